@@ -1,0 +1,402 @@
+//! The resolved scenario, as the Python layer sends it (JSON) and the core validates it.
+//!
+//! Field names are the scenario file's keys (`docs/scenario.md`); all values are SI.
+//! Validation here is a second line of defence: the Python layer already gives the user
+//! friendly messages, but the core must never run on an invalid scenario (the real-time
+//! runtime builds scenarios without Python).
+
+use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
+use serde::{Deserialize, Serialize};
+
+use crate::compensator::CompensatorConfig;
+use crate::error::{CoreError, Result};
+
+/// A complete scenario: two satellites, the collision geometry, the contact, the facility,
+/// the compensator and the metric settings.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Short name (used for the output folder).
+    pub name: String,
+    /// One line for humans.
+    #[serde(default)]
+    pub description: String,
+    /// Time stepping.
+    pub simulation: SimulationConfig,
+    /// The servicer satellite, which carries the rod.
+    pub servicer: BodyConfig,
+    /// The target satellite, which carries the walls; its body frame is the mockup frame `t`.
+    pub target: BodyConfig,
+    /// The rod on the servicer.
+    pub rod: RodConfig,
+    /// Planar walls fixed in the target frame.
+    pub walls: Vec<WallConfig>,
+    /// Contact law between the rod tip and the walls.
+    pub contact: ContactConfig,
+    /// Facility model: robot response and sensor.
+    #[serde(default)]
+    pub facility: FacilityConfig,
+    /// Delay compensator.
+    #[serde(default)]
+    pub compensator: CompensatorConfig,
+    /// Metric settings.
+    #[serde(default)]
+    pub metrics: MetricsConfig,
+}
+
+/// Time stepping of the loop.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SimulationConfig {
+    /// Simulated duration, s (> 0).
+    pub duration: f64,
+    /// Control period T, s (> 0).
+    pub period: f64,
+    /// Facility sub-steps per control period (>= 1).
+    #[serde(default = "default_substeps")]
+    pub plant_substeps: u32,
+    /// RK4 steps per control period for the ideal reference (>= 1).
+    #[serde(default = "default_substeps")]
+    pub reference_substeps: u32,
+    /// The run is `diverged` once its energy exceeds this many times the larger of the
+    /// initial energy and the reference's largest energy (> 1).
+    #[serde(default = "default_divergence_ratio")]
+    pub divergence_energy_ratio: f64,
+}
+
+fn default_substeps() -> u32 {
+    10
+}
+fn default_divergence_ratio() -> f64 {
+    100.0
+}
+
+/// A free-floating rigid body: mass properties and initial state (world frame).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodyConfig {
+    /// Mass, kg (> 0).
+    pub mass: f64,
+    /// Inertia about the centre of mass in the body frame, kg·m²: principal moments or a
+    /// symmetric positive-definite tensor.
+    pub inertia: Inertia,
+    /// Initial centre-of-mass position, m (world frame).
+    #[serde(default)]
+    pub position: [f64; 3],
+    /// Initial attitude, unit quaternion [w, x, y, z], body to world.
+    #[serde(default = "identity_quaternion")]
+    pub orientation: [f64; 4],
+    /// Initial centre-of-mass velocity, m/s (world frame).
+    #[serde(default)]
+    pub velocity: [f64; 3],
+    /// Initial angular velocity, rad/s (body frame).
+    #[serde(default)]
+    pub angular_velocity: [f64; 3],
+}
+
+/// An inertia given as principal moments `[Ixx, Iyy, Izz]` or as a full 3×3 tensor, kg·m².
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Inertia {
+    /// Principal moments (a diagonal tensor).
+    Principal([f64; 3]),
+    /// Full tensor, rows.
+    Tensor([[f64; 3]; 3]),
+}
+
+fn identity_quaternion() -> [f64; 4] {
+    [1.0, 0.0, 0.0, 0.0]
+}
+
+/// The rod carried by the servicer.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RodConfig {
+    /// Rod tip (the contact point) in the servicer body frame, m.
+    pub tip: [f64; 3],
+}
+
+/// A planar wall of the collision frame, fixed in the target frame.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WallConfig {
+    /// Name for reports.
+    #[serde(default)]
+    pub name: String,
+    /// A point of the wall, m (target frame).
+    pub point: [f64; 3],
+    /// Normal from the wall into free space (non-zero; normalised by the core).
+    pub normal: [f64; 3],
+}
+
+/// Which contact law.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ContactModelKind {
+    /// Linear spring-damper, eq. (5).
+    #[default]
+    Linear,
+    /// Hunt-Crossley: `F = k·d^n + c·d^n·ḋ`.
+    HuntCrossley,
+}
+
+/// Contact law parameters.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactConfig {
+    /// Contact law.
+    #[serde(default)]
+    pub model: ContactModelKind,
+    /// Stiffness k: N/m (linear) or N/m^n (Hunt-Crossley), > 0.
+    pub stiffness: f64,
+    /// Damping c: N·s/m (linear) or N·s/m^(n+1) (Hunt-Crossley), >= 0.
+    #[serde(default)]
+    pub damping: f64,
+    /// Hunt-Crossley exponent n (> 0); unused by the linear law.
+    #[serde(default = "default_exponent")]
+    pub exponent: f64,
+}
+
+fn default_exponent() -> f64 {
+    1.5
+}
+
+/// The facility model: robot response and F/T sensor.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FacilityConfig {
+    /// Pure delay of the robot's response, s (a whole number of periods).
+    #[serde(default)]
+    pub robot_delay: f64,
+    /// Pure delay of the sensor, s (a whole number of periods).
+    #[serde(default)]
+    pub sensor_delay: f64,
+    /// Natural frequency of the robot's second-order servo lag, Hz (0 = no lag).
+    #[serde(default)]
+    pub servo_frequency: f64,
+    /// Damping ratio of the servo lag (> 0).
+    #[serde(default = "default_servo_damping")]
+    pub servo_damping: f64,
+    /// Gaussian noise on each force axis, N (standard deviation).
+    #[serde(default)]
+    pub sensor_noise: f64,
+    /// Gaussian noise on each moment axis, N·m (standard deviation).
+    #[serde(default)]
+    pub torque_noise: f64,
+    /// Force quantisation step, N (0 = none).
+    #[serde(default)]
+    pub force_resolution: f64,
+    /// Moment quantisation step, N·m (0 = none).
+    #[serde(default)]
+    pub torque_resolution: f64,
+    /// Sensor origin in the target frame, m.
+    #[serde(default)]
+    pub sensor_position: [f64; 3],
+    /// Sensor attitude in the target frame, unit quaternion [w, x, y, z] (sensor to target).
+    #[serde(default = "identity_quaternion")]
+    pub sensor_orientation: [f64; 4],
+    /// Seed of the sensor-noise generator.
+    #[serde(default)]
+    pub seed: u64,
+    /// Round delays to whole periods instead of rejecting them (the Python layer applies it).
+    #[serde(default)]
+    pub round_delays: bool,
+}
+
+fn default_servo_damping() -> f64 {
+    0.7
+}
+
+impl Default for FacilityConfig {
+    fn default() -> Self {
+        FacilityConfig {
+            robot_delay: 0.0,
+            sensor_delay: 0.0,
+            servo_frequency: 0.0,
+            servo_damping: default_servo_damping(),
+            sensor_noise: 0.0,
+            torque_noise: 0.0,
+            force_resolution: 0.0,
+            torque_resolution: 0.0,
+            sensor_position: [0.0; 3],
+            sensor_orientation: identity_quaternion(),
+            seed: 0,
+            round_delays: false,
+        }
+    }
+}
+
+/// Metric settings.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MetricsConfig {
+    /// A collision is an interval where the physical contact force exceeds this, N (> 0).
+    #[serde(default = "default_contact_threshold")]
+    pub contact_threshold: f64,
+}
+
+fn default_contact_threshold() -> f64 {
+    0.5
+}
+
+impl Default for MetricsConfig {
+    fn default() -> Self {
+        MetricsConfig { contact_threshold: default_contact_threshold() }
+    }
+}
+
+fn positive(key: &str, value: f64) -> Result<()> {
+    if value.is_finite() && value > 0.0 {
+        Ok(())
+    } else {
+        Err(CoreError::invalid(key, format!("must be a positive number, got {value}")))
+    }
+}
+
+fn non_negative(key: &str, value: f64) -> Result<()> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(CoreError::invalid(key, format!("must be a number >= 0, got {value}")))
+    }
+}
+
+fn finite_vector(key: &str, v: &[f64]) -> Result<()> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(CoreError::invalid(key, format!("must contain finite numbers, got {v:?}")))
+    }
+}
+
+/// A unit quaternion from `[w, x, y, z]`, normalised; rejects a zero or non-finite one.
+pub fn quaternion(key: &str, q: [f64; 4]) -> Result<UnitQuaternion<f64>> {
+    finite_vector(key, &q)?;
+    let raw = Quaternion::new(q[0], q[1], q[2], q[3]);
+    if raw.norm() < 1e-12 {
+        return Err(CoreError::invalid(key, "must be a non-zero quaternion [w, x, y, z]"));
+    }
+    Ok(UnitQuaternion::new_normalize(raw))
+}
+
+/// Number of whole periods in `delay`; rejects a delay that is not a whole number of periods.
+pub fn delay_ticks(key: &str, delay: f64, period: f64) -> Result<usize> {
+    non_negative(key, delay)?;
+    let ticks = delay / period;
+    let rounded = ticks.round();
+    if (ticks - rounded).abs() > 1e-9 * rounded.max(1.0) {
+        return Err(CoreError::invalid(
+            key,
+            format!(
+                "{delay} s is not a whole number of periods (simulation.period = {period} s): use {} or {}, or set facility.round_delays = true",
+                ticks.floor() * period,
+                ticks.ceil() * period
+            ),
+        ));
+    }
+    Ok(rounded as usize)
+}
+
+impl BodyConfig {
+    /// The inertia tensor, checked symmetric positive definite.
+    pub fn inertia_matrix(&self, key: &str) -> Result<Matrix3<f64>> {
+        let rows = match self.inertia {
+            Inertia::Principal(d) => [[d[0], 0.0, 0.0], [0.0, d[1], 0.0], [0.0, 0.0, d[2]]],
+            Inertia::Tensor(rows) => rows,
+        };
+        finite_vector(key, &rows.concat())?;
+        let m = Matrix3::from_fn(|i, j| rows[i][j]);
+        let scale = m.abs().max();
+        if (m - m.transpose()).abs().max() > 1e-9 * scale.max(1.0) {
+            return Err(CoreError::invalid(key, "must be a symmetric 3x3 matrix"));
+        }
+        if m.cholesky().is_none() {
+            return Err(CoreError::invalid(key, "must be positive definite (principal moments > 0)"));
+        }
+        Ok(m)
+    }
+
+    fn validate(&self, key: &str) -> Result<()> {
+        positive(&format!("{key}.mass"), self.mass)?;
+        self.inertia_matrix(&format!("{key}.inertia"))?;
+        quaternion(&format!("{key}.orientation"), self.orientation)?;
+        finite_vector(&format!("{key}.position"), &self.position)?;
+        finite_vector(&format!("{key}.velocity"), &self.velocity)?;
+        finite_vector(&format!("{key}.angular_velocity"), &self.angular_velocity)
+    }
+}
+
+impl WallConfig {
+    /// The unit normal; rejects a zero normal.
+    pub fn unit_normal(&self, key: &str) -> Result<Vector3<f64>> {
+        finite_vector(key, &self.normal)?;
+        let n = Vector3::from(self.normal);
+        let norm = n.norm();
+        if norm < 1e-12 {
+            return Err(CoreError::invalid(key, "must be a non-zero vector (the wall's normal into free space)"));
+        }
+        Ok(n / norm)
+    }
+}
+
+impl Scenario {
+    /// Number of control ticks in the run (`duration / period`, rounded).
+    pub fn ticks(&self) -> usize {
+        (self.simulation.duration / self.simulation.period).round() as usize
+    }
+
+    /// Robot delay in whole periods.
+    pub fn robot_delay_ticks(&self) -> Result<usize> {
+        delay_ticks("facility.robot_delay", self.facility.robot_delay, self.simulation.period)
+    }
+
+    /// Sensor delay in whole periods.
+    pub fn sensor_delay_ticks(&self) -> Result<usize> {
+        delay_ticks("facility.sensor_delay", self.facility.sensor_delay, self.simulation.period)
+    }
+
+    /// Checks every invariant the core relies on; the error names the key.
+    pub fn validate(&self) -> Result<()> {
+        let sim = &self.simulation;
+        positive("simulation.duration", sim.duration)?;
+        positive("simulation.period", sim.period)?;
+        if sim.duration < sim.period {
+            return Err(CoreError::invalid("simulation.duration", "must be at least one period"));
+        }
+        if sim.plant_substeps == 0 {
+            return Err(CoreError::invalid("simulation.plant_substeps", "must be >= 1"));
+        }
+        if sim.reference_substeps == 0 {
+            return Err(CoreError::invalid("simulation.reference_substeps", "must be >= 1"));
+        }
+        if !(sim.divergence_energy_ratio.is_finite() && sim.divergence_energy_ratio > 1.0) {
+            return Err(CoreError::invalid("simulation.divergence_energy_ratio", "must be a number > 1"));
+        }
+        self.servicer.validate("servicer")?;
+        self.target.validate("target")?;
+        finite_vector("rod.tip", &self.rod.tip)?;
+        if self.walls.is_empty() {
+            return Err(CoreError::invalid("walls", "at least one wall is required"));
+        }
+        for (i, wall) in self.walls.iter().enumerate() {
+            finite_vector(&format!("walls[{i}].point"), &wall.point)?;
+            wall.unit_normal(&format!("walls[{i}].normal"))?;
+        }
+        positive("contact.stiffness", self.contact.stiffness)?;
+        non_negative("contact.damping", self.contact.damping)?;
+        positive("contact.exponent", self.contact.exponent)?;
+        let f = &self.facility;
+        self.robot_delay_ticks()?;
+        self.sensor_delay_ticks()?;
+        non_negative("facility.servo_frequency", f.servo_frequency)?;
+        positive("facility.servo_damping", f.servo_damping)?;
+        non_negative("facility.sensor_noise", f.sensor_noise)?;
+        non_negative("facility.torque_noise", f.torque_noise)?;
+        non_negative("facility.force_resolution", f.force_resolution)?;
+        non_negative("facility.torque_resolution", f.torque_resolution)?;
+        finite_vector("facility.sensor_position", &f.sensor_position)?;
+        quaternion("facility.sensor_orientation", f.sensor_orientation)?;
+        positive("metrics.contact_threshold", self.metrics.contact_threshold)?;
+        self.compensator.validate()
+    }
+}

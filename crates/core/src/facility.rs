@@ -1,0 +1,238 @@
+//! The facility model: what stands in for the hardware in a simulation.
+//!
+//! - Robot: the actual relative pose follows the commanded one with a pure delay `τ_r`
+//!   (commands are interpolated linearly between control ticks, attitude by slerp) and an
+//!   optional second-order servo lag `ω_n² / (s² + 2ζω_n s + ω_n²)`, integrated at the plant rate.
+//! - Contact: the law of [`crate::contact`] between the actual rod tip and the walls.
+//! - Sensor: the wrench on the frame from `τ_p` earlier, in the sensor frame, with Gaussian
+//!   noise and optional quantisation, from a seeded generator (reproducible runs).
+//!
+//! [`FacilityModel::advance`] never allocates.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+use rand_pcg::Pcg64Mcg;
+
+use crate::config::{quaternion, Scenario};
+use crate::delay_line::DelayLine;
+use crate::error::Result;
+use crate::world::{FrameWrench, RelativeMotion, TwoBodySystem};
+
+/// What the loop receives from the facility at a control tick: the sensor reading and the
+/// robot's actual motion (its forward kinematics).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measurement {
+    /// Measured force on the frame, sensor frame, N.
+    pub force: Vector3<f64>,
+    /// Measured moment about the sensor origin, sensor frame, N·m.
+    pub moment: Vector3<f64>,
+    /// Actual relative motion of the servicer (robot), `t` frame.
+    pub actual: RelativeMotion,
+}
+
+/// Second-order servo lag state (`t` frame).
+#[derive(Debug, Clone, Copy)]
+struct ServoLag {
+    /// ω_n, rad/s.
+    omega: f64,
+    /// ζ.
+    zeta: f64,
+}
+
+/// The robot: pure delay plus optional servo lag on the commanded relative motion.
+#[derive(Debug, Clone)]
+pub struct RobotModel {
+    delay_ticks: usize,
+    period: f64,
+    substeps: u32,
+    commands: DelayLine<RelativeMotion>,
+    servo: Option<ServoLag>,
+    actual: RelativeMotion,
+}
+
+/// Relative motion at rest at a pose.
+fn at_rest(pose: &RelativeMotion) -> RelativeMotion {
+    RelativeMotion { velocity: Vector3::zeros(), angular_velocity: Vector3::zeros(), ..*pose }
+}
+
+impl RobotModel {
+    /// A robot at rest at the initial command (it held it for all earlier time).
+    pub fn new(delay_ticks: usize, period: f64, substeps: u32, servo_frequency_hz: f64, servo_damping: f64, initial: &RelativeMotion) -> Self {
+        let servo = (servo_frequency_hz > 0.0).then(|| ServoLag { omega: 2.0 * std::f64::consts::PI * servo_frequency_hz, zeta: servo_damping });
+        RobotModel {
+            delay_ticks,
+            period,
+            substeps,
+            commands: DelayLine::new(delay_ticks + 1, at_rest(initial)),
+            servo,
+            actual: at_rest(initial),
+        }
+    }
+
+    /// The robot's actual relative motion now.
+    pub fn actual(&self) -> &RelativeMotion {
+        &self.actual
+    }
+
+    /// Advances one control period after the command for the coming tick was issued.
+    pub fn advance(&mut self, command: &RelativeMotion) {
+        self.commands.push(*command);
+        // the delayed command segment the robot follows during this period
+        let a = self.commands.delayed(self.delay_ticks + 1);
+        let b = self.commands.delayed(self.delay_ticks);
+        let t = self.period;
+        let segment_velocity = (b.position - a.position) / t;
+        let segment_rotation = a.orientation.inverse() * b.orientation;
+        let segment_angular_velocity = a.orientation * segment_rotation.scaled_axis() / t;
+        match self.servo {
+            None => {
+                self.actual = RelativeMotion {
+                    position: b.position,
+                    orientation: b.orientation,
+                    velocity: segment_velocity,
+                    angular_velocity: segment_angular_velocity,
+                };
+            }
+            Some(servo) => {
+                let h = t / self.substeps as f64;
+                let x = &mut self.actual;
+                for i in 1..=self.substeps {
+                    let s = i as f64 / self.substeps as f64;
+                    let u_position = a.position.lerp(&b.position, s);
+                    let u_orientation = a.orientation.slerp(&b.orientation, s);
+                    let w2 = servo.omega * servo.omega;
+                    let damp = 2.0 * servo.zeta * servo.omega;
+                    // ẍ = ω_n² (u − x) − 2ζω_n ẋ, semi-implicit Euler
+                    x.velocity += (w2 * (u_position - x.position) - damp * x.velocity) * h;
+                    x.position += x.velocity * h;
+                    let attitude_error = x.orientation * (x.orientation.inverse() * u_orientation).scaled_axis();
+                    x.angular_velocity += (w2 * attitude_error - damp * x.angular_velocity) * h;
+                    x.orientation = UnitQuaternion::from_scaled_axis(x.angular_velocity * h) * x.orientation;
+                }
+            }
+        }
+    }
+}
+
+/// The F/T sensor: pure delay, noise, quantisation.
+#[derive(Debug, Clone)]
+pub struct SensorModel {
+    delay_ticks: usize,
+    history: DelayLine<FrameWrench>,
+    /// Sensor attitude in `t` (sensor to `t`).
+    orientation: UnitQuaternion<f64>,
+    force_noise: f64,
+    torque_noise: f64,
+    force_resolution: f64,
+    torque_resolution: f64,
+    rng: Pcg64Mcg,
+}
+
+fn quantise(v: Vector3<f64>, step: f64) -> Vector3<f64> {
+    if step > 0.0 {
+        v.map(|x| (x / step).round() * step)
+    } else {
+        v
+    }
+}
+
+impl SensorModel {
+    /// The sensor of a scenario, having read `initial` for all earlier time.
+    pub fn from_scenario(s: &Scenario, initial: &FrameWrench) -> Result<Self> {
+        let f = &s.facility;
+        let delay_ticks = s.sensor_delay_ticks()?;
+        Ok(SensorModel {
+            delay_ticks,
+            history: DelayLine::new(delay_ticks, *initial),
+            orientation: quaternion("facility.sensor_orientation", f.sensor_orientation)?,
+            force_noise: f.sensor_noise,
+            torque_noise: f.torque_noise,
+            force_resolution: f.force_resolution,
+            torque_resolution: f.torque_resolution,
+            rng: Pcg64Mcg::seed_from_u64(f.seed),
+        })
+    }
+
+    /// Sensor attitude in `t` (sensor to `t`).
+    pub fn orientation(&self) -> UnitQuaternion<f64> {
+        self.orientation
+    }
+
+    fn noise(&mut self, std: f64) -> Vector3<f64> {
+        if std > 0.0 {
+            let rng = &mut self.rng;
+            Vector3::from_fn(|_, _| std * <StandardNormal as Distribution<f64>>::sample(&StandardNormal, rng))
+        } else {
+            Vector3::zeros()
+        }
+    }
+
+    /// Records the physical wrench of this tick (`t` frame) and returns the reading:
+    /// the wrench from `τ_p` earlier, in the sensor frame, plus noise, quantised.
+    pub fn sample(&mut self, physical: &FrameWrench) -> (Vector3<f64>, Vector3<f64>) {
+        self.history.push(*physical);
+        let delayed = self.history.delayed(self.delay_ticks);
+        let force = self.orientation.inverse_transform_vector(&delayed.force) + self.noise(self.force_noise);
+        let moment = self.orientation.inverse_transform_vector(&delayed.moment) + self.noise(self.torque_noise);
+        (quantise(force, self.force_resolution), quantise(moment, self.torque_resolution))
+    }
+}
+
+/// Robot, contact and sensor together: the simulated facility.
+#[derive(Debug, Clone)]
+pub struct FacilityModel {
+    system: TwoBodySystem,
+    robot: RobotModel,
+    sensor: SensorModel,
+    contact_force: Vector3<f64>,
+}
+
+impl FacilityModel {
+    /// The facility of a scenario with the robot at rest at the initial command.
+    pub fn from_scenario(s: &Scenario, system: &TwoBodySystem, initial_command: &RelativeMotion) -> Result<Self> {
+        let f = &s.facility;
+        let robot = RobotModel::new(
+            s.robot_delay_ticks()?,
+            s.simulation.period,
+            s.simulation.plant_substeps,
+            f.servo_frequency,
+            f.servo_damping,
+            initial_command,
+        );
+        let (contact_force, initial_wrench) = physical_wrench(system, robot.actual());
+        let sensor = SensorModel::from_scenario(s, &initial_wrench)?;
+        Ok(FacilityModel { system: system.clone(), robot, sensor, contact_force })
+    }
+
+    /// The physical contact force on the rod at the last tick, `t` frame, N (the truth that a
+    /// real facility does not report).
+    pub fn contact_force(&self) -> Vector3<f64> {
+        self.contact_force
+    }
+
+    /// The measurement at the current tick (call once per tick).
+    pub fn measure(&mut self) -> Measurement {
+        let (contact_force, wrench) = physical_wrench(&self.system, self.robot.actual());
+        self.contact_force = contact_force;
+        let (force, moment) = self.sensor.sample(&wrench);
+        Measurement { force, moment, actual: *self.robot.actual() }
+    }
+
+    /// Advances one control period: the robot receives the command for the next tick.
+    pub fn advance(&mut self, command: &RelativeMotion) {
+        self.robot.advance(command);
+    }
+
+    /// Sensor attitude in `t` (sensor to `t`).
+    pub fn sensor_orientation(&self) -> UnitQuaternion<f64> {
+        self.sensor.orientation()
+    }
+}
+
+/// Contact force on the rod (`t`) and the wrench on the frame for the robot's actual motion.
+fn physical_wrench(system: &TwoBodySystem, actual: &RelativeMotion) -> (Vector3<f64>, FrameWrench) {
+    let tip = actual.point(&system.rod_tip);
+    let force = system.contact.force_on_rod(&tip, &actual.point_velocity(&system.rod_tip));
+    (force, FrameWrench::from_rod_force(&force, &tip, &system.sensor_origin))
+}

@@ -1,0 +1,95 @@
+//! The virtual side of the HIL loop: compensator and satellite dynamics. The simulation
+//! couples it to a [`crate::facility::FacilityModel`]; the real-time runtime will couple the
+//! same code to real devices.
+//!
+//! One control tick k (period T):
+//! 1. the facility has advanced to k and reports a [`Measurement`] (sensor wrench, robot motion);
+//! 2. [`VirtualDynamics::compensate`] turns it into the wrench to apply;
+//! 3. [`VirtualDynamics::integrate`] advances eqs. (1), (2) by T; [`VirtualDynamics::command`]
+//!    is the relative motion the robot must reproduce at k+1.
+
+use nalgebra::UnitQuaternion;
+
+use crate::compensator::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
+use crate::config::{quaternion, Scenario};
+use crate::error::Result;
+use crate::facility::Measurement;
+use crate::world::{FrameWrench, RelativeMotion, TwoBodyState, TwoBodySystem};
+
+/// Compensator plus virtual satellite dynamics.
+pub struct VirtualDynamics {
+    system: TwoBodySystem,
+    state: TwoBodyState,
+    period: f64,
+    /// Sensor attitude in `t` (sensor to `t`).
+    sensor_orientation: UnitQuaternion<f64>,
+    compensator: Box<dyn Compensator>,
+}
+
+impl VirtualDynamics {
+    /// The virtual side of a (validated) scenario, at its initial state.
+    pub fn from_scenario(s: &Scenario, system: &TwoBodySystem) -> Result<Self> {
+        let context = CompensatorContext {
+            period: s.simulation.period,
+            sensor_delay: s.sensor_delay_ticks()? as f64 * s.simulation.period,
+            sensor_origin: system.sensor_origin,
+        };
+        Ok(VirtualDynamics {
+            system: system.clone(),
+            state: TwoBodyState::from_scenario(s)?,
+            period: s.simulation.period,
+            sensor_orientation: quaternion("facility.sensor_orientation", s.facility.sensor_orientation)?,
+            compensator: s.compensator.build(&context),
+        })
+    }
+
+    /// The virtual state of both satellites.
+    pub fn state(&self) -> &TwoBodyState {
+        &self.state
+    }
+
+    /// The two-body system.
+    pub fn system(&self) -> &TwoBodySystem {
+        &self.system
+    }
+
+    /// The relative motion the robot must reproduce now (the command).
+    pub fn command(&self) -> RelativeMotion {
+        self.system.relative_motion(&self.state)
+    }
+
+    /// Kinetic energy of the virtual relative motion, J.
+    pub fn energy(&self) -> f64 {
+        self.system.energy(&self.state)
+    }
+
+    /// Whether the compensator identifies contact parameters.
+    pub fn estimates_contact(&self) -> bool {
+        self.compensator.estimates_contact()
+    }
+
+    /// Runs the compensator on a measurement; the applied wrench is returned in the sensor's
+    /// convention (`t` frame inside [`CompensatorOutput`]).
+    pub fn compensate(&mut self, m: &Measurement) -> CompensatorOutput {
+        let desired = self.command();
+        let rod = &self.system.rod_tip;
+        let input = CompensatorInput {
+            measured: FrameWrench { force: self.sensor_orientation * m.force, moment: self.sensor_orientation * m.moment },
+            tip_position_actual: m.actual.point(rod),
+            tip_velocity_actual: m.actual.point_velocity(rod),
+            tip_position_desired: desired.point(rod),
+            tip_velocity_desired: desired.point_velocity(rod),
+        };
+        self.compensator.step(&input)
+    }
+
+    /// Advances the virtual dynamics one period under the applied wrench (`t` frame).
+    pub fn integrate(&mut self, applied: &FrameWrench) {
+        self.system.step_virtual(&mut self.state, applied, self.period);
+    }
+
+    /// Sensor attitude in `t`.
+    pub fn sensor_orientation(&self) -> UnitQuaternion<f64> {
+        self.sensor_orientation
+    }
+}

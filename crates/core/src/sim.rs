@@ -1,0 +1,290 @@
+//! A whole simulation: the ideal reference, the HIL loop against the facility model, the
+//! recorded time series and the metrics. Allocates its records up front; the per-tick code
+//! (facility, compensator, dynamics) does not allocate.
+
+use nalgebra::Vector3;
+
+use crate::config::{ContactModelKind, Scenario};
+use crate::error::Result;
+use crate::facility::FacilityModel;
+use crate::hil::VirtualDynamics;
+use crate::metrics::{self, EnergySummary, Metrics, Status};
+use crate::world::{TwoBodyState, TwoBodySystem};
+
+/// Named columns of equal length.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Table {
+    /// `(name, values)` in output order.
+    pub columns: Vec<(String, Vec<f64>)>,
+}
+
+impl Table {
+    /// The column called `name`.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.columns.iter().find(|(n, _)| n == name).map(|(_, v)| v.as_slice())
+    }
+
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.columns.first().map_or(0, |(_, v)| v.len())
+    }
+
+    /// Whether there are no rows.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    fn from_rows<R>(rows: &[R], scalars: &[(&str, fn(&R) -> f64)], vectors: &[(&str, fn(&R) -> Vector3<f64>)]) -> Table {
+        let mut columns = Vec::new();
+        for (name, get) in scalars {
+            columns.push((name.to_string(), rows.iter().map(get).collect()));
+        }
+        for (name, get) in vectors {
+            for (axis, label) in ["x", "y", "z"].iter().enumerate() {
+                columns.push((format!("{name}_{label}"), rows.iter().map(|r| get(r)[axis]).collect()));
+            }
+        }
+        Table { columns }
+    }
+}
+
+/// One tick of the ideal reference.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReferenceRecord {
+    /// Time, s.
+    pub time: f64,
+    /// Rod tip relative to the target, `t` frame, m.
+    pub tip_position: Vector3<f64>,
+    /// Rod tip velocity relative to the target, `t` frame, m/s.
+    pub tip_velocity: Vector3<f64>,
+    /// Contact force on the rod, `t` frame, N.
+    pub contact_force: Vector3<f64>,
+    /// Kinetic energy of the relative motion, J.
+    pub energy: f64,
+}
+
+/// One tick of the HIL loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HilRecord {
+    /// Time, s.
+    pub time: f64,
+    /// Desired (virtual) rod tip relative to the target, `t` frame, m.
+    pub tip_position: Vector3<f64>,
+    /// Desired (virtual) rod tip velocity, `t` frame, m/s.
+    pub tip_velocity: Vector3<f64>,
+    /// Actual (robot) rod tip, `t` frame, m.
+    pub actual_tip_position: Vector3<f64>,
+    /// Actual (robot) rod tip velocity, `t` frame, m/s.
+    pub actual_tip_velocity: Vector3<f64>,
+    /// Physical contact force on the rod, `t` frame, N.
+    pub contact_force: Vector3<f64>,
+    /// Sensor force on the frame, sensor frame, N.
+    pub measured_force: Vector3<f64>,
+    /// Sensor moment about its origin, sensor frame, N·m.
+    pub measured_moment: Vector3<f64>,
+    /// Force applied to the virtual dynamics, sensor frame and convention, N.
+    pub applied_force: Vector3<f64>,
+    /// Moment applied to the virtual dynamics, sensor frame and convention, N·m.
+    pub applied_moment: Vector3<f64>,
+    /// Kinetic energy of the virtual relative motion, J.
+    pub energy: f64,
+    /// Identified stiffness, N/m (NaN when not identified).
+    pub stiffness_estimate: f64,
+    /// Identified damping, N·s/m (NaN when not identified).
+    pub damping_estimate: f64,
+}
+
+impl HilRecord {
+    fn is_finite(&self) -> bool {
+        let v = [self.tip_position, self.tip_velocity, self.actual_tip_position, self.contact_force, self.applied_force, self.applied_moment];
+        self.energy.is_finite() && v.iter().all(|x| x.iter().all(|c| c.is_finite()))
+    }
+}
+
+/// Result of a simulation.
+#[derive(Debug, Clone)]
+pub struct SimulationOutput {
+    /// The HIL loop, one row per control tick (up to divergence).
+    pub timeseries: Table,
+    /// The ideal reference, one row per control tick.
+    pub reference: Table,
+    /// The metrics.
+    pub metrics: Metrics,
+}
+
+/// The ideal reference: the true contact law, no facility, RK4 with
+/// `simulation.reference_substeps` steps per period, sampled at every tick.
+pub fn run_reference(s: &Scenario, system: &TwoBodySystem) -> Result<Vec<ReferenceRecord>> {
+    let n = s.ticks();
+    let period = s.simulation.period;
+    let h = period / s.simulation.reference_substeps as f64;
+    let mut x = TwoBodyState::from_scenario(s)?;
+    let mut rows = Vec::with_capacity(n + 1);
+    for k in 0..=n {
+        let rel = system.relative_motion(&x);
+        let (contact_force, tip) = system.contact_force(&x);
+        rows.push(ReferenceRecord {
+            time: k as f64 * period,
+            tip_position: tip,
+            tip_velocity: rel.point_velocity(&system.rod_tip),
+            contact_force,
+            energy: system.energy(&x),
+        });
+        if k < n {
+            for _ in 0..s.simulation.reference_substeps {
+                system.step_rk4(&mut x, h);
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// How a HIL run ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HilRun {
+    /// Recorded ticks.
+    pub rows: Vec<HilRecord>,
+    /// Whether the compensator identified the contact.
+    pub estimates_contact: bool,
+    /// `ok` or `diverged`.
+    pub status: Status,
+    /// Why it stopped early.
+    pub reason: Option<String>,
+}
+
+/// The HIL loop against the facility model, stopped once the energy passes `energy_bound` (J).
+pub fn run_hil(s: &Scenario, system: &TwoBodySystem, energy_bound: f64) -> Result<HilRun> {
+    let n = s.ticks();
+    let period = s.simulation.period;
+    let mut virt = VirtualDynamics::from_scenario(s, system)?;
+    let mut facility = FacilityModel::from_scenario(s, system, &virt.command())?;
+    let sensor_to_t = virt.sensor_orientation();
+    let rod = system.rod_tip;
+    let mut rows = Vec::with_capacity(n + 1);
+    let (mut status, mut reason) = (Status::Ok, None);
+    for k in 0..=n {
+        let m = facility.measure();
+        let out = virt.compensate(&m);
+        let desired = virt.command();
+        let row = HilRecord {
+            time: k as f64 * period,
+            tip_position: desired.point(&rod),
+            tip_velocity: desired.point_velocity(&rod),
+            actual_tip_position: m.actual.point(&rod),
+            actual_tip_velocity: m.actual.point_velocity(&rod),
+            contact_force: facility.contact_force(),
+            measured_force: m.force,
+            measured_moment: m.moment,
+            applied_force: sensor_to_t.inverse_transform_vector(&out.applied.force),
+            applied_moment: sensor_to_t.inverse_transform_vector(&out.applied.moment),
+            energy: virt.energy(),
+            stiffness_estimate: out.estimate.map_or(f64::NAN, |e| e.stiffness),
+            damping_estimate: out.estimate.map_or(f64::NAN, |e| e.damping),
+        };
+        rows.push(row);
+        if !row.is_finite() {
+            status = Status::Diverged;
+            reason = Some("a state or force stopped being finite".to_string());
+            break;
+        }
+        if row.energy > energy_bound {
+            status = Status::Diverged;
+            reason = Some(format!(
+                "energy {:.4} J passed the divergence bound {:.4} J (simulation.divergence_energy_ratio = {})",
+                row.energy, energy_bound, s.simulation.divergence_energy_ratio
+            ));
+            break;
+        }
+        if k == n {
+            break;
+        }
+        virt.integrate(&out.applied);
+        facility.advance(&virt.command());
+    }
+    Ok(HilRun { rows, estimates_contact: virt.estimates_contact(), status, reason })
+}
+
+/// Runs the reference and the HIL loop of a scenario and computes the metrics.
+pub fn simulate(s: &Scenario) -> Result<SimulationOutput> {
+    s.validate()?;
+    let system = TwoBodySystem::from_scenario(s)?;
+    let reference = run_reference(s, &system)?;
+    let reference_energy: Vec<f64> = reference.iter().map(|r| r.energy).collect();
+    let bound = metrics::divergence_bound(s.simulation.divergence_energy_ratio, reference_energy[0], &reference_energy);
+    let hil = run_hil(s, &system, bound)?;
+
+    let threshold = s.metrics.contact_threshold;
+    let ref_collisions = metrics::collisions(
+        &reference.iter().map(|r| r.time).collect::<Vec<_>>(),
+        &reference.iter().map(|r| r.contact_force.norm()).collect::<Vec<_>>(),
+        &reference.iter().map(|r| r.tip_velocity.norm()).collect::<Vec<_>>(),
+        threshold,
+    );
+    let rows = &hil.rows;
+    let time: Vec<f64> = rows.iter().map(|r| r.time).collect();
+    let force: Vec<f64> = rows.iter().map(|r| r.contact_force.norm()).collect();
+    let speed: Vec<f64> = rows.iter().map(|r| r.tip_velocity.norm()).collect();
+    let hil_collisions = metrics::collisions(&time, &force, &speed, threshold);
+    let identification = match (hil.estimates_contact, s.contact.model, hil_collisions.first()) {
+        (true, ContactModelKind::Linear, Some(first)) => metrics::identification_error(
+            &time,
+            &force,
+            threshold,
+            first.end,
+            &rows.iter().map(|r| r.stiffness_estimate).collect::<Vec<_>>(),
+            &rows.iter().map(|r| r.damping_estimate).collect::<Vec<_>>(),
+            s.contact.stiffness,
+            s.contact.damping,
+        ),
+        _ => None,
+    };
+    let last = rows.last().map_or(f64::NAN, |r| r.energy);
+    let metrics = Metrics {
+        scenario: s.name.clone(),
+        compensator: s.compensator.kind().to_string(),
+        status: hil.status,
+        diverged_at: (hil.status == Status::Diverged).then(|| time.last().copied().unwrap_or(0.0)),
+        reason: hil.reason.clone(),
+        collisions: metrics::compare_with_reference(&hil_collisions, &ref_collisions),
+        reference_collisions: ref_collisions,
+        identification,
+        energy: EnergySummary {
+            initial: rows.first().map_or(f64::NAN, |r| r.energy),
+            r#final: last,
+            reference_final: *reference_energy.last().unwrap_or(&f64::NAN),
+            max: rows.iter().map(|r| r.energy).filter(|e| e.is_finite()).fold(0.0, f64::max),
+        },
+    };
+
+    type V = Vector3<f64>;
+    let mut hil_vectors: Vec<(&str, fn(&HilRecord) -> V)> = vec![
+        ("tip_position", |r| r.tip_position),
+        ("tip_velocity", |r| r.tip_velocity),
+        ("actual_tip_position", |r| r.actual_tip_position),
+        ("actual_tip_velocity", |r| r.actual_tip_velocity),
+        ("contact_force", |r| r.contact_force),
+        ("measured_force", |r| r.measured_force),
+        ("measured_moment", |r| r.measured_moment),
+        ("applied_force", |r| r.applied_force),
+        ("applied_moment", |r| r.applied_moment),
+    ];
+    let mut hil_scalars: Vec<(&str, fn(&HilRecord) -> f64)> = vec![("time", |r| r.time)];
+    let mut timeseries = Table::from_rows(rows, &hil_scalars, &hil_vectors);
+    hil_vectors.clear();
+    hil_scalars.clear();
+    hil_scalars.push(("energy", |r| r.energy));
+    if hil.estimates_contact {
+        hil_scalars.push(("stiffness_estimate", |r| r.stiffness_estimate));
+        hil_scalars.push(("damping_estimate", |r| r.damping_estimate));
+    }
+    timeseries.columns.extend(Table::from_rows(rows, &hil_scalars, &hil_vectors).columns);
+
+    let mut reference_table = Table::from_rows(
+        &reference,
+        &[("time", |r: &ReferenceRecord| r.time)],
+        &[("tip_position", |r| r.tip_position), ("tip_velocity", |r| r.tip_velocity), ("contact_force", |r| r.contact_force)],
+    );
+    reference_table.columns.push(("energy".to_string(), reference_energy));
+
+    Ok(SimulationOutput { timeseries, reference: reference_table, metrics })
+}

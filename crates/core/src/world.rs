@@ -1,0 +1,206 @@
+//! The virtual world: servicer and target free-floating, the rod tip fixed in the servicer,
+//! the walls and the sensor fixed in the target.
+//!
+//! Frames: world (inertial); body frames at each centre of mass; the target body frame is
+//! the mockup frame `t` on the ground, in which the robot reproduces the relative pose of the
+//! servicer (`t_from_servicer`) and in which walls, sensor origin and contact points are given.
+//! A wrench "on the frame" is what the sensor measures: the force the rod exerts on the
+//! target's collision frame, with its moment about the sensor origin.
+
+use nalgebra::{UnitQuaternion, Vector3};
+
+use crate::body::{BodyRate, BodyState, MassProperties};
+use crate::config::Scenario;
+use crate::contact::ContactGeometry;
+use crate::error::Result;
+
+/// Pose and twist of the servicer body frame relative to the target frame `t`, expressed in `t`:
+/// what the robot is commanded to reproduce, and what it actually reproduces.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RelativeMotion {
+    /// Position of the servicer's CoM in `t`, m.
+    pub position: Vector3<f64>,
+    /// Attitude of the servicer relative to `t` (servicer to `t`).
+    pub orientation: UnitQuaternion<f64>,
+    /// Rate of `position` (seen in `t`), m/s.
+    pub velocity: Vector3<f64>,
+    /// Angular velocity of the servicer relative to `t`, expressed in `t`, rad/s.
+    pub angular_velocity: Vector3<f64>,
+}
+
+impl RelativeMotion {
+    /// Position of a point fixed in the servicer (body coordinates) in `t`, eq. (3)/(25), m.
+    pub fn point(&self, r_body: &Vector3<f64>) -> Vector3<f64> {
+        self.position + self.orientation * r_body
+    }
+
+    /// Velocity of a point fixed in the servicer, seen in `t`, eq. (4)/(26), m/s.
+    pub fn point_velocity(&self, r_body: &Vector3<f64>) -> Vector3<f64> {
+        self.velocity + self.angular_velocity.cross(&(self.orientation * r_body))
+    }
+}
+
+/// A wrench on the target's collision frame: force (N) and moment about the sensor origin
+/// (N·m), both expressed in the target frame `t`.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FrameWrench {
+    /// Force on the frame, `t` frame, N.
+    pub force: Vector3<f64>,
+    /// Moment about the sensor origin, `t` frame, N·m.
+    pub moment: Vector3<f64>,
+}
+
+impl FrameWrench {
+    /// The wrench on the frame of a force `force_on_rod` (N, `t`) acting on the rod at `point`
+    /// (m, `t`): the frame gets the opposite force, with its moment about `sensor_origin`.
+    pub fn from_rod_force(force_on_rod: &Vector3<f64>, point: &Vector3<f64>, sensor_origin: &Vector3<f64>) -> Self {
+        let force = -force_on_rod;
+        FrameWrench { force, moment: (point - sensor_origin).cross(&force) }
+    }
+}
+
+/// Mass properties, rod and sensor: the fixed description of the two-body system.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TwoBodySystem {
+    /// Servicer mass properties.
+    pub servicer: MassProperties,
+    /// Target mass properties.
+    pub target: MassProperties,
+    /// Rod tip in the servicer body frame, m.
+    pub rod_tip: Vector3<f64>,
+    /// Sensor origin in the target frame, m.
+    pub sensor_origin: Vector3<f64>,
+    /// Walls and contact law.
+    pub contact: ContactGeometry,
+}
+
+/// The state of both bodies (world frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TwoBodyState {
+    /// The servicer.
+    pub servicer: BodyState,
+    /// The target.
+    pub target: BodyState,
+}
+
+impl TwoBodySystem {
+    /// The system of a (validated) scenario.
+    pub fn from_scenario(s: &Scenario) -> Result<Self> {
+        Ok(TwoBodySystem {
+            servicer: MassProperties::new(s.servicer.mass, s.servicer.inertia_matrix("servicer.inertia")?),
+            target: MassProperties::new(s.target.mass, s.target.inertia_matrix("target.inertia")?),
+            rod_tip: Vector3::from(s.rod.tip),
+            sensor_origin: Vector3::from(s.facility.sensor_position),
+            contact: ContactGeometry::from_scenario(s)?,
+        })
+    }
+
+    /// Reduced mass μ = m_s m_t / (m_s + m_t), kg.
+    pub fn reduced_mass(&self) -> f64 {
+        self.servicer.mass * self.target.mass / (self.servicer.mass + self.target.mass)
+    }
+
+    /// Pose and twist of the servicer relative to the target, in `t`.
+    pub fn relative_motion(&self, x: &TwoBodyState) -> RelativeMotion {
+        let (s, t) = (&x.servicer, &x.target);
+        let r = s.position - t.position;
+        let w_t = t.angular_velocity_world();
+        RelativeMotion {
+            position: t.orientation.inverse_transform_vector(&r),
+            orientation: t.orientation.inverse() * s.orientation,
+            // d/dt of Rᵀ r = Rᵀ (ṙ − ω_t × r)
+            velocity: t.orientation.inverse_transform_vector(&(s.velocity - t.velocity - w_t.cross(&r))),
+            angular_velocity: t.orientation.inverse_transform_vector(&(s.angular_velocity_world() - w_t)),
+        }
+    }
+
+    /// Kinetic energy of the relative motion (the barycentric kinetic energy), J:
+    /// `½ μ |v_s − v_t|² + ½ ω_sᵀ I_s ω_s + ½ ω_tᵀ I_t ω_t`. Constant in free flight.
+    pub fn energy(&self, x: &TwoBodyState) -> f64 {
+        0.5 * self.reduced_mass() * (x.servicer.velocity - x.target.velocity).norm_squared()
+            + x.servicer.rotational_energy(&self.servicer)
+            + x.target.rotational_energy(&self.target)
+    }
+
+    /// Elastic energy stored in a linear or Hunt-Crossley contact, J (`∫ k dⁿ dd` per wall).
+    pub fn contact_potential_energy(&self, x: &TwoBodyState) -> f64 {
+        let tip = self.relative_motion(x).point(&self.rod_tip);
+        let (k, n) = match self.contact.law {
+            crate::contact::ContactModel::Linear(l) => (l.stiffness, 1.0),
+            crate::contact::ContactModel::HuntCrossley(h) => (h.stiffness, h.exponent),
+        };
+        self.contact.walls.iter().map(|w| k * w.penetration(&tip).powf(n + 1.0) / (n + 1.0)).sum()
+    }
+
+    /// Total linear momentum (world), kg·m/s.
+    pub fn linear_momentum(&self, x: &TwoBodyState) -> Vector3<f64> {
+        x.servicer.linear_momentum(&self.servicer) + x.target.linear_momentum(&self.target)
+    }
+
+    /// Total angular momentum about the world origin (world), kg·m²/s.
+    pub fn angular_momentum(&self, x: &TwoBodyState) -> Vector3<f64> {
+        x.servicer.angular_momentum(&self.servicer) + x.target.angular_momentum(&self.target)
+    }
+
+    /// World-frame wrenches on both bodies (force, torque about own CoM) for a wrench on the
+    /// frame: the target gets it at the sensor origin (eqs. 1, 2 with `r × F`), the servicer
+    /// the equal and opposite one, so momentum and angular momentum are conserved.
+    pub fn body_wrenches(&self, x: &TwoBodyState, w: &FrameWrench) -> ([Vector3<f64>; 2], [Vector3<f64>; 2]) {
+        let (s, t) = (&x.servicer, &x.target);
+        let force = t.orientation * w.force;
+        let moment = t.orientation * w.moment;
+        let sensor_world = t.position + t.orientation * self.sensor_origin;
+        let target_torque = moment + (sensor_world - t.position).cross(&force);
+        let servicer_torque = -moment - (sensor_world - s.position).cross(&force);
+        ([-force, force], [servicer_torque, target_torque])
+    }
+
+    /// One control period of the virtual dynamics with the wrench held (zero-order hold).
+    pub fn step_virtual(&self, x: &mut TwoBodyState, w: &FrameWrench, period: f64) {
+        let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, w);
+        x.servicer.step_symplectic(&self.servicer, &f_s, &tau_s, period);
+        x.target.step_symplectic(&self.target, &f_t, &tau_t, period);
+    }
+
+    /// The physical contact force on the rod (N, `t`) at a state of the true system.
+    pub fn contact_force(&self, x: &TwoBodyState) -> (Vector3<f64>, Vector3<f64>) {
+        let rel = self.relative_motion(x);
+        let tip = rel.point(&self.rod_tip);
+        (self.contact.force_on_rod(&tip, &rel.point_velocity(&self.rod_tip)), tip)
+    }
+
+    /// Rates of both bodies of the true system (the contact law closes the loop).
+    pub fn true_rates(&self, x: &TwoBodyState) -> (BodyRate, BodyRate) {
+        let (f_rod, tip) = self.contact_force(x);
+        let w = FrameWrench::from_rod_force(&f_rod, &tip, &self.sensor_origin);
+        let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, &w);
+        (x.servicer.rate(&self.servicer, &f_s, &tau_s), x.target.rate(&self.target, &f_t, &tau_t))
+    }
+
+    /// One RK4 step of the true system (rod against walls, no facility) over `h`.
+    pub fn step_rk4(&self, x: &mut TwoBodyState, h: f64) {
+        let advance = |x: &TwoBodyState, r: &(BodyRate, BodyRate), dt: f64| TwoBodyState {
+            servicer: x.servicer.advanced(&r.0, dt),
+            target: x.target.advanced(&r.1, dt),
+        };
+        let k1 = self.true_rates(x);
+        let k2 = self.true_rates(&advance(x, &k1, 0.5 * h));
+        let k3 = self.true_rates(&advance(x, &k2, 0.5 * h));
+        let k4 = self.true_rates(&advance(x, &k3, h));
+        let avg = (
+            BodyRate::rk4_average(&k1.0, &k2.0, &k3.0, &k4.0),
+            BodyRate::rk4_average(&k1.1, &k2.1, &k3.1, &k4.1),
+        );
+        *x = advance(x, &avg, h);
+    }
+}
+
+impl TwoBodyState {
+    /// The initial state of a scenario.
+    pub fn from_scenario(s: &Scenario) -> Result<Self> {
+        Ok(TwoBodyState {
+            servicer: BodyState::from_config(&s.servicer, "servicer")?,
+            target: BodyState::from_config(&s.target, "target")?,
+        })
+    }
+}
