@@ -279,6 +279,11 @@ pub fn quaternion(key: &str, q: [f64; 4]) -> Result<UnitQuaternion<f64>> {
     Ok(UnitQuaternion::new_normalize(raw))
 }
 
+/// `x` rounded to 12 decimals, so that `13 × 0.001` prints as `0.013`.
+fn tidy(x: f64) -> f64 {
+    (x * 1e12).round() / 1e12
+}
+
 /// Number of whole periods in `delay`; rejects a delay that is not a whole number of periods.
 pub fn delay_ticks(key: &str, delay: f64, period: f64) -> Result<usize> {
     non_negative(key, delay)?;
@@ -289,8 +294,8 @@ pub fn delay_ticks(key: &str, delay: f64, period: f64) -> Result<usize> {
             key,
             format!(
                 "{delay} s is not a whole number of periods (simulation.period = {period} s): use {} or {}, or set facility.round_delays = true",
-                ticks.floor() * period,
-                ticks.ceil() * period
+                tidy(ticks.floor() * period),
+                tidy(ticks.ceil() * period)
             ),
         ));
     }

@@ -168,7 +168,8 @@ fn invalid_scenarios_are_rejected_naming_the_key() {
     s.walls[1].normal = [0.0, 0.0, 0.0];
     assert_eq!(invalid_key(simulate(&s)), "walls[1].normal");
     let s = table1(0.0125, 0.0);
-    assert_eq!(invalid_key(simulate(&s)), "facility.robot_delay");
+    let err = simulate(&s).unwrap_err().to_string();
+    assert!(err.starts_with("facility.robot_delay: 0.0125 s is not a whole number") && err.contains("use 0.012 or 0.013,"), "{err}");
     let s = table1(0.010, 0.0004);
     let err = simulate(&s).unwrap_err().to_string();
     assert!(err.contains("facility.sensor_delay") && err.contains("whole number of periods"), "{err}");

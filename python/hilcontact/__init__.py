@@ -1,0 +1,43 @@
+"""hilcontact: hardware-in-the-loop simulation of satellite contact.
+
+A robot reproduces the relative motion of two satellites, a force sensor measures the real
+contact, and the delay of the loop makes collisions rebound faster than they should. This
+package simulates that loop (facility model, compensators, ideal reference) through its
+Rust core ``hilcontact._core``.
+
+Quick start::
+
+    import hilcontact as hc
+    scenario = hc.load_scenario("paper-table1", {"facility.robot_delay": 0.02})
+    run = hc.simulate(scenario)
+    print(run.status, run.collision_table())
+    run.save("runs/paper-table1-20ms")
+
+Conventions: SI units (m, s, N, N m, kg, rad); points and normals of the collision frame in
+the target mockup frame ``t``; quaternions ``[w, x, y, z]``.
+"""
+
+from __future__ import annotations
+
+from importlib import metadata as _metadata
+
+try:
+    __version__ = _metadata.version("hilcontact")
+except _metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree
+    __version__ = "0+unknown"
+
+from .errors import HilContactError, ScenarioError
+from .run import Run, simulate
+from .scenario import Scenario, apply_overrides, load_scenario, presets
+
+__all__ = [
+    "HilContactError",
+    "Run",
+    "Scenario",
+    "ScenarioError",
+    "__version__",
+    "apply_overrides",
+    "load_scenario",
+    "presets",
+    "simulate",
+]

@@ -1,0 +1,186 @@
+"""The ``hilcontact`` command line.
+
+    hilcontact run SCENARIO [--set KEY=VALUE ...] [--out DIR] [--no-plots]
+    hilcontact presets
+    hilcontact show SCENARIO [--set KEY=VALUE ...]
+    hilcontact --version
+
+Bad input (scenario, override, output folder) prints one ``error: ...`` line on stderr and
+exits with code 2; nothing is written then.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import click
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+from . import __version__
+from .errors import HilContactError, ScenarioError
+from .run import Run, core_version, simulate
+from .scenario import load_scenario, presets
+
+__all__ = ["cli", "main", "parse_set_options"]
+
+
+def parse_set_options(items: Sequence[str]) -> dict[str, Any]:
+    """``KEY=VALUE`` strings to an overrides dict. VALUE is read as a TOML value
+    (``0.02``, ``true``, ``[0, 0, 1]``, ``"text"``) and, if that fails, kept as a string."""
+    overrides: dict[str, Any] = {}
+    for item in items:
+        key, sep, raw = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise ScenarioError(f"--set {item!r}: expected KEY=VALUE, e.g. --set facility.robot_delay=0.02")
+        try:
+            value: Any = tomllib.loads("v = " + raw.strip())["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw.strip()
+        overrides[key] = value
+    return overrides
+
+
+def _fail(message: str, code: int) -> None:
+    click.echo("error: " + " ".join(message.split("\n")), err=True)
+    raise click.exceptions.Exit(code)
+
+
+@contextmanager
+def _errors() -> Iterator[None]:
+    try:
+        yield
+    except ScenarioError as exc:
+        _fail(str(exc), 2)
+    except HilContactError as exc:
+        _fail(str(exc), 1)
+
+
+def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
+    if not value or ctx.resilient_parsing:
+        return
+    click.echo(f"hilcontact {__version__} (core {core_version() or 'not built'})")
+    ctx.exit()
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.option(
+    "--version",
+    is_flag=True,
+    expose_value=False,
+    is_eager=True,
+    callback=_print_version,
+    help="Show the version and exit.",
+)
+def cli() -> None:
+    """Hardware-in-the-loop simulation of satellite contact.
+
+    \b
+    Examples:
+      hilcontact presets
+      hilcontact run paper-table1
+      hilcontact run paper-table1 --set facility.robot_delay=0.02 --out runs/delay-20ms
+      hilcontact show paper-table1 > my-scenario.toml
+    """
+
+
+_SET_HELP = (
+    "Override a scenario value, e.g. --set facility.robot_delay=0.02 (VALUE is a TOML value, "
+    "or a plain string). Repeatable."
+)
+
+
+@cli.command(short_help="Simulate a scenario and save the results.")
+@click.argument("scenario")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
+@click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>].")
+@click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
+def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool) -> None:
+    """Simulate SCENARIO (a preset name or a TOML file) and save the results."""
+    with _errors():
+        resolved = load_scenario(scenario, parse_set_options(sets))
+        folder = Path(out) if out is not None else Path("runs") / resolved.name
+        if folder.exists() and not folder.is_dir():
+            raise ScenarioError(f"--out {folder}: exists and is not a directory")
+        with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
+            result = simulate(resolved)
+        result.save(folder, plots=not no_plots)
+    _report(Console(), result, folder)
+
+
+def _number(value: Any, fmt: str, scale: float = 1.0) -> str:
+    if value is None:
+        return "-"
+    try:
+        number = float(value) * scale
+    except (TypeError, ValueError):
+        return "-"
+    return format(number, fmt) if math.isfinite(number) else "-"
+
+
+def _report(console: Console, result: Run, folder: Path) -> None:
+    delay_ms = result.scenario.facility.robot_delay * 1e3
+    table = Table(
+        title=f"{result.scenario.name}: compensator {result.compensator}, robot delay {delay_ms:g} ms",
+    )
+    for header in ("#", "start (s)", "end (s)", "CoV", "CoF", "peak force (N)",
+                   "rebound speed (mm/s)", "reference rebound (mm/s)"):
+        table.add_column(header, justify="right")
+    for number, row in result.collision_table().iterrows():
+        table.add_row(
+            str(number),
+            _number(row["start"], ".3f"),
+            _number(row["end"], ".3f"),
+            _number(row["cov"], ".3f"),
+            _number(row["cof"], ".3f"),
+            _number(row["peak_force"], ".1f"),
+            _number(row["rebound_speed"], ".2f", 1e3),
+            _number(row["reference_rebound_speed"], ".2f", 1e3),
+        )
+    if table.row_count:
+        console.print(table)
+    else:
+        console.print("no collisions")
+    if result.status == "ok":
+        console.print("status: [green]ok[/green]")
+    else:
+        at = result.metrics.get("diverged_at")
+        when = f" at {at:.3f} s" if isinstance(at, (int, float)) else ""
+        reason = result.metrics.get("reason") or "no reason given"
+        console.print(
+            f"[bold red]status: {escape(result.status)}{when}: {escape(str(reason))}[/bold red]", soft_wrap=True
+        )
+    files = ", ".join(sorted(p.name for p in folder.iterdir()))
+    console.print(f"saved to {escape(str(folder))}/ ({escape(files)})", soft_wrap=True)
+
+
+@cli.command(name="presets")
+def presets_command() -> None:
+    """List the embedded presets."""
+    with _errors():
+        listing = presets()
+    width = max((len(name) for name in listing), default=0)
+    for name, description in listing.items():
+        click.echo(f"{name:<{width}}  {description}")
+
+
+@cli.command(short_help="Print a scenario's resolved TOML.")
+@click.argument("scenario")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
+def show(scenario: str, sets: tuple[str, ...]) -> None:
+    """Print the resolved TOML of SCENARIO (a preset name or a TOML file)."""
+    with _errors():
+        resolved = load_scenario(scenario, parse_set_options(sets))
+    click.echo(resolved.to_toml(), nl=False)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """Console-script entry point."""
+    cli.main(args=list(argv) if argv is not None else None, prog_name="hilcontact")

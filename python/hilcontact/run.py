@@ -1,0 +1,221 @@
+"""Running a scenario through the native core, and the results of a run."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+
+from .errors import HilContactError
+from .scenario import Scenario, load_scenario
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = ["REFERENCE_COLUMNS", "TIMESERIES_COLUMNS", "Run", "simulate"]
+
+_XYZ = ("x", "y", "z")
+
+
+def _vector(name: str) -> list[str]:
+    return [f"{name}_{axis}" for axis in _XYZ]
+
+
+#: Columns of ``Run.timeseries`` (the HIL loop), in this order; ``stiffness_estimate`` and
+#: ``damping_estimate`` follow when the compensator estimates them.
+TIMESERIES_COLUMNS: list[str] = [
+    "time",
+    *_vector("tip_position"),
+    *_vector("tip_velocity"),
+    *_vector("actual_tip_position"),
+    *_vector("actual_tip_velocity"),
+    *_vector("contact_force"),
+    *_vector("measured_force"),
+    *_vector("measured_moment"),
+    *_vector("applied_force"),
+    *_vector("applied_moment"),
+    "energy",
+]
+
+#: Columns of ``Run.reference`` (the ideal reference: true contact law, no delay).
+REFERENCE_COLUMNS: list[str] = [
+    "time",
+    *_vector("tip_position"),
+    *_vector("tip_velocity"),
+    *_vector("contact_force"),
+    "energy",
+]
+
+#: Files written by :meth:`Run.save` (plots excluded).
+DATA_FILES = ("timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml")
+#: Plot files written by :meth:`Run.save` (``identification.png`` too when estimates exist).
+PLOT_FILES = ("contact_velocity.png", "contact_force.png", "energy.png")
+
+
+def _frame(columns: dict[str, Any], order: list[str]) -> pd.DataFrame:
+    data = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
+    names = [c for c in order if c in data] + sorted(c for c in data if c not in order)
+    return pd.DataFrame({name: data[name] for name in names})
+
+
+def _core() -> Any:
+    try:
+        from . import _core as core
+    except ImportError as exc:
+        raise HilContactError(
+            "the native extension hilcontact._core is not available; build it with "
+            f"`pip install .` or `maturin develop --release` ({exc})"
+        ) from None
+    return core
+
+
+def core_version() -> str | None:
+    """Version of the native core, or None if it is not built."""
+    try:
+        return str(_core().version())
+    except HilContactError:
+        return None
+
+
+@dataclass
+class Run:
+    """The result of :func:`simulate`.
+
+    Attributes:
+        scenario: the resolved scenario that was simulated.
+        metrics: collisions (CoV, CoF, peak force, rebound speed), status, energy, ...
+            (see ``hilcontact._core.simulate``).
+        timeseries: the HIL loop, one row per control period (SI units).
+        reference: the ideal reference (true contact law, no delay).
+    """
+
+    scenario: Scenario
+    metrics: dict[str, Any]
+    timeseries: pd.DataFrame
+    reference: pd.DataFrame
+
+    @property
+    def status(self) -> str:
+        """``"ok"`` or ``"diverged"``."""
+        return str(self.metrics.get("status", "unknown"))
+
+    @property
+    def compensator(self) -> str:
+        return str(self.metrics.get("compensator") or self.scenario.compensator.kind)
+
+    def collision_table(self) -> pd.DataFrame:
+        """One row per HIL collision (index: collision number, from 1), with the ideal
+        reference's matching collision: start, end (s), peak_force (N), rebound_speed (m/s),
+        cov, cof, reference_peak_force (N), reference_rebound_speed (m/s)."""
+        reference = {c.get("index"): c for c in self.metrics.get("reference_collisions") or []}
+        rows = []
+        for collision in self.metrics.get("collisions") or []:
+            ref = reference.get(collision.get("index"), {})
+            rows.append(
+                {
+                    "collision": collision.get("index"),
+                    "start": collision.get("start"),
+                    "end": collision.get("end"),
+                    "peak_force": collision.get("peak_force"),
+                    "rebound_speed": collision.get("rebound_speed"),
+                    "cov": collision.get("cov"),
+                    "cof": collision.get("cof"),
+                    "reference_peak_force": ref.get("peak_force"),
+                    "reference_rebound_speed": ref.get("rebound_speed"),
+                }
+            )
+        columns = [
+            "collision", "start", "end", "peak_force", "rebound_speed", "cov", "cof",
+            "reference_peak_force", "reference_rebound_speed",
+        ]
+        table = pd.DataFrame(rows, columns=columns)
+        table[columns[1:]] = table[columns[1:]].astype(np.float64)
+        return table.set_index("collision")
+
+    def plot(self, directory: str | os.PathLike[str] | None = None) -> dict[str, Figure]:
+        """Make the figures (name -> matplotlib Figure); save them as ``<name>.png`` in
+        ``directory`` if given. Names: contact_velocity, contact_force, energy, and
+        identification when the compensator estimates stiffness."""
+        from .plots import make_figures
+
+        figures = make_figures(self)
+        if directory is not None:
+            folder = Path(directory)
+            folder.mkdir(parents=True, exist_ok=True)
+            for name, figure in figures.items():
+                figure.savefig(folder / f"{name}.png", dpi=120)
+        return figures
+
+    def save(self, directory: str | os.PathLike[str], plots: bool = True) -> Path:
+        """Write the run to ``directory``, atomically.
+
+        Files: timeseries.parquet, reference.parquet, metrics.json, scenario.toml (resolved,
+        reproduces the run) and, unless ``plots=False``, the PNG figures. Everything is
+        written into a temporary sibling folder which then replaces ``directory``: an
+        existing folder is never half-overwritten. Returns the folder's path.
+        """
+        target = Path(directory)
+        if target.exists() and not target.is_dir():
+            raise HilContactError(f"{target}: exists and is not a directory")
+        parent = target.absolute().parent
+        parent.mkdir(parents=True, exist_ok=True)
+        # os.mkdir (not tempfile.mkdtemp) so that the folder gets the usual permissions
+        staging = parent / f".{target.name}.tmp-{uuid.uuid4().hex[:12]}"
+        os.mkdir(staging)
+        try:
+            self._write(staging, plots)
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
+        _swap_into_place(staging, target.absolute())
+        return target
+
+    def _write(self, folder: Path, plots: bool) -> None:
+        self.timeseries.to_parquet(folder / "timeseries.parquet", engine="pyarrow", index=False)
+        self.reference.to_parquet(folder / "reference.parquet", engine="pyarrow", index=False)
+        (folder / "metrics.json").write_text(json.dumps(self.metrics, indent=2) + "\n", encoding="utf-8")
+        (folder / "scenario.toml").write_text(self.scenario.to_toml(), encoding="utf-8")
+        if plots:
+            self.plot(folder)
+
+
+def _swap_into_place(staging: Path, target: Path) -> None:
+    """Replace ``target`` by ``staging`` (same parent folder) with renames only."""
+    old: Path | None = None
+    if target.exists() or target.is_symlink():
+        old = target.parent / f".{target.name}.old-{uuid.uuid4().hex[:12]}"
+        os.rename(target, old)
+    try:
+        os.rename(staging, target)
+    except BaseException:
+        if old is not None:
+            os.rename(old, target)
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def simulate(scenario: Scenario | str | os.PathLike[str]) -> Run:
+    """Simulate a scenario (a :class:`Scenario`, a preset name or a TOML path).
+
+    Raises ScenarioError for an invalid scenario. A diverging loop is not an error: the run's
+    ``status`` is ``"diverged"`` and ``metrics["reason"]`` says why.
+    """
+    if not isinstance(scenario, Scenario):
+        scenario = load_scenario(scenario)
+    result = _core().simulate(scenario.to_json())
+    metrics = json.loads(result["metrics"])
+    return Run(
+        scenario=scenario,
+        metrics=metrics,
+        timeseries=_frame(result["timeseries"], TIMESERIES_COLUMNS),
+        reference=_frame(result["reference"], REFERENCE_COLUMNS),
+    )

@@ -1,0 +1,325 @@
+"""Run results: saving (atomic), plots, collision table; integration through the real core."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+from click.testing import CliRunner
+from conftest import synthetic_run
+
+import hilcontact as hc
+from hilcontact.cli import cli
+from hilcontact.run import REFERENCE_COLUMNS, TIMESERIES_COLUMNS
+
+DATA_FILES = {"timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml"}
+PLOTS = {"contact_velocity.png", "contact_force.png", "energy.png"}
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def siblings(path: Path) -> list[str]:
+    return sorted(p.name for p in path.parent.iterdir())
+
+
+# ---- save / plots / table (synthetic data, no core needed) ---------------------------------
+
+
+def test_save_writes_all_files(tmp_path, fake_run):
+    out = tmp_path / "runs" / "paper"
+    returned = fake_run.save(out)
+    assert returned == out
+    assert {p.name for p in out.iterdir()} == DATA_FILES | PLOTS
+    for name in PLOTS:
+        assert (out / name).read_bytes()[:8] == PNG_MAGIC
+    assert json.loads((out / "metrics.json").read_text()) == fake_run.metrics
+    assert (out / "metrics.json").read_text().startswith("{\n  ")  # indented
+    assert hc.load_scenario(out / "scenario.toml") == fake_run.scenario
+    table = pq.read_table(out / "timeseries.parquet")
+    assert table.column_names == list(fake_run.timeseries.columns)
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "reference.parquet"), fake_run.reference)
+    assert siblings(out) == ["paper"]  # no temporary folders left behind
+
+
+def test_save_without_plots(tmp_path, fake_run):
+    out = tmp_path / "noplots"
+    fake_run.save(out, plots=False)
+    assert {p.name for p in out.iterdir()} == DATA_FILES
+
+
+def test_save_replaces_existing_folder_completely(tmp_path, fake_run):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "stale.txt").write_text("old")
+    (out / "metrics.json").write_text("old")
+    fake_run.save(out, plots=False)
+    assert {p.name for p in out.iterdir()} == DATA_FILES
+    assert json.loads((out / "metrics.json").read_text())["status"] == "ok"
+    assert siblings(out) == ["run"]
+
+
+def test_failed_save_leaves_existing_folder_untouched(tmp_path, fake_run, monkeypatch):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "metrics.json").write_text("old")
+
+    def boom(self, *args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(hc.Scenario, "to_toml", boom)  # fails after the parquet files are written
+    with pytest.raises(OSError, match="disk full"):
+        fake_run.save(out)
+    assert [p.name for p in out.iterdir()] == ["metrics.json"]
+    assert (out / "metrics.json").read_text() == "old"
+    assert siblings(out) == ["run"]
+
+
+def test_failed_save_creates_nothing(tmp_path, fake_run, monkeypatch):
+    monkeypatch.setattr(pd.DataFrame, "to_parquet", lambda *a, **k: (_ for _ in ()).throw(OSError("nope")))
+    with pytest.raises(OSError):
+        fake_run.save(tmp_path / "new")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_save_refuses_a_file(tmp_path, fake_run):
+    target = tmp_path / "file"
+    target.write_text("x")
+    with pytest.raises(hc.HilContactError, match="not a directory"):
+        fake_run.save(target)
+    assert target.read_text() == "x"
+
+
+def test_collision_table(fake_run):
+    table = fake_run.collision_table()
+    assert list(table.index) == [1, 2]
+    assert table.index.name == "collision"
+    assert list(table.columns) == [
+        "start", "end", "peak_force", "rebound_speed", "cov", "cof",
+        "reference_peak_force", "reference_rebound_speed",
+    ]
+    assert table.loc[1, "cov"] == 1.25 and table.loc[1, "reference_rebound_speed"] == 0.02
+    assert math.isnan(table.loc[2, "cof"]) and math.isnan(table.loc[2, "reference_peak_force"])
+
+
+def _lines(figure):
+    return [line for ax in figure.axes for line in ax.get_lines() if not line.get_label().startswith("_")]
+
+
+def test_plots_are_labelled(tmp_path, fake_run):
+    figures = fake_run.plot()
+    assert list(figures) == ["contact_velocity", "contact_force", "energy"]
+    for name, figure in figures.items():
+        ax = figure.axes[0]
+        assert "paper-table1" in ax.get_title() and "none" in ax.get_title() and "10 ms" in ax.get_title()
+        assert ax.get_xlabel() == "time (s)"
+        assert ax.get_legend() is not None
+        assert any(line.get_visible() for line in ax.get_xgridlines())
+    assert figures["contact_velocity"].axes[0].get_ylabel() == "velocity (mm/s)"
+    assert figures["contact_force"].axes[0].get_ylabel() == "contact force (N)"
+    assert figures["energy"].axes[0].get_ylabel() == "energy (J)"
+    # x only (y is zero): HIL solid + reference dashed, in mm/s
+    lines = _lines(figures["contact_velocity"])
+    assert [line.get_label() for line in lines] == ["vx HIL", "vx ideal reference"]
+    assert lines[0].get_linestyle() == "-" and lines[1].get_linestyle() == "--"
+    assert np.max(lines[0].get_ydata()) == pytest.approx(20.0)
+    # collisions shaded
+    assert len(figures["contact_velocity"].axes[0].patches) == 2
+    fake_run.plot(tmp_path)
+    assert {p.name for p in tmp_path.iterdir()} == PLOTS
+
+
+def test_velocity_plot_adds_significant_components():
+    figures = synthetic_run(lateral=0.5).plot()
+    labels = [line.get_label() for line in _lines(figures["contact_velocity"])]
+    assert labels == ["vx HIL", "vx ideal reference", "vy HIL", "vy ideal reference"]
+    figures = synthetic_run(lateral=0.005).plot()  # below 1 % of the largest: left out
+    assert len(_lines(figures["contact_velocity"])) == 2
+
+
+def test_identification_plot_when_estimates_exist(tmp_path):
+    run = synthetic_run(estimates=True)
+    figures = run.plot()
+    assert "identification" in figures
+    run.save(tmp_path / "id")
+    assert (tmp_path / "id" / "identification.png").read_bytes()[:8] == PNG_MAGIC
+
+
+# ---- integration through the real core ----------------------------------------------------
+#
+# paper-table1 uses the pass-through compensator ("none") with 10 ms of robot delay: every
+# collision rebounds ~1.47x faster than the one before (negative damping k*tau of the delayed
+# spring: exp(pi*omega*tau/2) = 1.48 at 4 Hz), so the energy passes 100x its initial value in
+# the 6th collision (~2.8 s) and the run is reported as diverged. Without delay the HIL loop
+# reproduces the ideal reference: status ok, five collisions, CoV = CoF = 1.
+
+
+@pytest.fixture(scope="session")
+def undelayed_run(core) -> hc.Run:
+    return hc.simulate(hc.load_scenario("paper-table1", {"facility.robot_delay": 0.0}))
+
+
+def check_frames(run: hc.Run) -> None:
+    assert set(TIMESERIES_COLUMNS) <= set(run.timeseries.columns)
+    assert set(REFERENCE_COLUMNS) <= set(run.reference.columns)
+    for frame in (run.timeseries, run.reference):
+        assert all(frame[c].dtype == np.float64 for c in frame.columns)
+        time = frame["time"].to_numpy()
+        assert time[0] == 0.0
+        assert np.allclose(np.diff(time), run.scenario.simulation.period, rtol=1e-9)
+    # the ideal reference always covers the whole duration
+    assert run.reference["time"].iloc[-1] == pytest.approx(run.scenario.simulation.duration, abs=1e-9)
+    # both start from the scenario's state: 20 mm/s along x, rod tip 5 mm from the front wall
+    for frame in (run.timeseries, run.reference):
+        assert frame["tip_velocity_x"].iloc[0] == pytest.approx(0.02, rel=1e-12)
+        assert frame["tip_position_x"].iloc[0] == pytest.approx(0.005, abs=1e-12)
+    initial = 0.5 * (300.0 * 4000.0 / 4300.0) * 0.02**2  # 1/2 m_e v^2
+    assert run.metrics["energy"]["initial"] == pytest.approx(initial, rel=1e-9)
+    assert run.timeseries["energy"].iloc[0] == pytest.approx(initial, rel=1e-9)
+
+
+def test_paper_table1_without_delay_matches_reference(undelayed_run):
+    run = undelayed_run
+    check_frames(run)
+    m = run.metrics
+    assert m["scenario"] == "paper-table1" and m["compensator"] == "none"
+    assert m["status"] == "ok" and run.status == "ok"
+    assert m["diverged_at"] is None and m["reason"] is None
+    assert m["identification"] is None
+    assert len(run.timeseries) == len(run.reference) == 5501
+    assert [c["index"] for c in m["collisions"]] == [1, 2, 3, 4, 5]
+    assert len(m["reference_collisions"]) == 5
+    table = run.collision_table()
+    assert table["cov"].to_numpy() == pytest.approx(1.0, abs=1e-3)
+    assert table["cof"].to_numpy() == pytest.approx(1.0, abs=1e-3)
+    assert table["reference_rebound_speed"].to_numpy() == pytest.approx(0.02, rel=1e-6)
+    assert (table["end"] > table["start"]).all()
+    assert m["energy"]["final"] == pytest.approx(m["energy"]["reference_final"], rel=1e-3)
+
+
+def test_paper_table1_via_api_diverges_without_compensation(paper_run):
+    run = paper_run
+    check_frames(run)
+    assert run.scenario.compensator.kind == "none" and run.scenario.facility.robot_delay == 0.01
+    m = run.metrics
+    assert m["status"] == "diverged" and run.status == "diverged"
+    assert 2.0 < m["diverged_at"] < 3.5
+    assert "divergence" in m["reason"]
+    assert m["energy"]["max"] > 100 * m["energy"]["initial"]
+    # the HIL series stops where it diverged
+    assert run.timeseries["time"].iloc[-1] == pytest.approx(m["diverged_at"], abs=1e-9)
+    table = run.collision_table()
+    assert len(table) >= 5
+    first5 = table.loc[1:5]
+    assert first5["cov"].notna().all() and first5["cof"].notna().all()
+    assert first5["cov"].iloc[0] == pytest.approx(1.48, abs=0.03)
+    assert (first5["cov"].diff().dropna() > 0).all()  # each rebound faster than the last
+    assert (first5["peak_force"] > first5["reference_peak_force"]).all()
+
+
+def test_paper_table1_save_and_reproduce(paper_run, tmp_path):
+    out = paper_run.save(tmp_path / "paper")
+    assert {p.name for p in out.iterdir()} == DATA_FILES | PLOTS
+    columns = pq.read_table(out / "timeseries.parquet").column_names
+    assert set(TIMESERIES_COLUMNS) <= set(columns)
+    assert set(REFERENCE_COLUMNS) <= set(pq.read_table(out / "reference.parquet").column_names)
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics == paper_run.metrics
+    again = hc.simulate(hc.load_scenario(out / "scenario.toml"))
+    assert again.metrics == paper_run.metrics  # the saved scenario reproduces the run
+    pd.testing.assert_frame_equal(again.timeseries, paper_run.timeseries)
+    pd.testing.assert_frame_equal(pd.read_parquet(out / "reference.parquet"), paper_run.reference)
+
+
+def test_simulate_accepts_a_preset_name(paper_run):
+    run = hc.simulate("paper-table1")
+    assert run.scenario == hc.load_scenario("paper-table1")
+    assert run.metrics == paper_run.metrics
+
+
+def test_core_version(core):
+    assert isinstance(core.version(), str) and core.version()
+
+
+def test_core_rejects_invalid_json_with_scenario_error(core):
+    with pytest.raises(hc.ScenarioError):
+        core.simulate('{"name": "x"}')
+
+
+def test_core_validates_what_slips_past_python(core):
+    scenario = hc.load_scenario("paper-table1")
+    scenario.facility.robot_delay = 0.0125  # assignment is not validated: only the core sees it
+    with pytest.raises(hc.ScenarioError, match="facility.robot_delay"):
+        hc.simulate(scenario)
+
+
+def test_cli_run_paper_table1(core, tmp_path):
+    out = tmp_path / "cli-run"
+    result = CliRunner().invoke(cli, ["run", "paper-table1", "--out", str(out)], prog_name="hilcontact")
+    assert result.exit_code == 0, (result.output, result.stderr)
+    assert {p.name for p in out.iterdir()} == DATA_FILES | PLOTS
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["status"] == "diverged"
+    stdout = result.stdout.replace("\n", " ")
+    assert f"status: diverged at {metrics['diverged_at']:.3f} s" in stdout
+    assert str(out) in result.stdout.replace("\n", "")
+    for collision in metrics["collisions"]:  # one table row per collision, with its CoV
+        if collision["cov"] is not None:
+            assert f"{collision['cov']:.3f}" in result.stdout
+
+
+def test_cli_run_ok_with_set(core, tmp_path):
+    out = tmp_path / "ok"
+    result = CliRunner().invoke(
+        cli, ["run", "paper-table1", "--set", "facility.robot_delay=0", "--out", str(out)], prog_name="hilcontact"
+    )
+    assert result.exit_code == 0, (result.output, result.stderr)
+    assert "status: ok" in result.stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["status"] == "ok" and len(metrics["collisions"]) == 5
+    assert hc.load_scenario(out / "scenario.toml").facility.robot_delay == 0.0
+    rows = [line for line in result.stdout.splitlines() if line.startswith("│")]
+    assert len(rows) == 5
+
+
+def test_cli_run_no_plots_default_folder(core, tmp_path):
+    old = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        result = CliRunner().invoke(
+            cli, ["run", "paper-table1", "--no-plots", "--set", "simulation.duration=1.0"], prog_name="hilcontact"
+        )
+    finally:
+        os.chdir(old)
+    assert result.exit_code == 0, (result.output, result.stderr)
+    out = tmp_path / "runs" / "paper-table1"
+    assert {p.name for p in out.iterdir()} == DATA_FILES
+    assert hc.load_scenario(out / "scenario.toml").simulation.duration == 1.0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["runs"]
+
+
+@pytest.mark.parametrize("name", sorted(hc.presets()))
+def test_every_preset_simulates_consistently(core, name):
+    run = hc.simulate(name)
+    assert set(TIMESERIES_COLUMNS) <= set(run.timeseries.columns)
+    assert set(REFERENCE_COLUMNS) <= set(run.reference.columns)
+    m = run.metrics
+    assert m["scenario"] == name and m["compensator"] == run.scenario.compensator.kind
+    assert m["status"] in ("ok", "diverged")
+    if m["status"] == "ok":
+        assert m["diverged_at"] is None and m["reason"] is None
+        assert len(run.timeseries) == len(run.reference)
+    else:
+        assert m["diverged_at"] > 0 and isinstance(m["reason"], str) and m["reason"]
+        assert run.timeseries["time"].iloc[-1] == pytest.approx(m["diverged_at"], abs=1e-9)
+    assert not run.timeseries.isna().any().any() and not run.reference.isna().any().any()
+    for key in ("collisions", "reference_collisions"):
+        assert [c["index"] for c in m[key]] == list(range(1, len(m[key]) + 1))
+        assert all(c["end"] > c["start"] for c in m[key])
+    assert m["collisions"] and m["reference_collisions"]
+    assert set(m["energy"]) == {"initial", "final", "reference_final", "max"}
+    json.dumps(m, allow_nan=False)  # plain JSON: no NaN or infinity
