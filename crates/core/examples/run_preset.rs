@@ -1,33 +1,50 @@
-//! Runs a preset scenario file and prints its collisions: `cargo run --release --example
-//! run_preset -- python/hilcontact/scenarios/paper-table1.toml [robot_delay_s]`.
+//! Runs a preset scenario file and prints its collisions:
+//! `cargo run --release --example run_preset -- python/hilcontact/scenarios/paper-table1.toml [key=value ...]`
+//! with keys `robot_delay`, `sensor_delay`, `noise` (N), `seed`, `kind` (compensator), `mode` (align|lead).
+
+use hilcontact_core::compensator::{CompensatorConfig, DelayMode, ModelParams, TdpaParams};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let path = args.get(1).map(String::as_str).unwrap_or("python/hilcontact/scenarios/paper-table1.toml");
     let text = std::fs::read_to_string(path).expect("read scenario");
     let mut s: hilcontact_core::Scenario = toml::from_str(&text).expect("parse scenario");
-    if let Some(d) = args.get(2) {
-        s.facility.robot_delay = d.parse().expect("robot delay, s");
+    let (mut kind, mut mode) = ("none".to_string(), DelayMode::Align);
+    for arg in &args[2.min(args.len())..] {
+        let (key, value) = arg.split_once('=').expect("key=value");
+        match key {
+            "robot_delay" => s.facility.robot_delay = value.parse().expect("s"),
+            "sensor_delay" => s.facility.sensor_delay = value.parse().expect("s"),
+            "noise" => s.facility.sensor_noise = value.parse().expect("N"),
+            "seed" => s.facility.seed = value.parse().expect("integer"),
+            "kind" => kind = value.to_string(),
+            "mode" => mode = if value == "lead" { DelayMode::Lead } else { DelayMode::Align },
+            _ => panic!("unknown key {key}"),
+        }
     }
+    let model = ModelParams { delay_mode: mode, ..ModelParams::default() };
+    s.compensator = match kind.as_str() {
+        "none" => CompensatorConfig::None,
+        "pic" => CompensatorConfig::Pic(model),
+        "dac" => CompensatorConfig::Dac(model),
+        "pida" => CompensatorConfig::Pida(model),
+        "tdpa-impedance" => CompensatorConfig::TdpaImpedance(TdpaParams::default()),
+        "tdpa-admittance" => CompensatorConfig::TdpaAdmittance(TdpaParams::default()),
+        other => panic!("unknown compensator {other}"),
+    };
     let start = std::time::Instant::now();
     let out = hilcontact_core::simulate(&s).expect("simulate");
     let elapsed = start.elapsed();
     let m = &out.metrics;
-    println!("{} [{}] status {:?} {:?} in {:.2} ms", m.scenario, m.compensator, m.status, m.reason, elapsed.as_secs_f64() * 1e3);
-    for c in &m.collisions {
-        let r = m.reference_collisions.get(c.collision.index - 1);
-        println!(
-            "#{} {:.3}-{:.3} s peak {:8.2} N (ref {:8.2}) rebound {:7.3} mm/s (ref {:7.3}) CoV {:?} CoF {:?}",
-            c.collision.index,
-            c.collision.start,
-            c.collision.end,
-            c.collision.peak_force,
-            r.map_or(f64::NAN, |r| r.peak_force),
-            c.collision.rebound_speed.unwrap_or(f64::NAN) * 1e3,
-            r.and_then(|r| r.rebound_speed).unwrap_or(f64::NAN) * 1e3,
-            c.cov,
-            c.cof
-        );
-    }
-    println!("energy {:?}", m.energy);
+    let fmt = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.3}"));
+    println!(
+        "{} [{}] status {:?} in {:.1} ms; CoV {}; CoF {}; id {:?}",
+        m.scenario,
+        m.compensator,
+        m.status,
+        elapsed.as_secs_f64() * 1e3,
+        m.collisions.iter().map(|c| fmt(c.cov)).collect::<Vec<_>>().join(" "),
+        m.collisions.iter().map(|c| fmt(c.cof)).collect::<Vec<_>>().join(" "),
+        m.identification.as_ref().map(|i| (format!("k {:.3}%", i.stiffness_error * 100.0), format!("c {:.1} N s/m", i.damping_error)))
+    );
 }

@@ -92,6 +92,8 @@ pub struct HilRecord {
     pub stiffness_estimate: f64,
     /// Identified damping, N·s/m (NaN when not identified).
     pub damping_estimate: f64,
+    /// Energy observed by the compensator at the environment port, J (NaN when not observed).
+    pub observed_energy: f64,
 }
 
 impl HilRecord {
@@ -146,6 +148,8 @@ pub struct HilRun {
     pub rows: Vec<HilRecord>,
     /// Whether the compensator identified the contact.
     pub estimates_contact: bool,
+    /// Whether the compensator observed the port energy.
+    pub observes_energy: bool,
     /// `ok` or `diverged`.
     pub status: Status,
     /// Why it stopped early.
@@ -165,7 +169,7 @@ pub fn run_hil(s: &Scenario, system: &TwoBodySystem, energy_bound: f64) -> Resul
     for k in 0..=n {
         let m = facility.measure();
         let out = virt.compensate(&m);
-        let desired = virt.command();
+        let desired = virt.virtual_motion();
         let row = HilRecord {
             time: k as f64 * period,
             tip_position: desired.point(&rod),
@@ -180,6 +184,7 @@ pub fn run_hil(s: &Scenario, system: &TwoBodySystem, energy_bound: f64) -> Resul
             energy: virt.energy(),
             stiffness_estimate: out.estimate.map_or(f64::NAN, |e| e.stiffness),
             damping_estimate: out.estimate.map_or(f64::NAN, |e| e.damping),
+            observed_energy: out.observed_energy,
         };
         rows.push(row);
         if !row.is_finite() {
@@ -198,10 +203,10 @@ pub fn run_hil(s: &Scenario, system: &TwoBodySystem, energy_bound: f64) -> Resul
         if k == n {
             break;
         }
-        virt.integrate(&out.applied);
+        virt.integrate(&out);
         facility.advance(&virt.command());
     }
-    Ok(HilRun { rows, estimates_contact: virt.estimates_contact(), status, reason })
+    Ok(HilRun { rows, estimates_contact: virt.estimates_contact(), observes_energy: virt.observes_energy(), status, reason })
 }
 
 /// Runs the reference and the HIL loop of a scenario and computes the metrics.
@@ -276,6 +281,9 @@ pub fn simulate(s: &Scenario) -> Result<SimulationOutput> {
     if hil.estimates_contact {
         hil_scalars.push(("stiffness_estimate", |r| r.stiffness_estimate));
         hil_scalars.push(("damping_estimate", |r| r.damping_estimate));
+    }
+    if hil.observes_energy {
+        hil_scalars.push(("observed_energy", |r| r.observed_energy));
     }
     timeseries.columns.extend(Table::from_rows(rows, &hil_scalars, &hil_vectors).columns);
 

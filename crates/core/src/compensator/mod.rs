@@ -4,9 +4,27 @@
 //! It knows the period, the sensor delay `τ_p` and the sensor origin; it does not know the
 //! robot delay, the true stiffness or damping. Its `step` never allocates.
 
+mod akf;
+mod dac;
+mod delay;
+mod energy;
+mod force;
 mod none;
+mod params;
+mod pic;
+mod pida;
+mod tdpa;
 
+pub use akf::SageHusaFilter;
+pub use dac::Dac;
+pub use delay::{ContactEstimator, ContactView};
+pub use energy::{EnergyController, EnergyObserver};
+pub use force::{compensate_force, CompensatedWrench};
 pub use none::PassThrough;
+pub use params::{DelayMode, ModelParams, ObserverMode, TdpaParams};
+pub use pic::Pic;
+pub use pida::Pida;
+pub use tdpa::{TdpaAdmittance, TdpaImpedance};
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -43,8 +61,20 @@ pub struct ContactEstimate {
 pub struct CompensatorOutput {
     /// Wrench to apply to the virtual dynamics, same convention as the measurement.
     pub applied: FrameWrench,
+    /// Change of the rod tip's relative velocity, `t` frame, m/s (admittance-type
+    /// compensators act on the velocity; zero for the others).
+    pub velocity_correction: Vector3<f64>,
     /// Identified contact parameters, if the compensator identifies them.
     pub estimate: Option<ContactEstimate>,
+    /// Energy observed at the environment port, J (NaN when not observed).
+    pub observed_energy: f64,
+}
+
+impl CompensatorOutput {
+    /// An output that applies `applied` and nothing else.
+    pub fn wrench(applied: FrameWrench) -> Self {
+        CompensatorOutput { applied, velocity_correction: Vector3::zeros(), estimate: None, observed_energy: f64::NAN }
+    }
 }
 
 /// Fixed facts a compensator may use.
@@ -68,6 +98,10 @@ pub trait Compensator: Send {
     fn estimates_contact(&self) -> bool {
         false
     }
+    /// Whether `step` returns an observed energy.
+    fn observes_energy(&self) -> bool {
+        false
+    }
 }
 
 /// Which compensator, with its parameters (`[compensator]` in a scenario, tagged by `kind`).
@@ -77,6 +111,16 @@ pub enum CompensatorConfig {
     /// Pass-through: the measured wrench goes straight into the dynamics (diverges with delay).
     #[default]
     None,
+    /// Algorithm 1: parameter identification control, `F_comp`, `M_comp` into the dynamics.
+    Pic(ModelParams),
+    /// Algorithm 2: damping amendment control, `F_act + F_α`.
+    Dac(ModelParams),
+    /// Algorithm 3: identification and damping amendment, `F_comp + F_α`, eqs. (29), (30).
+    Pida(ModelParams),
+    /// Time-domain passivity, impedance type (a series damper on the force).
+    TdpaImpedance(TdpaParams),
+    /// Time-domain passivity, admittance type (a damper on the velocity command).
+    TdpaAdmittance(TdpaParams),
 }
 
 impl CompensatorConfig {
@@ -84,6 +128,11 @@ impl CompensatorConfig {
     pub fn kind(&self) -> &'static str {
         match self {
             CompensatorConfig::None => "none",
+            CompensatorConfig::Pic(_) => "pic",
+            CompensatorConfig::Dac(_) => "dac",
+            CompensatorConfig::Pida(_) => "pida",
+            CompensatorConfig::TdpaImpedance(_) => "tdpa-impedance",
+            CompensatorConfig::TdpaAdmittance(_) => "tdpa-admittance",
         }
     }
 
@@ -91,13 +140,20 @@ impl CompensatorConfig {
     pub fn validate(&self) -> Result<()> {
         match self {
             CompensatorConfig::None => Ok(()),
+            CompensatorConfig::Pic(p) | CompensatorConfig::Dac(p) | CompensatorConfig::Pida(p) => p.validate(),
+            CompensatorConfig::TdpaImpedance(p) | CompensatorConfig::TdpaAdmittance(p) => p.validate(),
         }
     }
 
     /// Builds the compensator (allocates once, here).
-    pub fn build(&self, _context: &CompensatorContext) -> Box<dyn Compensator> {
+    pub fn build(&self, context: &CompensatorContext) -> Box<dyn Compensator> {
         match self {
             CompensatorConfig::None => Box::new(PassThrough),
+            CompensatorConfig::Pic(p) => Box::new(Pic::new(p, context)),
+            CompensatorConfig::Dac(p) => Box::new(Dac::new(p, context)),
+            CompensatorConfig::Pida(p) => Box::new(Pida::new(p, context)),
+            CompensatorConfig::TdpaImpedance(p) => Box::new(TdpaImpedance::new(p, context)),
+            CompensatorConfig::TdpaAdmittance(p) => Box::new(TdpaAdmittance::new(p, context)),
         }
     }
 }

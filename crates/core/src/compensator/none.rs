@@ -10,7 +10,7 @@ pub struct PassThrough;
 
 impl Compensator for PassThrough {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
-        CompensatorOutput { applied: input.measured, estimate: None }
+        CompensatorOutput::wrench(input.measured)
     }
 
     fn reset(&mut self) {}

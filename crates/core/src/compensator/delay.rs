@@ -1,0 +1,160 @@
+//! Contact view for the identification-based compensators: measurement-delay compensation
+//! (eq. 6 or time alignment), contact direction (7), penetration increments (8)-(10) and
+//! the adaptive Kalman filter (11)-(13).
+//!
+//! All vectors are in `t` and in the sensor's convention (force on the frame), so that the
+//! contact direction `e = F/|F|` points into the wall and the paper's equations hold as
+//! printed: `Δd = Δp·e`, `Δḋ = Δv·e`, `ΔF = ΔF·e = k·Δd + c·Δḋ`.
+//!
+//! Delay modes:
+//! - `lead` (eq. 6): `F_act = F_mea + τ_p·dF_mea/dt` (backward difference), identified against
+//!   the present kinematics. It differentiates the sensor noise.
+//! - `align` (default): identify `F_mea(k)` against the robot kinematics from `τ_p` earlier
+//!   (those that produced it), then predict the present force from the model and the motion
+//!   since: `F_act = F_mea + (k̂·Δd + ĉ·Δḋ)·e` over the last `τ_p`.
+
+use nalgebra::{Matrix2, Vector2, Vector3};
+
+use super::akf::SageHusaFilter;
+use super::params::{DelayMode, ModelParams};
+use super::{CompensatorContext, CompensatorInput};
+use crate::delay_line::DelayLine;
+
+/// What the identification front end makes of a tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactView {
+    /// Whether `|F_act|` exceeds the contact threshold.
+    pub in_contact: bool,
+    /// Contact direction e = F_act/|F_act| (into the wall); zero out of contact.
+    pub direction: Vector3<f64>,
+    /// F_act: the measured force compensated for the measurement delay, N.
+    pub force: Vector3<f64>,
+    /// M_act: the measured moment compensated likewise, about the sensor origin, N·m.
+    pub moment: Vector3<f64>,
+    /// Identified stiffness k̂, N/m.
+    pub stiffness: f64,
+    /// Identified damping ĉ, N·s/m.
+    pub damping: f64,
+}
+
+/// The robot kinematics and measured force of one identification sample.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Sample {
+    force: Vector3<f64>,
+    position: Vector3<f64>,
+    velocity: Vector3<f64>,
+    in_contact: bool,
+}
+
+/// Delay compensation and online identification of the contact.
+#[derive(Debug, Clone)]
+pub struct ContactEstimator {
+    mode: DelayMode,
+    threshold: f64,
+    period: f64,
+    sensor_delay: f64,
+    delay_ticks: usize,
+    sensor_origin: Vector3<f64>,
+    /// Robot tip position and velocity of the last `τ_p/T + 1` ticks.
+    kinematics: DelayLine<(Vector3<f64>, Vector3<f64>)>,
+    previous_measured: (Vector3<f64>, Vector3<f64>),
+    previous_sample: Option<Sample>,
+    /// The adaptive Kalman filter.
+    pub filter: SageHusaFilter,
+}
+
+impl ContactEstimator {
+    /// A front end with the given parameters.
+    pub fn new(p: &ModelParams, context: &CompensatorContext) -> Self {
+        let delay_ticks = (context.sensor_delay / context.period).round() as usize;
+        let filter = SageHusaFilter::new(
+            Vector2::new(p.stiffness_initial, p.damping_initial),
+            Matrix2::from_diagonal(&Vector2::new(p.stiffness_std.powi(2), p.damping_std.powi(2))),
+            Matrix2::from_diagonal(&Vector2::new(p.stiffness_walk.powi(2), p.damping_walk.powi(2))),
+            p.noise_std.powi(2),
+            p.forgetting,
+        );
+        ContactEstimator {
+            mode: p.delay_mode,
+            threshold: p.contact_force,
+            period: context.period,
+            sensor_delay: context.sensor_delay,
+            delay_ticks,
+            sensor_origin: context.sensor_origin,
+            kinematics: DelayLine::new(delay_ticks, (Vector3::zeros(), Vector3::zeros())),
+            previous_measured: (Vector3::zeros(), Vector3::zeros()),
+            previous_sample: None,
+            filter,
+        }
+    }
+
+    /// Forgets everything but the parameters.
+    pub fn reset(&mut self) {
+        self.kinematics = DelayLine::new(self.delay_ticks, (Vector3::zeros(), Vector3::zeros()));
+        self.previous_measured = (Vector3::zeros(), Vector3::zeros());
+        self.previous_sample = None;
+        self.filter.reset();
+    }
+
+    /// One tick: delay compensation, identification, contact direction. Allocation-free.
+    pub fn step(&mut self, input: &CompensatorInput) -> ContactView {
+        let (f_mea, m_mea) = (input.measured.force, input.measured.moment);
+        let (p_act, v_act) = (input.tip_position_actual, input.tip_velocity_actual);
+        if self.previous_sample.is_none() {
+            // first tick: the kinematics held their present value for all earlier time
+            self.kinematics = DelayLine::new(self.delay_ticks, (p_act, v_act));
+            self.previous_measured = (f_mea, m_mea);
+        }
+        self.kinematics.push((p_act, v_act));
+
+        // the identification sample: a force and the kinematics that produced it
+        let lead = |now: Vector3<f64>, before: Vector3<f64>| now + (now - before) * (self.sensor_delay / self.period);
+        let sample = match self.mode {
+            DelayMode::Lead => Sample {
+                // (6) F_act = F_mea + τ_p dF_mea/dt
+                force: lead(f_mea, self.previous_measured.0),
+                position: p_act,
+                velocity: v_act,
+                in_contact: false,
+            },
+            DelayMode::Align => {
+                let (p, v) = self.kinematics.delayed(self.delay_ticks);
+                Sample { force: f_mea, position: p, velocity: v, in_contact: false }
+            }
+        };
+        let sample = Sample { in_contact: sample.force.norm() > self.threshold, ..sample };
+        if let (true, Some(prev)) = (sample.in_contact, self.previous_sample.filter(|s| s.in_contact)) {
+            // (7) e = F/|F|; (8)-(10) increments along e
+            let e = sample.force.normalize();
+            let h = Vector2::new((sample.position - prev.position).dot(&e), (sample.velocity - prev.velocity).dot(&e));
+            self.filter.update(&h, (sample.force - prev.force).dot(&e));
+        }
+        self.previous_sample = Some(sample);
+        let (stiffness, damping) = (self.filter.x[0], self.filter.x[1]);
+
+        let (force, moment) = match self.mode {
+            DelayMode::Lead => (sample.force, lead(m_mea, self.previous_measured.1)),
+            DelayMode::Align if sample.in_contact => {
+                // predict the present force from the model and the robot's motion since
+                let e = f_mea.normalize();
+                let (p_then, v_then) = self.kinematics.delayed(self.delay_ticks);
+                let increment = stiffness * (p_act - p_then).dot(&e) + damping * (v_act - v_then).dot(&e);
+                let magnitude = (f_mea.dot(&e) + increment).max(0.0); // never pulls
+                let f_act = f_mea + e * (magnitude - f_mea.dot(&e));
+                let s = &self.sensor_origin;
+                (f_act, m_mea + (p_act - s).cross(&f_act) - (p_then - s).cross(&f_mea))
+            }
+            DelayMode::Align => (f_mea, m_mea),
+        };
+        self.previous_measured = (f_mea, m_mea);
+        let in_contact = force.norm() > self.threshold;
+        ContactView {
+            in_contact,
+            direction: if in_contact { force.normalize() } else { Vector3::zeros() },
+            force,
+            moment,
+            stiffness,
+            damping,
+        }
+    }
+}

@@ -1,0 +1,199 @@
+//! Energy observer (14)-(16), (18) and energy controller (17), (19), (20).
+//!
+//! Sensor convention (force on the frame), so the power flowing into the environment port is
+//! `F·v_des`: positive while the rod compresses the contact, negative while it is pushed back.
+//! ```text
+//! E_obs(k) = E(0) + Σ T·[F_ek(i)·v_des(i) + F_α(i−1)·v_des(i−1)]          (14), (15)
+//! F_ek = F_comp − ĉ·(v_des·e)·e, of the previous tick while compressing     (16)
+//! E_obs,i = E_obs·|F_ek,i|/|F_ek|                                           (18)
+//! α_ii = −E_obs,i / (proj·F_ek,i·v_des,i·T) when E_obs,i < 0,
+//!        proj = v_desᵀF_ek/|F_ek|²                                          (19)
+//! F_α,i = α_ii·proj·F_ek,i                                                   (17)
+//! M_α = (p_des − p_s) × F_α                                                  (20)
+//! ```
+//! Two readings of the sum ([`ObserverMode`]):
+//! - `work` (default): the virtual dynamics hold the wrench of tick k−1 over the step to k
+//!   (symplectic Euler), which changes their kinetic energy by exactly
+//!   `−T·F(k−1)·(v_des(k−1) + v_des(k))/2`. So the observer adds
+//!   `T·(F_ek(k−1) + F_α(k−1))·(v_des(k−1) + v_des(k))/2`, and its energy is the virtual system's
+//!   real elastic exchange. Eq. (16) uses the previous tick's force for this reason, but only
+//!   while compressing. Read literally, the observer lags by one tick while rebounding and
+//!   misses about 1.5 % of the energy per collision at 20 ms.
+//! - `paper`: (15), (16) as printed.
+//!
+//! The observer runs only in contact (`E(0) = 0` at each contact's start): outside contact
+//! the damping term would otherwise accumulate during free flight. The controller only ever
+//! dissipates: α ≥ 0 and `F_α·v_des ≥ 0`; α is capped at `alpha_max` and a deficit that the
+//! cap leaves is carried to the next tick by the observer.
+
+use nalgebra::Vector3;
+
+use super::params::ObserverMode;
+
+/// One tick of the observer's history.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Tick {
+    force: Vector3<f64>,
+    direction: Vector3<f64>,
+    damping: f64,
+    velocity: Vector3<f64>,
+    alpha_force: Vector3<f64>,
+}
+
+/// The energy observer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnergyObserver {
+    period: f64,
+    mode: ObserverMode,
+    energy: f64,
+    previous: Option<Tick>,
+}
+
+/// Damping force `ĉ·(v·e)·e` of the identified contact, N.
+fn damping_force(damping: f64, velocity: &Vector3<f64>, direction: &Vector3<f64>) -> Vector3<f64> {
+    direction * (damping * velocity.dot(direction))
+}
+
+impl EnergyObserver {
+    /// An observer for control period `period` (s).
+    pub fn new(period: f64, mode: ObserverMode) -> Self {
+        EnergyObserver { period, mode, energy: 0.0, previous: None }
+    }
+
+    /// Forgets the contact.
+    pub fn reset(&mut self) {
+        self.energy = 0.0;
+        self.previous = None;
+    }
+
+    /// Observed energy E_obs, J.
+    pub fn energy(&self) -> f64 {
+        self.energy
+    }
+
+    /// One tick with the compensated force (N), contact direction, identified damping (N·s/m)
+    /// and desired velocity (m/s). Returns the elastic force F_ek of this tick (N); zero out of
+    /// contact.
+    pub fn step(&mut self, in_contact: bool, force: &Vector3<f64>, direction: &Vector3<f64>, damping: f64, velocity: &Vector3<f64>) -> Vector3<f64> {
+        if !in_contact {
+            self.reset();
+            return Vector3::zeros();
+        }
+        let elastic = |t: &Tick| t.force - damping_force(t.damping, &t.velocity, &t.direction);
+        let current = Tick { force: *force, direction: *direction, damping, velocity: *velocity, alpha_force: Vector3::zeros() };
+        let f_ek_now = elastic(&current);
+        self.energy += match (self.mode, self.previous) {
+            (_, None) => 0.0,
+            // the wrench held over the last step: its work on the virtual kinetic energy is
+            // exactly T·F(k−1)·(v(k−1) + v(k))/2 under symplectic Euler
+            (ObserverMode::Work, Some(p)) => 0.5 * self.period * (elastic(&p) + p.alpha_force).dot(&(p.velocity + velocity)),
+            // (15), (16) as printed
+            (ObserverMode::Paper, Some(p)) => {
+                let f_ek = if velocity.dot(force) > 0.0 { elastic(&p) } else { f_ek_now };
+                self.period * (f_ek.dot(velocity) + p.alpha_force.dot(&p.velocity))
+            }
+        };
+        self.previous = Some(current);
+        f_ek_now
+    }
+
+    /// Records the controller's force of this tick (enters the next tick's sum).
+    pub fn record_alpha_force(&mut self, alpha_force: &Vector3<f64>) {
+        if let Some(p) = self.previous.as_mut() {
+            p.alpha_force = *alpha_force;
+        }
+    }
+}
+
+/// The energy controller: a variable damping that dissipates what the observer finds created.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EnergyController {
+    period: f64,
+    alpha_max: f64,
+}
+
+impl EnergyController {
+    /// A controller for period `period` (s) with α capped at `alpha_max` (N·s/m).
+    pub fn new(period: f64, alpha_max: f64) -> Self {
+        EnergyController { period, alpha_max }
+    }
+
+    /// The amendment damping α (diagonal, N·s/m) and force F_α (N) for observed energy
+    /// `energy` (J), elastic force `f_ek` (N), contact direction `direction` and desired
+    /// velocity (m/s).
+    ///
+    /// Eqs. (17)-(19) depend on F_ek only through its direction ê: `proj·F_ek = (v·ê)·ê`. So
+    /// where F_ek vanishes (the virtual tip has left the wall while the robot has not) the
+    /// contact direction stands in for ê, and a deficit found late in the rebound can still
+    /// be dissipated.
+    pub fn step(&self, energy: f64, f_ek: &Vector3<f64>, direction: &Vector3<f64>, velocity: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+        let norm = f_ek.norm();
+        let e_hat = if norm > 1e-9 { f_ek / norm } else { *direction };
+        if energy >= 0.0 || e_hat.norm_squared() < 0.5 {
+            return (Vector3::zeros(), Vector3::zeros());
+        }
+        // proj·F_ek,i = (v·ê)·ê_i with proj = vᵀF_ek/|F_ek|²
+        let v_along = velocity.dot(&e_hat);
+        let mut alpha = Vector3::zeros();
+        for i in 0..3 {
+            let e_i = energy * e_hat[i].abs(); // (18)
+            let denominator = v_along * e_hat[i] * velocity[i] * self.period;
+            // (19), guarded: only where this axis can dissipate, never negative, capped
+            if e_i < 0.0 && denominator > 0.0 {
+                alpha[i] = (-e_i / denominator).min(self.alpha_max);
+            }
+        }
+        let f_alpha = alpha.component_mul(&e_hat) * v_along; // (17)
+        (alpha, f_alpha)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A lossless spring cycle seen by the observer: compress then release along x.
+    #[test]
+    fn observer_energy_is_zero_over_a_lossless_cycle() {
+        let (k, w, t) = (1.0e5, 20.0, 1e-4);
+        let mut obs = EnergyObserver::new(t, ObserverMode::Work);
+        let e = Vector3::new(1.0, 0.0, 0.0); // into the wall
+        let n = (std::f64::consts::PI / w / t).round() as usize;
+        let mut peak = 0.0f64;
+        for i in 0..=n {
+            let time = i as f64 * t;
+            let d = 0.01 / w * (w * time).sin(); // penetration
+            let v = Vector3::new(0.01 * (w * time).cos(), 0.0, 0.0);
+            obs.step(true, &(e * (k * d).max(0.0)), &e, 0.0, &v);
+            peak = peak.max(obs.energy());
+        }
+        // stored energy ½ k d_max² = 0.5e5·(5e-4)² = 1.25e-2 J at the middle, back to ~0
+        assert!((peak / (0.5 * k * (0.01f64 / w).powi(2)) - 1.0).abs() < 0.01, "peak {peak}");
+        assert!(obs.energy().abs() < 1e-3 * peak, "after the cycle {}", obs.energy());
+    }
+
+    #[test]
+    fn controller_only_dissipates_and_alpha_is_never_negative() {
+        let ctl = EnergyController::new(1e-3, 1e5);
+        let cases = [
+            (Vector3::new(50.0, 3.0, -1.0), Vector3::new(-0.02, 0.001, 0.0)),
+            (Vector3::new(50.0, -30.0, 5.0), Vector3::new(-0.01, 0.02, 0.003)),
+            (Vector3::new(1e-3, 0.0, 0.0), Vector3::new(-0.02, 0.0, 0.0)),
+            (Vector3::new(80.0, 0.0, 0.0), Vector3::new(-1e-7, 0.0, 0.0)),
+        ];
+        for (f, v) in cases {
+            for energy in [-1e-2, -1e-5, 0.0, 1e-3] {
+                let (alpha, f_alpha) = ctl.step(energy, &f, &f.normalize(), &v);
+                assert!(alpha.iter().all(|a| *a >= 0.0 && *a <= 1e5), "{alpha:?}");
+                assert!(f_alpha.dot(&v) >= -1e-15, "F_α must dissipate: {}", f_alpha.dot(&v));
+                if energy >= 0.0 {
+                    assert_eq!(f_alpha, Vector3::zeros());
+                }
+            }
+        }
+        // a small deficit on a clean 1-D rebound is removed in exactly one tick
+        let (f, v) = (Vector3::new(50.0, 0.0, 0.0), Vector3::new(-0.02, 0.0, 0.0));
+        let (_, f_alpha) = ctl.step(-1e-7, &f, &f.normalize(), &v);
+        assert!((f_alpha.dot(&v) * 1e-3 - 1e-7).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,136 @@
+//! Parameters of the compensators (`[compensator]` in a scenario), with units, defaults that
+//! work for every preset, and valid ranges.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{CoreError, Result};
+
+/// How the measurement delay `τ_p` is compensated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum DelayMode {
+    /// Identify against the kinematics from `τ_p` earlier and predict the present force from
+    /// the identified model (robust to sensor noise; the default).
+    #[default]
+    Align,
+    /// The paper's eq. (6): the lead `F_act = F_mea + τ_p·dF_mea/dt` (differentiates noise).
+    Lead,
+}
+
+/// How the energy observer sums the port's energy (see the energy module).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ObserverMode {
+    /// The work of the wrench held over each step (exact for the virtual dynamics; default).
+    #[default]
+    Work,
+    /// Eqs. (15), (16) as printed.
+    Paper,
+}
+
+/// Parameters of the identification-based compensators `pic`, `dac`, `pida`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ModelParams {
+    /// Measurement-delay compensation: `align` or `lead`.
+    pub delay_mode: DelayMode,
+    /// In contact while the force magnitude exceeds this, N (> 0; above the noise).
+    pub contact_force: f64,
+    /// Initial stiffness estimate k̂₀, N/m (> 0).
+    pub stiffness_initial: f64,
+    /// Initial damping estimate ĉ₀, N·s/m (>= 0).
+    pub damping_initial: f64,
+    /// Initial standard deviation of k̂ (√P₀₀), N/m (> 0).
+    pub stiffness_std: f64,
+    /// Initial standard deviation of ĉ (√P₁₁), N·s/m (> 0).
+    pub damping_std: f64,
+    /// Random walk of k per update (√Q₀₀), N/m (>= 0).
+    pub stiffness_walk: f64,
+    /// Random walk of c per update (√Q₁₁), N·s/m (>= 0).
+    pub damping_walk: f64,
+    /// Initial measurement noise of a force increment (√R₀), N (> 0).
+    pub noise_std: f64,
+    /// Forgetting factor b of the Sage-Husa noise estimate (0 < b < 1).
+    pub forgetting: f64,
+    /// Largest amendment damping α of the energy controller, N·s/m (> 0).
+    pub alpha_max: f64,
+    /// Energy observer: `work` or `paper`.
+    pub observer: ObserverMode,
+}
+
+impl Default for ModelParams {
+    fn default() -> Self {
+        ModelParams {
+            delay_mode: DelayMode::Align,
+            contact_force: 3.0,
+            stiffness_initial: 1.0e5,
+            damping_initial: 0.0,
+            stiffness_std: 1.0e5,
+            damping_std: 300.0,
+            stiffness_walk: 10.0,
+            damping_walk: 0.1,
+            noise_std: 0.1,
+            forgetting: 0.98,
+            alpha_max: 100000.0,
+            observer: ObserverMode::Work,
+        }
+    }
+}
+
+fn check(key: &str, ok: bool, allowed: &str, value: f64) -> Result<()> {
+    if ok && value.is_finite() {
+        Ok(())
+    } else {
+        Err(CoreError::invalid(format!("compensator.{key}"), format!("must be {allowed}, got {value}")))
+    }
+}
+
+impl ModelParams {
+    /// Checks every range.
+    pub fn validate(&self) -> Result<()> {
+        check("contact_force", self.contact_force > 0.0, "> 0 N", self.contact_force)?;
+        check("stiffness_initial", self.stiffness_initial > 0.0, "> 0 N/m", self.stiffness_initial)?;
+        check("damping_initial", self.damping_initial >= 0.0, ">= 0 N s/m", self.damping_initial)?;
+        check("stiffness_std", self.stiffness_std > 0.0, "> 0 N/m", self.stiffness_std)?;
+        check("damping_std", self.damping_std > 0.0, "> 0 N s/m", self.damping_std)?;
+        check("stiffness_walk", self.stiffness_walk >= 0.0, ">= 0 N/m", self.stiffness_walk)?;
+        check("damping_walk", self.damping_walk >= 0.0, ">= 0 N s/m", self.damping_walk)?;
+        check("noise_std", self.noise_std > 0.0, "> 0 N", self.noise_std)?;
+        check("forgetting", self.forgetting > 0.0 && self.forgetting < 1.0, "between 0 and 1 (exclusive)", self.forgetting)?;
+        check("alpha_max", self.alpha_max > 0.0, "> 0 N s/m", self.alpha_max)
+    }
+}
+
+/// Parameters of the TDPA baselines.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TdpaParams {
+    /// In contact while the force magnitude exceeds this, N (> 0); the observer restarts at
+    /// each contact (a windowed observer).
+    pub contact_force: f64,
+    /// Largest damping α of the impedance-type controller, N·s/m (> 0).
+    pub alpha_max: f64,
+    /// Largest admittance β of the admittance-type controller, m/(N·s) (> 0).
+    pub beta_max: f64,
+    /// Floor on |v| in the impedance controller's division, m/s (> 0).
+    pub velocity_floor: f64,
+    /// Floor on |f| in the admittance controller's division, N (> 0).
+    pub force_floor: f64,
+}
+
+impl Default for TdpaParams {
+    fn default() -> Self {
+        TdpaParams { contact_force: 3.0, alpha_max: 100000.0, beta_max: 1e-4, velocity_floor: 1e-3, force_floor: 1.0 }
+    }
+}
+
+impl TdpaParams {
+    /// Checks every range.
+    pub fn validate(&self) -> Result<()> {
+        check("contact_force", self.contact_force > 0.0, "> 0 N", self.contact_force)?;
+        check("alpha_max", self.alpha_max > 0.0, "> 0 N s/m", self.alpha_max)?;
+        check("beta_max", self.beta_max > 0.0, "> 0 m/(N s)", self.beta_max)?;
+        check("velocity_floor", self.velocity_floor > 0.0, "> 0 m/s", self.velocity_floor)?;
+        check("force_floor", self.force_floor > 0.0, "> 0 N", self.force_floor)
+    }
+}
