@@ -152,24 +152,40 @@ impl EnergyController {
 mod tests {
     use super::*;
 
-    /// A lossless spring cycle seen by the observer: compress then release along x.
+    /// A lossless contact integrated like the virtual dynamics (symplectic Euler, force held
+    /// over the step): the observer's energy is, at every tick, the kinetic energy the body
+    /// has handed to the environment, and it returns to zero when the contact is over.
     #[test]
     fn observer_energy_is_zero_over_a_lossless_cycle() {
-        let (k, w, t) = (1.0e5, 20.0, 1e-4);
-        let mut obs = EnergyObserver::new(t, ObserverMode::Work);
+        let (k, m, t) = (176_275.0, 279.07, 1e-3);
         let e = Vector3::new(1.0, 0.0, 0.0); // into the wall
-        let n = (std::f64::consts::PI / w / t).round() as usize;
-        let mut peak = 0.0f64;
-        for i in 0..=n {
-            let time = i as f64 * t;
-            let d = 0.01 / w * (w * time).sin(); // penetration
-            let v = Vector3::new(0.01 * (w * time).cos(), 0.0, 0.0);
-            obs.step(true, &(e * (k * d).max(0.0)), &e, 0.0, &v);
-            peak = peak.max(obs.energy());
+        for mode in [ObserverMode::Work, ObserverMode::Paper] {
+            let mut obs = EnergyObserver::new(t, mode);
+            let (mut x, mut v) = (0.0f64, 0.02f64); // penetration, its rate
+            let ke0 = 0.5 * m * v * v;
+            let (mut peak, mut worst) = (0.0f64, 0.0f64);
+            loop {
+                let force = e * (k * x).max(0.0); // on the frame
+                obs.step(true, &force, &e, 0.0, &(e * v));
+                if mode == ObserverMode::Work {
+                    worst = worst.max((obs.energy() - (ke0 - 0.5 * m * v * v)).abs());
+                }
+                peak = peak.max(obs.energy());
+                if x < 0.0 {
+                    break;
+                }
+                v -= force.x / m * t;
+                x += v * t;
+            }
+            assert!((peak / ke0 - 1.0).abs() < 0.02, "{mode:?}: peak {peak} vs {ke0}");
+            if mode == ObserverMode::Work {
+                assert!(worst < 1e-12, "the observer must track the kinetic energy exchanged: {worst}");
+                assert!(obs.energy().abs() < 1e-5 * ke0, "after the cycle {}", obs.energy());
+            } else {
+                // as printed, (16) lags by a tick while rebounding: it misses energy returned
+                assert!(obs.energy() > 1e-3 * ke0, "the literal reading should show its bias: {}", obs.energy());
+            }
         }
-        // stored energy ½ k d_max² = 0.5e5·(5e-4)² = 1.25e-2 J at the middle, back to ~0
-        assert!((peak / (0.5 * k * (0.01f64 / w).powi(2)) - 1.0).abs() < 0.01, "peak {peak}");
-        assert!(obs.energy().abs() < 1e-3 * peak, "after the cycle {}", obs.energy());
     }
 
     #[test]
