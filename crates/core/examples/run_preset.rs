@@ -1,15 +1,16 @@
 //! Runs a preset scenario file and prints its collisions:
 //! `cargo run --release --example run_preset -- python/hilcontact/scenarios/paper-table1.toml [key=value ...]`
-//! with keys `robot_delay`, `sensor_delay`, `noise` (N), `seed`, `kind` (compensator), `mode` (align|lead).
+//! with keys `robot_delay`, `sensor_delay`, `noise` (N), `seed`, `kind` (compensator), `mode` (align|lead),
+//! `observer` (work|paper).
 
-use hilcontact_core::compensator::{CompensatorConfig, DelayMode, ModelParams, TdpaParams};
+use hilcontact_core::compensator::{CompensatorConfig, DelayMode, ModelParams, ObserverMode, TdpaParams};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let path = args.get(1).map(String::as_str).unwrap_or("python/hilcontact/scenarios/paper-table1.toml");
     let text = std::fs::read_to_string(path).expect("read scenario");
     let mut s: hilcontact_core::Scenario = toml::from_str(&text).expect("parse scenario");
-    let (mut kind, mut mode) = ("none".to_string(), DelayMode::Align);
+    let (mut kind, mut mode, mut observer) = ("none".to_string(), DelayMode::Align, ObserverMode::Work);
     for arg in &args[2.min(args.len())..] {
         let (key, value) = arg.split_once('=').expect("key=value");
         match key {
@@ -19,10 +20,11 @@ fn main() {
             "seed" => s.facility.seed = value.parse().expect("integer"),
             "kind" => kind = value.to_string(),
             "mode" => mode = if value == "lead" { DelayMode::Lead } else { DelayMode::Align },
+            "observer" => observer = if value == "paper" { ObserverMode::Paper } else { ObserverMode::Work },
             _ => panic!("unknown key {key}"),
         }
     }
-    let model = ModelParams { delay_mode: mode, ..ModelParams::default() };
+    let model = ModelParams { delay_mode: mode, observer, ..ModelParams::default() };
     s.compensator = match kind.as_str() {
         "none" => CompensatorConfig::None,
         "pic" => CompensatorConfig::Pic(model),
