@@ -8,7 +8,7 @@
 //! 3. [`VirtualDynamics::integrate`] advances eqs. (1), (2) by T; [`VirtualDynamics::command`]
 //!    is the relative motion the robot must reproduce at k+1.
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::UnitQuaternion;
 
 use crate::compensator::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
 use crate::config::{quaternion, Scenario};
@@ -24,9 +24,6 @@ pub struct VirtualDynamics {
     /// Sensor attitude in `t` (sensor to `t`).
     sensor_orientation: UnitQuaternion<f64>,
     compensator: Box<dyn Compensator>,
-    /// Offset of the command from the virtual motion, position (m) and velocity (m/s) in `t`,
-    /// accumulated from admittance-type velocity corrections.
-    command_offset: (Vector3<f64>, Vector3<f64>),
 }
 
 impl VirtualDynamics {
@@ -36,6 +33,7 @@ impl VirtualDynamics {
             period: s.simulation.period,
             sensor_delay: s.sensor_delay_ticks()? as f64 * s.simulation.period,
             sensor_origin: system.sensor_origin,
+            reduced_mass: system.reduced_mass(),
         };
         Ok(VirtualDynamics {
             system: system.clone(),
@@ -43,7 +41,6 @@ impl VirtualDynamics {
             period: s.simulation.period,
             sensor_orientation: quaternion("facility.sensor_orientation", s.facility.sensor_orientation)?,
             compensator: s.compensator.build(&context),
-            command_offset: (Vector3::zeros(), Vector3::zeros()),
         })
     }
 
@@ -57,18 +54,9 @@ impl VirtualDynamics {
         &self.system
     }
 
-    /// The virtual relative motion of the servicer now (what the dynamics say).
-    pub fn virtual_motion(&self) -> RelativeMotion {
-        self.system.relative_motion(&self.state)
-    }
-
-    /// The relative motion the robot must reproduce now: the virtual motion plus any offset
-    /// an admittance-type compensator has commanded.
+    /// The relative motion the robot must reproduce now (the command).
     pub fn command(&self) -> RelativeMotion {
-        let mut m = self.virtual_motion();
-        m.position += self.command_offset.0;
-        m.velocity += self.command_offset.1;
-        m
+        self.system.relative_motion(&self.state)
     }
 
     /// Kinetic energy of the virtual relative motion, J.
@@ -89,7 +77,7 @@ impl VirtualDynamics {
     /// Runs the compensator on a measurement; the applied wrench is returned in the sensor's
     /// convention (`t` frame inside [`CompensatorOutput`]).
     pub fn compensate(&mut self, m: &Measurement) -> CompensatorOutput {
-        let desired = self.virtual_motion();
+        let desired = self.command();
         let rod = &self.system.rod_tip;
         let input = CompensatorInput {
             measured: FrameWrench { force: self.sensor_orientation * m.force, moment: self.sensor_orientation * m.moment },
@@ -101,12 +89,11 @@ impl VirtualDynamics {
         self.compensator.step(&input)
     }
 
-    /// Advances the virtual dynamics one period under the compensator's output: its wrench
-    /// (`t` frame) into eqs. (1), (2), its velocity correction into the command offset.
+    /// Advances the virtual dynamics one period under the compensator's output: its velocity
+    /// correction first (momentum conserved), then its wrench (`t` frame) into eqs. (1), (2).
     pub fn integrate(&mut self, output: &CompensatorOutput) {
+        self.system.correct_relative_velocity(&mut self.state, &output.velocity_correction);
         self.system.step_virtual(&mut self.state, &output.applied, self.period);
-        self.command_offset.1 = output.velocity_correction;
-        self.command_offset.0 += output.velocity_correction * self.period;
     }
 
     /// Sensor attitude in `t`.

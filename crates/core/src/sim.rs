@@ -169,7 +169,7 @@ pub fn run_hil(s: &Scenario, system: &TwoBodySystem, energy_bound: f64) -> Resul
     for k in 0..=n {
         let m = facility.measure();
         let out = virt.compensate(&m);
-        let desired = virt.virtual_motion();
+        let desired = virt.command();
         let row = HilRecord {
             time: k as f64 * period,
             tip_position: desired.point(&rod),

@@ -155,6 +155,15 @@ impl TwoBodySystem {
         ([-force, force], [servicer_torque, target_torque])
     }
 
+    /// Changes the servicer's velocity relative to the target by `dv` (`t` frame, m/s), split
+    /// between the bodies so that the linear momentum is unchanged.
+    pub fn correct_relative_velocity(&self, x: &mut TwoBodyState, dv: &Vector3<f64>) {
+        let dv_world = x.target.orientation * dv;
+        let mu = self.reduced_mass();
+        x.servicer.velocity += dv_world * (mu / self.servicer.mass);
+        x.target.velocity -= dv_world * (mu / self.target.mass);
+    }
+
     /// One control period of the virtual dynamics with the wrench held (zero-order hold).
     pub fn step_virtual(&self, x: &mut TwoBodyState, w: &FrameWrench, period: f64) {
         let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, w);

@@ -61,8 +61,9 @@ pub struct ContactEstimate {
 pub struct CompensatorOutput {
     /// Wrench to apply to the virtual dynamics, same convention as the measurement.
     pub applied: FrameWrench,
-    /// Change of the rod tip's relative velocity, `t` frame, m/s (admittance-type
-    /// compensators act on the velocity; zero for the others).
+    /// Change of the virtual relative velocity of the servicer, `t` frame, m/s, applied by the
+    /// virtual dynamics with momentum conserved (admittance-type compensators act on the
+    /// velocity; zero for the others).
     pub velocity_correction: Vector3<f64>,
     /// Identified contact parameters, if the compensator identifies them.
     pub estimate: Option<ContactEstimate>,
@@ -86,6 +87,9 @@ pub struct CompensatorContext {
     pub sensor_delay: f64,
     /// Sensor origin in `t`, m.
     pub sensor_origin: Vector3<f64>,
+    /// Reduced mass of the virtual satellites μ = m_s m_t/(m_s + m_t), kg (the virtual model
+    /// is software, so its masses are known).
+    pub reduced_mass: f64,
 }
 
 /// A delay compensator.

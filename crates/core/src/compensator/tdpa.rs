@@ -1,15 +1,22 @@
 //! The time-domain passivity approach (Hannaford & Ryu 2002; Ryu et al. 2005; De Stefano et
-//! al. 2020) as baselines. One port between the virtual dynamics and the environment; power
-//! positive into the environment (`f·v` with the force on the frame).
+//! al. 2020) as baselines. It uses one port between the virtual dynamics and the environment,
+//! with power positive into the environment (`f·v`, f the force on the frame).
+//!
+//! Passivity observer, windowed to each contact (it restarts when the measured force drops
+//! below `contact_force`, so energy banked in one contact cannot come back as a spike in the
+//! next). It sums the energy the virtual dynamics actually gave the port over the last step.
+//! Under symplectic Euler with the force held, that is `T·f(n−1)·(v(n−1) + v(n))/2`, plus
+//! what the controller removed:
 //! ```text
-//! E(n) = E(n−1) + T·f(n)·v(n) + T·(PC dissipation of n−1)        passivity observer
-//! impedance type:  α = −E/(T·max(|v|², v_min²)) if E < 0;  f ← f + α·v   (α ≤ α_max)
-//! admittance type: β = −E/(T·max(|f|², f_min²)) if E < 0;  v_cmd ← v + β·f (β ≤ β_max)
+//! E(n) = E(n−1) + T·f_applied(n−1)·(v(n−1) + v(n))/2 + (PC dissipation of n−1)
+//! impedance type:  α = −E/(T·max(|v|², v_min²)) if E < 0 (α ≤ α_max);  f_applied = f + α·v
+//! admittance type: a velocity correction Δv = β·f of the virtual relative motion, β ≥ 0
+//!                  chosen so that it removes −E of kinetic energy (β ≤ β_max)
 //! ```
-//! Safeguards: floors on the divisions, caps on α and β, and a windowed observer that restarts
-//! at each contact, so energy banked in one contact cannot be released as a spike in the next.
-//! The admittance type changes the velocity commanded to the robot, not the virtual state, so the
-//! robot's position drifts from the virtual one (a known weakness). See docs/compensators/tdpa.md.
+//! The measured force is used as it comes (no delay compensation), and neither controller
+//! knows the contact's damping: that is the weakness the paper attacks. On a damped contact
+//! the real dissipation pays for the energy the delay creates, so rebounds stay too fast.
+//! See docs/compensators/tdpa.md.
 
 use nalgebra::Vector3;
 
@@ -22,19 +29,34 @@ struct PassivityObserver {
     period: f64,
     threshold: f64,
     energy: f64,
-    previous_dissipation: f64,
+    /// Force applied and velocity at the previous tick, and the energy the controller removed.
+    previous: Option<(Vector3<f64>, Vector3<f64>, f64)>,
 }
 
 impl PassivityObserver {
-    /// Adds this tick's port energy; returns whether the port is in contact.
+    fn new(period: f64, threshold: f64) -> Self {
+        PassivityObserver { period, threshold, energy: 0.0, previous: None }
+    }
+
+    fn reset(&mut self) {
+        self.energy = 0.0;
+        self.previous = None;
+    }
+
+    /// Adds the last step's port energy; returns whether the port is in contact.
     fn observe(&mut self, force: &Vector3<f64>, velocity: &Vector3<f64>) -> bool {
         if force.norm() <= self.threshold {
-            self.energy = 0.0;
-            self.previous_dissipation = 0.0;
+            self.reset();
             return false;
         }
-        self.energy += self.period * force.dot(velocity) + self.previous_dissipation;
+        if let Some((f, v, dissipated)) = self.previous {
+            self.energy += 0.5 * self.period * f.dot(&(v + velocity)) + dissipated;
+        }
         true
+    }
+
+    fn remember(&mut self, applied: &Vector3<f64>, velocity: &Vector3<f64>, dissipated: f64) {
+        self.previous = Some((*applied, *velocity, dissipated));
     }
 }
 
@@ -50,7 +72,7 @@ impl TdpaImpedance {
     /// An impedance-type passivity controller.
     pub fn new(p: &TdpaParams, context: &CompensatorContext) -> Self {
         TdpaImpedance {
-            observer: PassivityObserver { period: context.period, threshold: p.contact_force, energy: 0.0, previous_dissipation: 0.0 },
+            observer: PassivityObserver::new(context.period, p.contact_force),
             params: p.clone(),
             sensor_origin: context.sensor_origin,
         }
@@ -60,27 +82,27 @@ impl TdpaImpedance {
 impl Compensator for TdpaImpedance {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
         let (f, v) = (input.measured.force, input.tip_velocity_desired);
-        let in_contact = self.observer.observe(&f, &v);
         let mut out = CompensatorOutput::wrench(input.measured);
-        if in_contact {
-            let t = self.observer.period;
-            let alpha = if self.observer.energy < 0.0 {
-                (-self.observer.energy / (t * v.norm_squared().max(self.params.velocity_floor.powi(2)))).min(self.params.alpha_max)
-            } else {
-                0.0
-            };
-            let f_pc = v * alpha;
-            self.observer.previous_dissipation = t * f_pc.dot(&v);
-            out.applied.force += f_pc;
-            out.applied.moment += (input.tip_position_desired - self.sensor_origin).cross(&f_pc);
-            out.observed_energy = self.observer.energy;
+        if !self.observer.observe(&f, &v) {
+            return out;
         }
+        let t = self.observer.period;
+        let alpha = if self.observer.energy < 0.0 {
+            (-self.observer.energy / (t * v.norm_squared().max(self.params.velocity_floor.powi(2)))).min(self.params.alpha_max)
+        } else {
+            0.0
+        };
+        let f_pc = v * alpha;
+        out.applied.force += f_pc;
+        out.applied.moment += (input.tip_position_desired - self.sensor_origin).cross(&f_pc);
+        out.observed_energy = self.observer.energy;
+        // the damper's work is part of the applied force's work, counted at the next tick
+        self.observer.remember(&out.applied.force, &v, 0.0);
         out
     }
 
     fn reset(&mut self) {
-        self.observer.energy = 0.0;
-        self.observer.previous_dissipation = 0.0;
+        self.observer.reset();
     }
 
     fn observes_energy(&self) -> bool {
@@ -88,45 +110,50 @@ impl Compensator for TdpaImpedance {
     }
 }
 
-/// Admittance-type TDPA: a damper on the velocity commanded to the robot.
+/// Admittance-type TDPA: a damper on the velocity the virtual dynamics output.
 #[derive(Debug, Clone)]
 pub struct TdpaAdmittance {
     observer: PassivityObserver,
     params: TdpaParams,
+    reduced_mass: f64,
 }
 
 impl TdpaAdmittance {
     /// An admittance-type passivity controller.
     pub fn new(p: &TdpaParams, context: &CompensatorContext) -> Self {
-        TdpaAdmittance {
-            observer: PassivityObserver { period: context.period, threshold: p.contact_force, energy: 0.0, previous_dissipation: 0.0 },
-            params: p.clone(),
-        }
+        TdpaAdmittance { observer: PassivityObserver::new(context.period, p.contact_force), params: p.clone(), reduced_mass: context.reduced_mass }
     }
 }
 
 impl Compensator for TdpaAdmittance {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
         let (f, v) = (input.measured.force, input.tip_velocity_desired);
-        let in_contact = self.observer.observe(&f, &v);
         let mut out = CompensatorOutput::wrench(input.measured);
-        if in_contact {
-            let t = self.observer.period;
-            let beta = if self.observer.energy < 0.0 {
-                (-self.observer.energy / (t * f.norm_squared().max(self.params.force_floor.powi(2)))).min(self.params.beta_max)
-            } else {
-                0.0
-            };
-            out.velocity_correction = f * beta;
-            self.observer.previous_dissipation = t * f.dot(&out.velocity_correction);
-            out.observed_energy = self.observer.energy;
+        if !self.observer.observe(&f, &v) {
+            return out;
         }
+        let (mu, e) = (self.reduced_mass, self.observer.energy);
+        let f2 = f.norm_squared().max(self.params.force_floor.powi(2));
+        let vf = v.dot(&f);
+        // ½μ(|v + βf|² − |v|²) = E: the smaller root, real and positive only when the rod is
+        // pushed back (v·f < 0) and E < 0
+        let beta = if e < 0.0 && vf < 0.0 {
+            let disc = (mu * vf).powi(2) + 2.0 * mu * f2 * e;
+            let root = if disc >= 0.0 { (-mu * vf - disc.sqrt()) / (mu * f2) } else { -vf / f2 };
+            root.clamp(0.0, self.params.beta_max)
+        } else {
+            0.0
+        };
+        let dv = f * beta;
+        out.velocity_correction = dv;
+        out.observed_energy = e;
+        let removed = -0.5 * mu * ((v + dv).norm_squared() - v.norm_squared());
+        self.observer.remember(&f, &(v + dv), removed.max(0.0));
         out
     }
 
     fn reset(&mut self) {
-        self.observer.energy = 0.0;
-        self.observer.previous_dissipation = 0.0;
+        self.observer.reset();
     }
 
     fn observes_energy(&self) -> bool {
