@@ -117,7 +117,7 @@ def test_version():
 def test_help_lists_commands():
     result = invoke("--help")
     assert result.exit_code == 0
-    for command in ("run", "presets", "show"):
+    for command in ("run", "compare", "presets", "show"):
         assert command in result.stdout
 
 

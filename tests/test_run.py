@@ -16,7 +16,7 @@ from conftest import synthetic_run
 
 import hilcontact as hc
 from hilcontact.cli import cli
-from hilcontact.run import REFERENCE_COLUMNS, TIMESERIES_COLUMNS
+from hilcontact.run import OPTIONAL_TIMESERIES_COLUMNS, REFERENCE_COLUMNS, TIMESERIES_COLUMNS
 
 DATA_FILES = {"timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml"}
 PLOTS = {"contact_velocity.png", "contact_force.png", "energy.png"}
@@ -145,8 +145,44 @@ def test_identification_plot_when_estimates_exist(tmp_path):
     run = synthetic_run(estimates=True)
     figures = run.plot()
     assert "identification" in figures
+    ax_k, ax_c = figures["identification"].axes
+    assert ax_k.get_ylabel() == "stiffness (N/mm)" and ax_c.get_ylabel() == "damping (N\u00b7s/mm)"
+    k_lines = {line.get_label(): line for line in ax_k.get_lines()}
+    assert k_lines["estimate k\u0302"].get_ydata()[0] == pytest.approx(170.0)  # 170000 N/m
+    assert k_lines["true k"].get_ydata()[0] == pytest.approx(176.275)  # 176275 N/m
+    c_lines = {line.get_label(): line for line in ax_c.get_lines()}
+    assert c_lines["estimate c\u0302"].get_ydata()[0] == pytest.approx(1e-3)  # 1 N s/m
+    assert c_lines["true c"].get_ydata()[0] == 0.0
     run.save(tmp_path / "id")
     assert (tmp_path / "id" / "identification.png").read_bytes()[:8] == PNG_MAGIC
+
+
+def test_observed_energy_is_plotted_only_when_it_has_values():
+    run = synthetic_run()
+    run.timeseries["observed_energy"] = np.nan
+    labels = [line.get_label() for line in _lines(run.plot()["energy"])]
+    assert labels == ["energy HIL", "energy ideal reference"]
+    run.timeseries["observed_energy"] = np.where(run.timeseries["time"] > 0.5, 0.02, np.nan)
+    lines = {line.get_label(): line for line in _lines(run.plot()["energy"])}
+    assert lines["observed energy (compensator)"].get_linestyle() == ":"
+    assert np.nanmax(lines["observed energy (compensator)"].get_ydata()) == 0.02
+
+
+def test_optional_columns_keep_their_order(monkeypatch):
+    import hilcontact.run as run_module
+
+    class FakeCore:
+        @staticmethod
+        def simulate(_json):
+            n = 3
+            columns = {name: [0.0] * n for name in ["observed_energy", "damping_estimate", "stiffness_estimate"]}
+            columns.update({name: [0.0] * n for name in reversed(TIMESERIES_COLUMNS)})
+            reference = {name: [0.0] * n for name in REFERENCE_COLUMNS}
+            return {"timeseries": columns, "reference": reference, "metrics": json.dumps({"status": "ok"})}
+
+    monkeypatch.setattr(run_module, "_core", lambda: FakeCore)
+    run = hc.simulate(hc.load_scenario("paper-table1"))
+    assert list(run.timeseries.columns) == TIMESERIES_COLUMNS + OPTIONAL_TIMESERIES_COLUMNS
 
 
 # ---- integration through the real core ----------------------------------------------------

@@ -8,6 +8,7 @@ from importlib import resources
 
 import numpy as np
 import pytest
+import tomli_w
 
 import hilcontact as hc
 from hilcontact.scenario import apply_overrides, preset_names
@@ -339,7 +340,8 @@ BAD_INPUT = [
     ({"servicer.inertia": [[1, 2, 0], [2, 1, 0], [0, 0, 1]]}, ("servicer.inertia", "positive definite")),
     ({"servicer.inertia": "big"}, ("servicer.inertia", "3 principal moments")),
     ({"contact.model": "hertz"}, "contact.model: must be one of 'linear' or 'hunt-crossley', got 'hertz'"),
-    ({"compensator.kind": "pida"}, "compensator.kind: unknown compensator kind 'pida'; allowed: 'none'"),
+    ({"compensator.kind": "magic"}, "compensator.kind: unknown compensator kind 'magic'; allowed: 'none', 'pic', "
+                                     "'dac', 'pida', 'tdpa-impedance', 'tdpa-admittance'"),
     ({"walls": []}, "walls: at least one [[walls]] table is required"),
     ({"walls": "front"}, ("walls", "expected one or more [[walls]] tables")),
     ({"servicer": 3}, "servicer: expected a table, got 3"),
@@ -423,4 +425,251 @@ def test_scenario_error_hierarchy():
 
 def test_public_api():
     for name in ("presets", "load_scenario", "simulate", "Scenario", "Run", "ScenarioError", "HilContactError"):
+        assert name in hc.__all__ and hasattr(hc, name)
+
+
+# ---- [compensator] parameters ---------------------------------------------------------------
+
+KINDS = ["none", "pic", "dac", "pida", "tdpa-impedance", "tdpa-admittance"]
+
+MODEL_DEFAULTS = {
+    "delay_mode": "align",
+    "contact_force": 3.0,
+    "stiffness_initial": 1.0e5,
+    "damping_initial": 0.0,
+    "stiffness_std": 1.0e5,
+    "damping_std": 300.0,
+    "stiffness_walk": 10.0,
+    "damping_walk": 0.1,
+    "noise_std": 0.1,
+    "forgetting": 0.98,
+    "alpha_max": 2000.0,
+    "observer": "work",
+}
+TDPA_DEFAULTS = {
+    "contact_force": 3.0,
+    "alpha_max": 2000.0,
+    "beta_max": 1e-4,
+    "velocity_floor": 1e-3,
+    "force_floor": 1.0,
+}
+DEFAULTS = {
+    "none": {},
+    "pic": MODEL_DEFAULTS,
+    "dac": MODEL_DEFAULTS,
+    "pida": MODEL_DEFAULTS,
+    "tdpa-impedance": TDPA_DEFAULTS,
+    "tdpa-admittance": TDPA_DEFAULTS,
+}
+
+
+def test_compensator_kinds_are_the_cores():
+    assert list(hc.scenario.COMPENSATOR_MODELS) == KINDS
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_each_kind_parses_with_defaults(kind):
+    s = hc.load_scenario(PRESET, {"compensator": {"kind": kind}})
+    assert s.compensator.kind == kind
+    assert s.to_dict()["compensator"] == {"kind": kind, **DEFAULTS[kind]}
+    # the resolved TOML lists every parameter, kind first
+    table = tomllib.loads(s.to_toml())["compensator"]
+    assert table == {"kind": kind, **DEFAULTS[kind]}
+    assert list(table)[0] == "kind"
+    assert json.loads(s.to_json())["compensator"] == table
+
+
+NON_DEFAULT = {
+    "none": {},
+    "pic": {"delay_mode": "lead", "contact_force": 5.0, "forgetting": 0.9, "stiffness_walk": 0.0},
+    "dac": {"alpha_max": 500.0, "damping_initial": 20.0, "noise_std": 0.3, "observer": "paper"},
+    "pida": {"stiffness_initial": 2e5, "stiffness_std": 5e4, "damping_std": 100.0, "damping_walk": 0.0},
+    "tdpa-impedance": {"alpha_max": 100.0, "velocity_floor": 5e-4},
+    "tdpa-admittance": {"beta_max": 2e-5, "force_floor": 0.5, "contact_force": 1.0},
+}
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_toml_round_trip_for_each_kind(kind, tmp_path):
+    s = hc.load_scenario(PRESET, {"compensator": {"kind": kind, **NON_DEFAULT[kind]}})
+    for key, value in NON_DEFAULT[kind].items():
+        assert getattr(s.compensator, key) == value
+    text = s.to_toml()
+    assert tomllib.loads(text)["compensator"] == {"kind": kind, **DEFAULTS[kind], **NON_DEFAULT[kind]}
+    again = hc.Scenario.from_toml(text)
+    assert again == s and type(again.compensator) is type(s.compensator)
+    assert again.to_toml() == text
+    path = tmp_path / "resolved.toml"
+    path.write_text(text, encoding="utf-8")
+    assert hc.load_scenario(path) == s
+
+
+def test_integers_are_accepted_for_compensator_numbers():
+    s = hc.load_scenario(PRESET, {"compensator.kind": "pida", "compensator.alpha_max": 1500})
+    assert s.compensator.alpha_max == 1500.0 and isinstance(s.compensator.alpha_max, float)
+
+
+MODEL_RANGE_ERRORS = [
+    ("contact_force", 0.0, "must be > 0, got 0.0"),
+    ("stiffness_initial", -1.0, "must be > 0, got -1.0"),
+    ("damping_initial", -0.5, "must be >= 0, got -0.5"),
+    ("stiffness_std", 0, "must be > 0, got 0"),
+    ("damping_std", 0.0, "must be > 0, got 0.0"),
+    ("stiffness_walk", -1.0, "must be >= 0, got -1.0"),
+    ("damping_walk", -0.1, "must be >= 0, got -0.1"),
+    ("noise_std", 0.0, "must be > 0, got 0.0"),
+    ("forgetting", 1.5, "must be between 0 and 1 (exclusive), got 1.5"),
+    ("forgetting", 1.0, "must be between 0 and 1 (exclusive), got 1.0"),
+    ("forgetting", 0.0, "must be between 0 and 1 (exclusive), got 0.0"),
+    ("forgetting", float("nan"), "must be a finite number, got nan"),
+    ("alpha_max", -2000.0, "must be > 0, got -2000.0"),
+    ("alpha_max", float("inf"), "must be a finite number, got inf"),
+    ("alpha_max", "big", "expected a number, got 'big'"),
+    ("delay_mode", "predict", "must be one of 'align' or 'lead', got 'predict'"),
+    ("observer", "exact", "must be one of 'work' or 'paper', got 'exact'"),
+]
+
+
+@pytest.mark.parametrize("kind", ["pic", "dac", "pida"])
+@pytest.mark.parametrize(("key", "value", "expected"), MODEL_RANGE_ERRORS)
+def test_model_params_range_errors_name_the_key(kind, key, value, expected):
+    message = error_of(PRESET, {"compensator.kind": kind, f"compensator.{key}": value})
+    assert message == f"compensator.{key}: {expected}"
+
+
+TDPA_RANGE_ERRORS = [
+    ("contact_force", -3.0, "must be > 0, got -3.0"),
+    ("alpha_max", 0.0, "must be > 0, got 0.0"),
+    ("beta_max", 0.0, "must be > 0, got 0.0"),
+    ("velocity_floor", -1e-3, "must be > 0, got -0.001"),
+    ("force_floor", 0, "must be > 0, got 0"),
+    ("beta_max", float("nan"), "must be a finite number, got nan"),
+]
+
+
+@pytest.mark.parametrize("kind", ["tdpa-impedance", "tdpa-admittance"])
+@pytest.mark.parametrize(("key", "value", "expected"), TDPA_RANGE_ERRORS)
+def test_tdpa_params_range_errors_name_the_key(kind, key, value, expected):
+    message = error_of(PRESET, {"compensator.kind": kind, f"compensator.{key}": value})
+    assert message == f"compensator.{key}: {expected}"
+
+
+def test_range_limits_are_inclusive_where_documented():
+    s = hc.load_scenario(
+        PRESET,
+        {"compensator.kind": "pic", "compensator.damping_initial": 0.0, "compensator.stiffness_walk": 0.0,
+         "compensator.damping_walk": 0.0, "compensator.forgetting": 0.999999},
+    )
+    assert (s.compensator.damping_initial, s.compensator.stiffness_walk, s.compensator.damping_walk) == (0.0,) * 3
+
+
+def test_unknown_kind_lists_the_allowed_kinds(scenario_file):
+    message = error_of(PRESET, {"compensator.kind": "pid"})
+    assert message == (
+        "compensator.kind: unknown compensator kind 'pid'; allowed: 'none', 'pic', 'dac', 'pida', "
+        "'tdpa-impedance', 'tdpa-admittance'"
+    )
+    text = tomllib.loads(hc.load_scenario(PRESET).to_toml())
+    text["compensator"] = {"kind": "smith-predictor", "alpha_max": 1.0}
+    assert error_of(text).startswith("compensator.kind: unknown compensator kind 'smith-predictor'; allowed: 'none'")
+
+
+def test_unknown_compensator_key_lists_the_kinds_allowed_keys():
+    message = error_of(PRESET, {"compensator.kind": "tdpa-impedance", "compensator.forgeting": 0.9})
+    assert message.startswith(
+        "compensator.forgeting: unknown key; allowed keys in [compensator] with kind = 'tdpa-impedance': "
+        "kind, contact_force, alpha_max, beta_max, velocity_floor, force_floor"
+    )
+    assert "did you mean" not in message  # nothing close among the TDPA keys
+    message = error_of(PRESET, {"compensator.kind": "pida", "compensator.forgeting": 0.9})
+    assert "(did you mean 'forgetting'?)" in message
+    # a parameter of another kind says which kinds have it
+    message = error_of(PRESET, {"compensator.alpha_max": 10.0})  # the preset's kind is none
+    assert message.startswith("compensator.alpha_max: unknown key; allowed keys in [compensator] with kind = 'none': kind")
+    assert "'alpha_max' is a parameter of kind 'pic', 'dac', 'pida', 'tdpa-impedance', 'tdpa-admittance'" in message
+    message = error_of(PRESET, {"compensator.kind": "pida", "compensator.beta_max": 1e-4})
+    assert message.startswith("compensator.beta_max: unknown key")
+    assert "kind 'tdpa-impedance', 'tdpa-admittance')" in message
+
+
+@pytest.mark.parametrize("name", preset_names())
+@pytest.mark.parametrize("kind", KINDS)
+def test_switching_kind_by_override_works_on_every_preset(name, kind):
+    assert "compensator" in raw_preset(name)
+    s = hc.load_scenario(name, {"compensator.kind": kind})
+    assert s.compensator.kind == kind
+    assert s.to_dict()["compensator"] == {"kind": kind, **DEFAULTS[kind]}
+    base = hc.load_scenario(name).to_dict()
+    switched = s.to_dict()
+    assert {k: v for k, v in switched.items() if k != "compensator"} == {
+        k: v for k, v in base.items() if k != "compensator"
+    }
+    again = hc.Scenario.from_toml(s.to_toml())
+    assert again == s
+
+
+def file_with_compensator(scenario_file, table: dict) -> str:
+    raw = raw_preset()
+    raw["compensator"] = table
+    return scenario_file(tomli_w.dumps(raw))
+
+
+def test_switching_kind_keeps_only_the_files_parameters_of_the_new_kind(scenario_file):
+    path = file_with_compensator(
+        scenario_file,
+        {"kind": "tdpa-impedance", "alpha_max": 150.0, "beta_max": 3e-5, "velocity_floor": 2e-3},
+    )
+    assert hc.load_scenario(path).compensator.beta_max == 3e-5
+    # to pida: beta_max and velocity_floor (tdpa only) are dropped, alpha_max (shared) is kept
+    pida = hc.load_scenario(path, {"compensator.kind": "pida"}).compensator
+    assert pida.kind == "pida" and pida.alpha_max == 150.0 and pida.forgetting == 0.98
+    # to the other TDPA: everything is kept
+    admittance = hc.load_scenario(path, {"compensator.kind": "tdpa-admittance"}).compensator
+    assert (admittance.alpha_max, admittance.beta_max, admittance.velocity_floor) == (150.0, 3e-5, 2e-3)
+    # to none: everything is dropped
+    assert hc.load_scenario(path, {"compensator.kind": "none"}).to_dict()["compensator"] == {"kind": "none"}
+    # the order of the overrides does not matter; explicit parameters win over the file's
+    for overrides in (
+        {"compensator.alpha_max": 99.0, "compensator.kind": "dac"},
+        {"compensator.kind": "dac", "compensator.alpha_max": 99.0},
+    ):
+        dac = hc.load_scenario(path, overrides).compensator
+        assert dac.kind == "dac" and dac.alpha_max == 99.0
+
+
+def test_explicit_parameter_of_another_kind_is_an_error_after_a_switch(scenario_file):
+    path = file_with_compensator(scenario_file, {"kind": "pic", "forgetting": 0.95})
+    for overrides in (
+        {"compensator.kind": "tdpa-admittance", "compensator.forgetting": 0.9},
+        {"compensator.forgetting": 0.9, "compensator.kind": "tdpa-admittance"},
+    ):
+        message = error_of(path, overrides)
+        assert message.startswith(
+            "compensator.forgetting: unknown key; allowed keys in [compensator] with kind = 'tdpa-admittance'"
+        )
+
+
+def test_same_kind_override_keeps_the_files_mistakes(scenario_file):
+    # not a switch: a wrong key in the file is still reported
+    path = file_with_compensator(scenario_file, {"kind": "pida", "alpha_maxx": 1.0})
+    message = error_of(path, {"compensator.kind": "pida"})
+    assert message.startswith("compensator.alpha_maxx: unknown key (did you mean 'alpha_max'?)")
+    assert error_of(path).startswith("compensator.alpha_maxx: unknown key")
+
+
+def test_switch_to_unknown_kind_is_reported_not_dropped(scenario_file):
+    path = file_with_compensator(scenario_file, {"kind": "pic", "forgetting": 0.95})
+    assert error_of(path, {"compensator.kind": "pdia"}).startswith("compensator.kind: unknown compensator kind 'pdia'")
+
+
+def test_kind_switch_in_apply_overrides_does_not_mutate_the_input():
+    raw = raw_preset()
+    raw["compensator"] = {"kind": "pic", "forgetting": 0.95}
+    out = apply_overrides(raw, {"compensator.kind": "tdpa-impedance"})
+    assert out["compensator"] == {"kind": "tdpa-impedance"}
+    assert raw["compensator"] == {"kind": "pic", "forgetting": 0.95}
+
+
+def test_public_api_has_compare():
+    for name in ("compare", "Comparison"):
         assert name in hc.__all__ and hasattr(hc, name)

@@ -12,6 +12,7 @@ Quick start::
     run = hc.simulate(scenario)
     print(run.status, run.collision_table())
     run.save("runs/paper-table1-20ms")
+    hc.compare("paper-table1", overrides={"facility.robot_delay": 0.02}).summary
 
 Conventions: SI units (m, s, N, N m, kg, rad); points and normals of the collision frame in
 the target mockup frame ``t``; quaternions ``[w, x, y, z]``.
@@ -26,17 +27,20 @@ try:
 except _metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree
     __version__ = "0+unknown"
 
+from .comparison import Comparison, compare
 from .errors import HilContactError, ScenarioError
 from .run import Run, simulate
 from .scenario import Scenario, apply_overrides, load_scenario, presets
 
 __all__ = [
+    "Comparison",
     "HilContactError",
     "Run",
     "Scenario",
     "ScenarioError",
     "__version__",
     "apply_overrides",
+    "compare",
     "load_scenario",
     "presets",
     "simulate",

@@ -18,7 +18,8 @@ def simulate(scenario_json: str) -> dict[str, Any]:
     ``actual_tip_position_{x,y,z}``, ``actual_tip_velocity_{x,y,z}``,
     ``contact_force_{x,y,z}``, ``measured_force_{x,y,z}``, ``measured_moment_{x,y,z}``,
     ``applied_force_{x,y,z}``, ``applied_moment_{x,y,z}``, ``energy`` and, when the
-    compensator estimates them, ``stiffness_estimate``, ``damping_estimate``.
+    compensator estimates them, ``stiffness_estimate``, ``damping_estimate`` (N/m, N s/m),
+    and, when it has an energy observer, ``observed_energy`` (J, NaN where not observed).
 
     reference columns: ``time``, ``tip_position_*``, ``tip_velocity_*``,
     ``contact_force_*``, ``energy``.

@@ -1,6 +1,7 @@
 """The ``hilcontact`` command line.
 
     hilcontact run SCENARIO [--set KEY=VALUE ...] [--out DIR] [--no-plots]
+    hilcontact compare SCENARIO [--set KEY=VALUE ...] [--compensators LIST] [--out DIR] [--no-plots]
     hilcontact presets
     hilcontact show SCENARIO [--set KEY=VALUE ...]
     hilcontact --version
@@ -24,6 +25,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from . import __version__
+from .comparison import ALL_KINDS, Comparison, comparison_scenarios, run_comparison
 from .errors import HilContactError, ScenarioError
 from .run import Run, core_version, simulate
 from .scenario import load_scenario, presets
@@ -87,6 +89,7 @@ def cli() -> None:
       hilcontact presets
       hilcontact run paper-table1
       hilcontact run paper-table1 --set facility.robot_delay=0.02 --out runs/delay-20ms
+      hilcontact compare paper-table1 --set facility.robot_delay=0.02
       hilcontact show paper-table1 > my-scenario.toml
     """
 
@@ -158,6 +161,93 @@ def _report(console: Console, result: Run, folder: Path) -> None:
             f"[bold red]status: {escape(result.status)}{when}: {escape(str(reason))}[/bold red]", soft_wrap=True
         )
     files = ", ".join(sorted(p.name for p in folder.iterdir()))
+    console.print(f"saved to {escape(str(folder))}/ ({escape(files)})", soft_wrap=True)
+
+
+@cli.command(name="compare", short_help="Run several compensators on one scenario and compare them.")
+@click.argument("scenario")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
+@click.option(
+    "--compensators",
+    "kinds",
+    metavar="LIST",
+    default=",".join(ALL_KINDS),
+    show_default=True,
+    help="Comma-separated compensator kinds to run.",
+)
+@click.option(
+    "--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-compare]."
+)
+@click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
+def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool) -> None:
+    """Simulate SCENARIO once per compensator and compare them.
+
+    Writes a run folder per compensator, comparison.md and comparison.csv (CoV, CoF, peak
+    force, rebound speed per collision; status and identification errors per compensator)
+    and the compare_*.png figures.
+    """
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    with _errors():
+        overrides = parse_set_options(sets)
+        scenarios = comparison_scenarios(scenario, kinds, overrides)  # validate all before running
+        name = next(iter(scenarios.values())).name
+        folder = Path(out) if out is not None else Path("runs") / f"{name}-compare"
+        if folder.exists() and not folder.is_dir():
+            raise ScenarioError(f"--out {folder}: exists and is not a directory")
+        stderr = Console(stderr=True)
+        with Progress(
+            TextColumn("[bold]{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=stderr,
+            transient=True,
+        ) as progress:
+            task = progress.add_task(f"Simulating {escape(name)}", total=len(scenarios))
+
+            def advance(kind: str, index: int, total: int) -> None:
+                progress.update(task, completed=index, description=f"Simulating {escape(name)}: {escape(kind)}")
+
+            result = run_comparison(scenarios, progress=advance)
+            progress.update(task, completed=len(scenarios), description="Writing files")
+            result.save(folder, plots=not no_plots)
+    _report_comparison(Console(), result, folder)
+
+
+def _report_comparison(console: Console, result: Comparison, folder: Path) -> None:
+    s = result.scenario
+    table = Table(
+        title=f"{s.name}: robot delay {s.facility.robot_delay * 1e3:g} ms, "
+        f"sensor delay {s.facility.sensor_delay * 1e3:g} ms",
+    )
+    table.add_column("compensator", no_wrap=True)
+    table.add_column("status")
+    table.add_column("CoV per collision")
+    for header in ("worst CoF", "k error (%)", "c error (N·s/mm)"):
+        table.add_column(header, justify="right")
+    for kind, row in result.summary.iterrows():
+        if row["status"] == "ok":
+            status = "[green]ok[/green]"
+        else:
+            at = row["diverged_at"]
+            when = f" {at:.2f} s" if math.isfinite(at) else ""
+            status = f"[bold red]{escape(str(row['status']))}{when}[/bold red]"
+        table.add_row(
+            escape(str(kind)),
+            status,
+            " ".join(_number(v, ".2f") for v in row["cov"]) or "-",
+            _number(row["worst_cof"], ".3f"),
+            _number(row["stiffness_error_pct"], ".3g"),
+            _number(row["damping_error_Ns_mm"], ".3g"),
+        )
+    console.print(table)
+    console.print(
+        "CoV, CoF: rebound speed and peak force / ideal reference (1 is perfect); "
+        "mean CoV and worst |CoV-1| in comparison.md",
+        soft_wrap=True,
+    )
+    files = ", ".join(sorted(p.name + ("/" if p.is_dir() else "") for p in folder.iterdir()))
     console.print(f"saved to {escape(str(folder))}/ ({escape(files)})", soft_wrap=True)
 
 

@@ -3,13 +3,20 @@
 - contact_velocity: rod-tip velocity (mm/s), HIL solid vs ideal reference dashed, with the
   collision intervals shaded (the paper's velocity figures).
 - contact_force: contact force magnitude (N), HIL vs reference (the paper's Figs 6/9/11).
-- energy: energy of the virtual relative motion (J), HIL vs reference (the paper's Fig 10).
-- identification (only when the compensator estimates them): stiffness and damping
-  estimates vs the scenario's true values.
+- energy: energy of the virtual relative motion (J), HIL vs reference (the paper's Fig 10),
+  and the compensator's observed energy (dotted) when it has an energy observer.
+- identification (only when the compensator estimates them): stiffness (N/mm) and damping
+  (N s/mm) estimates vs the scenario's true values.
+
+Comparison figures (several compensators on one scenario, one panel each, shared axes):
+compare_velocity, compare_force, compare_energy, compare_identification (the compensators
+that identify the contact) and compare_cov_cof (grouped bars, like the paper's Fig. 8d).
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -21,7 +28,7 @@ from matplotlib.figure import Figure
 if TYPE_CHECKING:
     from .run import Run
 
-__all__ = ["make_figures"]
+__all__ = ["comparison_figures", "make_figures"]
 
 _COLORS = {"x": "tab:blue", "y": "tab:orange", "z": "tab:green"}
 
@@ -124,12 +131,22 @@ def force_figure(run: Run) -> Figure:
     return figure
 
 
+def has_values(frame: pd.DataFrame, name: str) -> bool:
+    """Whether ``frame`` has the (optional) column ``name`` with at least one finite value."""
+    return name in frame and bool(np.isfinite(frame[name].to_numpy(dtype=np.float64)).any())
+
+
 def energy_figure(run: Run) -> Figure:
     figure, (ax,) = _figure()
     if "energy" in run.timeseries:
         ax.plot(run.timeseries["time"], run.timeseries["energy"], color="tab:blue", lw=1.4, label="energy HIL")
     if "energy" in run.reference:
         ax.plot(run.reference["time"], run.reference["energy"], color="black", lw=1.2, ls="--", label="energy ideal reference")
+    if has_values(run.timeseries, "observed_energy"):
+        ax.plot(
+            run.timeseries["time"], run.timeseries["observed_energy"], color="tab:purple", lw=1.2, ls=":",
+            label="observed energy (compensator)",
+        )
     _shade_collisions(ax, run)
     _mark_divergence(ax, run)
     _finish(ax, "Energy of the virtual relative motion", run, "energy (J)")
@@ -137,19 +154,21 @@ def energy_figure(run: Run) -> Figure:
 
 
 def identification_figure(run: Run) -> Figure:
+    """Identified stiffness (N/mm) and damping (N s/mm) against the true contact values."""
     figure, (ax_k, ax_c) = _figure(rows=2)
     ts = run.timeseries
     contact = run.scenario.contact
-    ax_k.plot(ts["time"], ts["stiffness_estimate"], color="tab:blue", lw=1.4, label="estimate")
-    ax_k.axhline(contact.stiffness, color="black", lw=1.2, ls="--", label="true")
+    if "stiffness_estimate" in ts:
+        ax_k.plot(ts["time"], ts["stiffness_estimate"] * 1e-3, color="tab:blue", lw=1.4, label="estimate k̂")
+    ax_k.axhline(contact.stiffness * 1e-3, color="black", lw=1.2, ls="--", label="true k")
     _shade_collisions(ax_k, run)
-    _finish(ax_k, "Identified contact stiffness", run, "stiffness (N/m)")
+    _finish(ax_k, "Identified contact stiffness", run, "stiffness (N/mm)")
     if "damping_estimate" in ts:
-        ax_c.plot(ts["time"], ts["damping_estimate"], color="tab:orange", lw=1.4, label="estimate")
-    ax_c.axhline(contact.damping, color="black", lw=1.2, ls="--", label="true")
+        ax_c.plot(ts["time"], ts["damping_estimate"] * 1e-3, color="tab:orange", lw=1.4, label="estimate ĉ")
+    ax_c.axhline(contact.damping * 1e-3, color="black", lw=1.2, ls="--", label="true c")
     _shade_collisions(ax_c, run)
     ax_c.set_xlabel("time (s)")
-    ax_c.set_ylabel("damping (N s/m)")
+    ax_c.set_ylabel("damping (N·s/mm)")
     ax_c.set_title("Identified contact damping", fontsize=11)
     ax_c.grid(True, alpha=0.4)
     ax_c.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
@@ -163,6 +182,296 @@ def make_figures(run: Run) -> dict[str, Figure]:
         "contact_force": force_figure(run),
         "energy": energy_figure(run),
     }
-    if "stiffness_estimate" in run.timeseries:
+    if "stiffness_estimate" in run.timeseries or "damping_estimate" in run.timeseries:
         figures["identification"] = identification_figure(run)
+    return figures
+
+
+# --------------------------------------------------------------------------------------
+# Comparison figures
+# --------------------------------------------------------------------------------------
+
+_KIND_COLORS = {
+    "none": "tab:red",
+    "pic": "tab:blue",
+    "dac": "tab:orange",
+    "pida": "tab:green",
+    "tdpa-impedance": "tab:purple",
+    "tdpa-admittance": "tab:brown",
+}
+_EXTRA_COLORS = ("tab:pink", "tab:olive", "tab:cyan", "tab:gray")
+
+
+def _kind_color(kind: str, index: int) -> str:
+    return _KIND_COLORS.get(kind, _EXTRA_COLORS[index % len(_EXTRA_COLORS)])
+
+
+def _comparison_header(runs: Mapping[str, Run]) -> str:
+    run = next(iter(runs.values()))
+    f = run.scenario.facility
+    return (
+        f"{run.scenario.name} | robot delay {f.robot_delay * 1e3:g} ms, sensor delay "
+        f"{f.sensor_delay * 1e3:g} ms | solid: HIL, dashed: ideal reference"
+    )
+
+
+def _grid(count: int, rows_per_panel: int = 1) -> tuple[Figure, list[list[Axes]]]:
+    """A figure with ``count`` panels (at most 3 per row), each ``rows_per_panel`` axes tall;
+    all axes share x, and y is shared per panel row. Returns the axes per panel."""
+    columns = min(3, max(count, 1))
+    panel_rows = math.ceil(count / columns)
+    rows = panel_rows * rows_per_panel
+    figure = Figure(figsize=(5.0 * columns + 0.6, 3.0 * rows + 0.8), layout="constrained")
+    FigureCanvasAgg(figure)
+    grid = figure.subplots(rows, columns, sharex=True, squeeze=False)
+    for r in range(rows_per_panel):  # share y between the same row of every panel
+        first = grid[r][0]
+        for pr in range(panel_rows):
+            for c in range(columns):
+                ax = grid[pr * rows_per_panel + r][c]
+                if ax is not first:
+                    ax.sharey(first)
+    panels = []
+    for i in range(panel_rows * columns):
+        pr, c = divmod(i, columns)
+        axes = [grid[pr * rows_per_panel + r][c] for r in range(rows_per_panel)]
+        if i < count:
+            panels.append(axes)
+        else:
+            for ax in axes:
+                ax.set_visible(False)
+    return figure, panels
+
+
+def _tidy_labels(panels: list[list[Axes]]) -> None:
+    """Shared axes: time tick labels and label only under the lowest panel of each column,
+    the y label only on the first column."""
+    columns = min(3, max(len(panels), 1))
+    for i, axes in enumerate(panels):
+        lowest = i + columns >= len(panels)
+        for r, ax in enumerate(axes):
+            bottom = lowest and r == len(axes) - 1
+            ax.tick_params(axis="x", labelbottom=bottom)
+            ax.set_xlabel("time (s)" if bottom else "")
+            if i % columns:
+                ax.set_ylabel("")
+
+
+def _panel_title(kind: str, run: Run) -> str:
+    if run.status == "ok":
+        return f"{kind}: ok"
+    at = run.metrics.get("diverged_at")
+    when = f" at {at:.2f} s" if isinstance(at, (int, float)) else ""
+    return f"{kind}: {run.status.upper()}{when}"
+
+
+def _clip_to_ok_runs(
+    panels: list[list[Axes]], runs: Mapping[str, Run], ranges: list[tuple[float, float]], row: int = 0
+) -> None:
+    """Share y limits fitted to the runs that stayed ok (and their references) when a diverged
+    run would otherwise flatten every panel; its panel's title then says it is clipped."""
+    ok = [r for (kind, run), r in zip(runs.items(), ranges) if run.status == "ok" and math.isfinite(r[0])]
+    if not ok:
+        return
+    lo, hi = min(r[0] for r in ok), max(r[1] for r in ok)
+    span = max(hi - lo, 1e-12)
+    allover = [r for r in ranges if math.isfinite(r[0])]
+    full_lo, full_hi = min(r[0] for r in allover), max(r[1] for r in allover)
+    if full_hi - full_lo <= 2.0 * span:
+        return  # nothing far outside: let matplotlib fit everything
+    pad = 0.1 * span
+    panels[0][row].set_ylim(lo - pad, hi + pad)
+    for axes, r in zip(panels, ranges):
+        if math.isfinite(r[0]) and (r[0] < lo - pad or r[1] > hi + pad):
+            ax = axes[row]
+            ax.set_title(ax.get_title() + " (clipped)")
+
+
+def _series_range(*series: np.ndarray | None) -> tuple[float, float]:
+    values = [s[np.isfinite(s)] for s in series if s is not None]
+    values = [v for v in values if v.size]
+    if not values:
+        return (math.nan, math.nan)
+    return (float(min(v.min() for v in values)), float(max(v.max() for v in values)))
+
+
+def _time_panels(
+    runs: Mapping[str, Run],
+    title: str,
+    ylabel: str,
+    hil: Callable[[pd.DataFrame], np.ndarray | None],
+    extra: Callable[[Axes, Run], np.ndarray | None] | None = None,
+) -> Figure:
+    figure, panels = _grid(len(runs))
+    ranges = []
+    for i, ((kind, run), axes) in enumerate(zip(runs.items(), panels)):
+        ax = axes[0]
+        color = _kind_color(kind, i)
+        values = hil(run.timeseries)
+        ideal = hil(run.reference)
+        if ideal is not None:
+            ax.plot(run.reference["time"], ideal, color="black", lw=1.0, ls="--", label="ideal reference")
+        if values is not None:
+            ax.plot(run.timeseries["time"], values, color=color, lw=1.3, label="HIL")
+        more = extra(ax, run) if extra is not None else None
+        ranges.append(_series_range(values, ideal, more))
+        _shade_collisions(ax, run)
+        _mark_divergence(ax, run)
+        ax.set_title(_panel_title(kind, run), fontsize=11, color="tab:red" if run.status != "ok" else "black")
+        ax.grid(True, alpha=0.4)
+        ax.set_ylabel(ylabel)
+        ax.set_xlabel("time (s)")
+        if i == 0:
+            ax.legend(loc="best", fontsize=8)
+    _clip_to_ok_runs(panels, runs, ranges)
+    _tidy_labels(panels)
+    figure.suptitle(f"{title}\n{_comparison_header(runs)}", fontsize=12)
+    return figure
+
+
+def compare_velocity_figure(runs: Mapping[str, Run]) -> Figure:
+    def velocity(frame: pd.DataFrame) -> np.ndarray | None:
+        values = _column(frame, "tip_velocity_x")
+        return None if values is None else values * 1e3
+
+    return _time_panels(runs, "Rod-tip relative velocity along x", "velocity x (mm/s)", velocity)
+
+
+def compare_force_figure(runs: Mapping[str, Run]) -> Figure:
+    return _time_panels(
+        runs, "Contact force magnitude", "|contact force| (N)", lambda frame: _magnitude(frame, "contact_force")
+    )
+
+
+def compare_energy_figure(runs: Mapping[str, Run]) -> Figure:
+    def observed(ax: Axes, run: Run) -> np.ndarray | None:
+        if not has_values(run.timeseries, "observed_energy"):
+            return None
+        values = run.timeseries["observed_energy"].to_numpy()
+        ax.plot(run.timeseries["time"], values, color="0.25", lw=1.0, ls=":", label="observed energy")
+        ax.legend(loc="best", fontsize=8)
+        return values
+
+    return _time_panels(runs, "Energy of the virtual relative motion", "energy (J)", lambda f: _column(f, "energy"), observed)
+
+
+def identifies(run: Run) -> bool:
+    """Whether the run has contact estimates (stiffness or damping) with values."""
+    return has_values(run.timeseries, "stiffness_estimate") or has_values(run.timeseries, "damping_estimate")
+
+
+def compare_identification_figure(runs: Mapping[str, Run]) -> Figure | None:
+    """k̂ (N/mm) and ĉ (N s/mm) against the true values, one column per compensator that
+    identifies; None if none does."""
+    chosen = {kind: run for kind, run in runs.items() if identifies(run)}
+    if not chosen:
+        return None
+    figure, panels = _grid(len(chosen), rows_per_panel=2)
+    index = {kind: i for i, kind in enumerate(runs)}
+    for (kind, run), (ax_k, ax_c) in zip(chosen.items(), panels):
+        ts, contact = run.timeseries, run.scenario.contact
+        color = _kind_color(kind, index[kind])
+        if "stiffness_estimate" in ts:
+            ax_k.plot(ts["time"], ts["stiffness_estimate"] * 1e-3, color=color, lw=1.3, label="k̂")
+        ax_k.axhline(contact.stiffness * 1e-3, color="black", lw=1.0, ls="--", label="true k")
+        if "damping_estimate" in ts:
+            ax_c.plot(ts["time"], ts["damping_estimate"] * 1e-3, color=color, lw=1.3, label="ĉ")
+        ax_c.axhline(contact.damping * 1e-3, color="black", lw=1.0, ls="--", label="true c")
+        for ax in (ax_k, ax_c):
+            _shade_collisions(ax, run)
+            _mark_divergence(ax, run)
+            ax.grid(True, alpha=0.4)
+            ax.legend(loc="best", fontsize=8)
+        ax_k.set_title(_panel_title(kind, run), fontsize=11, color="tab:red" if run.status != "ok" else "black")
+        ax_k.set_ylabel("stiffness (N/mm)")
+        ax_c.set_ylabel("damping (N·s/mm)")
+    _tidy_labels(panels)
+    run = next(iter(runs.values()))
+    figure.suptitle(
+        f"Identified contact stiffness and damping\n{run.scenario.name} | robot delay "
+        f"{run.scenario.facility.robot_delay * 1e3:g} ms | dashed: true value",
+        fontsize=12,
+    )
+    return figure
+
+
+def _finite_number(value: object) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def compare_cov_cof_figure(runs: Mapping[str, Run]) -> Figure:
+    """Grouped bars of CoV and CoF per collision, one colour per compensator, a line at 1.
+    When a diverged run's bars dwarf the others, the axis is cut and those bars are
+    labelled with their value."""
+    figure = Figure(figsize=(11.0, 7.0), layout="constrained")
+    FigureCanvasAgg(figure)
+    axes = figure.subplots(2, 1, sharex=True)
+    kinds = list(runs)
+    # collisions up to the last one with a CoV or CoF (later ones have no ideal counterpart)
+    count = max(
+        (
+            i + 1
+            for run in runs.values()
+            for i, c in enumerate(run.metrics.get("collisions") or [])
+            if _finite_number(c.get("cov")) or _finite_number(c.get("cof"))
+        ),
+        default=1,
+    )
+    numbers = np.arange(1, count + 1)
+    width = 0.8 / max(len(kinds), 1)
+    for ax, key, label in ((axes[0], "cov", "CoV"), (axes[1], "cof", "CoF")):
+        values = {}
+        for kind, run in runs.items():
+            row = np.full(count, np.nan)
+            for i, c in enumerate((run.metrics.get("collisions") or [])[:count]):
+                if _finite_number(c.get(key)):
+                    row[i] = float(c[key])
+            values[kind] = row
+        ok_values = [v for kind, v in values.items() if runs[kind].status == "ok"]
+        finite_ok = np.concatenate([v[np.isfinite(v)] for v in ok_values]) if ok_values else np.array([])
+        finite_all = np.concatenate([v[np.isfinite(v)] for v in values.values()]) if values else np.array([])
+        top = float(finite_all.max()) if finite_all.size else 1.0
+        cap = None
+        if finite_ok.size and top > 2.0 * max(float(finite_ok.max()), 1.0):
+            cap = max(1.5, 1.25 * float(finite_ok.max()))
+        for i, kind in enumerate(kinds):
+            heights = values[kind]
+            x = numbers - 0.4 + width * (i + 0.5)
+            shown = heights if cap is None else np.minimum(heights, cap)
+            ax.bar(x, shown, width=width * 0.95, color=_kind_color(kind, i), label=kind)
+            if cap is not None:
+                for xi, h in zip(x, heights):
+                    if np.isfinite(h) and h > cap:
+                        ax.text(xi, cap, f"{h:.2f}", ha="center", va="bottom", fontsize=7, rotation=90)
+        ax.axhline(1.0, color="black", lw=1.0, ls="--")
+        if cap is not None:
+            ax.set_ylim(0.0, cap * 1.15)
+            label += " (cut; bars above labelled)"
+        ax.set_ylabel(label)
+        ax.grid(True, axis="y", alpha=0.4)
+    axes[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False, title="compensator")
+    axes[1].set_xlabel("collision")
+    axes[1].set_xticks(numbers)
+    run = next(iter(runs.values())) if runs else None
+    if run is not None:
+        figure.suptitle(
+            f"CoV and CoF per collision (1 = ideal)\n{run.scenario.name} | robot delay "
+            f"{run.scenario.facility.robot_delay * 1e3:g} ms",
+            fontsize=12,
+        )
+    return figure
+
+
+def comparison_figures(runs: Mapping[str, Run]) -> dict[str, Figure]:
+    """The comparison figures by file stem (compare_identification only if a compensator
+    identifies the contact)."""
+    figures: dict[str, Figure] = {
+        "compare_velocity": compare_velocity_figure(runs),
+        "compare_force": compare_force_figure(runs),
+        "compare_energy": compare_energy_figure(runs),
+    }
+    identification = compare_identification_figure(runs)
+    if identification is not None:
+        figures["compare_identification"] = identification
+    figures["compare_cov_cof"] = compare_cov_cof_figure(runs)
     return figures

@@ -19,7 +19,7 @@ from .scenario import Scenario, load_scenario
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["REFERENCE_COLUMNS", "TIMESERIES_COLUMNS", "Run", "simulate"]
+__all__ = ["OPTIONAL_TIMESERIES_COLUMNS", "REFERENCE_COLUMNS", "TIMESERIES_COLUMNS", "Run", "simulate"]
 
 _XYZ = ("x", "y", "z")
 
@@ -28,8 +28,8 @@ def _vector(name: str) -> list[str]:
     return [f"{name}_{axis}" for axis in _XYZ]
 
 
-#: Columns of ``Run.timeseries`` (the HIL loop), in this order; ``stiffness_estimate`` and
-#: ``damping_estimate`` follow when the compensator estimates them.
+#: Columns of ``Run.timeseries`` (the HIL loop) that every run has, in this order; the
+#: optional ones (:data:`OPTIONAL_TIMESERIES_COLUMNS`) follow.
 TIMESERIES_COLUMNS: list[str] = [
     "time",
     *_vector("tip_position"),
@@ -43,6 +43,12 @@ TIMESERIES_COLUMNS: list[str] = [
     *_vector("applied_moment"),
     "energy",
 ]
+
+#: Columns of ``Run.timeseries`` that only some compensators produce: ``stiffness_estimate``
+#: (N/m) and ``damping_estimate`` (N s/m) for those that identify the contact (pic, dac,
+#: pida; NaN before the first estimate), ``observed_energy`` (J) for those with an energy
+#: observer (NaN where it does not observe). Code reading a run must not assume them.
+OPTIONAL_TIMESERIES_COLUMNS: list[str] = ["stiffness_estimate", "damping_estimate", "observed_energy"]
 
 #: Columns of ``Run.reference`` (the ideal reference: true contact law, no delay).
 REFERENCE_COLUMNS: list[str] = [
@@ -142,7 +148,7 @@ class Run:
     def plot(self, directory: str | os.PathLike[str] | None = None) -> dict[str, Figure]:
         """Make the figures (name -> matplotlib Figure); save them as ``<name>.png`` in
         ``directory`` if given. Names: contact_velocity, contact_force, energy, and
-        identification when the compensator estimates stiffness."""
+        identification when the compensator estimates the contact stiffness or damping."""
         from .plots import make_figures
 
         figures = make_figures(self)
@@ -216,6 +222,6 @@ def simulate(scenario: Scenario | str | os.PathLike[str]) -> Run:
     return Run(
         scenario=scenario,
         metrics=metrics,
-        timeseries=_frame(result["timeseries"], TIMESERIES_COLUMNS),
+        timeseries=_frame(result["timeseries"], TIMESERIES_COLUMNS + OPTIONAL_TIMESERIES_COLUMNS),
         reference=_frame(result["reference"], REFERENCE_COLUMNS),
     )

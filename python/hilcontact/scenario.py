@@ -50,12 +50,17 @@ __all__ = [
     "COMPENSATOR_MODELS",
     "Body",
     "Contact",
+    "DacCompensator",
     "Facility",
     "Metrics",
     "NoneCompensator",
+    "PicCompensator",
+    "PidaCompensator",
     "Rod",
     "Scenario",
     "Simulation",
+    "TdpaAdmittanceCompensator",
+    "TdpaImpedanceCompensator",
     "Wall",
     "apply_overrides",
     "load_scenario",
@@ -284,10 +289,96 @@ class NoneCompensator(_Table):
     kind: Literal["none"] = "none"
 
 
+class _ModelParams(_Table):
+    """Parameters of the identification-based compensators ``pic``, ``dac``, ``pida``
+    (the core's ``ModelParams``): adaptive Kalman identification of the contact stiffness
+    and damping, measurement-delay compensation, energy observer and controller."""
+
+    kind: str = Field("", description="set by each compensator class")  # first in the TOML
+    delay_mode: Literal["align", "lead"] = Field(
+        "align",
+        description="measurement-delay compensation: 'align' (identify against the kinematics "
+        "from tau_p earlier, robust to noise) or 'lead' (the paper's eq. (6))",
+    )
+    contact_force: float = Field(3.0, gt=0, allow_inf_nan=False, description="N, > 0: in contact above this force")
+    stiffness_initial: float = Field(1.0e5, gt=0, allow_inf_nan=False, description="initial k estimate, N/m, > 0")
+    damping_initial: float = Field(0.0, ge=0, allow_inf_nan=False, description="initial c estimate, N s/m, >= 0")
+    stiffness_std: float = Field(1.0e5, gt=0, allow_inf_nan=False, description="initial std of k, N/m, > 0")
+    damping_std: float = Field(300.0, gt=0, allow_inf_nan=False, description="initial std of c, N s/m, > 0")
+    stiffness_walk: float = Field(10.0, ge=0, allow_inf_nan=False, description="random walk of k per update, N/m, >= 0")
+    damping_walk: float = Field(0.1, ge=0, allow_inf_nan=False, description="random walk of c per update, N s/m, >= 0")
+    noise_std: float = Field(0.1, gt=0, allow_inf_nan=False, description="initial force-increment noise std, N, > 0")
+    forgetting: float = Field(0.98, allow_inf_nan=False, description="Sage-Husa forgetting factor b, 0 < b < 1")
+    alpha_max: float = Field(2000.0, gt=0, allow_inf_nan=False, description="largest amendment damping, N s/m, > 0")
+    observer: Literal["work", "paper"] = Field(
+        "work",
+        description="energy observer: 'work' (work of the wrench held over each step, exact) or "
+        "'paper' (eqs. (15), (16) as printed)",
+    )
+
+    @field_validator("forgetting")
+    @classmethod
+    def _check_forgetting(cls, value: float) -> float:
+        if not 0.0 < value < 1.0:
+            raise ValueError(f"must be between 0 and 1 (exclusive), got {_show(value)}")
+        return value
+
+
+class PicCompensator(_ModelParams):
+    """``kind = "pic"``: parameter identification control (the paper's Algorithm 1)."""
+
+    kind: Literal["pic"] = "pic"
+
+
+class DacCompensator(_ModelParams):
+    """``kind = "dac"``: damping amendment control (Algorithm 2)."""
+
+    kind: Literal["dac"] = "dac"
+
+
+class PidaCompensator(_ModelParams):
+    """``kind = "pida"``: identification and damping amendment (Algorithm 3)."""
+
+    kind: Literal["pida"] = "pida"
+
+
+class _TdpaParams(_Table):
+    """Parameters of the time-domain passivity baselines (the core's ``TdpaParams``)."""
+
+    kind: str = Field("", description="set by each compensator class")  # first in the TOML
+    contact_force: float = Field(
+        3.0, gt=0, allow_inf_nan=False, description="N, > 0: in contact above this force (the observer restarts)"
+    )
+    alpha_max: float = Field(2000.0, gt=0, allow_inf_nan=False, description="largest damping (impedance type), N s/m, > 0")
+    beta_max: float = Field(1e-4, gt=0, allow_inf_nan=False, description="largest admittance (admittance type), m/(N s), > 0")
+    velocity_floor: float = Field(1e-3, gt=0, allow_inf_nan=False, description="floor on |v| in a division, m/s, > 0")
+    force_floor: float = Field(1.0, gt=0, allow_inf_nan=False, description="floor on |f| in a division, N, > 0")
+
+
+class TdpaImpedanceCompensator(_TdpaParams):
+    """``kind = "tdpa-impedance"``: time-domain passivity, impedance type (a series damper)."""
+
+    kind: Literal["tdpa-impedance"] = "tdpa-impedance"
+
+
+class TdpaAdmittanceCompensator(_TdpaParams):
+    """``kind = "tdpa-admittance"``: time-domain passivity, admittance type (a damper on the
+    velocity command)."""
+
+    kind: Literal["tdpa-admittance"] = "tdpa-admittance"
+
+
 # To add a compensator: define a _Table subclass with `kind: Literal["<kind>"] = "<kind>"` and
 # its own parameters, and append it here. Everything else (the tagged union, error messages
-# listing the allowed kinds and keys) derives from this tuple.
-_COMPENSATOR_CLASSES: tuple[type[_Table], ...] = (NoneCompensator,)
+# listing the allowed kinds and keys, the kind switch of overrides) derives from this tuple.
+_COMPENSATOR_CLASSES: tuple[type[_Table], ...] = (
+    NoneCompensator,
+    PicCompensator,
+    DacCompensator,
+    PidaCompensator,
+    TdpaImpedanceCompensator,
+    TdpaAdmittanceCompensator,
+)
 
 COMPENSATOR_MODELS: dict[str, type[_Table]] = {
     cls.model_fields["kind"].default: cls for cls in _COMPENSATOR_CLASSES
@@ -522,7 +613,12 @@ def _error_line(err: Mapping[str, Any]) -> str:
         where = _table_label(parts[:-1], owner)
         if not parts[:-1]:
             return f"{key}: unknown top-level key{hint}; allowed: {', '.join(allowed)}"
-        return at(f"unknown key{hint}; allowed keys in {where}: {', '.join(allowed)}")
+        message = f"unknown key{hint}; allowed keys in {where}: {', '.join(allowed)}"
+        if parts[:-1] == ["compensator"]:
+            kinds = [k for k, cls in COMPENSATOR_MODELS.items() if key in cls.model_fields]
+            if kinds:
+                message += f" ({key!r} is a parameter of kind {', '.join(repr(k) for k in kinds)})"
+        return at(message)
     if kind == "compensator_kind":
         if isinstance(value, Mapping):
             allowed = ", ".join(repr(k) for k in COMPENSATOR_MODELS)
@@ -616,27 +712,51 @@ def _parse_toml(text: str, source: str) -> dict[str, Any]:
 _SEGMENT = re.compile(r"^([A-Za-z_][A-Za-z0-9_-]*)((?:\[\d+\])*)$")
 
 
+def _override_steps(key: Any) -> list[str | int]:
+    """``"walls[0].point"`` -> ``["walls", 0, "point"]``."""
+    if not isinstance(key, str) or not key:
+        raise ScenarioError(f"invalid override key {key!r}: expected a dotted key such as facility.robot_delay")
+    steps: list[str | int] = []
+    for segment in key.split("."):
+        match = _SEGMENT.match(segment.strip())
+        if not match:
+            raise ScenarioError(f"invalid override key {key!r}: expected a dotted key such as facility.robot_delay")
+        steps.append(match.group(1))
+        steps.extend(int(i) for i in re.findall(r"\[(\d+)\]", match.group(2)))
+    return steps
+
+
+def _switch_compensator_kind(data: dict[str, Any], kind: Any) -> None:
+    """An override changes ``compensator.kind``: keep from the file only the parameters that
+    the new kind has (the others belonged to the old kind). Parameters set by overrides are
+    applied afterwards and validated as usual."""
+    table = data.get("compensator")
+    if not isinstance(table, dict) or not isinstance(kind, str) or kind not in COMPENSATOR_MODELS:
+        return  # not a table, or an unknown kind: validation reports it
+    if table.get("kind", "none") == kind:
+        return
+    fields = COMPENSATOR_MODELS[kind].model_fields
+    data["compensator"] = {name: value for name, value in table.items() if name in fields}
+
+
 def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any] | None) -> dict[str, Any]:
     """Return a copy of the raw scenario dict with dotted-key overrides applied.
 
     Keys are dotted paths into the TOML tables (``"facility.robot_delay"``); list items can
     be addressed as ``"walls[0].point"``. Missing tables are created; the result is validated
     later, so unknown keys are reported with the allowed ones.
+
+    An override of ``compensator.kind`` to another kind keeps, of the file's ``[compensator]``
+    parameters, only those that the new kind has (``--set compensator.kind=pida`` works on a
+    file written for ``tdpa-impedance``). Compensator parameters set by overrides are always
+    kept, so one that the new kind does not have is an error.
     """
     data: dict[str, Any] = copy.deepcopy(dict(raw))
-    for key, value in (overrides or {}).items():
-        if not isinstance(key, str) or not key:
-            raise ScenarioError(f"invalid override key {key!r}: expected a dotted key such as facility.robot_delay")
-        segments = key.split(".")
-        steps: list[str | int] = []
-        for segment in segments:
-            match = _SEGMENT.match(segment.strip())
-            if not match:
-                raise ScenarioError(
-                    f"invalid override key {key!r}: expected a dotted key such as facility.robot_delay"
-                )
-            steps.append(match.group(1))
-            steps.extend(int(i) for i in re.findall(r"\[(\d+)\]", match.group(2)))
+    parsed = [(key, _override_steps(key), value) for key, value in (overrides or {}).items()]
+    for key, steps, value in parsed:
+        if steps == ["compensator", "kind"]:
+            _switch_compensator_kind(data, value)
+    for key, steps, value in parsed:
         node: Any = data
         for depth, step in enumerate(steps[:-1]):
             here = _dotted(steps[: depth + 1])

@@ -49,9 +49,11 @@ pub struct EnergyObserver {
     previous: Option<Tick>,
 }
 
-/// Damping force `ĉ·(v·e)·e` of the identified contact, N.
+/// Damping force `ĉ·(v·e)·e` of the identified contact, N. A negative estimate (noise can
+/// produce one) counts as zero here: it would let the observer credit energy the contact never
+/// gives, and the controller would then allow the energy to grow.
 fn damping_force(damping: f64, velocity: &Vector3<f64>, direction: &Vector3<f64>) -> Vector3<f64> {
-    direction * (damping * velocity.dot(direction))
+    direction * (damping.max(0.0) * velocity.dot(direction))
 }
 
 impl EnergyObserver {

@@ -1,0 +1,384 @@
+"""Several compensators on one scenario: the runs, a table per collision, a summary, figures.
+
+    import hilcontact as hc
+    comparison = hc.compare("paper-table1", overrides={"facility.robot_delay": 0.02})
+    comparison.summary          # one row per compensator
+    comparison.table            # one row per compensator and collision
+    comparison.save("runs/paper-table1-compare")
+
+Every compensator runs the same scenario, loaded with the overrides and
+``compensator.kind = <kind>``. A compensator parameter set by an override
+(``compensator.alpha_max``) goes to the compensators that have it; one that no compared
+compensator has is an error.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import uuid
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+
+from .errors import HilContactError, ScenarioError
+from .run import Run, _swap_into_place, simulate
+from .scenario import COMPENSATOR_MODELS, Scenario, _override_steps, _read_source, load_scenario
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = [
+    "ALL_KINDS",
+    "COMPARISON_FIGURES",
+    "Comparison",
+    "compare",
+    "comparison_scenarios",
+    "parse_kinds",
+    "run_comparison",
+]
+
+#: Every compensator kind, in the order of the tables and figures.
+ALL_KINDS: tuple[str, ...] = tuple(COMPENSATOR_MODELS)
+
+#: Figures of a comparison (file stems); ``compare_identification`` only when a compared
+#: compensator identifies the contact.
+COMPARISON_FIGURES = (
+    "compare_velocity",
+    "compare_force",
+    "compare_energy",
+    "compare_identification",
+    "compare_cov_cof",
+)
+
+#: Columns of :attr:`Comparison.table` (and of ``comparison.csv``).
+TABLE_COLUMNS = [
+    "compensator",
+    "collision",
+    "cov",
+    "cof",
+    "peak_force_N",
+    "rebound_speed_mm_s",
+    "status",
+    "worst_cov_error",
+    "worst_cof",
+    "mean_cov",
+    "stiffness_error_pct",
+    "damping_error_Ns_mm",
+]
+
+#: Columns of :attr:`Comparison.summary` (index: compensator).
+SUMMARY_COLUMNS = [
+    "status",
+    "diverged_at",
+    "collisions",
+    "cov",
+    "mean_cov",
+    "worst_cov_error",
+    "worst_cof",
+    "stiffness_error_pct",
+    "damping_error_Ns_mm",
+]
+
+
+def parse_kinds(kinds: str | Iterable[str] | None) -> list[str]:
+    """Compensator kinds from a comma-separated string or a list (None: all of them), checked,
+    duplicates removed, in the given order."""
+    if kinds is None:
+        return list(ALL_KINDS)
+    items = kinds.split(",") if isinstance(kinds, str) else list(kinds)
+    allowed = ", ".join(ALL_KINDS)
+    out: list[str] = []
+    for item in items:
+        if not isinstance(item, str):
+            raise ScenarioError(f"compensators: expected compensator kinds, got {item!r}; allowed: {allowed}")
+        kind = item.strip()
+        if not kind:
+            continue  # "none,pida," or spaces
+        if kind not in COMPENSATOR_MODELS:
+            raise ScenarioError(f"compensators: unknown compensator {kind!r}; allowed: {allowed}")
+        if kind not in out:
+            out.append(kind)
+    if not out:
+        raise ScenarioError(f"compensators: none given; allowed: {allowed}")
+    return out
+
+
+def comparison_scenarios(
+    scenario_source: Any,
+    kinds: str | Iterable[str] | None = None,
+    overrides: Mapping[str, Any] | None = None,
+) -> dict[str, Scenario]:
+    """The resolved scenario of each compensator (validated before anything runs).
+
+    Raises ScenarioError for a bad scenario, override or kind, and for an override of
+    ``compensator.kind`` (the kinds are the ``kinds`` argument).
+    """
+    chosen = parse_kinds(kinds)
+    user = dict(overrides or {})
+    parameters: dict[str, str] = {}  # override key -> compensator parameter it sets
+    for key in user:
+        steps = _override_steps(key)
+        if steps == ["compensator", "kind"]:
+            raise ScenarioError(
+                "compensator.kind: a comparison runs every chosen compensator; choose them with "
+                "--compensators (kinds=...) instead of overriding compensator.kind"
+            )
+        if len(steps) == 2 and steps[0] == "compensator" and isinstance(steps[1], str):
+            parameters[key] = steps[1]
+    owned = {name for kind in chosen for name in COMPENSATOR_MODELS[kind].model_fields}
+    raw = _read_source(scenario_source)
+    scenarios: dict[str, Scenario] = {}
+    for kind in chosen:
+        fields = COMPENSATOR_MODELS[kind].model_fields
+        # a parameter that some compared kind has goes only to those; an unknown one is kept
+        # everywhere, so that validation reports it
+        mine = {
+            key: value
+            for key, value in user.items()
+            if key not in parameters or parameters[key] in fields or parameters[key] not in owned
+        }
+        scenarios[kind] = load_scenario(raw, {**mine, "compensator.kind": kind})
+    return scenarios
+
+
+def _finite(values: Iterable[Any]) -> list[float]:
+    out = []
+    for value in values:
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+            out.append(float(value))
+    return out
+
+
+def _nan(value: Any) -> float:
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+        return float(value)
+    return math.nan
+
+
+@dataclass
+class Comparison:
+    """The result of :func:`compare`: one :class:`Run` per compensator, same scenario.
+
+    Attributes:
+        runs: compensator kind -> run, in the compared order.
+    """
+
+    runs: dict[str, Run]
+
+    def __post_init__(self) -> None:
+        if not self.runs:
+            raise HilContactError("a comparison needs at least one run")
+
+    @property
+    def scenario(self) -> Scenario:
+        """The scenario of the first run (they differ only in ``[compensator]``)."""
+        return next(iter(self.runs.values())).scenario
+
+    @property
+    def kinds(self) -> list[str]:
+        return list(self.runs)
+
+    # ---- tables ------------------------------------------------------------------------
+
+    def _stats(self, run: Run) -> dict[str, Any]:
+        collisions = run.metrics.get("collisions") or []
+        covs = _finite(c.get("cov") for c in collisions)
+        cofs = _finite(c.get("cof") for c in collisions)
+        identification = run.metrics.get("identification") or {}
+        at = run.metrics.get("diverged_at")
+        return {
+            "status": run.status,
+            "diverged_at": _nan(at),
+            "collisions": len(collisions),
+            "cov": [_nan(c.get("cov")) for c in collisions],
+            "mean_cov": float(np.mean(covs)) if covs else math.nan,
+            "worst_cov_error": max(abs(v - 1.0) for v in covs) if covs else math.nan,
+            "worst_cof": max(cofs, key=lambda v: abs(v - 1.0)) if cofs else math.nan,
+            "stiffness_error_pct": _nan(identification.get("stiffness_error")) * 100.0,
+            "damping_error_Ns_mm": _nan(identification.get("damping_error")) * 1e-3,
+        }
+
+    @property
+    def summary(self) -> pd.DataFrame:
+        """One row per compensator (index ``compensator``): status, diverged_at (s, NaN if
+        ok), collisions (count), cov (list, one per collision), mean_cov, worst_cov_error
+        (largest |CoV - 1|), worst_cof (the CoF farthest from 1), stiffness_error_pct (%),
+        damping_error_Ns_mm (N s/mm); NaN where the run has no such value."""
+        rows = [{"compensator": kind, **self._stats(run)} for kind, run in self.runs.items()]
+        frame = pd.DataFrame(rows, columns=["compensator", *SUMMARY_COLUMNS])
+        return frame.set_index("compensator")
+
+    @property
+    def table(self) -> pd.DataFrame:
+        """One row per compensator and collision (a compensator without collisions gets one
+        row with an empty collision number): compensator, collision, cov, cof, peak_force_N,
+        rebound_speed_mm_s and the compensator's summary values (status, worst_cov_error,
+        worst_cof, mean_cov, stiffness_error_pct, damping_error_Ns_mm)."""
+        rows = []
+        for kind, run in self.runs.items():
+            stats = self._stats(run)
+            per_run = {key: stats[key] for key in TABLE_COLUMNS[6:]}
+            collisions = run.metrics.get("collisions") or [{}]
+            for collision in collisions:
+                rows.append(
+                    {
+                        "compensator": kind,
+                        "collision": collision.get("index"),
+                        "cov": _nan(collision.get("cov")),
+                        "cof": _nan(collision.get("cof")),
+                        "peak_force_N": _nan(collision.get("peak_force")),
+                        "rebound_speed_mm_s": _nan(collision.get("rebound_speed")) * 1e3,
+                        **per_run,
+                    }
+                )
+        frame = pd.DataFrame(rows, columns=TABLE_COLUMNS)
+        frame["collision"] = frame["collision"].astype("Int64")
+        return frame
+
+    def to_csv(self) -> str:
+        """:attr:`table` as CSV, ``-`` for missing values."""
+        return self.table.to_csv(index=False, na_rep="-")
+
+    def to_markdown(self, figures: Iterable[str] = ()) -> str:
+        """The report: a summary table, the per-collision table, then links to ``figures``
+        (file names)."""
+        s = self.scenario
+        f = s.facility
+        contact = s.contact
+        lines = [
+            f"# Compensator comparison: {s.name}",
+            "",
+            f"Robot delay {f.robot_delay * 1e3:g} ms, sensor delay {f.sensor_delay * 1e3:g} ms, "
+            f"force noise {f.sensor_noise:g} N; true contact ({contact.model}) stiffness "
+            f"{contact.stiffness * 1e-3:g} N/mm, damping {contact.damping * 1e-3:g} N·s/mm.",
+            "CoV and CoF are the rebound speed and the peak force of each collision divided by "
+            "those of the ideal reference (1 is perfect). `-`: no value.",
+            "",
+            "## Summary",
+            "",
+            "| compensator | status | CoV per collision | mean CoV | worst \\|CoV − 1\\| | worst CoF "
+            "| k error (%) | c error (N·s/mm) |",
+            "|---|---|---|--:|--:|--:|--:|--:|",
+        ]
+        for kind, row in self.summary.iterrows():
+            status = str(row["status"])
+            if math.isfinite(row["diverged_at"]):
+                status += f" at {row['diverged_at']:.3f} s"
+            covs = ", ".join(_cell(v, ".3f") for v in row["cov"]) or "-"
+            lines.append(
+                f"| `{kind}` | {status} | {covs} | {_cell(row['mean_cov'], '.3f')} "
+                f"| {_cell(row['worst_cov_error'], '.3f')} | {_cell(row['worst_cof'], '.3f')} "
+                f"| {_cell(row['stiffness_error_pct'], '.3g')} | {_cell(row['damping_error_Ns_mm'], '.3g')} |"
+            )
+        lines += [
+            "",
+            "## Per collision",
+            "",
+            "| compensator | # | CoV | CoF | peak force (N) | rebound speed (mm/s) |",
+            "|---|--:|--:|--:|--:|--:|",
+        ]
+        for _, row in self.table.iterrows():
+            number = "-" if pd.isna(row["collision"]) else str(int(row["collision"]))
+            lines.append(
+                f"| `{row['compensator']}` | {number} | {_cell(row['cov'], '.3f')} | {_cell(row['cof'], '.3f')} "
+                f"| {_cell(row['peak_force_N'], '.1f')} | {_cell(row['rebound_speed_mm_s'], '.2f')} |"
+            )
+        figures = list(figures)
+        if figures:
+            lines += ["", "## Figures", ""]
+            for name in figures:
+                lines += [f"![{Path(name).stem}]({name})", ""]
+            lines.pop()
+        lines.append("")
+        return "\n".join(lines)
+
+    # ---- figures and files -------------------------------------------------------------
+
+    def plot(self, directory: str | os.PathLike[str] | None = None) -> dict[str, Figure]:
+        """The comparison figures (name -> matplotlib Figure, see :data:`COMPARISON_FIGURES`);
+        saved as ``<name>.png`` in ``directory`` if given."""
+        from .plots import comparison_figures
+
+        figures = comparison_figures(self.runs)
+        if directory is not None:
+            folder = Path(directory)
+            folder.mkdir(parents=True, exist_ok=True)
+            for name, figure in figures.items():
+                figure.savefig(folder / f"{name}.png", dpi=110)
+        return figures
+
+    def save(self, directory: str | os.PathLike[str], plots: bool = True) -> Path:
+        """Write the comparison to ``directory``, atomically (a temporary sibling folder that
+        then replaces ``directory``).
+
+        Contents: ``<kind>/`` (a run folder per compensator, as :meth:`Run.save`),
+        ``comparison.md``, ``comparison.csv`` and, unless ``plots=False``, the run figures
+        and ``compare_*.png``. Returns the folder's path.
+        """
+        target = Path(directory)
+        if target.exists() and not target.is_dir():
+            raise HilContactError(f"{target}: exists and is not a directory")
+        parent = target.absolute().parent
+        parent.mkdir(parents=True, exist_ok=True)
+        staging = parent / f".{target.name}.tmp-{uuid.uuid4().hex[:12]}"
+        os.mkdir(staging)
+        try:
+            for kind, run in self.runs.items():
+                run.save(staging / kind, plots=plots)
+            names: list[str] = []
+            if plots:
+                names = [f"{name}.png" for name in self.plot(staging)]
+            (staging / "comparison.csv").write_text(self.to_csv(), encoding="utf-8")
+            (staging / "comparison.md").write_text(self.to_markdown(names), encoding="utf-8")
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
+        _swap_into_place(staging, target.absolute())
+        return target
+
+
+def _cell(value: Any, fmt: str) -> str:
+    if value is None:
+        return "-"
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return "-"
+    return format(number, fmt) if math.isfinite(number) else "-"
+
+
+def compare(
+    scenario_source: Any,
+    kinds: str | Iterable[str] | None = None,
+    overrides: Mapping[str, Any] | None = None,
+    *,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> Comparison:
+    """Simulate one scenario with several compensators.
+
+    ``scenario_source``: a preset name, a TOML path, a raw dict or a Scenario. ``kinds``: the
+    compensators (a list or a comma-separated string; default: all of :data:`ALL_KINDS`).
+    ``overrides``: dotted keys as in :func:`load_scenario`, applied to every run.
+    ``progress(kind, index, total)`` is called before each run. Every scenario is validated
+    before the first run; raises ScenarioError for bad input. A diverging run is a result,
+    not an error.
+    """
+    return run_comparison(comparison_scenarios(scenario_source, kinds, overrides), progress=progress)
+
+
+def run_comparison(
+    scenarios: Mapping[str, Scenario], *, progress: Callable[[str, int, int], None] | None = None
+) -> Comparison:
+    """Simulate resolved scenarios (kind -> Scenario, e.g. from :func:`comparison_scenarios`)."""
+    runs: dict[str, Run] = {}
+    for index, (kind, scenario) in enumerate(scenarios.items()):
+        if progress is not None:
+            progress(kind, index, len(scenarios))
+        runs[kind] = simulate(scenario)
+    return Comparison(runs=runs)
