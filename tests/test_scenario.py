@@ -443,12 +443,12 @@ MODEL_DEFAULTS = {
     "damping_walk": 0.1,
     "noise_std": 0.1,
     "forgetting": 0.98,
-    "alpha_max": 2000.0,
+    "alpha_max": 100000.0,
     "observer": "work",
 }
 TDPA_DEFAULTS = {
     "contact_force": 3.0,
-    "alpha_max": 2000.0,
+    "alpha_max": 100000.0,
     "beta_max": 1e-4,
     "velocity_floor": 1e-3,
     "force_floor": 1.0,

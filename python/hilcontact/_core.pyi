@@ -34,3 +34,8 @@ def simulate(scenario_json: str) -> dict[str, Any]:
 
 def version() -> str:
     """Version of the native core."""
+
+
+def compensator_defaults() -> str:
+    """The core's default parameters of every compensator kind, as JSON text:
+    ``{kind: {"kind": kind, parameter: default, ...}}``."""

@@ -309,7 +309,7 @@ class _ModelParams(_Table):
     damping_walk: float = Field(0.1, ge=0, allow_inf_nan=False, description="random walk of c per update, N s/m, >= 0")
     noise_std: float = Field(0.1, gt=0, allow_inf_nan=False, description="initial force-increment noise std, N, > 0")
     forgetting: float = Field(0.98, allow_inf_nan=False, description="Sage-Husa forgetting factor b, 0 < b < 1")
-    alpha_max: float = Field(2000.0, gt=0, allow_inf_nan=False, description="largest amendment damping, N s/m, > 0")
+    alpha_max: float = Field(100000.0, gt=0, allow_inf_nan=False, description="largest amendment damping, N s/m, > 0")
     observer: Literal["work", "paper"] = Field(
         "work",
         description="energy observer: 'work' (work of the wrench held over each step, exact) or "
@@ -349,7 +349,7 @@ class _TdpaParams(_Table):
     contact_force: float = Field(
         3.0, gt=0, allow_inf_nan=False, description="N, > 0: in contact above this force (the observer restarts)"
     )
-    alpha_max: float = Field(2000.0, gt=0, allow_inf_nan=False, description="largest damping (impedance type), N s/m, > 0")
+    alpha_max: float = Field(100000.0, gt=0, allow_inf_nan=False, description="largest damping (impedance type), N s/m, > 0")
     beta_max: float = Field(1e-4, gt=0, allow_inf_nan=False, description="largest admittance (admittance type), m/(N s), > 0")
     velocity_floor: float = Field(1e-3, gt=0, allow_inf_nan=False, description="floor on |v| in a division, m/s, > 0")
     force_floor: float = Field(1.0, gt=0, allow_inf_nan=False, description="floor on |f| in a division, N, > 0")

@@ -49,6 +49,27 @@ fn simulate<'py>(py: Python<'py>, scenario_json: &str) -> PyResult<Bound<'py, Py
     Ok(result)
 }
 
+/// The core's default parameters of every compensator kind, as JSON
+/// (`{"pida": {"kind": "pida", "delay_mode": "align", ...}, ...}`): the Python schema is checked
+/// against it so that both layers share one set of defaults.
+#[pyfunction]
+fn compensator_defaults() -> PyResult<String> {
+    use hilcontact_core::compensator::{CompensatorConfig, ModelParams, TdpaParams};
+    let kinds = [
+        CompensatorConfig::None,
+        CompensatorConfig::Pic(ModelParams::default()),
+        CompensatorConfig::Dac(ModelParams::default()),
+        CompensatorConfig::Pida(ModelParams::default()),
+        CompensatorConfig::TdpaImpedance(TdpaParams::default()),
+        CompensatorConfig::TdpaAdmittance(TdpaParams::default()),
+    ];
+    let map: serde_json::Map<String, serde_json::Value> = kinds
+        .iter()
+        .map(|k| Ok((k.kind().to_string(), serde_json::to_value(k).map_err(|e| PyValueError::new_err(e.to_string()))?)))
+        .collect::<PyResult<_>>()?;
+    Ok(serde_json::Value::Object(map).to_string())
+}
+
 /// Version of the native core.
 #[pyfunction]
 fn version() -> &'static str {
@@ -59,5 +80,6 @@ fn version() -> &'static str {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
+    m.add_function(wrap_pyfunction!(compensator_defaults, m)?)?;
     Ok(())
 }
