@@ -16,8 +16,6 @@ from __future__ import annotations
 
 import math
 import os
-import shutil
-import uuid
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +25,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import HilContactError, ScenarioError
-from .run import Run, _swap_into_place, simulate
+from .run import Run, simulate, write_atomically
 from .scenario import COMPENSATOR_MODELS, Scenario, _override_steps, _read_source, load_scenario
 
 if TYPE_CHECKING:
@@ -321,26 +319,14 @@ class Comparison:
         ``comparison.md``, ``comparison.csv`` and, unless ``plots=False``, the run figures
         and ``compare_*.png``. Returns the folder's path.
         """
-        target = Path(directory)
-        if target.exists() and not target.is_dir():
-            raise HilContactError(f"{target}: exists and is not a directory")
-        parent = target.absolute().parent
-        parent.mkdir(parents=True, exist_ok=True)
-        staging = parent / f".{target.name}.tmp-{uuid.uuid4().hex[:12]}"
-        os.mkdir(staging)
-        try:
+        def write(folder: Path) -> None:
             for kind, run in self.runs.items():
-                run.save(staging / kind, plots=plots)
-            names: list[str] = []
-            if plots:
-                names = [f"{name}.png" for name in self.plot(staging)]
-            (staging / "comparison.csv").write_text(self.to_csv(), encoding="utf-8")
-            (staging / "comparison.md").write_text(self.to_markdown(names), encoding="utf-8")
-        except BaseException:
-            shutil.rmtree(staging, ignore_errors=True)
-            raise
-        _swap_into_place(staging, target.absolute())
-        return target
+                run.save(folder / kind, plots=plots)
+            names = [f"{name}.png" for name in self.plot(folder)] if plots else []
+            (folder / "comparison.csv").write_text(self.to_csv(), encoding="utf-8")
+            (folder / "comparison.md").write_text(self.to_markdown(names), encoding="utf-8")
+
+        return write_atomically(directory, write)
 
 
 def _cell(value: Any, fmt: str) -> str:

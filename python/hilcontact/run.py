@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import json
 import os
 import shutil
@@ -167,21 +169,7 @@ class Run:
         written into a temporary sibling folder which then replaces ``directory``: an
         existing folder is never half-overwritten. Returns the folder's path.
         """
-        target = Path(directory)
-        if target.exists() and not target.is_dir():
-            raise HilContactError(f"{target}: exists and is not a directory")
-        parent = target.absolute().parent
-        parent.mkdir(parents=True, exist_ok=True)
-        # os.mkdir (not tempfile.mkdtemp) so that the folder gets the usual permissions
-        staging = parent / f".{target.name}.tmp-{uuid.uuid4().hex[:12]}"
-        os.mkdir(staging)
-        try:
-            self._write(staging, plots)
-        except BaseException:
-            shutil.rmtree(staging, ignore_errors=True)
-            raise
-        _swap_into_place(staging, target.absolute())
-        return target
+        return write_atomically(directory, lambda folder: self._write(folder, plots))
 
     def _write(self, folder: Path, plots: bool) -> None:
         self.timeseries.to_parquet(folder / "timeseries.parquet", engine="pyarrow", index=False)
@@ -190,6 +178,27 @@ class Run:
         (folder / "scenario.toml").write_text(self.scenario.to_toml(), encoding="utf-8")
         if plots:
             self.plot(folder)
+
+
+def write_atomically(directory: str | os.PathLike[str], write: Callable[[Path], None]) -> Path:
+    """Call ``write(folder)`` on a temporary sibling folder of ``directory``, then swap it into
+    place: an existing ``directory`` is never half-overwritten, and nothing is left behind if
+    ``write`` fails. Returns ``directory`` as a Path."""
+    target = Path(directory)
+    if target.exists() and not target.is_dir():
+        raise HilContactError(f"{target}: exists and is not a directory")
+    parent = target.absolute().parent
+    parent.mkdir(parents=True, exist_ok=True)
+    # os.mkdir (not tempfile.mkdtemp) so that the folder gets the usual permissions
+    staging = parent / f".{target.name}.tmp-{uuid.uuid4().hex[:12]}"
+    os.mkdir(staging)
+    try:
+        write(staging)
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    _swap_into_place(staging, target.absolute())
+    return target
 
 
 def _swap_into_place(staging: Path, target: Path) -> None:

@@ -3,7 +3,7 @@
 //! dynamics (the identified damping is still used for `F_ek`). See docs/compensators/dac.md.
 
 use super::delay::ContactEstimator;
-use super::energy::{EnergyController, EnergyObserver};
+use super::energy::DampingAmendment;
 use super::params::ModelParams;
 use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate};
 use crate::world::FrameWrench;
@@ -13,42 +13,32 @@ use nalgebra::Vector3;
 #[derive(Debug, Clone)]
 pub struct Dac {
     estimator: ContactEstimator,
-    observer: EnergyObserver,
-    controller: EnergyController,
-    sensor_origin: Vector3<f64>,
+    amendment: DampingAmendment,
 }
 
 impl Dac {
     /// A DAC compensator.
     pub fn new(p: &ModelParams, context: &CompensatorContext) -> Self {
-        Dac {
-            estimator: ContactEstimator::new(p, context),
-            observer: EnergyObserver::new(context.period, p.observer),
-            controller: EnergyController::new(context.period, p.alpha_max),
-            sensor_origin: context.sensor_origin,
-        }
+        Dac { estimator: ContactEstimator::new(p, context), amendment: DampingAmendment::new(p, context) }
     }
 }
 
 impl Compensator for Dac {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
-        let view = self.estimator.step(input);
-        let v = input.tip_velocity_desired;
-        let f_ek = self.observer.step(view.in_contact, &view.force, &view.direction, view.damping, &v);
-        let (_, f_alpha) = self.controller.step(self.observer.energy(), &f_ek, &view.direction, &v);
-        self.observer.record_alpha_force(&f_alpha);
-        let m_alpha = (input.tip_position_desired - self.sensor_origin).cross(&f_alpha); // (20)
+        let view = self.estimator.step(input); // steps 1-2
+        let alpha = self.amendment.step(&view, &view.force, input); // steps 3-6
         CompensatorOutput {
-            applied: FrameWrench { force: view.force + f_alpha, moment: view.moment + m_alpha },
+            // steps 7-8: F_comp replaced by F_act in (29), (30)
+            applied: FrameWrench { force: view.force + alpha.force, moment: view.moment + alpha.moment },
             velocity_correction: Vector3::zeros(),
             estimate: Some(ContactEstimate { stiffness: view.stiffness, damping: view.damping }),
-            observed_energy: self.observer.energy(),
+            observed_energy: self.amendment.energy(),
         }
     }
 
     fn reset(&mut self) {
         self.estimator.reset();
-        self.observer.reset();
+        self.amendment.reset();
     }
 
     fn estimates_contact(&self) -> bool {

@@ -28,7 +28,10 @@
 
 use nalgebra::Vector3;
 
-use super::params::ObserverMode;
+use super::delay::ContactView;
+use super::params::{ModelParams, ObserverMode};
+use super::{CompensatorContext, CompensatorInput};
+use crate::world::FrameWrench;
 
 /// One tick of the observer's history.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -147,6 +150,46 @@ impl EnergyController {
         }
         let f_alpha = alpha.component_mul(&e_hat) * v_along; // (17)
         (alpha, f_alpha)
+    }
+}
+
+/// Observer and controller together: the damping amendment that DAC and PIDA add to the
+/// force they feed the dynamics.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DampingAmendment {
+    observer: EnergyObserver,
+    controller: EnergyController,
+    sensor_origin: Vector3<f64>,
+}
+
+impl DampingAmendment {
+    /// An amendment with the compensator's parameters.
+    pub fn new(p: &ModelParams, context: &CompensatorContext) -> Self {
+        DampingAmendment {
+            observer: EnergyObserver::new(context.period, p.observer),
+            controller: EnergyController::new(context.period, p.alpha_max),
+            sensor_origin: context.sensor_origin,
+        }
+    }
+
+    /// Forgets the contact.
+    pub fn reset(&mut self) {
+        self.observer.reset();
+    }
+
+    /// Observed energy E_obs, J.
+    pub fn energy(&self) -> f64 {
+        self.observer.energy()
+    }
+
+    /// One tick: observes `force` (the force fed to the dynamics before amendment, N) and
+    /// returns `F_α` (17) and `M_α = (p_des − p_s) × F_α` (20).
+    pub fn step(&mut self, view: &ContactView, force: &Vector3<f64>, input: &CompensatorInput) -> FrameWrench {
+        let v = input.tip_velocity_desired;
+        let f_ek = self.observer.step(view.in_contact, force, &view.direction, view.damping, &v);
+        let (_, f_alpha) = self.controller.step(self.observer.energy(), &f_ek, &view.direction, &v);
+        self.observer.record_alpha_force(&f_alpha);
+        FrameWrench { force: f_alpha, moment: (input.tip_position_desired - self.sensor_origin).cross(&f_alpha) }
     }
 }
 

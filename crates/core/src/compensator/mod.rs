@@ -18,7 +18,7 @@ mod tdpa;
 pub use akf::SageHusaFilter;
 pub use dac::Dac;
 pub use delay::{ContactEstimator, ContactView};
-pub use energy::{EnergyController, EnergyObserver};
+pub use energy::{DampingAmendment, EnergyController, EnergyObserver};
 pub use force::{compensate_force, CompensatedWrench};
 pub use none::PassThrough;
 pub use params::{DelayMode, ModelParams, ObserverMode, TdpaParams};

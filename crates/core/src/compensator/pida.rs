@@ -3,7 +3,7 @@
 //! by `F_comp`. See docs/compensators/pida.md.
 
 use super::delay::ContactEstimator;
-use super::energy::{EnergyController, EnergyObserver};
+use super::energy::DampingAmendment;
 use super::force::compensate_force;
 use super::params::ModelParams;
 use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate};
@@ -14,20 +14,14 @@ use nalgebra::Vector3;
 #[derive(Debug, Clone)]
 pub struct Pida {
     estimator: ContactEstimator,
-    observer: EnergyObserver,
-    controller: EnergyController,
+    amendment: DampingAmendment,
     sensor_origin: Vector3<f64>,
 }
 
 impl Pida {
     /// A PIDA compensator.
     pub fn new(p: &ModelParams, context: &CompensatorContext) -> Self {
-        Pida {
-            estimator: ContactEstimator::new(p, context),
-            observer: EnergyObserver::new(context.period, p.observer),
-            controller: EnergyController::new(context.period, p.alpha_max),
-            sensor_origin: context.sensor_origin,
-        }
+        Pida { estimator: ContactEstimator::new(p, context), amendment: DampingAmendment::new(p, context), sensor_origin: context.sensor_origin }
     }
 }
 
@@ -35,23 +29,19 @@ impl Compensator for Pida {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
         let view = self.estimator.step(input); // steps 1-4
         let comp = compensate_force(&view, input, &self.sensor_origin); // steps 5-6
-        let v = input.tip_velocity_desired;
-        let f_ek = self.observer.step(view.in_contact, &comp.force, &view.direction, view.damping, &v); // steps 7-8
-        let (_, f_alpha) = self.controller.step(self.observer.energy(), &f_ek, &view.direction, &v); // step 9
-        self.observer.record_alpha_force(&f_alpha);
-        let m_alpha = (input.tip_position_desired - self.sensor_origin).cross(&f_alpha); // (20)
+        let alpha = self.amendment.step(&view, &comp.force, input); // steps 7-10
         CompensatorOutput {
             // (29), (30)
-            applied: FrameWrench { force: comp.force + f_alpha, moment: comp.moment + m_alpha },
+            applied: FrameWrench { force: comp.force + alpha.force, moment: comp.moment + alpha.moment },
             velocity_correction: Vector3::zeros(),
             estimate: Some(ContactEstimate { stiffness: view.stiffness, damping: view.damping }),
-            observed_energy: self.observer.energy(),
+            observed_energy: self.amendment.energy(),
         }
     }
 
     fn reset(&mut self) {
         self.estimator.reset();
-        self.observer.reset();
+        self.amendment.reset();
     }
 
     fn estimates_contact(&self) -> bool {
