@@ -16,7 +16,7 @@
 //! The measured force is used as it comes (no delay compensation), and neither controller
 //! knows the contact's damping: that is the weakness the paper attacks. On a damped contact
 //! the real dissipation pays for the energy the delay creates, so rebounds stay too fast.
-//! See docs/compensators/tdpa.md.
+//! See docs/compensators/tdpa-impedance.md and docs/compensators/tdpa-admittance.md.
 
 use nalgebra::Vector3;
 
