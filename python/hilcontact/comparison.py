@@ -301,14 +301,11 @@ class Comparison:
     def plot(self, directory: str | os.PathLike[str] | None = None) -> dict[str, Figure]:
         """The comparison figures (name -> matplotlib Figure, see :data:`COMPARISON_FIGURES`);
         saved as ``<name>.png`` in ``directory`` if given."""
-        from .plots import comparison_figures
+        from .plots import comparison_figures, save_figures
 
         figures = comparison_figures(self.runs)
         if directory is not None:
-            folder = Path(directory)
-            folder.mkdir(parents=True, exist_ok=True)
-            for name, figure in figures.items():
-                figure.savefig(folder / f"{name}.png", dpi=110)
+            save_figures(figures, directory, dpi=110)
         return figures
 
     def save(self, directory: str | os.PathLike[str], plots: bool = True) -> Path:

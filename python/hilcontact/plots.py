@@ -16,6 +16,8 @@ that identify the contact) and compare_cov_cof (grouped bars, like the paper's F
 from __future__ import annotations
 
 import math
+import os
+from pathlib import Path
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING
 
@@ -31,6 +33,14 @@ if TYPE_CHECKING:
 __all__ = ["comparison_figures", "make_figures"]
 
 _COLORS = {"x": "tab:blue", "y": "tab:orange", "z": "tab:green"}
+
+
+def save_figures(figures: Mapping[str, Figure], directory: str | os.PathLike[str], dpi: int) -> None:
+    """Save each figure as ``<name>.png`` in ``directory`` (created if needed)."""
+    folder = Path(directory)
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, figure in figures.items():
+        figure.savefig(folder / f"{name}.png", dpi=dpi)
 
 
 def _figure(rows: int = 1) -> tuple[Figure, list[Axes]]:

@@ -151,14 +151,11 @@ class Run:
         """Make the figures (name -> matplotlib Figure); save them as ``<name>.png`` in
         ``directory`` if given. Names: contact_velocity, contact_force, energy, and
         identification when the compensator estimates the contact stiffness or damping."""
-        from .plots import make_figures
+        from .plots import make_figures, save_figures
 
         figures = make_figures(self)
         if directory is not None:
-            folder = Path(directory)
-            folder.mkdir(parents=True, exist_ok=True)
-            for name, figure in figures.items():
-                figure.savefig(folder / f"{name}.png", dpi=120)
+            save_figures(figures, directory, dpi=120)
         return figures
 
     def save(self, directory: str | os.PathLike[str], plots: bool = True) -> Path:

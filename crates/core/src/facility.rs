@@ -154,11 +154,6 @@ impl SensorModel {
         })
     }
 
-    /// Sensor attitude in `t` (sensor to `t`).
-    pub fn orientation(&self) -> UnitQuaternion<f64> {
-        self.orientation
-    }
-
     fn noise(&mut self, std: f64) -> Vector3<f64> {
         if std > 0.0 {
             let rng = &mut self.rng;
@@ -222,11 +217,6 @@ impl FacilityModel {
     /// Advances one control period: the robot receives the command for the next tick.
     pub fn advance(&mut self, command: &RelativeMotion) {
         self.robot.advance(command);
-    }
-
-    /// Sensor attitude in `t` (sensor to `t`).
-    pub fn sensor_orientation(&self) -> UnitQuaternion<f64> {
-        self.sensor.orientation()
     }
 }
 

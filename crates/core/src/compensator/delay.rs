@@ -109,20 +109,12 @@ impl ContactEstimator {
 
         // the identification sample: a force and the kinematics that produced it
         let lead = |now: Vector3<f64>, before: Vector3<f64>| now + (now - before) * (self.sensor_delay / self.period);
-        let sample = match self.mode {
-            DelayMode::Lead => Sample {
-                // (6) F_act = F_mea + τ_p dF_mea/dt
-                force: lead(f_mea, self.previous_measured.0),
-                position: p_act,
-                velocity: v_act,
-                in_contact: false,
-            },
-            DelayMode::Align => {
-                let (p, v) = self.kinematics.delayed(self.delay_ticks);
-                Sample { force: f_mea, position: p, velocity: v, in_contact: false }
-            }
+        let (force, (position, velocity)) = match self.mode {
+            // (6) F_act = F_mea + τ_p dF_mea/dt, against the present kinematics
+            DelayMode::Lead => (lead(f_mea, self.previous_measured.0), (p_act, v_act)),
+            DelayMode::Align => (f_mea, self.kinematics.delayed(self.delay_ticks)),
         };
-        let sample = Sample { in_contact: sample.force.norm() > self.threshold, ..sample };
+        let sample = Sample { force, position, velocity, in_contact: force.norm() > self.threshold };
         if let (true, Some(prev)) = (sample.in_contact, self.previous_sample.filter(|s| s.in_contact)) {
             // (7) e = F/|F|; (8)-(10) increments along e
             let e = sample.force.normalize();
