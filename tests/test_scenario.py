@@ -94,7 +94,7 @@ stiffness = 1e5
     s = hc.load_scenario(path)
     assert s.description == ""
     assert s.simulation.duration == 1.0 and isinstance(s.simulation.duration, float)
-    assert (s.simulation.plant_substeps, s.simulation.reference_substeps) == (10, 10)
+    assert (s.simulation.plant_substeps, s.simulation.reference_substeps) == (10, 2)
     assert s.servicer.inertia == [[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 3.0]]
     assert s.servicer.position == [0.0, 0.0, 0.0] and s.servicer.angular_velocity == [0.0, 0.0, 0.0]
     assert s.servicer.orientation == [1.0, 0.0, 0.0, 0.0]

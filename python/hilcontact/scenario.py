@@ -216,7 +216,9 @@ class Simulation(_Table):
     duration: float = Field(gt=0, allow_inf_nan=False, description="s, > 0")
     period: float = Field(gt=0, allow_inf_nan=False, description="control period T in s, > 0")
     plant_substeps: int = Field(10, ge=1, description="facility sub-steps per period, integer >= 1")
-    reference_substeps: int = Field(10, ge=1, description="RK4 steps per period for the ideal reference, integer >= 1")
+    reference_substeps: int = Field(
+        2, ge=1, description="RK4 steps per period for the ideal reference in contact, integer >= 1"
+    )
     divergence_energy_ratio: float = Field(
         100.0, gt=1, allow_inf_nan=False, description="energy / initial energy that counts as diverged, > 1"
     )

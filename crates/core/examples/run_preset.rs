@@ -1,16 +1,23 @@
 //! Runs a preset scenario file and prints its collisions:
 //! `cargo run --release --example run_preset -- python/hilcontact/scenarios/paper-table1.toml [key=value ...]`
 //! with keys `robot_delay`, `sensor_delay`, `noise` (N), `seed`, `kind` (compensator), `mode` (align|lead),
-//! `observer` (work|paper).
+//! `observer` (work|paper), `repeat` (runs, for profiling: `perf record -g` on this example).
 
-use hilcontact_core::compensator::{CompensatorConfig, DelayMode, ModelParams, ObserverMode, TdpaParams};
+use hilcontact_core::compensator::{
+    CompensatorConfig, DelayMode, ModelParams, ObserverMode, TdpaParams,
+};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).map(String::as_str).unwrap_or("python/hilcontact/scenarios/paper-table1.toml");
+    let path = args
+        .get(1)
+        .map(String::as_str)
+        .unwrap_or("python/hilcontact/scenarios/paper-table1.toml");
     let text = std::fs::read_to_string(path).expect("read scenario");
     let mut s: hilcontact_core::Scenario = toml::from_str(&text).expect("parse scenario");
-    let (mut kind, mut mode, mut observer) = ("none".to_string(), DelayMode::Align, ObserverMode::Work);
+    let (mut kind, mut mode, mut observer) =
+        ("none".to_string(), DelayMode::Align, ObserverMode::Work);
+    let mut repeat = 1usize;
     for arg in &args[2.min(args.len())..] {
         let (key, value) = arg.split_once('=').expect("key=value");
         match key {
@@ -19,12 +26,29 @@ fn main() {
             "noise" => s.facility.sensor_noise = value.parse().expect("N"),
             "seed" => s.facility.seed = value.parse().expect("integer"),
             "kind" => kind = value.to_string(),
-            "mode" => mode = if value == "lead" { DelayMode::Lead } else { DelayMode::Align },
-            "observer" => observer = if value == "paper" { ObserverMode::Paper } else { ObserverMode::Work },
+            "repeat" => repeat = value.parse().expect("integer"),
+            "mode" => {
+                mode = if value == "lead" {
+                    DelayMode::Lead
+                } else {
+                    DelayMode::Align
+                }
+            }
+            "observer" => {
+                observer = if value == "paper" {
+                    ObserverMode::Paper
+                } else {
+                    ObserverMode::Work
+                }
+            }
             _ => panic!("unknown key {key}"),
         }
     }
-    let model = ModelParams { delay_mode: mode, observer, ..ModelParams::default() };
+    let model = ModelParams {
+        delay_mode: mode,
+        observer,
+        ..ModelParams::default()
+    };
     s.compensator = match kind.as_str() {
         "none" => CompensatorConfig::None,
         "pic" => CompensatorConfig::Pic(model),
@@ -36,7 +60,10 @@ fn main() {
     };
     let start = std::time::Instant::now();
     let out = hilcontact_core::simulate(&s).expect("simulate");
-    let elapsed = start.elapsed();
+    for _ in 1..repeat {
+        std::hint::black_box(hilcontact_core::simulate(&s).expect("simulate"));
+    }
+    let elapsed = start.elapsed() / repeat as u32;
     let m = &out.metrics;
     let fmt = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.3}"));
     println!(
@@ -45,8 +72,19 @@ fn main() {
         m.compensator,
         m.status,
         elapsed.as_secs_f64() * 1e3,
-        m.collisions.iter().map(|c| fmt(c.cov)).collect::<Vec<_>>().join(" "),
-        m.collisions.iter().map(|c| fmt(c.cof)).collect::<Vec<_>>().join(" "),
-        m.identification.as_ref().map(|i| (format!("k {:.3}%", i.stiffness_error * 100.0), format!("c {:.1} N s/m", i.damping_error)))
+        m.collisions
+            .iter()
+            .map(|c| fmt(c.cov))
+            .collect::<Vec<_>>()
+            .join(" "),
+        m.collisions
+            .iter()
+            .map(|c| fmt(c.cof))
+            .collect::<Vec<_>>()
+            .join(" "),
+        m.identification.as_ref().map(|i| (
+            format!("k {:.3}%", i.stiffness_error * 100.0),
+            format!("c {:.1} N s/m", i.damping_error)
+        ))
     );
 }

@@ -29,12 +29,21 @@ impl MassProperties {
     /// Mass properties from a mass (kg) and an inertia tensor (kg·m², positive definite).
     pub fn new(mass: f64, inertia: Matrix3<f64>) -> Self {
         let inertia_inv = inertia.try_inverse().unwrap_or_else(Matrix3::zeros);
-        MassProperties { mass, inertia, inertia_inv }
+        MassProperties {
+            mass,
+            inertia,
+            inertia_inv,
+        }
     }
 
     /// Angular acceleration in the body frame, eq. (2): `I⁻¹ (τ_b − ω × Iω)`, rad/s².
-    pub fn angular_acceleration(&self, angular_velocity: &Vector3<f64>, torque_body: &Vector3<f64>) -> Vector3<f64> {
-        self.inertia_inv * (torque_body - angular_velocity.cross(&(self.inertia * angular_velocity)))
+    pub fn angular_acceleration(
+        &self,
+        angular_velocity: &Vector3<f64>,
+        torque_body: &Vector3<f64>,
+    ) -> Vector3<f64> {
+        self.inertia_inv
+            * (torque_body - angular_velocity.cross(&(self.inertia * angular_velocity)))
     }
 }
 
@@ -67,7 +76,9 @@ pub struct BodyRate {
 impl BodyRate {
     /// The RK4 average `(k1 + 2 k2 + 2 k3 + k4) / 6`.
     pub fn rk4_average(k1: &BodyRate, k2: &BodyRate, k3: &BodyRate, k4: &BodyRate) -> BodyRate {
-        let avg3 = |a: Vector3<f64>, b: Vector3<f64>, c: Vector3<f64>, d: Vector3<f64>| (a + 2.0 * b + 2.0 * c + d) / 6.0;
+        let avg3 = |a: Vector3<f64>, b: Vector3<f64>, c: Vector3<f64>, d: Vector3<f64>| {
+            (a + 2.0 * b + 2.0 * c + d) / 6.0
+        };
         BodyRate {
             velocity: avg3(k1.velocity, k2.velocity, k3.velocity, k4.velocity),
             orientation_rate: (k1.orientation_rate
@@ -75,7 +86,12 @@ impl BodyRate {
                 + k3.orientation_rate * 2.0
                 + k4.orientation_rate)
                 / 6.0,
-            acceleration: avg3(k1.acceleration, k2.acceleration, k3.acceleration, k4.acceleration),
+            acceleration: avg3(
+                k1.acceleration,
+                k2.acceleration,
+                k3.acceleration,
+                k4.acceleration,
+            ),
             angular_acceleration: avg3(
                 k1.angular_acceleration,
                 k2.angular_acceleration,
@@ -91,7 +107,10 @@ impl BodyState {
     pub fn from_config(config: &BodyConfig, key: &str) -> Result<Self> {
         Ok(BodyState {
             position: Vector3::from(config.position),
-            orientation: crate::config::quaternion(&format!("{key}.orientation"), config.orientation)?,
+            orientation: crate::config::quaternion(
+                &format!("{key}.orientation"),
+                config.orientation,
+            )?,
             velocity: Vector3::from(config.velocity),
             angular_velocity: Vector3::from(config.angular_velocity),
         })
@@ -104,15 +123,25 @@ impl BodyState {
 
     /// Velocity (world frame) of a point fixed in the body, given in body coordinates.
     pub fn point_velocity(&self, point_body: &Vector3<f64>) -> Vector3<f64> {
-        self.velocity + self.angular_velocity_world().cross(&(self.orientation * point_body))
+        self.velocity
+            + self
+                .angular_velocity_world()
+                .cross(&(self.orientation * point_body))
     }
 
     /// State derivative under a force (world, at the CoM, N) and a torque (world, about the CoM, N·m).
-    pub fn rate(&self, mp: &MassProperties, force_world: &Vector3<f64>, torque_world: &Vector3<f64>) -> BodyRate {
+    pub fn rate(
+        &self,
+        mp: &MassProperties,
+        force_world: &Vector3<f64>,
+        torque_world: &Vector3<f64>,
+    ) -> BodyRate {
         let torque_body = self.orientation.inverse_transform_vector(torque_world);
         BodyRate {
             velocity: self.velocity,
-            orientation_rate: self.orientation.quaternion() * Quaternion::from_imag(self.angular_velocity) * 0.5,
+            orientation_rate: self.orientation.quaternion()
+                * Quaternion::from_imag(self.angular_velocity)
+                * 0.5,
             acceleration: force_world / mp.mass,
             angular_acceleration: mp.angular_acceleration(&self.angular_velocity, &torque_body),
         }
@@ -122,7 +151,9 @@ impl BodyState {
     pub fn advanced(&self, rate: &BodyRate, h: f64) -> BodyState {
         BodyState {
             position: self.position + rate.velocity * h,
-            orientation: UnitQuaternion::new_normalize(self.orientation.quaternion() + rate.orientation_rate * h),
+            orientation: UnitQuaternion::new_normalize(
+                self.orientation.quaternion() + rate.orientation_rate * h,
+            ),
             velocity: self.velocity + rate.acceleration * h,
             angular_velocity: self.angular_velocity + rate.angular_acceleration * h,
         }
@@ -133,9 +164,18 @@ impl BodyState {
     /// Translation is symplectic Euler (`v ← v + h F/m`, `p ← p + h v`); the body-frame angular
     /// velocity follows eq. (2) by RK4 with the torque held, and the attitude turns by the mean
     /// of the old and new angular velocities. Allocation-free.
-    pub fn step_symplectic(&mut self, mp: &MassProperties, force_world: &Vector3<f64>, torque_world: &Vector3<f64>, h: f64) {
+    pub fn step_symplectic(
+        &mut self,
+        mp: &MassProperties,
+        force_world: &Vector3<f64>,
+        torque_world: &Vector3<f64>,
+        h: f64,
+    ) {
         self.velocity += force_world * (h / mp.mass);
         self.position += self.velocity * h;
+        if self.angular_velocity == Vector3::zeros() && *torque_world == Vector3::zeros() {
+            return; // neither turning nor made to turn
+        }
         let torque_body = self.orientation.inverse_transform_vector(torque_world);
         let w0 = self.angular_velocity;
         let f = |w: &Vector3<f64>| mp.angular_acceleration(w, &torque_body);
@@ -149,6 +189,21 @@ impl BodyState {
         self.angular_velocity = w1;
     }
 
+    /// Force- and torque-free motion over `h`: translation exact, rotation (eq. 2 without
+    /// torque) by one RK4 step; a body that does not turn only translates.
+    pub fn drift(&mut self, mp: &MassProperties, h: f64) {
+        if self.angular_velocity == Vector3::zeros() {
+            self.position += self.velocity * h;
+            return;
+        }
+        let zero = Vector3::zeros();
+        let k1 = self.rate(mp, &zero, &zero);
+        let k2 = self.advanced(&k1, 0.5 * h).rate(mp, &zero, &zero);
+        let k3 = self.advanced(&k2, 0.5 * h).rate(mp, &zero, &zero);
+        let k4 = self.advanced(&k3, h).rate(mp, &zero, &zero);
+        *self = self.advanced(&BodyRate::rk4_average(&k1, &k2, &k3, &k4), h);
+    }
+
     /// Linear momentum, world frame, kg·m/s.
     pub fn linear_momentum(&self, mp: &MassProperties) -> Vector3<f64> {
         self.velocity * mp.mass
@@ -156,12 +211,15 @@ impl BodyState {
 
     /// Angular momentum about the world origin, world frame, kg·m²/s.
     pub fn angular_momentum(&self, mp: &MassProperties) -> Vector3<f64> {
-        self.position.cross(&(self.velocity * mp.mass)) + self.orientation * (mp.inertia * self.angular_velocity)
+        self.position.cross(&(self.velocity * mp.mass))
+            + self.orientation * (mp.inertia * self.angular_velocity)
     }
 
     /// Rotational kinetic energy ½ ωᵀ I ω, J.
     pub fn rotational_energy(&self, mp: &MassProperties) -> f64 {
-        0.5 * self.angular_velocity.dot(&(mp.inertia * self.angular_velocity))
+        0.5 * self
+            .angular_velocity
+            .dot(&(mp.inertia * self.angular_velocity))
     }
 
     /// Total kinetic energy ½ m v² + ½ ωᵀ I ω, J.

@@ -55,8 +55,9 @@ pub struct SimulationConfig {
     /// Facility sub-steps per control period (>= 1).
     #[serde(default = "default_substeps")]
     pub plant_substeps: u32,
-    /// RK4 steps per control period for the ideal reference (>= 1).
-    #[serde(default = "default_substeps")]
+    /// RK4 steps per control period for the ideal reference while in contact (>= 1); free
+    /// flight takes one step per period.
+    #[serde(default = "default_reference_substeps")]
     pub reference_substeps: u32,
     /// The run is `diverged` once its energy exceeds this many times the larger of the
     /// initial energy and the reference's largest energy (> 1).
@@ -66,6 +67,9 @@ pub struct SimulationConfig {
 
 fn default_substeps() -> u32 {
     10
+}
+fn default_reference_substeps() -> u32 {
+    2
 }
 fn default_divergence_ratio() -> f64 {
     100.0
@@ -241,7 +245,9 @@ fn default_contact_threshold() -> f64 {
 
 impl Default for MetricsConfig {
     fn default() -> Self {
-        MetricsConfig { contact_threshold: default_contact_threshold() }
+        MetricsConfig {
+            contact_threshold: default_contact_threshold(),
+        }
     }
 }
 
@@ -249,7 +255,10 @@ fn positive(key: &str, value: f64) -> Result<()> {
     if value.is_finite() && value > 0.0 {
         Ok(())
     } else {
-        Err(CoreError::invalid(key, format!("must be a positive number, got {value}")))
+        Err(CoreError::invalid(
+            key,
+            format!("must be a positive number, got {value}"),
+        ))
     }
 }
 
@@ -257,7 +266,10 @@ fn non_negative(key: &str, value: f64) -> Result<()> {
     if value.is_finite() && value >= 0.0 {
         Ok(())
     } else {
-        Err(CoreError::invalid(key, format!("must be a number >= 0, got {value}")))
+        Err(CoreError::invalid(
+            key,
+            format!("must be a number >= 0, got {value}"),
+        ))
     }
 }
 
@@ -265,7 +277,10 @@ fn finite_vector(key: &str, v: &[f64]) -> Result<()> {
     if v.iter().all(|x| x.is_finite()) {
         Ok(())
     } else {
-        Err(CoreError::invalid(key, format!("must contain finite numbers, got {v:?}")))
+        Err(CoreError::invalid(
+            key,
+            format!("must contain finite numbers, got {v:?}"),
+        ))
     }
 }
 
@@ -274,7 +289,10 @@ pub fn quaternion(key: &str, q: [f64; 4]) -> Result<UnitQuaternion<f64>> {
     finite_vector(key, &q)?;
     let raw = Quaternion::new(q[0], q[1], q[2], q[3]);
     if raw.norm() < 1e-12 {
-        return Err(CoreError::invalid(key, "must be a non-zero quaternion [w, x, y, z]"));
+        return Err(CoreError::invalid(
+            key,
+            "must be a non-zero quaternion [w, x, y, z]",
+        ));
     }
     Ok(UnitQuaternion::new_normalize(raw))
 }
@@ -316,7 +334,10 @@ impl BodyConfig {
             return Err(CoreError::invalid(key, "must be a symmetric 3x3 matrix"));
         }
         if m.cholesky().is_none() {
-            return Err(CoreError::invalid(key, "must be positive definite (principal moments > 0)"));
+            return Err(CoreError::invalid(
+                key,
+                "must be positive definite (principal moments > 0)",
+            ));
         }
         Ok(m)
     }
@@ -338,7 +359,10 @@ impl WallConfig {
         let n = Vector3::from(self.normal);
         let norm = n.norm();
         if norm < 1e-12 {
-            return Err(CoreError::invalid(key, "must be a non-zero vector (the wall's normal into free space)"));
+            return Err(CoreError::invalid(
+                key,
+                "must be a non-zero vector (the wall's normal into free space)",
+            ));
         }
         Ok(n / norm)
     }
@@ -352,12 +376,20 @@ impl Scenario {
 
     /// Robot delay in whole periods.
     pub fn robot_delay_ticks(&self) -> Result<usize> {
-        delay_ticks("facility.robot_delay", self.facility.robot_delay, self.simulation.period)
+        delay_ticks(
+            "facility.robot_delay",
+            self.facility.robot_delay,
+            self.simulation.period,
+        )
     }
 
     /// Sensor delay in whole periods.
     pub fn sensor_delay_ticks(&self) -> Result<usize> {
-        delay_ticks("facility.sensor_delay", self.facility.sensor_delay, self.simulation.period)
+        delay_ticks(
+            "facility.sensor_delay",
+            self.facility.sensor_delay,
+            self.simulation.period,
+        )
     }
 
     /// Checks every invariant the core relies on; the error names the key.
@@ -366,16 +398,28 @@ impl Scenario {
         positive("simulation.duration", sim.duration)?;
         positive("simulation.period", sim.period)?;
         if sim.duration < sim.period {
-            return Err(CoreError::invalid("simulation.duration", "must be at least one period"));
+            return Err(CoreError::invalid(
+                "simulation.duration",
+                "must be at least one period",
+            ));
         }
         if sim.plant_substeps == 0 {
-            return Err(CoreError::invalid("simulation.plant_substeps", "must be >= 1"));
+            return Err(CoreError::invalid(
+                "simulation.plant_substeps",
+                "must be >= 1",
+            ));
         }
         if sim.reference_substeps == 0 {
-            return Err(CoreError::invalid("simulation.reference_substeps", "must be >= 1"));
+            return Err(CoreError::invalid(
+                "simulation.reference_substeps",
+                "must be >= 1",
+            ));
         }
         if !(sim.divergence_energy_ratio.is_finite() && sim.divergence_energy_ratio > 1.0) {
-            return Err(CoreError::invalid("simulation.divergence_energy_ratio", "must be a number > 1"));
+            return Err(CoreError::invalid(
+                "simulation.divergence_energy_ratio",
+                "must be a number > 1",
+            ));
         }
         self.servicer.validate("servicer")?;
         self.target.validate("target")?;

@@ -64,7 +64,10 @@ impl ContactModel {
     /// The law a scenario's `[contact]` table describes.
     pub fn from_config(c: &ContactConfig) -> Self {
         match c.model {
-            ContactModelKind::Linear => ContactModel::Linear(LinearSpringDamper { stiffness: c.stiffness, damping: c.damping }),
+            ContactModelKind::Linear => ContactModel::Linear(LinearSpringDamper {
+                stiffness: c.stiffness,
+                damping: c.damping,
+            }),
             ContactModelKind::HuntCrossley => ContactModel::HuntCrossley(HuntCrossley {
                 stiffness: c.stiffness,
                 damping: c.damping,
@@ -121,9 +124,17 @@ impl ContactGeometry {
             .walls
             .iter()
             .enumerate()
-            .map(|(i, w)| Ok(Wall { point: Vector3::from(w.point), normal: w.unit_normal(&format!("walls[{i}].normal"))? }))
+            .map(|(i, w)| {
+                Ok(Wall {
+                    point: Vector3::from(w.point),
+                    normal: w.unit_normal(&format!("walls[{i}].normal"))?,
+                })
+            })
             .collect::<Result<Vec<_>>>()?;
-        Ok(ContactGeometry { walls, law: ContactModel::from_config(&s.contact) })
+        Ok(ContactGeometry {
+            walls,
+            law: ContactModel::from_config(&s.contact),
+        })
     }
 
     /// Physical contact force on the rod tip, target frame, N: the sum over the walls it
@@ -133,10 +144,41 @@ impl ContactGeometry {
         for wall in &self.walls {
             let d = wall.penetration(tip);
             if d > 0.0 {
-                force += wall.normal * self.law.normal_force(d, wall.penetration_rate(tip_velocity));
+                force += wall.normal
+                    * self
+                        .law
+                        .normal_force(d, wall.penetration_rate(tip_velocity));
             }
         }
         force
+    }
+
+    /// Which walls push on the rod (bit `i` for wall `i`, the first 64 walls): the contact's
+    /// active set. The force is smooth in the state while this set stays the same, so the
+    /// reference integrator locates its changes.
+    pub fn active_set(&self, tip: &Vector3<f64>, tip_velocity: &Vector3<f64>) -> u64 {
+        let mut set = 0u64;
+        for (i, wall) in self.walls.iter().enumerate().take(64) {
+            let d = wall.penetration(tip);
+            if d > 0.0
+                && self
+                    .law
+                    .normal_force(d, wall.penetration_rate(tip_velocity))
+                    > 0.0
+            {
+                set |= 1 << i;
+            }
+        }
+        set
+    }
+
+    /// Smallest signed distance of the tip to the walls' planes (negative inside a wall), m;
+    /// `+∞` without walls.
+    pub fn clearance(&self, tip: &Vector3<f64>) -> f64 {
+        self.walls
+            .iter()
+            .map(|w| (tip - w.point).dot(&w.normal))
+            .fold(f64::INFINITY, f64::min)
     }
 }
 
@@ -146,7 +188,10 @@ mod tests {
 
     #[test]
     fn linear_law_never_pulls_and_matches_eq5() {
-        let law = LinearSpringDamper { stiffness: 1000.0, damping: 50.0 };
+        let law = LinearSpringDamper {
+            stiffness: 1000.0,
+            damping: 50.0,
+        };
         assert_eq!(law.normal_force(0.002, 0.01), 1000.0 * 0.002 + 50.0 * 0.01);
         // separating fast at small penetration: k d + c ḋ < 0 → 0, not a pull
         assert_eq!(law.normal_force(0.0001, -1.0), 0.0);
@@ -154,7 +199,11 @@ mod tests {
 
     #[test]
     fn hunt_crossley_follows_power_law() {
-        let law = HuntCrossley { stiffness: 1e6, damping: 0.0, exponent: 1.5 };
+        let law = HuntCrossley {
+            stiffness: 1e6,
+            damping: 0.0,
+            exponent: 1.5,
+        };
         let f1 = law.normal_force(0.001, 0.0);
         let f2 = law.normal_force(0.004, 0.0);
         assert!((f2 / f1 - 8.0).abs() < 1e-12); // (4)^1.5 = 8
@@ -163,13 +212,19 @@ mod tests {
     #[test]
     fn wall_sign_convention() {
         // front wall at x = 0.01 facing −x; the tip at x = 0.012 penetrates 2 mm
-        let wall = Wall { point: Vector3::new(0.01, 0.0, 0.0), normal: Vector3::new(-1.0, 0.0, 0.0) };
+        let wall = Wall {
+            point: Vector3::new(0.01, 0.0, 0.0),
+            normal: Vector3::new(-1.0, 0.0, 0.0),
+        };
         assert!((wall.penetration(&Vector3::new(0.012, 0.3, 0.0)) - 0.002).abs() < 1e-15);
         assert_eq!(wall.penetration(&Vector3::new(0.009, 0.0, 0.0)), 0.0);
         assert_eq!(wall.penetration_rate(&Vector3::new(0.02, 0.0, 0.0)), 0.02);
         let geometry = ContactGeometry {
             walls: vec![wall],
-            law: ContactModel::Linear(LinearSpringDamper { stiffness: 1000.0, damping: 0.0 }),
+            law: ContactModel::Linear(LinearSpringDamper {
+                stiffness: 1000.0,
+                damping: 0.0,
+            }),
         };
         let f = geometry.force_on_rod(&Vector3::new(0.012, 0.0, 0.0), &Vector3::zeros());
         // the force on the rod pushes it back out, along −x

@@ -11,7 +11,10 @@ pub struct DelayLine<T: Copy> {
 impl<T: Copy> DelayLine<T> {
     /// A line holding `max_lag + 1` values, all `initial`.
     pub fn new(max_lag: usize, initial: T) -> Self {
-        DelayLine { buffer: vec![initial; max_lag + 1], head: 0 }
+        DelayLine {
+            buffer: vec![initial; max_lag + 1],
+            head: 0,
+        }
     }
 
     /// Appends the newest value, dropping the oldest.

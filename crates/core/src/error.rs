@@ -18,7 +18,10 @@ pub enum CoreError {
 impl CoreError {
     /// Shorthand for [`CoreError::InvalidScenario`].
     pub fn invalid(key: impl Into<String>, message: impl Into<String>) -> Self {
-        CoreError::InvalidScenario { key: key.into(), message: message.into() }
+        CoreError::InvalidScenario {
+            key: key.into(),
+            message: message.into(),
+        }
     }
 }
 

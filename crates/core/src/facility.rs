@@ -53,13 +53,27 @@ pub struct RobotModel {
 
 /// Relative motion at rest at a pose.
 fn at_rest(pose: &RelativeMotion) -> RelativeMotion {
-    RelativeMotion { velocity: Vector3::zeros(), angular_velocity: Vector3::zeros(), ..*pose }
+    RelativeMotion {
+        velocity: Vector3::zeros(),
+        angular_velocity: Vector3::zeros(),
+        ..*pose
+    }
 }
 
 impl RobotModel {
     /// A robot at rest at the initial command (it held it for all earlier time).
-    pub fn new(delay_ticks: usize, period: f64, substeps: u32, servo_frequency_hz: f64, servo_damping: f64, initial: &RelativeMotion) -> Self {
-        let servo = (servo_frequency_hz > 0.0).then(|| ServoLag { omega: 2.0 * std::f64::consts::PI * servo_frequency_hz, zeta: servo_damping });
+    pub fn new(
+        delay_ticks: usize,
+        period: f64,
+        substeps: u32,
+        servo_frequency_hz: f64,
+        servo_damping: f64,
+        initial: &RelativeMotion,
+    ) -> Self {
+        let servo = (servo_frequency_hz > 0.0).then(|| ServoLag {
+            omega: 2.0 * std::f64::consts::PI * servo_frequency_hz,
+            zeta: servo_damping,
+        });
         RobotModel {
             delay_ticks,
             period,
@@ -106,9 +120,11 @@ impl RobotModel {
                     // ẍ = ω_n² (u − x) − 2ζω_n ẋ, semi-implicit Euler
                     x.velocity += (w2 * (u_position - x.position) - damp * x.velocity) * h;
                     x.position += x.velocity * h;
-                    let attitude_error = x.orientation * (x.orientation.inverse() * u_orientation).scaled_axis();
+                    let attitude_error =
+                        x.orientation * (x.orientation.inverse() * u_orientation).scaled_axis();
                     x.angular_velocity += (w2 * attitude_error - damp * x.angular_velocity) * h;
-                    x.orientation = UnitQuaternion::from_scaled_axis(x.angular_velocity * h) * x.orientation;
+                    x.orientation =
+                        UnitQuaternion::from_scaled_axis(x.angular_velocity * h) * x.orientation;
                 }
             }
         }
@@ -157,7 +173,9 @@ impl SensorModel {
     fn noise(&mut self, std: f64) -> Vector3<f64> {
         if std > 0.0 {
             let rng = &mut self.rng;
-            Vector3::from_fn(|_, _| std * <StandardNormal as Distribution<f64>>::sample(&StandardNormal, rng))
+            Vector3::from_fn(|_, _| {
+                std * <StandardNormal as Distribution<f64>>::sample(&StandardNormal, rng)
+            })
         } else {
             Vector3::zeros()
         }
@@ -168,9 +186,14 @@ impl SensorModel {
     pub fn sample(&mut self, physical: &FrameWrench) -> (Vector3<f64>, Vector3<f64>) {
         self.history.push(*physical);
         let delayed = self.history.delayed(self.delay_ticks);
-        let force = self.orientation.inverse_transform_vector(&delayed.force) + self.noise(self.force_noise);
-        let moment = self.orientation.inverse_transform_vector(&delayed.moment) + self.noise(self.torque_noise);
-        (quantise(force, self.force_resolution), quantise(moment, self.torque_resolution))
+        let force = self.orientation.inverse_transform_vector(&delayed.force)
+            + self.noise(self.force_noise);
+        let moment = self.orientation.inverse_transform_vector(&delayed.moment)
+            + self.noise(self.torque_noise);
+        (
+            quantise(force, self.force_resolution),
+            quantise(moment, self.torque_resolution),
+        )
     }
 }
 
@@ -185,7 +208,11 @@ pub struct FacilityModel {
 
 impl FacilityModel {
     /// The facility of a scenario with the robot at rest at the initial command.
-    pub fn from_scenario(s: &Scenario, system: &TwoBodySystem, initial_command: &RelativeMotion) -> Result<Self> {
+    pub fn from_scenario(
+        s: &Scenario,
+        system: &TwoBodySystem,
+        initial_command: &RelativeMotion,
+    ) -> Result<Self> {
         let f = &s.facility;
         let robot = RobotModel::new(
             s.robot_delay_ticks()?,
@@ -197,7 +224,12 @@ impl FacilityModel {
         );
         let (contact_force, initial_wrench) = physical_wrench(system, robot.actual());
         let sensor = SensorModel::from_scenario(s, &initial_wrench)?;
-        Ok(FacilityModel { system: system.clone(), robot, sensor, contact_force })
+        Ok(FacilityModel {
+            system: system.clone(),
+            robot,
+            sensor,
+            contact_force,
+        })
     }
 
     /// The physical contact force on the rod at the last tick, `t` frame, N (the truth that a
@@ -211,7 +243,11 @@ impl FacilityModel {
         let (contact_force, wrench) = physical_wrench(&self.system, self.robot.actual());
         self.contact_force = contact_force;
         let (force, moment) = self.sensor.sample(&wrench);
-        Measurement { force, moment, actual: *self.robot.actual() }
+        Measurement {
+            force,
+            moment,
+            actual: *self.robot.actual(),
+        }
     }
 
     /// Advances one control period: the robot receives the command for the next tick.
@@ -222,7 +258,9 @@ impl FacilityModel {
 
 /// Contact force on the rod (`t`) and the wrench on the frame for the robot's actual motion.
 fn physical_wrench(system: &TwoBodySystem, actual: &RelativeMotion) -> (Vector3<f64>, FrameWrench) {
-    let tip = actual.point(&system.rod_tip);
-    let force = system.contact.force_on_rod(&tip, &actual.point_velocity(&system.rod_tip));
-    (force, FrameWrench::from_rod_force(&force, &tip, &system.sensor_origin))
+    let (force, tip) = system.contact_force_at(actual);
+    (
+        force,
+        FrameWrench::from_rod_force(&force, &tip, &system.sensor_origin),
+    )
 }

@@ -20,6 +20,8 @@ use crate::world::{FrameWrench, RelativeMotion, TwoBodyState, TwoBodySystem};
 pub struct VirtualDynamics {
     system: TwoBodySystem,
     state: TwoBodyState,
+    /// The relative motion of `state` (the command), kept with it.
+    command: RelativeMotion,
     period: f64,
     /// Sensor attitude in `t` (sensor to `t`).
     sensor_orientation: UnitQuaternion<f64>,
@@ -35,11 +37,16 @@ impl VirtualDynamics {
             sensor_origin: system.sensor_origin,
             reduced_mass: system.reduced_mass(),
         };
+        let state = TwoBodyState::from_scenario(s)?;
         Ok(VirtualDynamics {
             system: system.clone(),
-            state: TwoBodyState::from_scenario(s)?,
+            command: system.relative_motion(&state),
+            state,
             period: s.simulation.period,
-            sensor_orientation: quaternion("facility.sensor_orientation", s.facility.sensor_orientation)?,
+            sensor_orientation: quaternion(
+                "facility.sensor_orientation",
+                s.facility.sensor_orientation,
+            )?,
             compensator: s.compensator.build(&context),
         })
     }
@@ -56,7 +63,7 @@ impl VirtualDynamics {
 
     /// The relative motion the robot must reproduce now (the command).
     pub fn command(&self) -> RelativeMotion {
-        self.system.relative_motion(&self.state)
+        self.command
     }
 
     /// Kinetic energy of the virtual relative motion, J.
@@ -77,10 +84,13 @@ impl VirtualDynamics {
     /// Runs the compensator on a measurement; the applied wrench is returned in the sensor's
     /// convention (`t` frame inside [`CompensatorOutput`]).
     pub fn compensate(&mut self, m: &Measurement) -> CompensatorOutput {
-        let desired = self.command();
+        let desired = self.command;
         let rod = &self.system.rod_tip;
         let input = CompensatorInput {
-            measured: FrameWrench { force: self.sensor_orientation * m.force, moment: self.sensor_orientation * m.moment },
+            measured: FrameWrench {
+                force: self.sensor_orientation * m.force,
+                moment: self.sensor_orientation * m.moment,
+            },
             tip_position_actual: m.actual.point(rod),
             tip_velocity_actual: m.actual.point_velocity(rod),
             tip_position_desired: desired.point(rod),
@@ -92,8 +102,11 @@ impl VirtualDynamics {
     /// Advances the virtual dynamics one period under the compensator's output: its velocity
     /// correction first (momentum conserved), then its wrench (`t` frame) into eqs. (1), (2).
     pub fn integrate(&mut self, output: &CompensatorOutput) {
-        self.system.correct_relative_velocity(&mut self.state, &output.velocity_correction);
-        self.system.step_virtual(&mut self.state, &output.applied, self.period);
+        self.system
+            .correct_relative_velocity(&mut self.state, &output.velocity_correction);
+        self.system
+            .step_virtual(&mut self.state, &output.applied, self.period);
+        self.command = self.system.relative_motion(&self.state);
     }
 
     /// Sensor attitude in `t`.

@@ -27,4 +27,4 @@ pub mod world;
 
 pub use config::Scenario;
 pub use error::{CoreError, Result};
-pub use sim::{simulate, SimulationOutput, Table};
+pub use sim::{simulate, simulate_metrics, SimulationOutput, Table};

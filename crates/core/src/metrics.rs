@@ -79,7 +79,10 @@ pub fn collisions(time: &[f64], force: &[f64], speed: &[f64], threshold: f64) ->
 }
 
 /// CoV and CoF of each collision against the reference's collision of the same index.
-pub fn compare_with_reference(collisions: &[Collision], reference: &[Collision]) -> Vec<ComparedCollision> {
+pub fn compare_with_reference(
+    collisions: &[Collision],
+    reference: &[Collision],
+) -> Vec<ComparedCollision> {
     let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
         (Some(a), Some(b)) if b > 0.0 => Some(a / b),
         _ => None,
@@ -129,7 +132,11 @@ pub fn identification_error(
             n += 1;
         }
     }
-    (n > 0).then(|| IdentificationError { stiffness_error: sk / n as f64, damping_error: sc / n as f64, samples: n })
+    (n > 0).then(|| IdentificationError {
+        stiffness_error: sk / n as f64,
+        damping_error: sc / n as f64,
+        samples: n,
+    })
 }
 
 /// Energy summary, J.
@@ -180,7 +187,11 @@ pub struct Metrics {
 
 /// Energy bound past which a run is `diverged`, J: `ratio × max(initial, reference peak)`.
 pub fn divergence_bound(ratio: f64, initial_energy: f64, reference_energy: &[f64]) -> f64 {
-    ratio * reference_energy.iter().cloned().fold(initial_energy, f64::max)
+    ratio
+        * reference_energy
+            .iter()
+            .cloned()
+            .fold(initial_energy, f64::max)
 }
 
 #[cfg(test)]
@@ -191,7 +202,17 @@ mod tests {
     fn finds_collisions_and_rebounds() {
         // 0..10: free, 10..20 contact, 20..40 free, 40..50 contact, 50..60 free
         let time: Vec<f64> = (0..60).map(|i| i as f64 * 0.1).collect();
-        let force: Vec<f64> = (0..60).map(|i| if (10..20).contains(&i) { 5.0 } else if (40..50).contains(&i) { 7.0 } else { 0.0 }).collect();
+        let force: Vec<f64> = (0..60)
+            .map(|i| {
+                if (10..20).contains(&i) {
+                    5.0
+                } else if (40..50).contains(&i) {
+                    7.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let speed: Vec<f64> = (0..60).map(|i| i as f64).collect();
         let c = collisions(&time, &force, &speed, 0.5);
         assert_eq!(c.len(), 2);
@@ -211,7 +232,13 @@ mod tests {
 
     #[test]
     fn cov_and_cof_are_ratios_to_the_reference() {
-        let mk = |speed, peak| Collision { index: 1, start: 0.0, end: 1.0, peak_force: peak, rebound_speed: Some(speed) };
+        let mk = |speed, peak| Collision {
+            index: 1,
+            start: 0.0,
+            end: 1.0,
+            peak_force: peak,
+            rebound_speed: Some(speed),
+        };
         let hil = compare_with_reference(&[mk(0.03, 120.0)], &[mk(0.02, 100.0)]);
         assert!((hil[0].cov.unwrap() - 1.5).abs() < 1e-12);
         assert!((hil[0].cof.unwrap() - 1.2).abs() < 1e-12);

@@ -21,7 +21,10 @@ pub struct Table {
 impl Table {
     /// The column called `name`.
     pub fn column(&self, name: &str) -> Option<&[f64]> {
-        self.columns.iter().find(|(n, _)| n == name).map(|(_, v)| v.as_slice())
+        self.columns
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_slice())
     }
 
     /// Number of rows.
@@ -34,17 +37,69 @@ impl Table {
         self.len() == 0
     }
 
-    fn from_rows<R>(rows: &[R], scalars: &[(&str, fn(&R) -> f64)], vectors: &[(&str, fn(&R) -> Vector3<f64>)]) -> Table {
+    fn from_rows<R>(
+        rows: &[R],
+        scalars: &[(&str, fn(&R) -> f64)],
+        vectors: &[(&str, fn(&R) -> Vector3<f64>)],
+    ) -> Table {
         let mut columns = Vec::new();
         for (name, get) in scalars {
             columns.push((name.to_string(), rows.iter().map(get).collect()));
         }
         for (name, get) in vectors {
             for (axis, label) in ["x", "y", "z"].iter().enumerate() {
-                columns.push((format!("{name}_{label}"), rows.iter().map(|r| get(r)[axis]).collect()));
+                columns.push((
+                    format!("{name}_{label}"),
+                    rows.iter().map(|r| get(r)[axis]).collect(),
+                ));
             }
         }
         Table { columns }
+    }
+}
+
+/// What the metrics read of a run, one value per tick: the compact record a sweep keeps.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Trace {
+    /// Time, s.
+    pub time: Vec<f64>,
+    /// Magnitude of the physical contact force on the rod, N.
+    pub force: Vec<f64>,
+    /// Speed of the (virtual) rod tip relative to the target, m/s.
+    pub speed: Vec<f64>,
+    /// Kinetic energy of the (virtual) relative motion, J.
+    pub energy: Vec<f64>,
+    /// Identified stiffness, N/m (NaN when not identified; empty for the reference).
+    pub stiffness_estimate: Vec<f64>,
+    /// Identified damping, N·s/m (NaN when not identified; empty for the reference).
+    pub damping_estimate: Vec<f64>,
+}
+
+impl Trace {
+    fn with_capacity(n: usize, estimates: bool) -> Self {
+        let v = || Vec::with_capacity(n);
+        let e = || {
+            if estimates {
+                Vec::with_capacity(n)
+            } else {
+                Vec::new()
+            }
+        };
+        Trace {
+            time: v(),
+            force: v(),
+            speed: v(),
+            energy: v(),
+            stiffness_estimate: e(),
+            damping_estimate: e(),
+        }
+    }
+
+    fn push(&mut self, time: f64, force: &Vector3<f64>, velocity: &Vector3<f64>, energy: f64) {
+        self.time.push(time);
+        self.force.push(force.norm());
+        self.speed.push(velocity.norm());
+        self.energy.push(energy);
     }
 }
 
@@ -98,7 +153,14 @@ pub struct HilRecord {
 
 impl HilRecord {
     fn is_finite(&self) -> bool {
-        let v = [self.tip_position, self.tip_velocity, self.actual_tip_position, self.contact_force, self.applied_force, self.applied_moment];
+        let v = [
+            self.tip_position,
+            self.tip_velocity,
+            self.actual_tip_position,
+            self.contact_force,
+            self.applied_force,
+            self.applied_moment,
+        ];
         self.energy.is_finite() && v.iter().all(|x| x.iter().all(|c| c.is_finite()))
     }
 }
@@ -114,37 +176,47 @@ pub struct SimulationOutput {
     pub metrics: Metrics,
 }
 
-/// The ideal reference: the true contact law, no facility, RK4 with
-/// `simulation.reference_substeps` steps per period, sampled at every tick.
-pub fn run_reference(s: &Scenario, system: &TwoBodySystem) -> Result<Vec<ReferenceRecord>> {
+/// The ideal reference: the true contact law, no facility, sampled at every tick; integrated by
+/// [`TwoBodySystem::step_reference`] (one force-free step per period in free flight; in
+/// contact RK4 with `simulation.reference_substeps` steps per period and the contact's
+/// start and end located). Returns the trace and, if `keep_rows`, every record.
+pub fn run_reference(
+    s: &Scenario,
+    system: &TwoBodySystem,
+    keep_rows: bool,
+) -> Result<(Trace, Vec<ReferenceRecord>)> {
     let n = s.ticks();
     let period = s.simulation.period;
-    let h = period / s.simulation.reference_substeps as f64;
     let mut x = TwoBodyState::from_scenario(s)?;
-    let mut rows = Vec::with_capacity(n + 1);
+    let mut trace = Trace::with_capacity(n + 1, false);
+    let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     for k in 0..=n {
         let rel = system.relative_motion(&x);
-        let (contact_force, tip) = system.contact_force(&x);
-        rows.push(ReferenceRecord {
+        let (contact_force, tip) = system.contact_force_at(&rel);
+        let row = ReferenceRecord {
             time: k as f64 * period,
             tip_position: tip,
             tip_velocity: rel.point_velocity(&system.rod_tip),
             contact_force,
             energy: system.energy(&x),
-        });
+        };
+        trace.push(row.time, &row.contact_force, &row.tip_velocity, row.energy);
+        if keep_rows {
+            rows.push(row);
+        }
         if k < n {
-            for _ in 0..s.simulation.reference_substeps {
-                system.step_rk4(&mut x, h);
-            }
+            system.step_reference(&mut x, period, s.simulation.reference_substeps);
         }
     }
-    Ok(rows)
+    Ok((trace, rows))
 }
 
 /// How a HIL run ended.
 #[derive(Debug, Clone, PartialEq)]
 pub struct HilRun {
-    /// Recorded ticks.
+    /// What the metrics read of every tick run.
+    pub trace: Trace,
+    /// Every record, if asked for (up to divergence).
     pub rows: Vec<HilRecord>,
     /// Whether the compensator identified the contact.
     pub estimates_contact: bool,
@@ -156,15 +228,22 @@ pub struct HilRun {
     pub reason: Option<String>,
 }
 
-/// The HIL loop against the facility model, stopped once the energy passes `energy_bound` (J).
-pub fn run_hil(s: &Scenario, system: &TwoBodySystem, energy_bound: f64) -> Result<HilRun> {
+/// The HIL loop against the facility model, stopped once the energy passes `energy_bound` (J);
+/// every record is kept if `keep_rows`, the trace always.
+pub fn run_hil(
+    s: &Scenario,
+    system: &TwoBodySystem,
+    energy_bound: f64,
+    keep_rows: bool,
+) -> Result<HilRun> {
     let n = s.ticks();
     let period = s.simulation.period;
     let mut virt = VirtualDynamics::from_scenario(s, system)?;
     let mut facility = FacilityModel::from_scenario(s, system, &virt.command())?;
     let sensor_to_t = virt.sensor_orientation();
     let rod = system.rod_tip;
-    let mut rows = Vec::with_capacity(n + 1);
+    let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
+    let mut trace = Trace::with_capacity(n + 1, virt.estimates_contact());
     let (mut status, mut reason) = (Status::Ok, None);
     for k in 0..=n {
         let m = facility.measure();
@@ -186,7 +265,14 @@ pub fn run_hil(s: &Scenario, system: &TwoBodySystem, energy_bound: f64) -> Resul
             damping_estimate: out.estimate.map_or(f64::NAN, |e| e.damping),
             observed_energy: out.observed_energy,
         };
-        rows.push(row);
+        trace.push(row.time, &row.contact_force, &row.tip_velocity, row.energy);
+        if virt.estimates_contact() {
+            trace.stiffness_estimate.push(row.stiffness_estimate);
+            trace.damping_estimate.push(row.damping_estimate);
+        }
+        if keep_rows {
+            rows.push(row);
+        }
         if !row.is_finite() {
             status = Status::Diverged;
             reason = Some("a state or force stopped being finite".to_string());
@@ -206,61 +292,31 @@ pub fn run_hil(s: &Scenario, system: &TwoBodySystem, energy_bound: f64) -> Resul
         virt.integrate(&out);
         facility.advance(&virt.command());
     }
-    Ok(HilRun { rows, estimates_contact: virt.estimates_contact(), observes_energy: virt.observes_energy(), status, reason })
+    Ok(HilRun {
+        trace,
+        rows,
+        estimates_contact: virt.estimates_contact(),
+        observes_energy: virt.observes_energy(),
+        status,
+        reason,
+    })
+}
+
+/// Runs the reference and the HIL loop of a scenario and computes the metrics, without
+/// keeping the records (what a sweep keeps of a run).
+pub fn simulate_metrics(s: &Scenario) -> Result<Metrics> {
+    run(s, false).map(|r| r.metrics)
 }
 
 /// Runs the reference and the HIL loop of a scenario and computes the metrics.
 pub fn simulate(s: &Scenario) -> Result<SimulationOutput> {
-    s.validate()?;
-    let system = TwoBodySystem::from_scenario(s)?;
-    let reference = run_reference(s, &system)?;
-    let reference_energy: Vec<f64> = reference.iter().map(|r| r.energy).collect();
-    let bound = metrics::divergence_bound(s.simulation.divergence_energy_ratio, reference_energy[0], &reference_energy);
-    let hil = run_hil(s, &system, bound)?;
-
-    let threshold = s.metrics.contact_threshold;
-    let ref_collisions = metrics::collisions(
-        &reference.iter().map(|r| r.time).collect::<Vec<_>>(),
-        &reference.iter().map(|r| r.contact_force.norm()).collect::<Vec<_>>(),
-        &reference.iter().map(|r| r.tip_velocity.norm()).collect::<Vec<_>>(),
-        threshold,
-    );
+    let Runs {
+        reference,
+        reference_trace,
+        hil,
+        metrics,
+    } = run(s, true)?;
     let rows = &hil.rows;
-    let time: Vec<f64> = rows.iter().map(|r| r.time).collect();
-    let force: Vec<f64> = rows.iter().map(|r| r.contact_force.norm()).collect();
-    let speed: Vec<f64> = rows.iter().map(|r| r.tip_velocity.norm()).collect();
-    let hil_collisions = metrics::collisions(&time, &force, &speed, threshold);
-    let identification = match (hil.estimates_contact, s.contact.model, hil_collisions.first()) {
-        (true, ContactModelKind::Linear, Some(first)) => metrics::identification_error(
-            &time,
-            &force,
-            threshold,
-            first.end,
-            &rows.iter().map(|r| r.stiffness_estimate).collect::<Vec<_>>(),
-            &rows.iter().map(|r| r.damping_estimate).collect::<Vec<_>>(),
-            s.contact.stiffness,
-            s.contact.damping,
-        ),
-        _ => None,
-    };
-    let last = rows.last().map_or(f64::NAN, |r| r.energy);
-    let metrics = Metrics {
-        scenario: s.name.clone(),
-        compensator: s.compensator.kind().to_string(),
-        status: hil.status,
-        diverged_at: (hil.status == Status::Diverged).then(|| time.last().copied().unwrap_or(0.0)),
-        reason: hil.reason.clone(),
-        collisions: metrics::compare_with_reference(&hil_collisions, &ref_collisions),
-        reference_collisions: ref_collisions,
-        identification,
-        energy: EnergySummary {
-            initial: rows.first().map_or(f64::NAN, |r| r.energy),
-            r#final: last,
-            reference_final: *reference_energy.last().unwrap_or(&f64::NAN),
-            max: rows.iter().map(|r| r.energy).filter(|e| e.is_finite()).fold(0.0, f64::max),
-        },
-    };
-
     type V = Vector3<f64>;
     let mut hil_vectors: Vec<(&str, fn(&HilRecord) -> V)> = vec![
         ("tip_position", |r| r.tip_position),
@@ -285,14 +341,98 @@ pub fn simulate(s: &Scenario) -> Result<SimulationOutput> {
     if hil.observes_energy {
         hil_scalars.push(("observed_energy", |r| r.observed_energy));
     }
-    timeseries.columns.extend(Table::from_rows(rows, &hil_scalars, &hil_vectors).columns);
+    timeseries
+        .columns
+        .extend(Table::from_rows(rows, &hil_scalars, &hil_vectors).columns);
 
     let mut reference_table = Table::from_rows(
         &reference,
         &[("time", |r: &ReferenceRecord| r.time)],
-        &[("tip_position", |r| r.tip_position), ("tip_velocity", |r| r.tip_velocity), ("contact_force", |r| r.contact_force)],
+        &[
+            ("tip_position", |r| r.tip_position),
+            ("tip_velocity", |r| r.tip_velocity),
+            ("contact_force", |r| r.contact_force),
+        ],
     );
-    reference_table.columns.push(("energy".to_string(), reference_energy));
+    reference_table
+        .columns
+        .push(("energy".to_string(), reference_trace.energy));
 
-    Ok(SimulationOutput { timeseries, reference: reference_table, metrics })
+    Ok(SimulationOutput {
+        timeseries,
+        reference: reference_table,
+        metrics,
+    })
+}
+
+/// The records and metrics of a run.
+struct Runs {
+    reference: Vec<ReferenceRecord>,
+    reference_trace: Trace,
+    hil: HilRun,
+    metrics: Metrics,
+}
+
+fn run(s: &Scenario, keep_rows: bool) -> Result<Runs> {
+    s.validate()?;
+    let system = TwoBodySystem::from_scenario(s)?;
+    let (reference_trace, reference) = run_reference(s, &system, keep_rows)?;
+    let reference_energy = &reference_trace.energy;
+    let bound = metrics::divergence_bound(
+        s.simulation.divergence_energy_ratio,
+        reference_energy[0],
+        reference_energy,
+    );
+    let hil = run_hil(s, &system, bound, keep_rows)?;
+
+    let threshold = s.metrics.contact_threshold;
+    let r = &reference_trace;
+    let ref_collisions = metrics::collisions(&r.time, &r.force, &r.speed, threshold);
+    let t = &hil.trace;
+    let hil_collisions = metrics::collisions(&t.time, &t.force, &t.speed, threshold);
+    let identification = match (
+        hil.estimates_contact,
+        s.contact.model,
+        hil_collisions.first(),
+    ) {
+        (true, ContactModelKind::Linear, Some(first)) => metrics::identification_error(
+            &t.time,
+            &t.force,
+            threshold,
+            first.end,
+            &t.stiffness_estimate,
+            &t.damping_estimate,
+            s.contact.stiffness,
+            s.contact.damping,
+        ),
+        _ => None,
+    };
+    let metrics = Metrics {
+        scenario: s.name.clone(),
+        compensator: s.compensator.kind().to_string(),
+        status: hil.status,
+        diverged_at: (hil.status == Status::Diverged)
+            .then(|| t.time.last().copied().unwrap_or(0.0)),
+        reason: hil.reason.clone(),
+        collisions: metrics::compare_with_reference(&hil_collisions, &ref_collisions),
+        reference_collisions: ref_collisions,
+        identification,
+        energy: EnergySummary {
+            initial: t.energy.first().copied().unwrap_or(f64::NAN),
+            r#final: t.energy.last().copied().unwrap_or(f64::NAN),
+            reference_final: reference_energy.last().copied().unwrap_or(f64::NAN),
+            max: t
+                .energy
+                .iter()
+                .copied()
+                .filter(|e| e.is_finite())
+                .fold(0.0, f64::max),
+        },
+    };
+    Ok(Runs {
+        reference,
+        reference_trace,
+        hil,
+        metrics,
+    })
 }

@@ -53,9 +53,16 @@ pub struct FrameWrench {
 impl FrameWrench {
     /// The wrench on the frame of a force `force_on_rod` (N, `t`) acting on the rod at `point`
     /// (m, `t`): the frame gets the opposite force, with its moment about `sensor_origin`.
-    pub fn from_rod_force(force_on_rod: &Vector3<f64>, point: &Vector3<f64>, sensor_origin: &Vector3<f64>) -> Self {
+    pub fn from_rod_force(
+        force_on_rod: &Vector3<f64>,
+        point: &Vector3<f64>,
+        sensor_origin: &Vector3<f64>,
+    ) -> Self {
         let force = -force_on_rod;
-        FrameWrench { force, moment: (point - sensor_origin).cross(&force) }
+        FrameWrench {
+            force,
+            moment: (point - sensor_origin).cross(&force),
+        }
     }
 }
 
@@ -87,7 +94,10 @@ impl TwoBodySystem {
     /// The system of a (validated) scenario.
     pub fn from_scenario(s: &Scenario) -> Result<Self> {
         Ok(TwoBodySystem {
-            servicer: MassProperties::new(s.servicer.mass, s.servicer.inertia_matrix("servicer.inertia")?),
+            servicer: MassProperties::new(
+                s.servicer.mass,
+                s.servicer.inertia_matrix("servicer.inertia")?,
+            ),
             target: MassProperties::new(s.target.mass, s.target.inertia_matrix("target.inertia")?),
             rod_tip: Vector3::from(s.rod.tip),
             sensor_origin: Vector3::from(s.facility.sensor_position),
@@ -104,13 +114,17 @@ impl TwoBodySystem {
     pub fn relative_motion(&self, x: &TwoBodyState) -> RelativeMotion {
         let (s, t) = (&x.servicer, &x.target);
         let r = s.position - t.position;
-        let w_t = t.angular_velocity_world();
+        // R_t (target to world) once, as a matrix: cheaper than four quaternion rotations
+        let r_t = t.orientation.to_rotation_matrix();
+        let w_t = r_t * t.angular_velocity;
+        let orientation = t.orientation.inverse() * s.orientation;
         RelativeMotion {
-            position: t.orientation.inverse_transform_vector(&r),
-            orientation: t.orientation.inverse() * s.orientation,
+            position: r_t.inverse_transform_vector(&r),
+            orientation,
             // d/dt of Rᵀ r = Rᵀ (ṙ − ω_t × r)
-            velocity: t.orientation.inverse_transform_vector(&(s.velocity - t.velocity - w_t.cross(&r))),
-            angular_velocity: t.orientation.inverse_transform_vector(&(s.angular_velocity_world() - w_t)),
+            velocity: r_t.inverse_transform_vector(&(s.velocity - t.velocity - w_t.cross(&r))),
+            // Rᵀ (ω_s,world − ω_t,world) = R_rel ω_s,body − ω_t,body
+            angular_velocity: orientation * s.angular_velocity - t.angular_velocity,
         }
     }
 
@@ -129,7 +143,11 @@ impl TwoBodySystem {
             crate::contact::ContactModel::Linear(l) => (l.stiffness, 1.0),
             crate::contact::ContactModel::HuntCrossley(h) => (h.stiffness, h.exponent),
         };
-        self.contact.walls.iter().map(|w| k * w.penetration(&tip).powf(n + 1.0) / (n + 1.0)).sum()
+        self.contact
+            .walls
+            .iter()
+            .map(|w| k * w.penetration(&tip).powf(n + 1.0) / (n + 1.0))
+            .sum()
     }
 
     /// Total linear momentum (world), kg·m/s.
@@ -145,7 +163,11 @@ impl TwoBodySystem {
     /// World-frame wrenches on both bodies (force, torque about own CoM) for a wrench on the
     /// frame: the target gets it at the sensor origin (eqs. 1, 2 with `r × F`), the servicer
     /// the equal and opposite one, so momentum and angular momentum are conserved.
-    pub fn body_wrenches(&self, x: &TwoBodyState, w: &FrameWrench) -> ([Vector3<f64>; 2], [Vector3<f64>; 2]) {
+    pub fn body_wrenches(
+        &self,
+        x: &TwoBodyState,
+        w: &FrameWrench,
+    ) -> ([Vector3<f64>; 2], [Vector3<f64>; 2]) {
         let (s, t) = (&x.servicer, &x.target);
         let force = t.orientation * w.force;
         let moment = t.orientation * w.moment;
@@ -167,15 +189,25 @@ impl TwoBodySystem {
     /// One control period of the virtual dynamics with the wrench held (zero-order hold).
     pub fn step_virtual(&self, x: &mut TwoBodyState, w: &FrameWrench, period: f64) {
         let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, w);
-        x.servicer.step_symplectic(&self.servicer, &f_s, &tau_s, period);
+        x.servicer
+            .step_symplectic(&self.servicer, &f_s, &tau_s, period);
         x.target.step_symplectic(&self.target, &f_t, &tau_t, period);
     }
 
     /// The physical contact force on the rod (N, `t`) at a state of the true system.
     pub fn contact_force(&self, x: &TwoBodyState) -> (Vector3<f64>, Vector3<f64>) {
-        let rel = self.relative_motion(x);
+        self.contact_force_at(&self.relative_motion(x))
+    }
+
+    /// The physical contact force on the rod (N, `t`) and the rod tip (m, `t`) for a relative
+    /// motion of the servicer.
+    pub fn contact_force_at(&self, rel: &RelativeMotion) -> (Vector3<f64>, Vector3<f64>) {
         let tip = rel.point(&self.rod_tip);
-        (self.contact.force_on_rod(&tip, &rel.point_velocity(&self.rod_tip)), tip)
+        (
+            self.contact
+                .force_on_rod(&tip, &rel.point_velocity(&self.rod_tip)),
+            tip,
+        )
     }
 
     /// Rates of both bodies of the true system (the contact law closes the loop).
@@ -183,7 +215,10 @@ impl TwoBodySystem {
         let (f_rod, tip) = self.contact_force(x);
         let w = FrameWrench::from_rod_force(&f_rod, &tip, &self.sensor_origin);
         let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, &w);
-        (x.servicer.rate(&self.servicer, &f_s, &tau_s), x.target.rate(&self.target, &f_t, &tau_t))
+        (
+            x.servicer.rate(&self.servicer, &f_s, &tau_s),
+            x.target.rate(&self.target, &f_t, &tau_t),
+        )
     }
 
     /// One RK4 step of the true system (rod against walls, no facility) over `h`.
@@ -201,6 +236,74 @@ impl TwoBodySystem {
             BodyRate::rk4_average(&k1.1, &k2.1, &k3.1, &k4.1),
         );
         *x = advance(x, &avg, h);
+    }
+
+    /// The contact's active set at a state (see [`ContactGeometry::active_set`]).
+    pub fn active_set(&self, x: &TwoBodyState) -> u64 {
+        let rel = self.relative_motion(x);
+        self.contact.active_set(
+            &rel.point(&self.rod_tip),
+            &rel.point_velocity(&self.rod_tip),
+        )
+    }
+
+    /// Advances the true system (rod against walls, no facility) by `period`: the ideal
+    /// reference's integrator.
+    ///
+    /// - Free flight: while the rod tip stays clear of every wall over the whole period (both
+    ///   ends clear by more than the bend of its path, `|a_tip| T² / 2`), one force-free step.
+    /// - Otherwise RK4 with `substeps` steps per period, and every change of the contact's
+    ///   active set (a wall starts or stops pushing) located by bisection to `h / 2¹⁶`: an RK4 step
+    ///   ends just before it and a step of that width crosses it, so that no step of size
+    ///   straddles the kink or jump of the force at contact start and end.
+    pub fn step_reference(&self, x: &mut TwoBodyState, period: f64, substeps: u32) {
+        let start = self.relative_motion(x);
+        let tip_velocity = start.point_velocity(&self.rod_tip);
+        if self
+            .contact
+            .active_set(&start.point(&self.rod_tip), &tip_velocity)
+            == 0
+        {
+            let mut y = *x;
+            y.servicer.drift(&self.servicer, period);
+            y.target.drift(&self.target, period);
+            let end = self.relative_motion(&y);
+            let bend = (end.point_velocity(&self.rod_tip) - tip_velocity).norm() * period / 2.0;
+            let clear = |m: &RelativeMotion| self.contact.clearance(&m.point(&self.rod_tip));
+            if clear(&start) > bend && clear(&end) > bend {
+                *x = y;
+                return;
+            }
+        }
+        let h = period / substeps as f64;
+        let mut remaining = period;
+        while remaining > period * 1e-12 {
+            let step = h.min(remaining);
+            let before = self.active_set(x);
+            let mut y = *x;
+            self.step_rk4(&mut y, step);
+            if self.active_set(&y) == before {
+                *x = y;
+                remaining -= step;
+                continue;
+            }
+            // the set changes within the step: bisect for the first moment it does
+            let (mut lo, mut hi) = (0.0, step);
+            for _ in 0..16 {
+                let mid = 0.5 * (lo + hi);
+                let mut z = *x;
+                self.step_rk4(&mut z, mid);
+                if self.active_set(&z) == before {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            // up to the switch with every RK4 stage before it, then across it in a tiny step
+            self.step_rk4(x, lo);
+            self.step_rk4(x, hi - lo);
+            remaining -= hi;
+        }
     }
 }
 

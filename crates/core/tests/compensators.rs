@@ -27,19 +27,33 @@ fn run(mut s: Scenario, kind: CompensatorConfig) -> SimulationOutput {
 }
 
 fn covs(out: &SimulationOutput) -> Vec<f64> {
-    out.metrics.collisions.iter().filter_map(|c| c.cov).collect()
+    out.metrics
+        .collisions
+        .iter()
+        .filter_map(|c| c.cov)
+        .collect()
 }
 
 fn cofs(out: &SimulationOutput) -> Vec<f64> {
-    out.metrics.collisions.iter().filter_map(|c| c.cof).collect()
+    out.metrics
+        .collisions
+        .iter()
+        .filter_map(|c| c.cof)
+        .collect()
 }
 
 fn stiffness_error(out: &SimulationOutput) -> f64 {
-    out.metrics.identification.as_ref().expect("identified").stiffness_error
+    out.metrics
+        .identification
+        .as_ref()
+        .expect("identified")
+        .stiffness_error
 }
 
 fn col<'a>(out: &'a SimulationOutput, name: &str) -> &'a [f64] {
-    out.timeseries.column(name).unwrap_or_else(|| panic!("no column {name}"))
+    out.timeseries
+        .column(name)
+        .unwrap_or_else(|| panic!("no column {name}"))
 }
 
 #[test]
@@ -48,10 +62,20 @@ fn without_delay_every_compensator_is_the_identity() {
         let name = kind.kind();
         let out = run(table1(0.0, 0.0), kind);
         let (measured, applied) = (col(&out, "measured_force_x"), col(&out, "applied_force_x"));
-        let worst = measured.iter().zip(applied).map(|(m, a)| (m - a).abs()).fold(0.0, f64::max);
-        assert!(worst < 0.01 * 140.28, "{name}: applied differs from measured by {worst} N");
+        let worst = measured
+            .iter()
+            .zip(applied)
+            .map(|(m, a)| (m - a).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            worst < 0.01 * 140.28,
+            "{name}: applied differs from measured by {worst} N"
+        );
         for (cov, cof) in covs(&out).iter().zip(cofs(&out)) {
-            assert!((cov - 1.0).abs() < 0.005 && (cof - 1.0).abs() < 0.005, "{name}: CoV {cov} CoF {cof}");
+            assert!(
+                (cov - 1.0).abs() < 0.005 && (cof - 1.0).abs() < 0.005,
+                "{name}: CoV {cov} CoF {cof}"
+            );
         }
     }
 }
@@ -59,56 +83,107 @@ fn without_delay_every_compensator_is_the_identity() {
 #[test]
 fn pida_reaches_the_paper_numbers_on_table1() {
     for (delay, cof_max) in [(0.010, 1.10), (0.020, 1.20)] {
-        let out = run(table1(delay, 0.0), CompensatorConfig::Pida(ModelParams::default()));
+        let out = run(
+            table1(delay, 0.0),
+            CompensatorConfig::Pida(ModelParams::default()),
+        );
         let (cov, cof) = (covs(&out), cofs(&out));
         assert_eq!(cov.len(), 5, "{delay}: five collisions with a rebound");
-        assert!(cov.iter().all(|c| (0.97..=1.05).contains(c)), "{delay}: CoV {cov:?}");
+        assert!(
+            cov.iter().all(|c| (0.97..=1.05).contains(c)),
+            "{delay}: CoV {cov:?}"
+        );
         assert!(cof.iter().all(|c| *c <= cof_max), "{delay}: CoF {cof:?}");
         // paper: 0.43 % at 10 ms
-        assert!(stiffness_error(&out) < 0.005, "{delay}: stiffness error {}", stiffness_error(&out));
+        assert!(
+            stiffness_error(&out) < 0.005,
+            "{delay}: stiffness error {}",
+            stiffness_error(&out)
+        );
     }
 }
 
 #[test]
 fn pic_and_dac_show_the_paper_trade_offs() {
-    let pic = run(table1(0.020, 0.0), CompensatorConfig::Pic(ModelParams::default()));
-    let dac = run(table1(0.010, 0.0), CompensatorConfig::Dac(ModelParams::default()));
+    let pic = run(
+        table1(0.020, 0.0),
+        CompensatorConfig::Pic(ModelParams::default()),
+    );
+    let dac = run(
+        table1(0.010, 0.0),
+        CompensatorConfig::Dac(ModelParams::default()),
+    );
     // PIC cannot remove the energy of the contact's onset: rebounds grow
     let c = covs(&pic);
-    assert!(c.windows(2).all(|w| w[1] > w[0]) && c[0] > 1.05, "PIC CoV {c:?}");
+    assert!(
+        c.windows(2).all(|w| w[1] > w[0]) && c[0] > 1.05,
+        "PIC CoV {c:?}"
+    );
     // DAC: velocity right, force too high (paper: CoV ≈ 1, CoF ≈ 1.28 at 10 ms)
-    assert!(covs(&dac).iter().all(|c| (c - 1.0).abs() < 0.02), "DAC CoV {:?}", covs(&dac));
-    assert!(cofs(&dac).iter().all(|c| *c > 1.15), "DAC CoF {:?}", cofs(&dac));
+    assert!(
+        covs(&dac).iter().all(|c| (c - 1.0).abs() < 0.02),
+        "DAC CoV {:?}",
+        covs(&dac)
+    );
+    assert!(
+        cofs(&dac).iter().all(|c| *c > 1.15),
+        "DAC CoF {:?}",
+        cofs(&dac)
+    );
 }
 
 fn noisy(mode: DelayMode) -> SimulationOutput {
     let mut s = table1(0.020, 0.005);
     s.facility.sensor_noise = 0.2;
-    run(s, CompensatorConfig::Pida(ModelParams { delay_mode: mode, ..ModelParams::default() }))
+    run(
+        s,
+        CompensatorConfig::Pida(ModelParams {
+            delay_mode: mode,
+            ..ModelParams::default()
+        }),
+    )
 }
 
 #[test]
 fn pida_with_noise_and_sensor_delay_aligns_instead_of_differentiating() {
     let out = noisy(DelayMode::Align);
     assert_eq!(out.metrics.status, Status::Ok);
-    assert!(stiffness_error(&out) < 0.01, "stiffness error {}", stiffness_error(&out));
+    assert!(
+        stiffness_error(&out) < 0.01,
+        "stiffness error {}",
+        stiffness_error(&out)
+    );
     let (cov, cof) = (covs(&out), cofs(&out));
     assert_eq!(cov.len(), 5);
     assert!(cov.iter().all(|c| (0.95..=1.05).contains(c)), "CoV {cov:?}");
     assert!(cof.iter().all(|c| *c <= 1.30), "CoF {cof:?}");
     // the paper's lead filter differentiates the noise: identification is far off
     let lead = noisy(DelayMode::Lead);
-    assert!(stiffness_error(&lead) > 10.0 * stiffness_error(&out), "lead {} vs align {}", stiffness_error(&lead), stiffness_error(&out));
+    assert!(
+        stiffness_error(&lead) > 10.0 * stiffness_error(&out),
+        "lead {} vs align {}",
+        stiffness_error(&lead),
+        stiffness_error(&out)
+    );
 }
 
 #[test]
 fn pida_reproduces_the_damped_experiments_and_tdpa_does_not() {
     for name in ["paper-exp-2.64hz", "paper-exp-1.93hz"] {
-        let out = run(preset(name), CompensatorConfig::Pida(ModelParams::default()));
+        let out = run(
+            preset(name),
+            CompensatorConfig::Pida(ModelParams::default()),
+        );
         let cov = covs(&out);
-        assert!(cov.len() >= 4 && cov.iter().all(|c| (0.95..=1.05).contains(c)), "{name}: PIDA CoV {cov:?}");
+        assert!(
+            cov.len() >= 4 && cov.iter().all(|c| (0.95..=1.05).contains(c)),
+            "{name}: PIDA CoV {cov:?}"
+        );
         // TDPA spends the contact's real dissipation on the delay's energy: too fast rebounds
-        let tdpa = run(preset(name), CompensatorConfig::TdpaImpedance(TdpaParams::default()));
+        let tdpa = run(
+            preset(name),
+            CompensatorConfig::TdpaImpedance(TdpaParams::default()),
+        );
         let worst = covs(&tdpa).into_iter().fold(0.0, f64::max);
         assert!(worst > 1.10, "{name}: TDPA worst CoV {worst}");
     }
@@ -116,16 +191,27 @@ fn pida_reproduces_the_damped_experiments_and_tdpa_does_not() {
 
 #[test]
 fn nothing_diverges_up_to_60_ms() {
-    for kind in [CompensatorConfig::Pida(ModelParams::default()), CompensatorConfig::TdpaImpedance(TdpaParams::default()), CompensatorConfig::TdpaAdmittance(TdpaParams::default())] {
+    for kind in [
+        CompensatorConfig::Pida(ModelParams::default()),
+        CompensatorConfig::TdpaImpedance(TdpaParams::default()),
+        CompensatorConfig::TdpaAdmittance(TdpaParams::default()),
+    ] {
         for delay in [0.030, 0.045, 0.060] {
             let name = kind.kind();
             let out = run(table1(delay, 0.0), kind.clone());
             assert_eq!(out.metrics.status, Status::Ok, "{name} at {delay}");
-            assert!(covs(&out).iter().all(|c| (c - 1.0).abs() < 0.05), "{name} at {delay}: CoV {:?}", covs(&out));
+            assert!(
+                covs(&out).iter().all(|c| (c - 1.0).abs() < 0.05),
+                "{name} at {delay}: CoV {:?}",
+                covs(&out)
+            );
         }
     }
     // and the admittance type really acts on the velocity
-    let out = run(table1(0.020, 0.0), CompensatorConfig::TdpaAdmittance(TdpaParams::default()));
+    let out = run(
+        table1(0.020, 0.0),
+        CompensatorConfig::TdpaAdmittance(TdpaParams::default()),
+    );
     let none = run(table1(0.020, 0.0), CompensatorConfig::None);
     assert!(covs(&out)[0] < 0.6 * covs(&none)[0]);
 }
@@ -135,13 +221,23 @@ fn energy_after(out: &SimulationOutput, reference: bool, n: usize) -> f64 {
     let (collisions, table) = if reference {
         (out.metrics.reference_collisions.clone(), &out.reference)
     } else {
-        (out.metrics.collisions.iter().map(|c| c.collision.clone()).collect(), &out.timeseries)
+        (
+            out.metrics
+                .collisions
+                .iter()
+                .map(|c| c.collision.clone())
+                .collect(),
+            &out.timeseries,
+        )
     };
     let time = table.column("time").unwrap();
     let energy = table.column("energy").unwrap();
     let end = collisions[n - 1].end;
     let next = collisions.get(n).map_or(*time.last().unwrap(), |c| c.start);
-    let k = time.iter().position(|t| *t >= 0.5 * (end + next)).unwrap_or(time.len() - 1);
+    let k = time
+        .iter()
+        .position(|t| *t >= 0.5 * (end + next))
+        .unwrap_or(time.len() - 1);
     energy[k]
 }
 

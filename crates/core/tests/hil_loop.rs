@@ -8,16 +8,27 @@ use hilcontact_core::metrics::Status;
 use hilcontact_core::{simulate, CoreError, SimulationOutput};
 
 fn col<'a>(out: &'a SimulationOutput, name: &str) -> &'a [f64] {
-    out.timeseries.column(name).unwrap_or_else(|| panic!("no column {name}"))
+    out.timeseries
+        .column(name)
+        .unwrap_or_else(|| panic!("no column {name}"))
 }
 
 fn covs(out: &SimulationOutput) -> Vec<f64> {
-    out.metrics.collisions.iter().filter_map(|c| c.cov).collect()
+    out.metrics
+        .collisions
+        .iter()
+        .filter_map(|c| c.cov)
+        .collect()
 }
 
 #[test]
 fn without_facility_delay_the_loop_follows_the_reference() {
-    for name in ["paper-table1", "paper-exp-2.64hz", "paper-exp-1.93hz", "oblique-6dof"] {
+    for name in [
+        "paper-table1",
+        "paper-exp-2.64hz",
+        "paper-exp-1.93hz",
+        "oblique-6dof",
+    ] {
         let mut s = preset(name);
         s.facility.robot_delay = 0.0;
         s.facility.sensor_delay = 0.0;
@@ -26,22 +37,43 @@ fn without_facility_delay_the_loop_follows_the_reference() {
         let out = simulate(&s).unwrap();
         let m = &out.metrics;
         assert_eq!(m.status, Status::Ok, "{name}");
-        assert_eq!(m.collisions.len(), m.reference_collisions.len(), "{name}: collision count");
+        assert_eq!(
+            m.collisions.len(),
+            m.reference_collisions.len(),
+            "{name}: collision count"
+        );
         assert!(m.collisions.len() >= 2, "{name}: at least two collisions");
         for c in &m.collisions {
             let (cov, cof) = (c.cov.unwrap(), c.cof.unwrap());
-            assert!((cov - 1.0).abs() < 0.01, "{name} #{}: CoV {cov}", c.collision.index);
-            assert!((cof - 1.0).abs() < 0.01, "{name} #{}: CoF {cof}", c.collision.index);
+            assert!(
+                (cov - 1.0).abs() < 0.01,
+                "{name} #{}: CoV {cov}",
+                c.collision.index
+            );
+            assert!(
+                (cof - 1.0).abs() < 0.01,
+                "{name} #{}: CoF {cof}",
+                c.collision.index
+            );
         }
         // and the trajectory itself: the tip within 1 % of its path length of the reference
         let r = &out.reference;
         let speed = |axis: &str| r.column(&format!("tip_velocity_{axis}")).unwrap().to_vec();
         let (vx, vy, vz) = (speed("x"), speed("y"), speed("z"));
-        let path: f64 = (0..vx.len()).map(|k| (vx[k].powi(2) + vy[k].powi(2) + vz[k].powi(2)).sqrt() * s.simulation.period).sum();
+        let path: f64 = (0..vx.len())
+            .map(|k| (vx[k].powi(2) + vy[k].powi(2) + vz[k].powi(2)).sqrt() * s.simulation.period)
+            .sum();
         for axis in ["x", "y", "z"] {
             let key = format!("tip_position_{axis}");
-            let worst = col(&out, &key).iter().zip(r.column(&key).unwrap()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-            assert!(worst < 0.01 * path, "{name}: tip {axis} off by {worst} m over a {path} m path");
+            let worst = col(&out, &key)
+                .iter()
+                .zip(r.column(&key).unwrap())
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                worst < 0.01 * path,
+                "{name}: tip {axis} off by {worst} m over a {path} m path"
+            );
         }
     }
 }
@@ -53,14 +85,27 @@ fn with_delay_and_no_compensation_every_rebound_is_faster_and_more_so_with_more_
         let out = simulate(&table1(delay, 0.0)).unwrap();
         let cov = covs(&out);
         assert!(cov.len() >= 3, "delay {delay}: {cov:?}");
-        assert!(cov[0] > 1.0, "delay {delay}: first rebound not faster: {cov:?}");
-        assert!(cov.windows(2).all(|w| w[1] > w[0]), "delay {delay}: CoV must grow at every collision: {cov:?}");
+        assert!(
+            cov[0] > 1.0,
+            "delay {delay}: first rebound not faster: {cov:?}"
+        );
+        assert!(
+            cov.windows(2).all(|w| w[1] > w[0]),
+            "delay {delay}: CoV must grow at every collision: {cov:?}"
+        );
         first_cov.push(cov[0]);
     }
-    assert!(first_cov.windows(2).all(|w| w[1] > w[0]), "CoV must grow with the delay: {first_cov:?}");
+    assert!(
+        first_cov.windows(2).all(|w| w[1] > w[0]),
+        "CoV must grow with the delay: {first_cov:?}"
+    );
     // the delayed spring's negative damping −kτ predicts the first restitution exp(ωτπ/2)
     let predicted = (2.0 * std::f64::consts::PI * 4.0 * 0.010 * std::f64::consts::PI / 2.0).exp();
-    assert!((first_cov[2] / predicted - 1.0).abs() < 0.05, "10 ms: CoV {} vs predicted {predicted}", first_cov[2]);
+    assert!(
+        (first_cov[2] / predicted - 1.0).abs() < 0.05,
+        "10 ms: CoV {} vs predicted {predicted}",
+        first_cov[2]
+    );
 }
 
 #[test]
@@ -70,34 +115,54 @@ fn divergence_is_a_status_not_a_nan() {
     assert!(out.metrics.diverged_at.unwrap() < 5.5);
     assert!(out.metrics.reason.as_deref().unwrap().contains("energy"));
     for (name, values) in &out.timeseries.columns {
-        assert!(values.iter().all(|v| v.is_finite()), "{name} has a non-finite value");
+        assert!(
+            values.iter().all(|v| v.is_finite()),
+            "{name} has a non-finite value"
+        );
     }
 }
 
 #[test]
 fn robot_follows_the_command_with_its_pure_delay() {
     let out = simulate(&table1(0.020, 0.0)).unwrap();
-    let (desired, actual) = (col(&out, "tip_position_x"), col(&out, "actual_tip_position_x"));
+    let (desired, actual) = (
+        col(&out, "tip_position_x"),
+        col(&out, "actual_tip_position_x"),
+    );
     for k in 20..desired.len() {
         assert!((actual[k] - desired[k - 20]).abs() < 1e-15, "tick {k}");
     }
-    assert!((actual[25] - desired[25]).abs() > 1e-4, "the delay must show");
+    assert!(
+        (actual[25] - desired[25]).abs() > 1e-4,
+        "the delay must show"
+    );
 }
 
 #[test]
 fn sensor_reports_the_wrench_on_the_frame_with_its_pure_delay() {
     let out = simulate(&table1(0.004, 0.005)).unwrap();
     let (contact, measured) = (col(&out, "contact_force_x"), col(&out, "measured_force_x"));
-    let (tip_x, moment_y) = (col(&out, "actual_tip_position_x"), col(&out, "measured_moment_y"));
+    let (tip_x, moment_y) = (
+        col(&out, "actual_tip_position_x"),
+        col(&out, "measured_moment_y"),
+    );
     let mut in_contact = 0;
     for k in 5..contact.len() {
         // the frame gets the opposite of the force on the rod, 5 ticks later
         assert!((measured[k] + contact[k - 5]).abs() < 1e-9, "tick {k}");
         // moment about the sensor origin (0, 0, −0.15): M_y = r_z F_x − r_x F_z = 0.15 · F_x(frame)
-        assert!((moment_y[k] - 0.15 * measured[k]).abs() < 1e-9, "tick {k}: {} vs {}", moment_y[k], measured[k]);
+        assert!(
+            (moment_y[k] - 0.15 * measured[k]).abs() < 1e-9,
+            "tick {k}: {} vs {}",
+            moment_y[k],
+            measured[k]
+        );
         in_contact += (contact[k].abs() > 1.0) as usize;
     }
-    assert!(in_contact > 100 && tip_x.len() > 1000, "{in_contact} ticks in contact");
+    assert!(
+        in_contact > 100 && tip_x.len() > 1000,
+        "{in_contact} ticks in contact"
+    );
 }
 
 #[test]
@@ -107,10 +172,18 @@ fn sensor_noise_is_gaussian_seeded_and_reproducible() {
     s.facility.seed = 7;
     let a = simulate(&s).unwrap();
     let b = simulate(&s).unwrap();
-    assert_eq!(col(&a, "measured_force_y"), col(&b, "measured_force_y"), "same seed, same run");
+    assert_eq!(
+        col(&a, "measured_force_y"),
+        col(&b, "measured_force_y"),
+        "same seed, same run"
+    );
     s.facility.seed = 8;
     let c = simulate(&s).unwrap();
-    assert_ne!(col(&a, "measured_force_y"), col(&c, "measured_force_y"), "another seed, other noise");
+    assert_ne!(
+        col(&a, "measured_force_y"),
+        col(&c, "measured_force_y"),
+        "another seed, other noise"
+    );
     // y carries no contact force: its samples are the noise alone
     let y = col(&a, "measured_force_y");
     let mean = y.iter().sum::<f64>() / y.len() as f64;
@@ -126,11 +199,20 @@ fn sensor_quantises_to_its_resolution() {
     s.facility.force_resolution = 0.125;
     s.facility.torque_resolution = 0.01;
     let out = simulate(&s).unwrap();
-    for v in col(&out, "measured_force_x").iter().chain(col(&out, "measured_force_z")) {
+    for v in col(&out, "measured_force_x")
+        .iter()
+        .chain(col(&out, "measured_force_z"))
+    {
         let q = v / 0.125;
-        assert!((q - q.round()).abs() < 1e-9, "{v} is not a multiple of 0.125");
+        assert!(
+            (q - q.round()).abs() < 1e-9,
+            "{v} is not a multiple of 0.125"
+        );
     }
-    let distinct = col(&out, "measured_force_y").iter().filter(|v| **v != 0.0).count();
+    let distinct = col(&out, "measured_force_y")
+        .iter()
+        .filter(|v| **v != 0.0)
+        .count();
     assert!(distinct > 100, "the noise must cross quantisation steps");
 }
 
@@ -140,11 +222,18 @@ fn servo_lag_trails_a_ramp_by_two_zeta_over_omega() {
     s.facility.servo_frequency = 10.0;
     s.facility.servo_damping = 0.7;
     let out = simulate(&s).unwrap();
-    let (desired, actual) = (col(&out, "tip_position_x"), col(&out, "actual_tip_position_x"));
+    let (desired, actual) = (
+        col(&out, "tip_position_x"),
+        col(&out, "actual_tip_position_x"),
+    );
     // at 0.2 s the transient has decayed (e^{−ζω_n t} ≈ 1.5e-4) and the tip has not touched yet
     let lag = 2.0 * 0.7 / (2.0 * std::f64::consts::PI * 10.0);
     let trailing = desired[200] - actual[200];
-    assert!((trailing / (0.02 * lag) - 1.0).abs() < 0.02, "trailing {trailing} m vs {}", 0.02 * lag);
+    assert!(
+        (trailing / (0.02 * lag) - 1.0).abs() < 0.02,
+        "trailing {trailing} m vs {}",
+        0.02 * lag
+    );
     // a lagging robot is a delay too: the rebound is faster than the reference
     assert!(covs(&out)[0] > 1.05);
 }
@@ -169,10 +258,17 @@ fn invalid_scenarios_are_rejected_naming_the_key() {
     assert_eq!(invalid_key(simulate(&s)), "walls[1].normal");
     let s = table1(0.0125, 0.0);
     let err = simulate(&s).unwrap_err().to_string();
-    assert!(err.starts_with("facility.robot_delay: 0.0125 s is not a whole number") && err.contains("use 0.012 or 0.013,"), "{err}");
+    assert!(
+        err.starts_with("facility.robot_delay: 0.0125 s is not a whole number")
+            && err.contains("use 0.012 or 0.013,"),
+        "{err}"
+    );
     let s = table1(0.010, 0.0004);
     let err = simulate(&s).unwrap_err().to_string();
-    assert!(err.contains("facility.sensor_delay") && err.contains("whole number of periods"), "{err}");
+    assert!(
+        err.contains("facility.sensor_delay") && err.contains("whole number of periods"),
+        "{err}"
+    );
     let mut s = table1(0.0, 0.0);
     s.target.inertia = hilcontact_core::config::Inertia::Principal([3684.0, -1.0, 3684.0]);
     assert_eq!(invalid_key(simulate(&s)), "target.inertia");

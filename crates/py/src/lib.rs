@@ -38,10 +38,13 @@ fn table_to_dict<'py>(py: Python<'py>, table: Table) -> PyResult<Bound<'py, PyDi
 /// Returns `{"timeseries": {column: ndarray}, "reference": {column: ndarray}, "metrics": str}`.
 #[pyfunction]
 fn simulate<'py>(py: Python<'py>, scenario_json: &str) -> PyResult<Bound<'py, PyDict>> {
-    let scenario: Scenario =
-        serde_json::from_str(scenario_json).map_err(|e| scenario_error(py, format!("scenario: {e}")))?;
-    let output = py.allow_threads(|| hilcontact_core::simulate(&scenario)).map_err(|e| to_py_err(py, e))?;
-    let metrics = serde_json::to_string(&output.metrics).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let scenario: Scenario = serde_json::from_str(scenario_json)
+        .map_err(|e| scenario_error(py, format!("scenario: {e}")))?;
+    let output = py
+        .allow_threads(|| hilcontact_core::simulate(&scenario))
+        .map_err(|e| to_py_err(py, e))?;
+    let metrics =
+        serde_json::to_string(&output.metrics).map_err(|e| PyValueError::new_err(e.to_string()))?;
     let result = PyDict::new(py);
     result.set_item("timeseries", table_to_dict(py, output.timeseries)?)?;
     result.set_item("reference", table_to_dict(py, output.reference)?)?;
@@ -65,7 +68,12 @@ fn compensator_defaults() -> PyResult<String> {
     ];
     let map: serde_json::Map<String, serde_json::Value> = kinds
         .iter()
-        .map(|k| Ok((k.kind().to_string(), serde_json::to_value(k).map_err(|e| PyValueError::new_err(e.to_string()))?)))
+        .map(|k| {
+            Ok((
+                k.kind().to_string(),
+                serde_json::to_value(k).map_err(|e| PyValueError::new_err(e.to_string()))?,
+            ))
+        })
         .collect::<PyResult<_>>()?;
     Ok(serde_json::Value::Object(map).to_string())
 }

@@ -33,7 +33,18 @@ pub struct SageHusaFilter {
 impl SageHusaFilter {
     /// A filter at `x0` with covariance `p0`, process noise `q`, measurement noise `r0`, forgetting `b`.
     pub fn new(x0: Vector2<f64>, p0: Matrix2<f64>, q: Matrix2<f64>, r0: f64, b: f64) -> Self {
-        SageHusaFilter { x: x0, p: p0, q, r: r0, b, t: 0, y: 0.0, s: 0.0, k: Vector2::zeros(), initial: (x0, p0, r0) }
+        SageHusaFilter {
+            x: x0,
+            p: p0,
+            q,
+            r: r0,
+            b,
+            t: 0,
+            y: 0.0,
+            s: 0.0,
+            k: Vector2::zeros(),
+            initial: (x0, p0, r0),
+        }
     }
 
     /// Back to the initial guess.

@@ -5,7 +5,9 @@
 use super::delay::ContactEstimator;
 use super::energy::DampingAmendment;
 use super::params::ModelParams;
-use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate};
+use super::{
+    Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
+};
 use crate::world::FrameWrench;
 use nalgebra::Vector3;
 
@@ -19,7 +21,10 @@ pub struct Dac {
 impl Dac {
     /// A DAC compensator.
     pub fn new(p: &ModelParams, context: &CompensatorContext) -> Self {
-        Dac { estimator: ContactEstimator::new(p, context), amendment: DampingAmendment::new(p, context) }
+        Dac {
+            estimator: ContactEstimator::new(p, context),
+            amendment: DampingAmendment::new(p, context),
+        }
     }
 }
 
@@ -29,9 +34,15 @@ impl Compensator for Dac {
         let alpha = self.amendment.step(&view, &view.force, input); // steps 3-6
         CompensatorOutput {
             // steps 7-8: F_comp replaced by F_act in (29), (30)
-            applied: FrameWrench { force: view.force + alpha.force, moment: view.moment + alpha.moment },
+            applied: FrameWrench {
+                force: view.force + alpha.force,
+                moment: view.moment + alpha.moment,
+            },
             velocity_correction: Vector3::zeros(),
-            estimate: Some(ContactEstimate { stiffness: view.stiffness, damping: view.damping }),
+            estimate: Some(ContactEstimate {
+                stiffness: view.stiffness,
+                damping: view.damping,
+            }),
             observed_energy: self.amendment.energy(),
         }
     }

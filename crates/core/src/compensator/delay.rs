@@ -69,8 +69,14 @@ impl ContactEstimator {
         let delay_ticks = (context.sensor_delay / context.period).round() as usize;
         let filter = SageHusaFilter::new(
             Vector2::new(p.stiffness_initial, p.damping_initial),
-            Matrix2::from_diagonal(&Vector2::new(p.stiffness_std.powi(2), p.damping_std.powi(2))),
-            Matrix2::from_diagonal(&Vector2::new(p.stiffness_walk.powi(2), p.damping_walk.powi(2))),
+            Matrix2::from_diagonal(&Vector2::new(
+                p.stiffness_std.powi(2),
+                p.damping_std.powi(2),
+            )),
+            Matrix2::from_diagonal(&Vector2::new(
+                p.stiffness_walk.powi(2),
+                p.damping_walk.powi(2),
+            )),
             p.noise_std.powi(2),
             p.forgetting,
         );
@@ -108,17 +114,30 @@ impl ContactEstimator {
         self.kinematics.push((p_act, v_act));
 
         // the identification sample: a force and the kinematics that produced it
-        let lead = |now: Vector3<f64>, before: Vector3<f64>| now + (now - before) * (self.sensor_delay / self.period);
+        let lead = |now: Vector3<f64>, before: Vector3<f64>| {
+            now + (now - before) * (self.sensor_delay / self.period)
+        };
         let (force, (position, velocity)) = match self.mode {
             // (6) F_act = F_mea + τ_p dF_mea/dt, against the present kinematics
             DelayMode::Lead => (lead(f_mea, self.previous_measured.0), (p_act, v_act)),
             DelayMode::Align => (f_mea, self.kinematics.delayed(self.delay_ticks)),
         };
-        let sample = Sample { force, position, velocity, in_contact: force.norm() > self.threshold };
-        if let (true, Some(prev)) = (sample.in_contact, self.previous_sample.filter(|s| s.in_contact)) {
+        let sample = Sample {
+            force,
+            position,
+            velocity,
+            in_contact: force.norm() > self.threshold,
+        };
+        if let (true, Some(prev)) = (
+            sample.in_contact,
+            self.previous_sample.filter(|s| s.in_contact),
+        ) {
             // (7) e = F/|F|; (8)-(10) increments along e
             let e = sample.force.normalize();
-            let h = Vector2::new((sample.position - prev.position).dot(&e), (sample.velocity - prev.velocity).dot(&e));
+            let h = Vector2::new(
+                (sample.position - prev.position).dot(&e),
+                (sample.velocity - prev.velocity).dot(&e),
+            );
             self.filter.update(&h, (sample.force - prev.force).dot(&e));
         }
         self.previous_sample = Some(sample);
@@ -130,11 +149,15 @@ impl ContactEstimator {
                 // predict the present force from the model and the robot's motion since
                 let e = f_mea.normalize();
                 let (p_then, v_then) = self.kinematics.delayed(self.delay_ticks);
-                let increment = stiffness * (p_act - p_then).dot(&e) + damping * (v_act - v_then).dot(&e);
+                let increment =
+                    stiffness * (p_act - p_then).dot(&e) + damping * (v_act - v_then).dot(&e);
                 let magnitude = (f_mea.dot(&e) + increment).max(0.0); // never pulls
                 let f_act = f_mea + e * (magnitude - f_mea.dot(&e));
                 let s = &self.sensor_origin;
-                (f_act, m_mea + (p_act - s).cross(&f_act) - (p_then - s).cross(&f_mea))
+                (
+                    f_act,
+                    m_mea + (p_act - s).cross(&f_act) - (p_then - s).cross(&f_mea),
+                )
             }
             DelayMode::Align => (f_mea, m_mea),
         };
@@ -142,7 +165,11 @@ impl ContactEstimator {
         let in_contact = force.norm() > self.threshold;
         ContactView {
             in_contact,
-            direction: if in_contact { force.normalize() } else { Vector3::zeros() },
+            direction: if in_contact {
+                force.normalize()
+            } else {
+                Vector3::zeros()
+            },
             force,
             moment,
             stiffness,

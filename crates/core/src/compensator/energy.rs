@@ -63,7 +63,12 @@ fn damping_force(damping: f64, velocity: &Vector3<f64>, direction: &Vector3<f64>
 impl EnergyObserver {
     /// An observer for control period `period` (s).
     pub fn new(period: f64, mode: ObserverMode) -> Self {
-        EnergyObserver { period, mode, energy: 0.0, previous: None }
+        EnergyObserver {
+            period,
+            mode,
+            energy: 0.0,
+            previous: None,
+        }
     }
 
     /// Forgets the contact.
@@ -80,22 +85,41 @@ impl EnergyObserver {
     /// One tick with the compensated force (N), contact direction, identified damping (N·s/m)
     /// and desired velocity (m/s). Returns the elastic force F_ek of this tick (N); zero out of
     /// contact.
-    pub fn step(&mut self, in_contact: bool, force: &Vector3<f64>, direction: &Vector3<f64>, damping: f64, velocity: &Vector3<f64>) -> Vector3<f64> {
+    pub fn step(
+        &mut self,
+        in_contact: bool,
+        force: &Vector3<f64>,
+        direction: &Vector3<f64>,
+        damping: f64,
+        velocity: &Vector3<f64>,
+    ) -> Vector3<f64> {
         if !in_contact {
             self.reset();
             return Vector3::zeros();
         }
         let elastic = |t: &Tick| t.force - damping_force(t.damping, &t.velocity, &t.direction);
-        let current = Tick { force: *force, direction: *direction, damping, velocity: *velocity, alpha_force: Vector3::zeros() };
+        let current = Tick {
+            force: *force,
+            direction: *direction,
+            damping,
+            velocity: *velocity,
+            alpha_force: Vector3::zeros(),
+        };
         let f_ek_now = elastic(&current);
         self.energy += match (self.mode, self.previous) {
             (_, None) => 0.0,
             // the wrench held over the last step: its work on the virtual kinetic energy is
             // exactly T·F(k−1)·(v(k−1) + v(k))/2 under symplectic Euler
-            (ObserverMode::Work, Some(p)) => 0.5 * self.period * (elastic(&p) + p.alpha_force).dot(&(p.velocity + velocity)),
+            (ObserverMode::Work, Some(p)) => {
+                0.5 * self.period * (elastic(&p) + p.alpha_force).dot(&(p.velocity + velocity))
+            }
             // (15), (16) as printed
             (ObserverMode::Paper, Some(p)) => {
-                let f_ek = if velocity.dot(force) > 0.0 { elastic(&p) } else { f_ek_now };
+                let f_ek = if velocity.dot(force) > 0.0 {
+                    elastic(&p)
+                } else {
+                    f_ek_now
+                };
                 self.period * (f_ek.dot(velocity) + p.alpha_force.dot(&p.velocity))
             }
         };
@@ -132,7 +156,13 @@ impl EnergyController {
     /// where F_ek vanishes (the virtual tip has left the wall while the robot has not) the
     /// contact direction stands in for ê, and a deficit found late in the rebound can still
     /// be dissipated.
-    pub fn step(&self, energy: f64, f_ek: &Vector3<f64>, direction: &Vector3<f64>, velocity: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    pub fn step(
+        &self,
+        energy: f64,
+        f_ek: &Vector3<f64>,
+        direction: &Vector3<f64>,
+        velocity: &Vector3<f64>,
+    ) -> (Vector3<f64>, Vector3<f64>) {
         let norm = f_ek.norm();
         let e_hat = if norm > 1e-9 { f_ek / norm } else { *direction };
         if energy >= 0.0 || e_hat.norm_squared() < 0.5 {
@@ -185,12 +215,24 @@ impl DampingAmendment {
 
     /// One tick: observes `force` (the force fed to the dynamics before amendment, N) and
     /// returns `F_α` (17) and `M_α = (p_des − p_s) × F_α` (20).
-    pub fn step(&mut self, view: &ContactView, force: &Vector3<f64>, input: &CompensatorInput) -> FrameWrench {
+    pub fn step(
+        &mut self,
+        view: &ContactView,
+        force: &Vector3<f64>,
+        input: &CompensatorInput,
+    ) -> FrameWrench {
         let v = input.tip_velocity_desired;
-        let f_ek = self.observer.step(view.in_contact, force, &view.direction, view.damping, &v);
-        let (_, f_alpha) = self.controller.step(self.observer.energy(), &f_ek, &view.direction, &v);
+        let f_ek = self
+            .observer
+            .step(view.in_contact, force, &view.direction, view.damping, &v);
+        let (_, f_alpha) = self
+            .controller
+            .step(self.observer.energy(), &f_ek, &view.direction, &v);
         self.observer.record_alpha_force(&f_alpha);
-        FrameWrench { force: f_alpha, moment: (input.tip_position_desired - self.sensor_origin).cross(&f_alpha) }
+        FrameWrench {
+            force: f_alpha,
+            moment: (input.tip_position_desired - self.sensor_origin).cross(&f_alpha),
+        }
     }
 }
 
@@ -223,10 +265,20 @@ mod tests {
                 v -= force.x / m * t;
                 x += v * t;
             }
-            assert!((peak / ke0 - 1.0).abs() < 0.02, "{mode:?}: peak {peak} vs {ke0}");
+            assert!(
+                (peak / ke0 - 1.0).abs() < 0.02,
+                "{mode:?}: peak {peak} vs {ke0}"
+            );
             if mode == ObserverMode::Work {
-                assert!(worst < 1e-12, "the observer must track the kinetic energy exchanged: {worst}");
-                assert!(obs.energy().abs() < 1e-5 * ke0, "after the cycle {}", obs.energy());
+                assert!(
+                    worst < 1e-12,
+                    "the observer must track the kinetic energy exchanged: {worst}"
+                );
+                assert!(
+                    obs.energy().abs() < 1e-5 * ke0,
+                    "after the cycle {}",
+                    obs.energy()
+                );
             }
         }
     }
@@ -235,8 +287,14 @@ mod tests {
     fn controller_only_dissipates_and_alpha_is_never_negative() {
         let ctl = EnergyController::new(1e-3, 1e5);
         let cases = [
-            (Vector3::new(50.0, 3.0, -1.0), Vector3::new(-0.02, 0.001, 0.0)),
-            (Vector3::new(50.0, -30.0, 5.0), Vector3::new(-0.01, 0.02, 0.003)),
+            (
+                Vector3::new(50.0, 3.0, -1.0),
+                Vector3::new(-0.02, 0.001, 0.0),
+            ),
+            (
+                Vector3::new(50.0, -30.0, 5.0),
+                Vector3::new(-0.01, 0.02, 0.003),
+            ),
             (Vector3::new(1e-3, 0.0, 0.0), Vector3::new(-0.02, 0.0, 0.0)),
             (Vector3::new(80.0, 0.0, 0.0), Vector3::new(-1e-7, 0.0, 0.0)),
         ];
@@ -244,7 +302,11 @@ mod tests {
             for energy in [-1e-2, -1e-5, 0.0, 1e-3] {
                 let (alpha, f_alpha) = ctl.step(energy, &f, &f.normalize(), &v);
                 assert!(alpha.iter().all(|a| *a >= 0.0 && *a <= 1e5), "{alpha:?}");
-                assert!(f_alpha.dot(&v) >= -1e-15, "F_α must dissipate: {}", f_alpha.dot(&v));
+                assert!(
+                    f_alpha.dot(&v) >= -1e-15,
+                    "F_α must dissipate: {}",
+                    f_alpha.dot(&v)
+                );
                 if energy >= 0.0 {
                     assert_eq!(f_alpha, Vector3::zeros());
                 }

@@ -26,9 +26,17 @@ pub struct CompensatedWrench {
 }
 
 /// Eqs. (21)-(24), (27), (28); out of contact F_comp = F_act, M_comp = M_act.
-pub fn compensate_force(view: &ContactView, input: &CompensatorInput, sensor_origin: &Vector3<f64>) -> CompensatedWrench {
+pub fn compensate_force(
+    view: &ContactView,
+    input: &CompensatorInput,
+    sensor_origin: &Vector3<f64>,
+) -> CompensatedWrench {
     if !view.in_contact {
-        return CompensatedWrench { force: view.force, moment: view.moment, error: Vector3::zeros() };
+        return CompensatedWrench {
+            force: view.force,
+            moment: view.moment,
+            error: Vector3::zeros(),
+        };
     }
     let e = view.direction;
     let dp = input.tip_position_desired - input.tip_position_actual;
@@ -37,6 +45,11 @@ pub fn compensate_force(view: &ContactView, input: &CompensatorInput, sensor_ori
     let along = view.force.dot(&e) + view.stiffness * dp_err + view.damping * dv_err; // (21), (22)
     let force = e * along.max(0.0);
     let error = force - view.force;
-    let moment = view.moment + dp.cross(&force) + (input.tip_position_actual - sensor_origin).cross(&error); // (27), (28)
-    CompensatedWrench { force, moment, error }
+    let moment =
+        view.moment + dp.cross(&force) + (input.tip_position_actual - sensor_origin).cross(&error); // (27), (28)
+    CompensatedWrench {
+        force,
+        moment,
+        error,
+    }
 }

@@ -74,7 +74,12 @@ pub struct CompensatorOutput {
 impl CompensatorOutput {
     /// An output that applies `applied` and nothing else.
     pub fn wrench(applied: FrameWrench) -> Self {
-        CompensatorOutput { applied, velocity_correction: Vector3::zeros(), estimate: None, observed_energy: f64::NAN }
+        CompensatorOutput {
+            applied,
+            velocity_correction: Vector3::zeros(),
+            estimate: None,
+            observed_energy: f64::NAN,
+        }
     }
 }
 
@@ -144,8 +149,12 @@ impl CompensatorConfig {
     pub fn validate(&self) -> Result<()> {
         match self {
             CompensatorConfig::None => Ok(()),
-            CompensatorConfig::Pic(p) | CompensatorConfig::Dac(p) | CompensatorConfig::Pida(p) => p.validate(),
-            CompensatorConfig::TdpaImpedance(p) | CompensatorConfig::TdpaAdmittance(p) => p.validate(),
+            CompensatorConfig::Pic(p) | CompensatorConfig::Dac(p) | CompensatorConfig::Pida(p) => {
+                p.validate()
+            }
+            CompensatorConfig::TdpaImpedance(p) | CompensatorConfig::TdpaAdmittance(p) => {
+                p.validate()
+            }
         }
     }
 

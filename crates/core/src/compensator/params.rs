@@ -81,23 +81,71 @@ fn check(key: &str, ok: bool, allowed: &str, value: f64) -> Result<()> {
     if ok && value.is_finite() {
         Ok(())
     } else {
-        Err(CoreError::invalid(format!("compensator.{key}"), format!("must be {allowed}, got {value}")))
+        Err(CoreError::invalid(
+            format!("compensator.{key}"),
+            format!("must be {allowed}, got {value}"),
+        ))
     }
 }
 
 impl ModelParams {
     /// Checks every range.
     pub fn validate(&self) -> Result<()> {
-        check("contact_force", self.contact_force > 0.0, "> 0 N", self.contact_force)?;
-        check("stiffness_initial", self.stiffness_initial > 0.0, "> 0 N/m", self.stiffness_initial)?;
-        check("damping_initial", self.damping_initial >= 0.0, ">= 0 N s/m", self.damping_initial)?;
-        check("stiffness_std", self.stiffness_std > 0.0, "> 0 N/m", self.stiffness_std)?;
-        check("damping_std", self.damping_std > 0.0, "> 0 N s/m", self.damping_std)?;
-        check("stiffness_walk", self.stiffness_walk >= 0.0, ">= 0 N/m", self.stiffness_walk)?;
-        check("damping_walk", self.damping_walk >= 0.0, ">= 0 N s/m", self.damping_walk)?;
+        check(
+            "contact_force",
+            self.contact_force > 0.0,
+            "> 0 N",
+            self.contact_force,
+        )?;
+        check(
+            "stiffness_initial",
+            self.stiffness_initial > 0.0,
+            "> 0 N/m",
+            self.stiffness_initial,
+        )?;
+        check(
+            "damping_initial",
+            self.damping_initial >= 0.0,
+            ">= 0 N s/m",
+            self.damping_initial,
+        )?;
+        check(
+            "stiffness_std",
+            self.stiffness_std > 0.0,
+            "> 0 N/m",
+            self.stiffness_std,
+        )?;
+        check(
+            "damping_std",
+            self.damping_std > 0.0,
+            "> 0 N s/m",
+            self.damping_std,
+        )?;
+        check(
+            "stiffness_walk",
+            self.stiffness_walk >= 0.0,
+            ">= 0 N/m",
+            self.stiffness_walk,
+        )?;
+        check(
+            "damping_walk",
+            self.damping_walk >= 0.0,
+            ">= 0 N s/m",
+            self.damping_walk,
+        )?;
         check("noise_std", self.noise_std > 0.0, "> 0 N", self.noise_std)?;
-        check("forgetting", self.forgetting > 0.0 && self.forgetting < 1.0, "between 0 and 1 (exclusive)", self.forgetting)?;
-        check("alpha_max", self.alpha_max > 0.0, "> 0 N s/m", self.alpha_max)
+        check(
+            "forgetting",
+            self.forgetting > 0.0 && self.forgetting < 1.0,
+            "between 0 and 1 (exclusive)",
+            self.forgetting,
+        )?;
+        check(
+            "alpha_max",
+            self.alpha_max > 0.0,
+            "> 0 N s/m",
+            self.alpha_max,
+        )
     }
 }
 
@@ -120,17 +168,48 @@ pub struct TdpaParams {
 
 impl Default for TdpaParams {
     fn default() -> Self {
-        TdpaParams { contact_force: 3.0, alpha_max: 100000.0, beta_max: 1e-4, velocity_floor: 1e-3, force_floor: 1.0 }
+        TdpaParams {
+            contact_force: 3.0,
+            alpha_max: 100000.0,
+            beta_max: 1e-4,
+            velocity_floor: 1e-3,
+            force_floor: 1.0,
+        }
     }
 }
 
 impl TdpaParams {
     /// Checks every range.
     pub fn validate(&self) -> Result<()> {
-        check("contact_force", self.contact_force > 0.0, "> 0 N", self.contact_force)?;
-        check("alpha_max", self.alpha_max > 0.0, "> 0 N s/m", self.alpha_max)?;
-        check("beta_max", self.beta_max > 0.0, "> 0 m/(N s)", self.beta_max)?;
-        check("velocity_floor", self.velocity_floor > 0.0, "> 0 m/s", self.velocity_floor)?;
-        check("force_floor", self.force_floor > 0.0, "> 0 N", self.force_floor)
+        check(
+            "contact_force",
+            self.contact_force > 0.0,
+            "> 0 N",
+            self.contact_force,
+        )?;
+        check(
+            "alpha_max",
+            self.alpha_max > 0.0,
+            "> 0 N s/m",
+            self.alpha_max,
+        )?;
+        check(
+            "beta_max",
+            self.beta_max > 0.0,
+            "> 0 m/(N s)",
+            self.beta_max,
+        )?;
+        check(
+            "velocity_floor",
+            self.velocity_floor > 0.0,
+            "> 0 m/s",
+            self.velocity_floor,
+        )?;
+        check(
+            "force_floor",
+            self.force_floor > 0.0,
+            "> 0 N",
+            self.force_floor,
+        )
     }
 }

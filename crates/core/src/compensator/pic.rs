@@ -4,7 +4,9 @@
 use super::delay::ContactEstimator;
 use super::force::compensate_force;
 use super::params::ModelParams;
-use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate};
+use super::{
+    Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
+};
 use crate::world::FrameWrench;
 use nalgebra::Vector3;
 
@@ -18,7 +20,10 @@ pub struct Pic {
 impl Pic {
     /// A PIC compensator.
     pub fn new(p: &ModelParams, context: &CompensatorContext) -> Self {
-        Pic { estimator: ContactEstimator::new(p, context), sensor_origin: context.sensor_origin }
+        Pic {
+            estimator: ContactEstimator::new(p, context),
+            sensor_origin: context.sensor_origin,
+        }
     }
 }
 
@@ -27,8 +32,14 @@ impl Compensator for Pic {
         let view = self.estimator.step(input); // steps 1-4
         let comp = compensate_force(&view, input, &self.sensor_origin); // steps 5-6
         CompensatorOutput {
-            applied: FrameWrench { force: comp.force, moment: comp.moment }, // step 7
-            estimate: Some(ContactEstimate { stiffness: view.stiffness, damping: view.damping }),
+            applied: FrameWrench {
+                force: comp.force,
+                moment: comp.moment,
+            }, // step 7
+            estimate: Some(ContactEstimate {
+                stiffness: view.stiffness,
+                damping: view.damping,
+            }),
             ..CompensatorOutput::wrench(FrameWrench::default())
         }
     }

@@ -6,7 +6,9 @@ use super::delay::ContactEstimator;
 use super::energy::DampingAmendment;
 use super::force::compensate_force;
 use super::params::ModelParams;
-use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate};
+use super::{
+    Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
+};
 use crate::world::FrameWrench;
 use nalgebra::Vector3;
 
@@ -21,7 +23,11 @@ pub struct Pida {
 impl Pida {
     /// A PIDA compensator.
     pub fn new(p: &ModelParams, context: &CompensatorContext) -> Self {
-        Pida { estimator: ContactEstimator::new(p, context), amendment: DampingAmendment::new(p, context), sensor_origin: context.sensor_origin }
+        Pida {
+            estimator: ContactEstimator::new(p, context),
+            amendment: DampingAmendment::new(p, context),
+            sensor_origin: context.sensor_origin,
+        }
     }
 }
 
@@ -32,9 +38,15 @@ impl Compensator for Pida {
         let alpha = self.amendment.step(&view, &comp.force, input); // steps 7-10
         CompensatorOutput {
             // (29), (30)
-            applied: FrameWrench { force: comp.force + alpha.force, moment: comp.moment + alpha.moment },
+            applied: FrameWrench {
+                force: comp.force + alpha.force,
+                moment: comp.moment + alpha.moment,
+            },
             velocity_correction: Vector3::zeros(),
-            estimate: Some(ContactEstimate { stiffness: view.stiffness, damping: view.damping }),
+            estimate: Some(ContactEstimate {
+                stiffness: view.stiffness,
+                damping: view.damping,
+            }),
             observed_energy: self.amendment.energy(),
         }
     }

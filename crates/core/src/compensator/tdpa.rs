@@ -35,7 +35,12 @@ struct PassivityObserver {
 
 impl PassivityObserver {
     fn new(period: f64, threshold: f64) -> Self {
-        PassivityObserver { period, threshold, energy: 0.0, previous: None }
+        PassivityObserver {
+            period,
+            threshold,
+            energy: 0.0,
+            previous: None,
+        }
     }
 
     fn reset(&mut self) {
@@ -88,7 +93,8 @@ impl Compensator for TdpaImpedance {
         }
         let t = self.observer.period;
         let alpha = if self.observer.energy < 0.0 {
-            (-self.observer.energy / (t * v.norm_squared().max(self.params.velocity_floor.powi(2)))).min(self.params.alpha_max)
+            (-self.observer.energy / (t * v.norm_squared().max(self.params.velocity_floor.powi(2))))
+                .min(self.params.alpha_max)
         } else {
             0.0
         };
@@ -121,7 +127,11 @@ pub struct TdpaAdmittance {
 impl TdpaAdmittance {
     /// An admittance-type passivity controller.
     pub fn new(p: &TdpaParams, context: &CompensatorContext) -> Self {
-        TdpaAdmittance { observer: PassivityObserver::new(context.period, p.contact_force), params: p.clone(), reduced_mass: context.reduced_mass }
+        TdpaAdmittance {
+            observer: PassivityObserver::new(context.period, p.contact_force),
+            params: p.clone(),
+            reduced_mass: context.reduced_mass,
+        }
     }
 }
 
@@ -139,7 +149,11 @@ impl Compensator for TdpaAdmittance {
         // pushed back (v·f < 0) and E < 0
         let beta = if e < 0.0 && vf < 0.0 {
             let disc = (mu * vf).powi(2) + 2.0 * mu * f2 * e;
-            let root = if disc >= 0.0 { (-mu * vf - disc.sqrt()) / (mu * f2) } else { -vf / f2 };
+            let root = if disc >= 0.0 {
+                (-mu * vf - disc.sqrt()) / (mu * f2)
+            } else {
+                -vf / f2
+            };
             root.clamp(0.0, self.params.beta_max)
         } else {
             0.0

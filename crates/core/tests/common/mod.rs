@@ -5,7 +5,10 @@ use hilcontact_core::Scenario;
 
 /// A preset scenario from `python/hilcontact/scenarios/<name>.toml`.
 pub fn preset(name: &str) -> Scenario {
-    let path = format!("{}/../../python/hilcontact/scenarios/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+    let path = format!(
+        "{}/../../python/hilcontact/scenarios/{name}.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
     toml::from_str(&text).unwrap_or_else(|e| panic!("{path}: {e}"))
 }
