@@ -68,6 +68,7 @@ def synthetic_run(estimates: bool = False, lateral: float = 0.0) -> hc.Run:
         "reference_collisions": [
             {"index": 1, "start": 0.1, "end": 0.2, "peak_force": 100.0, "rebound_speed": 0.02},
         ],
+        "summary": {"collisions": 2, "mean_cov": 1.25, "worst_cov": 1.25, "mean_cof": 1.2, "worst_cof": 1.2},
         "identification": None,
         "energy": {"initial": 0.0558, "final": 0.06, "reference_final": 0.0558, "max": 0.07},
     }

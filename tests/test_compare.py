@@ -133,6 +133,7 @@ def fake_comparison(kinds=("none", "pic", "pida", "tdpa-impedance")) -> Comparis
                 {"index": 3, "start": 0.8, "end": 0.85, "peak_force": 400.0, "rebound_speed": 0.05,
                  "cov": 4.0, "cof": 0.5}
             )
+            run.metrics["summary"] = {"collisions": 3, "mean_cov": 3.5, "worst_cov": 4.0, "mean_cof": 0.85, "worst_cof": 0.5}
         if kind == "pida":
             run.metrics["identification"] = {"stiffness_error": 0.0043, "damping_error": 320.0, "samples": 10}
             run.timeseries["observed_energy"] = np.where(run.timeseries["time"] > 0.5, 0.01, np.nan)

@@ -13,6 +13,8 @@ Quick start::
     print(run.status, run.collision_table())
     run.save("runs/paper-table1-20ms")
     hc.compare("paper-table1", overrides={"facility.robot_delay": 0.02}).summary
+    rows = hc.sweep("paper-table1", {"facility.robot_delay": "0.002:0.06:30"}, "none,pida")
+    hc.stability_map(rows).max_faithful_delay()
 
 Conventions: SI units (m, s, N, N m, kg, rad); points and normals of the collision frame in
 the target mockup frame ``t``; quaternions ``[w, x, y, z]``.
@@ -31,6 +33,8 @@ from .comparison import Comparison, compare
 from .errors import HilContactError, ScenarioError
 from .run import Run, simulate
 from .scenario import Scenario, apply_overrides, load_scenario, presets
+from .stability import StabilityMap, stability_map
+from .sweep import load_results, sweep
 
 __all__ = [
     "Comparison",
@@ -38,10 +42,14 @@ __all__ = [
     "Run",
     "Scenario",
     "ScenarioError",
+    "StabilityMap",
     "__version__",
     "apply_overrides",
     "compare",
+    "load_results",
     "load_scenario",
     "presets",
     "simulate",
+    "stability_map",
+    "sweep",
 ]

@@ -27,9 +27,22 @@ def simulate(scenario_json: str) -> dict[str, Any]:
     metrics: ``{"scenario", "compensator", "status": "ok"|"diverged", "diverged_at",
     "reason", "collisions": [{"index", "start", "end", "peak_force", "rebound_speed",
     "cov", "cof"}], "reference_collisions": [...], "identification": {"stiffness_error",
-    "damping_error"} | null, "energy": {"initial", "final", "reference_final", "max"}}``.
+    "damping_error"} | null, "energy": {"initial", "final", "reference_final", "max"},
+    "summary": {"collisions", "mean_cov", "worst_cov", "mean_cof", "worst_cof"}}`` (worst:
+    the value farthest from 1; null where there is none).
 
     Raises ``hilcontact.errors.ScenarioError`` for an invalid scenario.
+    """
+
+def simulate_batch(scenarios: list[str], threads: int | None = None) -> dict[str, Any]:
+    """Run many scenarios (resolved JSON each) in parallel on Rust threads, the GIL released,
+    keeping only each run's summary. ``threads``: pool size (default: one per core).
+
+    Returns columns, one value per scenario in order: ``status`` (list of "ok"/"diverged")
+    and float64 arrays ``diverged_at`` (s), ``collisions``, ``reference_collisions``,
+    ``mean_cov``, ``worst_cov``, ``mean_cof``, ``worst_cof``, ``stiffness_error`` (fraction),
+    ``damping_error`` (N s/m), ``energy_ratio`` (final / reference final), ``wall_time`` (s);
+    NaN where a run has no such value. Raises ScenarioError for an invalid scenario.
     """
 
 def version() -> str:

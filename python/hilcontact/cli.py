@@ -2,12 +2,16 @@
 
     hilcontact run SCENARIO [--set KEY=VALUE ...] [--out DIR] [--no-plots]
     hilcontact compare SCENARIO [--set KEY=VALUE ...] [--compensators LIST] [--out DIR] [--no-plots]
+    hilcontact sweep SCENARIO --grid KEY=START:STOP:COUNT|KEY=A,B,... [--compensators LIST]
+                     [--seeds N] [--set KEY=VALUE ...] --out DIR [--resume] [--dask ADDRESS]
+    hilcontact stability-map SWEEP_DIR [--out DIR] [--cov-tolerance 0.05] [--cof-limit 1.2]
     hilcontact presets
     hilcontact show SCENARIO [--set KEY=VALUE ...]
     hilcontact --version
 
 Bad input (scenario, override, output folder) prints one ``error: ...`` line on stderr and
-exits with code 2; nothing is written then.
+exits with code 2; nothing is written then. An interrupted sweep (Ctrl-C) keeps its finished
+rows and exits with code 130.
 """
 
 from __future__ import annotations
@@ -91,6 +95,9 @@ def cli() -> None:
       hilcontact run paper-table1 --set facility.robot_delay=0.02 --out runs/delay-20ms
       hilcontact compare paper-table1 --set facility.robot_delay=0.02
       hilcontact show paper-table1 > my-scenario.toml
+      hilcontact sweep paper-table1 --grid facility.robot_delay=0.002:0.06:30 \\
+          --grid servicer.mass=100,300,600,1200 --compensators none,pida --seeds 2 --out sweeps/s1
+      hilcontact stability-map sweeps/s1
     """
 
 
@@ -249,6 +256,166 @@ def _report_comparison(console: Console, result: Comparison, folder: Path) -> No
     )
     files = ", ".join(sorted(p.name + ("/" if p.is_dir() else "") for p in folder.iterdir()))
     console.print(f"saved to {escape(str(folder))}/ ({escape(files)})", soft_wrap=True)
+
+
+@cli.command(name="sweep", short_help="Run a scenario over a grid of values, compensators and seeds.")
+@click.argument("scenario")
+@click.option(
+    "--grid",
+    "grids",
+    multiple=True,
+    metavar="KEY=SPEC",
+    help="A swept key: KEY=START:STOP:COUNT (both ends included) or KEY=A,B,C. Repeatable; "
+    "the grid is every combination.",
+)
+@click.option(
+    "--compensators",
+    "kinds",
+    metavar="LIST",
+    default=",".join(ALL_KINDS),
+    show_default=True,
+    help="Comma-separated compensator kinds to run at every grid point.",
+)
+@click.option("--seeds", default=1, show_default=True, type=int, help="Noise seeds per grid point.")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
+@click.option("--out", "out", metavar="DIR", required=True, help="Sweep folder (results.parquet, sweep.json).")
+@click.option("--resume", is_flag=True, help="Continue the sweep in --out, skipping its finished runs.")
+@click.option(
+    "--dask",
+    metavar="ADDRESS",
+    default=None,
+    help="Run on a Dask cluster: a scheduler address (tcp://host:8786) or 'local' (a LocalCluster).",
+)
+@click.option("--threads", type=int, default=None, help="Rust threads for a local sweep [default: one per core].")
+def sweep_command(
+    scenario: str,
+    grids: tuple[str, ...],
+    kinds: str,
+    seeds: int,
+    sets: tuple[str, ...],
+    out: str,
+    resume: bool,
+    dask: str | None,
+    threads: int | None,
+) -> None:
+    """Run SCENARIO at every point of the grid, with every compensator and seed.
+
+    Writes one row per run (swept values, compensator, seed, status, worst and mean CoV and
+    CoF, identification error, wall time) to DIR/results.parquet. Ctrl-C keeps the finished
+    rows; rerun with --resume to skip them.
+    """
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    from .sweep import plan_sweep, run_plan
+
+    if threads is not None and threads < 1:
+        _fail("--threads: expected a whole number >= 1", 2)
+    with _errors():
+        overrides = parse_set_options(sets)
+        plan = plan_sweep(scenario, list(grids), kinds, seeds, overrides)  # validate before anything runs
+        stderr = Console(stderr=True)
+        where = f"on Dask ({dask})" if dask else f"on {threads or 'all'} core(s)"
+        stderr.print(
+            f"{plan.size} runs: {len(plan.points)} grid point(s) x {len(plan.compensators)} compensator(s) "
+            f"x {len(plan.seeds)} seed(s), {where}",
+            soft_wrap=True,
+        )
+        columns = (
+            TextColumn("[bold]sweep"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("elapsed"),
+            TimeElapsedColumn(),
+            TextColumn("ETA"),
+            TimeRemainingColumn(),
+        )
+        try:
+            with Progress(*columns, console=stderr, transient=True) as bar:
+                task = bar.add_task("sweep", total=plan.size)
+                rows = run_plan(
+                    plan,
+                    out,
+                    resume=resume,
+                    dask=dask,
+                    threads=threads,
+                    progress=lambda done, total: bar.update(task, completed=done, total=total),
+                )
+        except KeyboardInterrupt:
+            from .sweep import load_results
+
+            try:
+                saved = len(load_results(out))
+            except HilContactError:
+                saved = 0
+            click.echo(
+                f"interrupted: {saved} finished run(s) saved in {out}/results.parquet; "
+                "rerun with --resume to continue",
+                err=True,
+            )
+            raise click.exceptions.Exit(130) from None
+    _report_sweep(Console(), rows, out)
+
+
+def _report_sweep(console: Console, rows: Any, out: str) -> None:
+    from .stability import faithful
+
+    table = Table(title=f"sweep: {len(rows)} runs")
+    for header in ("compensator", "runs", "ok", "diverged", "faithful", "median wall time (ms)"):
+        table.add_column(header, justify="right" if header != "compensator" else "left")
+    marks = faithful(rows)
+    for kind, group in rows.groupby("compensator", sort=False):
+        ok = int((group["status"] == "ok").sum())
+        table.add_row(
+            escape(str(kind)),
+            str(len(group)),
+            str(ok),
+            str(len(group) - ok),
+            f"{int(marks[group.index].sum())}",
+            _number(group["wall_time"].median(), ".2f", 1e3),
+        )
+    console.print(table)
+    console.print("faithful: ok, |CoV-1| <= 5 %, CoF <= 1.2 (see hilcontact stability-map)", soft_wrap=True)
+    console.print(f"saved to {escape(out)}/results.parquet", soft_wrap=True)
+
+
+@cli.command(name="stability-map", short_help="Map where each compensator stays faithful in a sweep.")
+@click.argument("sweep_dir", metavar="SWEEP_DIR")
+@click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: SWEEP_DIR].")
+@click.option("--cov-tolerance", default=0.05, show_default=True, type=float, help="Faithful: |CoV - 1| <= this.")
+@click.option("--cof-limit", default=1.2, show_default=True, type=float, help="Faithful: CoF <= this.")
+def stability_map_command(sweep_dir: str, out: str | None, cov_tolerance: float, cof_limit: float) -> None:
+    """Draw, per compensator, the (contact frequency, robot delay) region where every run is
+    faithful, heat maps of the worst CoV and CoF, and print the maximal faithful delay per
+    compensator and contact frequency.
+
+    Writes stability_map.png, worst_cov.png, worst_cof.png, max_faithful_delay.csv and
+    cells.csv into DIR.
+    """
+    from .stability import MAP_FILES, stability_map
+
+    with _errors():
+        if not Path(sweep_dir).is_dir():
+            raise ScenarioError(f"{sweep_dir}: not a sweep folder")
+        result = stability_map(sweep_dir, cov_tolerance=cov_tolerance, cof_limit=cof_limit)
+        folder = result.save(out if out is not None else sweep_dir)
+    best = result.max_faithful_delay()
+    table = Table(title=f"maximal faithful robot delay (ms): |CoV-1| <= {cov_tolerance:g}, CoF <= {cof_limit:g}")
+    table.add_column("contact frequency (Hz)", justify="right")
+    for kind in best.columns:
+        table.add_column(escape(str(kind)), justify="right")
+    for freq, row in best.iterrows():
+        table.add_row(_number(freq, ".2f"), *(_number(v, "g", 1e3) for v in row))
+    console = Console()
+    console.print(table)
+    console.print("- : not faithful even at the smallest swept delay", soft_wrap=True)
+    console.print(f"saved to {escape(str(folder))}/ ({', '.join(MAP_FILES)})", soft_wrap=True)
 
 
 @cli.command(name="presets")

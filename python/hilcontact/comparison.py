@@ -145,14 +145,6 @@ def comparison_scenarios(
     return scenarios
 
 
-def _finite(values: Iterable[Any]) -> list[float]:
-    out = []
-    for value in values:
-        if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
-            out.append(float(value))
-    return out
-
-
 def _nan(value: Any) -> float:
     if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
         return float(value)
@@ -186,8 +178,7 @@ class Comparison:
 
     def _stats(self, run: Run) -> dict[str, Any]:
         collisions = run.metrics.get("collisions") or []
-        covs = _finite(c.get("cov") for c in collisions)
-        cofs = _finite(c.get("cof") for c in collisions)
+        summary = run.metrics.get("summary") or {}  # the core's one definition of worst/mean
         identification = run.metrics.get("identification") or {}
         at = run.metrics.get("diverged_at")
         return {
@@ -195,9 +186,9 @@ class Comparison:
             "diverged_at": _nan(at),
             "collisions": len(collisions),
             "cov": [_nan(c.get("cov")) for c in collisions],
-            "mean_cov": float(np.mean(covs)) if covs else math.nan,
-            "worst_cov_error": max(abs(v - 1.0) for v in covs) if covs else math.nan,
-            "worst_cof": max(cofs, key=lambda v: abs(v - 1.0)) if cofs else math.nan,
+            "mean_cov": _nan(summary.get("mean_cov")),
+            "worst_cov_error": abs(_nan(summary.get("worst_cov")) - 1.0),
+            "worst_cof": _nan(summary.get("worst_cof")),
             "stiffness_error_pct": _nan(identification.get("stiffness_error")) * 100.0,
             "damping_error_Ns_mm": _nan(identification.get("damping_error")) * 1e-3,
         }

@@ -139,6 +139,47 @@ pub fn identification_error(
     })
 }
 
+/// A run in a few numbers: what a comparison table or a sweep row shows.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Summary {
+    /// Number of HIL collisions.
+    pub collisions: usize,
+    /// Mean CoV over the collisions that have one (NaN if none).
+    pub mean_cov: f64,
+    /// The CoV farthest from 1 (NaN if none).
+    pub worst_cov: f64,
+    /// Mean CoF over the collisions that have one (NaN if none).
+    pub mean_cof: f64,
+    /// The CoF farthest from 1 (NaN if none).
+    pub worst_cof: f64,
+}
+
+impl Summary {
+    /// The summary of compared collisions.
+    pub fn of(collisions: &[ComparedCollision]) -> Self {
+        let stats = |values: &mut dyn Iterator<Item = f64>| {
+            let (mut sum, mut n, mut worst) = (0.0, 0usize, f64::NAN);
+            for v in values.filter(|v| v.is_finite()) {
+                sum += v;
+                n += 1;
+                if !((worst - 1.0).abs() >= (v - 1.0).abs()) {
+                    worst = v;
+                }
+            }
+            (if n > 0 { sum / n as f64 } else { f64::NAN }, worst)
+        };
+        let (mean_cov, worst_cov) = stats(&mut collisions.iter().filter_map(|c| c.cov));
+        let (mean_cof, worst_cof) = stats(&mut collisions.iter().filter_map(|c| c.cof));
+        Summary {
+            collisions: collisions.len(),
+            mean_cov,
+            worst_cov,
+            mean_cof,
+            worst_cof,
+        }
+    }
+}
+
 /// Energy summary, J.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EnergySummary {
@@ -177,6 +218,8 @@ pub struct Metrics {
     pub reason: Option<String>,
     /// The HIL run's collisions, with CoV and CoF.
     pub collisions: Vec<ComparedCollision>,
+    /// Mean and worst CoV and CoF of `collisions`.
+    pub summary: Summary,
     /// The ideal reference's collisions.
     pub reference_collisions: Vec<Collision>,
     /// Identification error, when the compensator identifies the contact.
@@ -242,5 +285,32 @@ mod tests {
         let hil = compare_with_reference(&[mk(0.03, 120.0)], &[mk(0.02, 100.0)]);
         assert!((hil[0].cov.unwrap() - 1.5).abs() < 1e-12);
         assert!((hil[0].cof.unwrap() - 1.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn summary_takes_the_values_farthest_from_one() {
+        let mk = |cov: Option<f64>, cof: Option<f64>| ComparedCollision {
+            collision: Collision {
+                index: 1,
+                start: 0.0,
+                end: 1.0,
+                peak_force: 1.0,
+                rebound_speed: None,
+            },
+            cov,
+            cof,
+        };
+        let s = Summary::of(&[
+            mk(Some(1.02), Some(1.1)),
+            mk(Some(0.9), Some(1.3)),
+            mk(None, Some(0.6)),
+        ]);
+        assert_eq!(s.collisions, 3);
+        assert_eq!(s.worst_cov, 0.9);
+        assert_eq!(s.worst_cof, 0.6);
+        assert!((s.mean_cov - 0.96).abs() < 1e-12);
+        assert!((s.mean_cof - 1.0).abs() < 1e-12);
+        let empty = Summary::of(&[]);
+        assert!(empty.worst_cov.is_nan() && empty.mean_cof.is_nan() && empty.collisions == 0);
     }
 }

@@ -407,6 +407,7 @@ fn run(s: &Scenario, keep_rows: bool) -> Result<Runs> {
         ),
         _ => None,
     };
+    let collisions = metrics::compare_with_reference(&hil_collisions, &ref_collisions);
     let metrics = Metrics {
         scenario: s.name.clone(),
         compensator: s.compensator.kind().to_string(),
@@ -414,7 +415,8 @@ fn run(s: &Scenario, keep_rows: bool) -> Result<Runs> {
         diverged_at: (hil.status == Status::Diverged)
             .then(|| t.time.last().copied().unwrap_or(0.0)),
         reason: hil.reason.clone(),
-        collisions: metrics::compare_with_reference(&hil_collisions, &ref_collisions),
+        summary: metrics::Summary::of(&collisions),
+        collisions,
         reference_collisions: ref_collisions,
         identification,
         energy: EnergySummary {

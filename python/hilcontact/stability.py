@@ -1,0 +1,188 @@
+"""Stability maps of a sweep: where, in (contact frequency, robot delay), each compensator
+keeps the loop faithful.
+
+A run is *faithful* when it ran to the end (status ok), had at least one compared collision,
+its worst CoV is within ``cov_tolerance`` of 1 and its worst CoF is at most ``cof_limit``
+(defaults: |CoV − 1| ≤ 5 %, CoF ≤ 1.2). A cell (compensator, contact frequency, robot delay)
+is faithful when every run in it is: every seed and every value of any other swept key.
+The *maximal faithful delay* of a compensator at a frequency is the largest swept delay up to
+which every cell, from the smallest delay on, is faithful (NaN if the smallest is not).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import pandas as pd
+
+from .errors import HilContactError
+from .sweep import load_results
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+__all__ = ["StabilityMap", "faithful", "stability_map"]
+
+#: Files written by :meth:`StabilityMap.save`.
+MAP_FILES = ("stability_map.png", "worst_cov.png", "worst_cof.png", "max_faithful_delay.csv", "cells.csv")
+
+
+def faithful(rows: pd.DataFrame, cov_tolerance: float = 0.05, cof_limit: float = 1.2) -> pd.Series:
+    """Whether each run (row of a sweep) is faithful (see the module doc)."""
+    cov = rows["worst_cov"].astype(float)
+    cof = rows["worst_cof"].astype(float)
+    return (rows["status"] == "ok") & ((cov - 1.0).abs() <= cov_tolerance) & (cof <= cof_limit)
+
+
+@dataclass
+class StabilityMap:
+    """Per compensator and (contact frequency, robot delay) cell: faithful or not, and the
+    worst CoV and CoF over the cell's runs.
+
+    Attributes:
+        cells: one row per (compensator, contact_frequency, robot_delay): runs, faithful
+            (bool), worst_cov (the CoV farthest from 1), worst_cof (largest), diverged (runs).
+        cov_tolerance, cof_limit: the criterion.
+    """
+
+    cells: pd.DataFrame
+    cov_tolerance: float
+    cof_limit: float
+
+    @property
+    def compensators(self) -> list[str]:
+        return list(dict.fromkeys(self.cells["compensator"]))
+
+    def max_faithful_delay(self) -> pd.DataFrame:
+        """Rows: contact frequency (Hz); columns: compensators; values: the maximal faithful
+        robot delay (s), NaN where even the smallest swept delay is not faithful."""
+        out: dict[str, dict[float, float]] = {}
+        for (kind, freq), group in self.cells.groupby(["compensator", "contact_frequency"], sort=False):
+            best = math.nan
+            for _, cell in group.sort_values("robot_delay").iterrows():
+                if not cell["faithful"]:
+                    break
+                best = float(cell["robot_delay"])
+            out.setdefault(str(kind), {})[float(freq)] = best
+        frame = pd.DataFrame(out)
+        frame.index.name = "contact_frequency"
+        return frame.sort_index()[self.compensators]
+
+    def figures(self) -> dict[str, Figure]:
+        """``stability_map`` (faithful cells per compensator), ``worst_cov`` (|CoV − 1| heat
+        maps) and ``worst_cof`` (CoF heat maps): one panel per compensator, robot delay (ms)
+        across, contact frequency (Hz) up."""
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.colors import ListedColormap, LogNorm
+        from matplotlib.figure import Figure
+
+        kinds = self.compensators
+        delays = np.sort(self.cells["robot_delay"].unique())
+        freqs = np.sort(self.cells["contact_frequency"].unique())
+
+        def grid(kind: str, column: str) -> np.ndarray:
+            cells = self.cells[self.cells["compensator"] == kind]
+            table = cells.pivot_table(index="contact_frequency", columns="robot_delay", values=column, aggfunc="first")
+            return table.reindex(index=freqs, columns=delays).to_numpy(dtype=float)
+
+        def edges(values: np.ndarray) -> np.ndarray:
+            if len(values) == 1:
+                return np.array([values[0] - 0.5, values[0] + 0.5]) if values[0] else np.array([-0.5, 0.5])
+            mids = (values[1:] + values[:-1]) / 2
+            return np.concatenate([[values[0] - (mids[0] - values[0])], mids, [values[-1] + (values[-1] - mids[-1])]])
+
+        x, y = edges(delays * 1e3), edges(freqs)
+        criterion = f"|CoV−1| ≤ {self.cov_tolerance:g}, CoF ≤ {self.cof_limit:g} for every run"
+
+        def panels(title: str) -> tuple[Figure, list[Any]]:
+            cols = min(len(kinds), 3)
+            rows = math.ceil(len(kinds) / cols)
+            figure = Figure(figsize=(4.2 * cols + 1.0, 3.4 * rows + 0.6), layout="constrained")
+            FigureCanvasAgg(figure)
+            axes = [figure.add_subplot(rows, cols, i + 1) for i in range(len(kinds))]
+            figure.suptitle(title)
+            for ax, kind in zip(axes, kinds):
+                ax.set_title(kind)
+                ax.set_xlabel("robot delay (ms)")
+                ax.set_ylabel("contact frequency (Hz)")
+            return figure, axes
+
+        figures: dict[str, Figure] = {}
+        figure, axes = panels(f"Faithful region ({criterion})")
+        colours = ListedColormap(["#d9534f", "#5cb85c"])
+        for ax, kind in zip(axes, kinds):
+            ok = grid(kind, "faithful")
+            ax.pcolormesh(x, y, np.ma.masked_invalid(ok), cmap=colours, vmin=0, vmax=1, edgecolors="white", linewidth=0.3)
+        figures["stability_map"] = figure
+
+        figure, axes = panels("Worst |CoV − 1| per cell (log scale)")
+        for ax, kind in zip(axes, kinds):
+            error = np.abs(grid(kind, "worst_cov") - 1.0)
+            mesh = ax.pcolormesh(x, y, np.ma.masked_invalid(np.clip(error, 1e-4, None)), cmap="viridis",
+                                 norm=LogNorm(vmin=1e-4, vmax=max(1.0, float(np.nanmax(error)) if np.isfinite(error).any() else 1.0)))
+            if min(error.shape) > 1 and np.isfinite(error).any():
+                ax.contour(delays * 1e3, freqs, error, levels=[self.cov_tolerance], colors="white", linewidths=1.0)
+            figure.colorbar(mesh, ax=ax)
+        figures["worst_cov"] = figure
+
+        figure, axes = panels("Worst CoF per cell")
+        for ax, kind in zip(axes, kinds):
+            cof = grid(kind, "worst_cof")
+            mesh = ax.pcolormesh(x, y, np.ma.masked_invalid(cof), cmap="magma", vmin=1.0,
+                                 vmax=max(self.cof_limit * 1.5, float(np.nanmax(cof)) if np.isfinite(cof).any() else 2.0))
+            figure.colorbar(mesh, ax=ax)
+        figures["worst_cof"] = figure
+        return figures
+
+    def save(self, directory: str | os.PathLike[str]) -> Path:
+        """Write the figures (PNG), ``max_faithful_delay.csv`` and ``cells.csv`` into
+        ``directory``; returns it."""
+        from .plots import save_figures
+
+        folder = Path(directory)
+        folder.mkdir(parents=True, exist_ok=True)
+        save_figures(self.figures(), folder, dpi=110)
+        self.max_faithful_delay().to_csv(folder / "max_faithful_delay.csv")
+        self.cells.to_csv(folder / "cells.csv", index=False)
+        return folder
+
+
+def stability_map(
+    results: pd.DataFrame | str | os.PathLike[str], cov_tolerance: float = 0.05, cof_limit: float = 1.2
+) -> StabilityMap:
+    """The stability map of a sweep's rows (a DataFrame from :func:`hilcontact.sweep` or a
+    sweep folder)."""
+    rows = results if isinstance(results, pd.DataFrame) else load_results(results)
+    if rows.empty:
+        raise HilContactError("stability map: the sweep has no finished runs")
+    if not (cov_tolerance > 0 and cof_limit > 0):
+        raise HilContactError("stability map: the CoV tolerance and the CoF limit must be > 0")
+    usable = rows[np.isfinite(rows["contact_frequency"].astype(float))]
+    if usable.empty:
+        raise HilContactError(
+            "stability map: no run has a contact frequency (only linear contacts have one; "
+            "Hunt-Crossley sweeps cannot be mapped)"
+        )
+    usable = usable.assign(
+        faithful=faithful(usable, cov_tolerance, cof_limit),
+        cov_error=(usable["worst_cov"].astype(float) - 1.0).abs(),
+        diverged=usable["status"] != "ok",
+    )
+    keys = ["compensator", "contact_frequency", "robot_delay"]
+    grouped = usable.groupby(keys, sort=False)
+    cells = grouped.agg(
+        runs=("run_key", "size"), faithful=("faithful", "all"), worst_cof=("worst_cof", "max"),
+        diverged=("diverged", "sum"),
+    )
+    # the worst CoV of a cell: the run's CoV farthest from 1 (NaN if any run has none)
+    worst = usable.loc[usable["cov_error"].fillna(np.inf).groupby([usable[k] for k in keys], sort=False).idxmax()]
+    cells["worst_cov"] = worst.set_index(keys)["worst_cov"]
+    cells = cells.reset_index()[["compensator", "contact_frequency", "robot_delay", "runs", "faithful",
+                                 "worst_cov", "worst_cof", "diverged"]]
+    cells["diverged"] = cells["diverged"].astype(np.int64)
+    return StabilityMap(cells=cells, cov_tolerance=cov_tolerance, cof_limit=cof_limit)

@@ -1,0 +1,587 @@
+"""Parameter sweeps: a scenario run over a grid of values, compensators and noise seeds, in
+parallel (Rust threads, or a Dask cluster), one summary row per run.
+
+A sweep's folder holds:
+
+- ``sweep.json``: what was asked (the resolved base scenario, the grid, compensators, seeds);
+  ``--resume`` checks it so that a folder never mixes two different sweeps;
+- ``results.parquet``: one row per finished run (see :data:`RESULT_COLUMNS`);
+- ``parts/``: while the sweep runs, finished rows in small Parquet files, each written
+  atomically; they are merged into ``results.parquet`` at the end or on interruption, so an
+  interrupted sweep keeps every finished row and ``--resume`` skips them.
+
+Time series are never kept: a run is reduced to its summary in the core
+(``_core.simulate_batch``), so memory does not grow with the number of runs beyond one small
+row each.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+import time
+import tomllib
+import uuid
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .comparison import comparison_scenarios, parse_kinds
+from .errors import HilContactError, ScenarioError
+from .run import _core
+from .scenario import Scenario, load_scenario
+
+__all__ = [
+    "RESULT_COLUMNS",
+    "GridAxis",
+    "SweepPlan",
+    "contact_frequency",
+    "load_results",
+    "parse_grid",
+    "plan_sweep",
+    "run_plan",
+    "sweep",
+]
+
+RESULTS_FILE = "results.parquet"
+SPEC_FILE = "sweep.json"
+PARTS_DIR = "parts"
+
+#: Summary columns of a result row, after the swept keys (one column per ``--grid`` key,
+#: named by the key), in this order. ``run_key`` identifies the run (grid values, compensator,
+#: seed) for ``--resume``; ``point`` numbers the grid point (from 0); ``robot_delay`` (s) and
+#: ``contact_frequency`` (Hz, ``sqrt(k/μ)/2π`` of a linear contact, NaN for Hunt-Crossley) are
+#: there even when not swept. The rest is the core's summary (``_core.simulate_batch``):
+#: status ("ok"/"diverged"), diverged_at (s), collisions, reference_collisions, mean_cov,
+#: worst_cov and worst_cof (the values farthest from 1), mean_cof, stiffness_error
+#: (fraction), damping_error (N s/m), energy_ratio (final / reference final) and wall_time (s).
+RESULT_COLUMNS = [
+    "run_key",
+    "point",
+    "compensator",
+    "seed",
+    "robot_delay",
+    "contact_frequency",
+    "status",
+    "diverged_at",
+    "collisions",
+    "reference_collisions",
+    "mean_cov",
+    "worst_cov",
+    "mean_cof",
+    "worst_cof",
+    "stiffness_error",
+    "damping_error",
+    "energy_ratio",
+    "wall_time",
+]
+
+_CORE_COLUMNS = RESULT_COLUMNS[6:]
+
+
+# ---- the grid -----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GridAxis:
+    """One swept key and its values."""
+
+    key: str
+    values: tuple[Any, ...]
+
+
+def _tidy(value: float) -> float:
+    """A float from a range, rounded to 12 significant digits (``0.026``, not
+    ``0.026000000000000002``), so that delays stay whole control periods."""
+    return float(f"{value:.12g}")
+
+
+def _toml_value(text: str) -> Any:
+    try:
+        return tomllib.loads("v = " + text)["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def parse_grid(spec: str) -> GridAxis:
+    """Parse ``KEY=START:STOP:COUNT`` (COUNT values, both ends included) or ``KEY=A,B,C``
+    (a list; each item a TOML value or a plain string) or ``KEY=VALUE``.
+
+    Raises ScenarioError naming the key for a malformed spec.
+    """
+    if not isinstance(spec, str):
+        raise ScenarioError(f"--grid {spec!r}: expected KEY=START:STOP:COUNT or KEY=A,B,C")
+    key, sep, body = spec.partition("=")
+    key, body = key.strip(), body.strip()
+    if not sep or not key or not body:
+        raise ScenarioError(
+            f"--grid {spec!r}: expected KEY=START:STOP:COUNT or KEY=A,B,C, "
+            "e.g. --grid facility.robot_delay=0.002:0.06:30"
+        )
+    if ":" in body:
+        parts = [p.strip() for p in body.split(":")]
+        if len(parts) != 3:
+            raise ScenarioError(f"--grid {key}: range {body!r} must be START:STOP:COUNT, e.g. 0.002:0.06:30")
+        try:
+            start, stop = float(parts[0]), float(parts[1])
+        except ValueError:
+            raise ScenarioError(f"--grid {key}: range {body!r}: START and STOP must be numbers") from None
+        try:
+            count = int(parts[2])
+        except ValueError:
+            raise ScenarioError(f"--grid {key}: range {body!r}: COUNT must be a whole number") from None
+        if not (math.isfinite(start) and math.isfinite(stop)):
+            raise ScenarioError(f"--grid {key}: range {body!r}: START and STOP must be finite")
+        if count < 1:
+            raise ScenarioError(f"--grid {key}: range {body!r}: COUNT must be >= 1")
+        if count == 1 and start != stop:
+            raise ScenarioError(f"--grid {key}: range {body!r}: one value needs START == STOP")
+        values: tuple[Any, ...] = tuple(_tidy(v) for v in np.linspace(start, stop, count))
+    else:
+        items = [item.strip() for item in body.split(",")]
+        if any(not item for item in items):
+            raise ScenarioError(f"--grid {key}: list {body!r} has an empty item")
+        values = tuple(_toml_value(item) for item in items)
+    if len(set(map(repr, values))) != len(values):
+        raise ScenarioError(f"--grid {key}: {body!r} repeats a value")
+    return GridAxis(key=key, values=values)
+
+
+def _axes(grid: Mapping[str, Any] | Iterable[str | GridAxis] | None) -> list[GridAxis]:
+    """Grid axes from specs (``"key=..."``), GridAxis objects or a mapping key -> spec body
+    (``"0.002:0.06:30"``) or list of values."""
+    if grid is None:
+        return []
+    axes: list[GridAxis] = []
+    if isinstance(grid, Mapping):
+        for key, body in grid.items():
+            if isinstance(body, str):
+                axes.append(parse_grid(f"{key}={body}"))
+            elif isinstance(body, Iterable):
+                axes.append(GridAxis(key=str(key), values=tuple(body)))
+            else:
+                axes.append(GridAxis(key=str(key), values=(body,)))
+    else:
+        for item in grid:
+            axes.append(item if isinstance(item, GridAxis) else parse_grid(item))
+    keys = [a.key for a in axes]
+    for key in keys:
+        if keys.count(key) > 1:
+            raise ScenarioError(f"--grid {key}: given more than once")
+        if key.replace(" ", "") in ("compensator.kind", "facility.seed"):
+            raise ScenarioError(
+                f"--grid {key}: choose compensators with --compensators and seeds with --seeds"
+            )
+    for axis in axes:
+        if not axis.values:
+            raise ScenarioError(f"--grid {axis.key}: no values")
+    return axes
+
+
+def contact_frequency(scenario: Scenario) -> float:
+    """Undamped contact frequency of a linear contact, Hz: ``sqrt(k/μ) / 2π`` with the reduced
+    mass ``μ = m_s m_t / (m_s + m_t)``; NaN for a Hunt-Crossley contact."""
+    if scenario.contact.model != "linear":
+        return math.nan
+    ms, mt = scenario.servicer.mass, scenario.target.mass
+    mu = ms * mt / (ms + mt)
+    return math.sqrt(scenario.contact.stiffness / mu) / (2.0 * math.pi)
+
+
+# ---- the plan -----------------------------------------------------------------------------
+
+
+@dataclass
+class SweepPlan:
+    """Every run of a sweep, validated before anything runs.
+
+    Attributes:
+        base: the resolved base scenario (``--set`` applied), as a dict.
+        axes: the swept keys and their values.
+        compensators: the compensator kinds.
+        seeds: the noise seeds (``facility.seed`` values).
+        scenarios: (grid point, compensator) -> resolved scenario dict (seed not yet set).
+        points: the grid points (key -> value), numbered from 0.
+    """
+
+    base: dict[str, Any]
+    axes: list[GridAxis]
+    compensators: list[str]
+    seeds: list[int]
+    scenarios: dict[tuple[int, str], dict[str, Any]]
+    points: list[dict[str, Any]]
+    frequencies: dict[int, float]
+
+    @property
+    def size(self) -> int:
+        """Number of runs."""
+        return len(self.points) * len(self.compensators) * len(self.seeds)
+
+    def spec(self) -> dict[str, Any]:
+        """What ``sweep.json`` records."""
+        return {
+            "scenario": self.base,
+            "grid": [[axis.key, list(axis.values)] for axis in self.axes],
+            "compensators": self.compensators,
+            "seeds": self.seeds,
+        }
+
+    def runs(self) -> Iterator[tuple[str, int, str, int]]:
+        """``(run_key, point, compensator, seed)`` of every run, grid point by grid point."""
+        for point, values in enumerate(self.points):
+            for kind in self.compensators:
+                for seed in self.seeds:
+                    yield run_key(values, kind, seed), point, kind, seed
+
+    def scenario_json(self, point: int, kind: str, seed: int) -> str:
+        """The resolved scenario of one run, as JSON for the core."""
+        data = self.scenarios[(point, kind)]
+        facility = dict(data["facility"], seed=seed)
+        return json.dumps({**data, "facility": facility})
+
+
+def run_key(values: Mapping[str, Any], kind: str, seed: int) -> str:
+    """The identity of a run: its grid values, compensator and seed (stable text)."""
+    return json.dumps({"grid": dict(values), "compensator": kind, "seed": seed}, sort_keys=True)
+
+
+def plan_sweep(
+    scenario: Any,
+    grid: Mapping[str, Any] | Iterable[str | GridAxis] | None = None,
+    compensators: str | Iterable[str] | None = None,
+    seeds: int = 1,
+    overrides: Mapping[str, Any] | None = None,
+) -> SweepPlan:
+    """Resolve and validate every run of a sweep (see :func:`sweep` for the arguments).
+
+    Raises ScenarioError naming the key and value for a bad grid, a bad override or a grid
+    point that is not a valid scenario.
+    """
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
+        raise ScenarioError(f"--seeds: expected a whole number >= 1, got {seeds!r}")
+    axes = _axes(grid)
+    kinds = parse_kinds(compensators)
+    base_scenario = load_scenario(scenario, overrides)
+    base = base_scenario.to_dict()
+    # each value alone first, so that a bad value is reported with its key
+    for axis in axes:
+        for value in axis.values:
+            try:
+                load_scenario(base, {axis.key: value})
+            except ScenarioError as exc:
+                raise ScenarioError(f"--grid {axis.key}={value!r}: {exc}") from None
+    points = [dict(zip([a.key for a in axes], combo)) for combo in itertools.product(*[a.values for a in axes])]
+    scenarios: dict[tuple[int, str], dict[str, Any]] = {}
+    frequencies: dict[int, float] = {}
+    for point, values in enumerate(points):
+        try:
+            resolved = comparison_scenarios(base, kinds, values)
+        except ScenarioError as exc:
+            shown = ", ".join(f"{k}={v!r}" for k, v in values.items())
+            raise ScenarioError(f"--grid point {shown}: {exc}") from None
+        for kind, s in resolved.items():
+            scenarios[(point, kind)] = s.to_dict()
+        frequencies[point] = contact_frequency(next(iter(resolved.values())))
+    first_seed = int(base["facility"].get("seed", 1))
+    return SweepPlan(
+        base=base,
+        axes=axes,
+        compensators=kinds,
+        seeds=[first_seed + i for i in range(seeds)],
+        scenarios=scenarios,
+        points=points,
+        frequencies=frequencies,
+    )
+
+
+# ---- results on disk ----------------------------------------------------------------------
+
+
+def _write_parquet_atomically(frame: pd.DataFrame, path: Path) -> None:
+    staging = path.with_name(f".{path.name}.tmp-{uuid.uuid4().hex[:12]}")
+    try:
+        frame.to_parquet(staging, engine="pyarrow", index=False)
+        os.replace(staging, path)
+    finally:
+        if staging.exists():
+            staging.unlink()
+
+
+def load_results(directory: str | os.PathLike[str]) -> pd.DataFrame:
+    """Every finished row of a sweep folder (``results.parquet`` and any unmerged parts)."""
+    folder = Path(directory)
+    files = ([folder / RESULTS_FILE] if (folder / RESULTS_FILE).is_file() else []) + sorted(
+        (folder / PARTS_DIR).glob("part-*.parquet") if (folder / PARTS_DIR).is_dir() else []
+    )
+    if not files:
+        raise HilContactError(f"{folder}: no sweep results ({RESULTS_FILE}) here")
+    frames = [pd.read_parquet(f, engine="pyarrow") for f in files]
+    frame = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
+    return frame.drop_duplicates(subset="run_key", keep="first").reset_index(drop=True)
+
+
+def _merge(folder: Path, order: Sequence[str]) -> pd.DataFrame | None:
+    """Merge ``results.parquet`` and the parts into ``results.parquet`` (rows in plan order),
+    then remove the parts. Returns the merged rows (None if there are none)."""
+    parts = sorted((folder / PARTS_DIR).glob("part-*.parquet")) if (folder / PARTS_DIR).is_dir() else []
+    if not parts and not (folder / RESULTS_FILE).is_file():
+        return None
+    frame = load_results(folder)
+    rank = {key: i for i, key in enumerate(order)}
+    frame = frame.assign(_rank=frame["run_key"].map(rank)).sort_values("_rank", kind="stable").drop(columns="_rank")
+    frame = frame.reset_index(drop=True)
+    _write_parquet_atomically(frame, folder / RESULTS_FILE)
+    for part in parts:
+        part.unlink()
+    return frame
+
+
+# ---- running ------------------------------------------------------------------------------
+
+
+#: Progress callback: (runs done, runs in total) — including those skipped by ``resume``.
+Progress = Callable[[int, int], None]
+
+
+def _run_chunk(scenarios: list[str], threads: int | None) -> dict[str, Any]:
+    """Run a chunk of scenarios in the core (the task a Dask worker runs)."""
+    from . import _core as core
+
+    return dict(core.simulate_batch(scenarios, threads))
+
+
+def _rows(plan: SweepPlan, chunk: list[tuple[str, int, str, int]], columns: Mapping[str, Any]) -> pd.DataFrame:
+    data: dict[str, Any] = {
+        "run_key": [r[0] for r in chunk],
+        "point": np.array([r[1] for r in chunk], dtype=np.int64),
+    }
+    for axis in plan.axes:
+        data[axis.key] = [plan.points[r[1]][axis.key] for r in chunk]
+    data["compensator"] = [r[2] for r in chunk]
+    data["seed"] = np.array([r[3] for r in chunk], dtype=np.int64)
+    data["robot_delay"] = [float(plan.scenarios[(r[1], r[2])]["facility"]["robot_delay"]) for r in chunk]
+    data["contact_frequency"] = [plan.frequencies[r[1]] for r in chunk]
+    for name in _CORE_COLUMNS:
+        values = columns[name]
+        data[name] = list(values) if name == "status" else np.asarray(values, dtype=np.float64)
+    frame = pd.DataFrame(data)
+    for name in ("collisions", "reference_collisions"):
+        frame[name] = frame[name].astype(np.int64)
+    return frame
+
+
+def _chunks(items: list[Any], size: int) -> Iterator[list[Any]]:
+    for start in range(0, len(items), size):
+        yield items[start : start + size]
+
+
+def _prepare_folder(folder: Path, plan: SweepPlan, resume: bool) -> set[str]:
+    """Create or check the sweep folder; returns the keys of the runs already done."""
+    spec_path = folder / SPEC_FILE
+    if folder.exists() and not folder.is_dir():
+        raise ScenarioError(f"--out {folder}: exists and is not a directory")
+    has_results = (folder / RESULTS_FILE).is_file() or any((folder / PARTS_DIR).glob("part-*.parquet"))
+    if resume:
+        if spec_path.is_file():
+            recorded = json.loads(spec_path.read_text(encoding="utf-8"))
+            wanted = json.loads(json.dumps(plan.spec()))
+            for field in ("scenario", "grid", "compensators", "seeds"):
+                if recorded.get(field) != wanted.get(field):
+                    raise ScenarioError(
+                        f"--resume {folder}: the folder holds a sweep with other {field}; "
+                        "resume it with the same scenario, --set, --grid, --compensators and --seeds, "
+                        "or choose another --out"
+                    )
+        elif has_results:
+            raise ScenarioError(f"--resume {folder}: results without {SPEC_FILE}; choose another --out")
+    elif has_results:
+        raise ScenarioError(
+            f"--out {folder}: already holds sweep results; add --resume to continue that sweep "
+            "(its finished runs are skipped), or choose another --out"
+        )
+    (folder / PARTS_DIR).mkdir(parents=True, exist_ok=True)
+    spec_path.write_text(json.dumps(plan.spec(), indent=1) + "\n", encoding="utf-8")
+    if not has_results:
+        return set()
+    return set(load_results(folder)["run_key"])
+
+
+def _dask_client(address: str) -> Any:
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:
+        raise HilContactError(
+            "--dask needs dask.distributed: pip install 'hilcontact[dask]' (or dask distributed)"
+        ) from None
+    if address == "local":
+        cluster = LocalCluster(n_workers=os.cpu_count() or 1, threads_per_worker=1, dashboard_address=None)
+        return Client(cluster)
+    try:
+        return Client(address, timeout="20s")
+    except OSError as exc:
+        raise HilContactError(f"--dask {address}: cannot reach the scheduler: {exc}") from None
+
+
+def _execute(
+    plan: SweepPlan,
+    pending: list[tuple[str, int, str, int]],
+    emit: Callable[[pd.DataFrame], None],
+    threads: int | None,
+    chunk_size: int | None,
+    dask: str | Any | None,
+) -> None:
+    """Run the pending runs chunk by chunk, locally or on Dask, handing each chunk's rows to
+    ``emit`` as it finishes."""
+    if dask is None:
+        size = chunk_size or max(8, 16 * (threads or os.cpu_count() or 1))
+        for chunk in _chunks(pending, size):
+            columns = _run_chunk([plan.scenario_json(p, k, s) for _, p, k, s in chunk], threads)
+            emit(_rows(plan, chunk, columns))
+        return
+    from dask.distributed import as_completed
+
+    client = _dask_client(dask) if isinstance(dask, str) else dask
+    try:
+        size = chunk_size or 200
+        window = 2 * max(1, sum(client.nthreads().values()))
+        chunks = iter(_chunks(pending, size))
+        running: dict[Any, list[tuple[str, int, str, int]]] = {}
+
+        def submit() -> bool:
+            chunk = next(chunks, None)
+            if chunk is None:
+                return False
+            jsons = [plan.scenario_json(p, k, s) for _, p, k, s in chunk]
+            running[client.submit(_run_chunk, jsons, 1, pure=False)] = chunk
+            return True
+
+        for _ in range(window):
+            if not submit():
+                break
+        done = as_completed(list(running))
+        for future in done:
+            chunk = running.pop(future)
+            emit(_rows(plan, chunk, future.result()))
+            if submit():
+                done.add(next(reversed(running)))
+    finally:
+        if isinstance(dask, str):
+            cluster = getattr(client, "cluster", None)
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+def sweep(
+    scenario: Any,
+    grid: Mapping[str, Any] | Iterable[str | GridAxis] | None = None,
+    compensators: str | Iterable[str] | None = None,
+    seeds: int = 1,
+    out: str | os.PathLike[str] | None = None,
+    *,
+    overrides: Mapping[str, Any] | None = None,
+    resume: bool = False,
+    dask: str | Any | None = None,
+    threads: int | None = None,
+    chunk_size: int | None = None,
+    progress: Progress | None = None,
+    flush_seconds: float = 5.0,
+) -> pd.DataFrame:
+    """Run a scenario over a grid, compensators and seeds; one summary row per run.
+
+    Args:
+        scenario: preset name, TOML path, dict or :class:`Scenario` (the base).
+        grid: the swept keys: specs ``["facility.robot_delay=0.002:0.06:30",
+            "servicer.mass=100,300"]``, or a mapping ``{"facility.robot_delay": "0.002:0.06:30",
+            "servicer.mass": [100, 300]}``. A range ``START:STOP:COUNT`` includes both ends.
+        compensators: kinds (comma-separated or a list; default all).
+        seeds: noise seeds per grid point: ``facility.seed``, ``facility.seed + 1``, ...
+        out: folder for ``results.parquet`` (kept up to date as runs finish); None keeps the
+            rows in memory only.
+        overrides: ``--set`` values applied to the base scenario.
+        resume: skip the runs already in ``out`` (the same sweep, checked against
+            ``sweep.json``).
+        dask: None (local threads), ``"local"`` (a LocalCluster, one worker per core), a
+            scheduler address (``"tcp://host:8786"``) or a ``dask.distributed.Client``.
+        threads: Rust threads for a local sweep (default: one per core).
+        chunk_size: runs per core call (local) or per Dask task (default 16 per thread, 200).
+        progress: called with (runs done, total) after each chunk.
+        flush_seconds: how often finished rows are written to ``out``.
+
+    Returns the rows (see :data:`RESULT_COLUMNS`; one column per swept key after ``point``),
+    in grid order. Identical inputs give identical rows (but for ``wall_time``), locally or
+    on Dask. Raises ScenarioError for bad input before anything runs; on KeyboardInterrupt the
+    finished rows are in ``out`` before the exception propagates.
+    """
+    return run_plan(
+        plan_sweep(scenario, grid, compensators, seeds, overrides),
+        out,
+        resume=resume,
+        dask=dask,
+        threads=threads,
+        chunk_size=chunk_size,
+        progress=progress,
+        flush_seconds=flush_seconds,
+    )
+
+
+def run_plan(
+    plan: SweepPlan,
+    out: str | os.PathLike[str] | None = None,
+    *,
+    resume: bool = False,
+    dask: str | Any | None = None,
+    threads: int | None = None,
+    chunk_size: int | None = None,
+    progress: Progress | None = None,
+    flush_seconds: float = 5.0,
+) -> pd.DataFrame:
+    """Run a validated :class:`SweepPlan` (see :func:`sweep` for the arguments)."""
+    _core()  # fail early if the extension is missing
+    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+        raise ScenarioError(f"threads: expected a whole number >= 1, got {threads!r}")
+    everything = list(plan.runs())
+    order = [r[0] for r in everything]
+    folder = Path(out) if out is not None else None
+    done: set[str] = _prepare_folder(folder, plan, resume) if folder is not None else set()
+    pending = [r for r in everything if r[0] not in done]
+    finished = len(everything) - len(pending)
+    kept: list[pd.DataFrame] = []  # rows when there is no folder
+    buffer: list[pd.DataFrame] = []
+    last_flush = time.monotonic()
+
+    def flush() -> None:
+        nonlocal last_flush
+        if folder is not None and buffer:
+            frame = pd.concat(buffer, ignore_index=True)
+            _write_parquet_atomically(frame, folder / PARTS_DIR / f"part-{time.time_ns():020d}.parquet")
+            buffer.clear()
+        last_flush = time.monotonic()
+
+    def emit(rows: pd.DataFrame) -> None:
+        nonlocal finished
+        finished += len(rows)
+        (buffer if folder is not None else kept).append(rows)
+        if folder is not None and time.monotonic() - last_flush >= flush_seconds:
+            flush()
+        if progress is not None:
+            progress(finished, len(everything))
+
+    if progress is not None:
+        progress(finished, len(everything))
+    try:
+        _execute(plan, pending, emit, threads, chunk_size, dask)
+    finally:
+        if folder is not None:
+            flush()
+            _merge(folder, order)
+    if folder is not None:
+        return load_results(folder)
+    frame = pd.concat(kept, ignore_index=True) if kept else _rows(plan, [], {c: [] for c in _CORE_COLUMNS})
+    return frame
