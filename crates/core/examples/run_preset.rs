@@ -1,7 +1,8 @@
 //! Runs a preset scenario file and prints its collisions:
 //! `cargo run --release --example run_preset -- python/hilcontact/scenarios/paper-table1.toml [key=value ...]`
 //! with keys `robot_delay`, `sensor_delay`, `noise` (N), `seed`, `kind` (compensator), `mode` (align|lead),
-//! `observer` (work|paper), `repeat` (runs, for profiling: `perf record -g` on this example).
+//! `observer` (work|paper), `repeat` (more runs, metrics only as a sweep runs them, for profiling: `perf record -g`
+//! on this example).
 
 use hilcontact_core::compensator::{
     CompensatorConfig, DelayMode, ModelParams, ObserverMode, TdpaParams,
@@ -61,7 +62,8 @@ fn main() {
     let start = std::time::Instant::now();
     let out = hilcontact_core::simulate(&s).expect("simulate");
     for _ in 1..repeat {
-        std::hint::black_box(hilcontact_core::simulate(&s).expect("simulate"));
+        // as a sweep runs it: summary only, no time series
+        std::hint::black_box(hilcontact_core::simulate_metrics(&s).expect("simulate"));
     }
     let elapsed = start.elapsed() / repeat as u32;
     let m = &out.metrics;

@@ -84,9 +84,16 @@ impl VirtualDynamics {
     /// Runs the compensator on a measurement; the applied wrench is returned in the sensor's
     /// convention (`t` frame inside [`CompensatorOutput`]).
     pub fn compensate(&mut self, m: &Measurement) -> CompensatorOutput {
-        let desired = self.command;
+        let input = self.input(m);
+        self.compensator.step(&input)
+    }
+
+    /// What the compensator sees of a measurement at this tick: the wrench turned into `t`,
+    /// the actual rod tip (robot) and the desired one (virtual dynamics).
+    pub fn input(&self, m: &Measurement) -> CompensatorInput {
+        let desired = &self.command;
         let rod = &self.system.rod_tip;
-        let input = CompensatorInput {
+        CompensatorInput {
             measured: FrameWrench {
                 force: self.sensor_orientation * m.force,
                 moment: self.sensor_orientation * m.moment,
@@ -95,8 +102,7 @@ impl VirtualDynamics {
             tip_velocity_actual: m.actual.point_velocity(rod),
             tip_position_desired: desired.point(rod),
             tip_velocity_desired: desired.point_velocity(rod),
-        };
-        self.compensator.step(&input)
+        }
     }
 
     /// Advances the virtual dynamics one period under the compensator's output: its velocity

@@ -162,7 +162,7 @@ impl Summary {
             for v in values.filter(|v| v.is_finite()) {
                 sum += v;
                 n += 1;
-                if !((worst - 1.0).abs() >= (v - 1.0).abs()) {
+                if worst.is_nan() || (v - 1.0).abs() > (worst - 1.0).abs() {
                     worst = v;
                 }
             }
