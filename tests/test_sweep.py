@@ -275,3 +275,18 @@ def test_sweep_cli_errors_exit_2_and_write_nothing(core, tmp_path):
     assert not out.exists()
     result = runner.invoke(cli, ["stability-map", str(tmp_path / "nowhere")])
     assert result.exit_code == 2 and "not a sweep folder" in result.output
+
+
+def test_sweep_cli_on_a_local_dask_cluster_matches_threads(core, tmp_path):
+    pytest.importorskip("dask.distributed")
+    runner = CliRunner()
+    common = ["sweep", "paper-table1", "--grid", "facility.robot_delay=0.01,0.02", "--compensators", "none,pida",
+              "--seeds", "2", "--set", "simulation.duration=2", "--set", "facility.sensor_noise=0.2"]
+    result = runner.invoke(cli, [*common, "--out", str(tmp_path / "threads")])
+    assert result.exit_code == 0, result.output
+    result = runner.invoke(cli, [*common, "--out", str(tmp_path / "dask"), "--dask", "local"])
+    assert result.exit_code == 0, result.output
+    threads = pd.read_parquet(tmp_path / "threads" / "results.parquet")
+    dask = pd.read_parquet(tmp_path / "dask" / "results.parquet")
+    assert len(dask) == 8
+    pd.testing.assert_frame_equal(_without_time(threads), _without_time(dask))
