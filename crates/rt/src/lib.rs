@@ -17,9 +17,16 @@
 pub mod clock;
 pub mod egm;
 pub mod egm_proto;
+pub mod emulator;
 pub mod error;
+pub mod feedback;
 pub mod mapping;
 pub mod netftapi;
 pub mod rdt;
+pub mod report;
+pub mod runtime;
+pub mod safety;
 
+pub use emulator::{EmulatorOptions, FacilityHandle};
 pub use error::{Result, RtError};
+pub use runtime::{HilHandle, RuntimeOptions};
