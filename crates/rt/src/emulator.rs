@@ -381,7 +381,7 @@ impl Emulator {
         if k < self.sensor_silent_from {
             self.send_record(&reading);
         }
-        if k % self.egm_every == 0 && k < self.robot_silent_from {
+        if k.is_multiple_of(self.egm_every) && k < self.robot_silent_from {
             let actual = self.mapping.to_egm(&m.actual).pose;
             let time_us = k * self.period_ns / 1000;
             self.egm_seqno = self.egm_seqno.wrapping_add(1);

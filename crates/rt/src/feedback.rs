@@ -70,7 +70,7 @@ impl FeedbackEstimator {
         let f0 = self.fed[0]?;
         let rate = |a: &Fed, b: &Fed| -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
             let mut dt = a.robot_time - b.robot_time;
-            if !(dt > 1e-5) {
+            if dt.is_nan() || dt <= 1e-5 {
                 dt = (a.local_ns.saturating_sub(b.local_ns)) as f64 * 1e-9;
             }
             (dt > 1e-5).then(|| ((a.position - b.position) / dt, (a.orientation * b.orientation.inverse()).scaled_axis() / dt, dt))

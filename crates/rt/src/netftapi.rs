@@ -83,7 +83,7 @@ pub fn fetch_counts(host: &str, port: u16, timeout: Duration) -> Result<CountsPe
     let text = String::from_utf8_lossy(&response);
     let (head, body) = text.split_once("\r\n\r\n").unwrap_or((&text, ""));
     let status = head.lines().next().unwrap_or("");
-    if !status.split_whitespace().nth(1).is_some_and(|code| code == "200") {
+    if status.split_whitespace().nth(1).is_none_or(|code| code != "200") {
         return Err(RtError::Protocol(format!("{what}: HTTP status {status:?}")));
     }
     parse_counts(body)

@@ -689,10 +689,6 @@ impl Loop {
                     continue;
                 }
             };
-            if record.status != 0 {
-                self.sensor.invalid += 1;
-                continue;
-            }
             match self.rdt_seq.check(record.rdt_sequence) {
                 SequenceVerdict::Stale => {
                     self.sensor.stale += 1;
@@ -700,6 +696,11 @@ impl Loop {
                 }
                 SequenceVerdict::Gap(n) => self.sensor.lost += n as u64,
                 SequenceVerdict::First | SequenceVerdict::Next => {}
+            }
+            // a record with an error status arrived (not lost) but its values are not used
+            if record.status != 0 {
+                self.sensor.invalid += 1;
+                continue;
             }
             let (f, m) = self.counts.to_wrench(&record.counts);
             self.force = Vector3::from(f);
@@ -819,7 +820,7 @@ impl Loop {
             return Some(stop);
         }
         let energy = self.virt.energy();
-        if !(energy <= self.energy_bound) {
+        if energy.is_nan() || energy > self.energy_bound {
             return Some(StopEvent { kind: StopKind::Diverged, time, value: energy, limit: self.energy_bound });
         }
         let target = self.mapping.to_egm(&command);

@@ -151,10 +151,10 @@ impl StopEvent {
 /// Checks the wrench limits (magnitudes of the measured force N and moment N·m).
 pub fn check_wrench(limits: &SafetyLimits, force: &Vector3<f64>, moment: &Vector3<f64>, time: f64) -> Option<StopEvent> {
     let (f, m) = (force.norm(), moment.norm());
-    if !(f <= limits.force_limit) {
+    if f.is_nan() || f > limits.force_limit {
         return Some(StopEvent { kind: StopKind::ForceLimit, time, value: f, limit: limits.force_limit });
     }
-    if !(m <= limits.moment_limit) {
+    if m.is_nan() || m > limits.moment_limit {
         return Some(StopEvent { kind: StopKind::MomentLimit, time, value: m, limit: limits.moment_limit });
     }
     None

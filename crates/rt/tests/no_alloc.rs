@@ -62,6 +62,6 @@ fn loop_writer_and_emulator_do_not_allocate() {
     drop(facility);
     assert_eq!(out.metrics["status"], "ok", "{}", out.metrics["reason"]);
     assert!(ticks > 1500, "the loop ran only {ticks} ticks");
-    assert!(out.metrics["collisions"].as_array().unwrap().len() >= 1);
+    assert!(!out.metrics["collisions"].as_array().unwrap().is_empty());
     assert_eq!(counted, 0, "{counted} allocations while running");
 }
