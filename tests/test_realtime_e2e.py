@@ -129,6 +129,33 @@ def test_sensor_watchdog_stops_the_run_when_the_sensor_goes_silent(core, tmp_pat
     assert series["sensor_age"].iloc[-1] > 0.05 and series["sensor_age"].iloc[:-60].max() < 0.01
 
 
+def test_ctrl_c_stops_cleanly_and_keeps_what_was_recorded(core, tmp_path):
+    import time
+
+    out = tmp_path / "rt-ctrl-c"
+    with facility_process(tmp_path) as ports:
+        cmd = [
+            sys.executable, "-m", "hilcontact", "hil", "paper-table1", "--set", ROBOT_DELAY,
+            "--set", "compensator.kind=pida", "--set", "simulation.duration=20",
+            "--sensor", "127.0.0.1", "--sensor-port", ports["sensor"], "--http-port", ports["http"],
+            "--egm-port", ports["egm"], "--egm-bind", "127.0.0.1", "--out", str(out), "--no-plots",
+        ]
+        process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(4.0)
+        process.send_signal(signal.SIGINT)
+        stdout, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130, stderr + stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    stop = metrics["realtime"]["stop"]
+    assert metrics["status"] == "interrupted" and stop["kind"] == "user" and stop["exit_code"] == 130
+    assert 1.0 < stop["time"] < 4.0
+    series = pd.read_parquet(out / "timeseries.parquet")
+    # every tick up to the stop is in the file
+    assert len(series) == metrics["realtime"]["samples"] == round(stop["time"] / 0.001) + 1
+    assert series["time"].diff().iloc[1:].round(9).eq(0.001).all()
+    assert metrics["realtime"]["samples_dropped"] == 0
+
+
 def test_hil_without_a_facility_fails_fast(core, tmp_path):
     ports = {"sensor": str(free_port()), "http": str(free_port(socket.SOCK_STREAM)), "egm": str(free_port())}
     cmd = [

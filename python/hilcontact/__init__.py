@@ -14,6 +14,10 @@ Quick start::
     run.save("runs/paper-table1-20ms")
     hc.compare("paper-table1", overrides={"facility.robot_delay": 0.02}).summary
 
+Real time (see ``hilcontact.realtime``): ``hc.start_facility(scenario, options)`` runs the
+emulated facility (ATI Net F/T RDT sensor, ABB EGM robot) and ``hc.run_hil(scenario, options)``
+runs the HIL loop against it or against a real facility.
+
 Conventions: SI units (m, s, N, N m, kg, rad); points and normals of the collision frame in
 the target mockup frame ``t``; quaternions ``[w, x, y, z]``.
 """
@@ -28,13 +32,17 @@ except _metadata.PackageNotFoundError:  # pragma: no cover - running from a sour
     __version__ = "0+unknown"
 
 from .comparison import Comparison, compare
-from .errors import HilContactError, ScenarioError
+from .errors import HilContactError, RealtimeError, RealtimeOptionError, ScenarioError
+from .realtime import Facility, run_hil, start_facility
 from .run import Run, simulate
 from .scenario import Scenario, apply_overrides, load_scenario, presets
 
 __all__ = [
     "Comparison",
+    "Facility",
     "HilContactError",
+    "RealtimeError",
+    "RealtimeOptionError",
     "Run",
     "Scenario",
     "ScenarioError",
@@ -43,5 +51,7 @@ __all__ = [
     "compare",
     "load_scenario",
     "presets",
+    "run_hil",
     "simulate",
+    "start_facility",
 ]
