@@ -14,6 +14,8 @@
 //!
 //! The numerics stay in `hilcontact-core`; this crate owns the I/O, the clocks and the threads.
 
+#![warn(missing_docs)]
+
 pub mod clock;
 pub mod egm;
 pub mod egm_proto;
