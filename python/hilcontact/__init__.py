@@ -16,6 +16,10 @@ Quick start::
     rows = hc.sweep("paper-table1", {"facility.robot_delay": "0.002:0.06:30"}, "none,pida")
     hc.stability_map(rows).max_faithful_delay()
 
+Real time (see ``hilcontact.realtime``): ``hc.start_facility(scenario, options)`` runs the
+emulated facility (ATI Net F/T RDT sensor, ABB EGM robot) and ``hc.run_hil(scenario, options)``
+runs the HIL loop against it or against a real facility.
+
 Conventions: SI units (m, s, N, N m, kg, rad); points and normals of the collision frame in
 the target mockup frame ``t``; quaternions ``[w, x, y, z]``.
 """
@@ -30,7 +34,8 @@ except _metadata.PackageNotFoundError:  # pragma: no cover - running from a sour
     __version__ = "0+unknown"
 
 from .comparison import Comparison, compare
-from .errors import HilContactError, ScenarioError
+from .errors import HilContactError, RealtimeError, RealtimeOptionError, ScenarioError
+from .realtime import Facility, run_hil, start_facility
 from .run import Run, simulate
 from .scenario import Scenario, apply_overrides, load_scenario, presets
 from .stability import StabilityMap, stability_map
@@ -38,7 +43,10 @@ from .sweep import load_results, sweep
 
 __all__ = [
     "Comparison",
+    "Facility",
     "HilContactError",
+    "RealtimeError",
+    "RealtimeOptionError",
     "Run",
     "Scenario",
     "ScenarioError",
@@ -49,7 +57,9 @@ __all__ = [
     "load_results",
     "load_scenario",
     "presets",
+    "run_hil",
     "simulate",
     "stability_map",
+    "start_facility",
     "sweep",
 ]

@@ -52,3 +52,67 @@ def version() -> str:
 def compensator_defaults() -> str:
     """The core's default parameters of every compensator kind, as JSON text:
     ``{kind: {"kind": kind, parameter: default, ...}}``."""
+
+
+class HilHandle:
+    """A running real-time HIL loop (from :func:`start_hil`). The loop runs in Rust threads."""
+
+    def status(self) -> dict[str, Any]:
+        """Live status: ``phase`` (connecting/running/holding/finished), ``tick``, ``time`` (s),
+        ``force`` (measured, N), ``energy`` (J), ``max_latency_us``, ``overruns``,
+        ``sensor_lost``, ``sensor_late``, ``robot_lost``, ``robot_late``, ``dropped``,
+        ``stop`` (None or the stop kind, e.g. ``"force-limit"``)."""
+
+    def stop(self) -> None:
+        """Ask the loop to stop: it commands the robot to hold, stops the sensor's streaming
+        and flushes its log. Returns at once."""
+
+    def is_finished(self) -> bool:
+        """Whether the loop has ended."""
+
+    def wait(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` s with the GIL released; return whether the loop has ended."""
+
+    def finish(self) -> dict[str, Any]:
+        """Wait for the loop and its writer; return ``{"timeseries": {column: ndarray},
+        "reference": {column: ndarray}, "metrics": str (JSON, with a "realtime" section),
+        "exit_code": int}``. Call once."""
+
+
+class FacilityHandle:
+    """A running emulated facility (from :func:`start_facility`)."""
+
+    def status(self) -> dict[str, Any]:
+        """``finished``, ``tick``, ``time`` (s), ``contact_force`` (N), ``rdt_sent``,
+        ``rdt_requests``, ``rdt_bad_requests``, ``egm_sent``, ``corrections``,
+        ``corrections_dropped``, ``overruns``, ``max_latency_us``."""
+
+    def addresses(self) -> dict[str, str | None]:
+        """``{"sensor", "http", "robot", "egm_peer"}`` as ``host:port`` (http None if off)."""
+
+    def stop(self) -> None:
+        """Ask the emulator to stop; returns at once."""
+
+    def is_finished(self) -> bool:
+        """Whether the emulator has ended."""
+
+    def join(self) -> dict[str, Any]:
+        """Stop, wait (GIL released), return the final status. Call once."""
+
+
+def start_hil(scenario_json: str, options_json: str) -> HilHandle:
+    """Start the real-time HIL loop of a scenario (JSON) with runtime options (JSON object,
+    keys of ``realtime_defaults()["runtime"]``; missing keys take the defaults). Binds the
+    sockets and reads the sensor's counts per unit before returning.
+
+    Raises ``ScenarioError``, ``RealtimeOptionError`` (bad option) or ``RealtimeError``
+    (port in use, sensor HTTP unreachable)."""
+
+
+def start_facility(scenario_json: str, options_json: str) -> FacilityHandle:
+    """Start the emulated facility of a scenario (JSON) with options (JSON object, keys of
+    ``realtime_defaults()["facility"]``). Raises like :func:`start_hil`."""
+
+
+def realtime_defaults() -> str:
+    """The default runtime and facility options as JSON: ``{"runtime": {...}, "facility": {...}}``."""

@@ -7,16 +7,24 @@
     hilcontact stability-map SWEEP_DIR [--out DIR] [--cov-tolerance 0.05] [--cof-limit 1.2]
     hilcontact presets
     hilcontact show SCENARIO [--set KEY=VALUE ...]
+    hilcontact facility SCENARIO [--sensor-port 49152 --http-port 80 --egm-host H --egm-port 6510 ...]
+    hilcontact hil SCENARIO --sensor HOST [--egm-port 6510 --force-limit N ...] [--out DIR]
+    hilcontact demo-rt [SCENARIO] [--compensator pida] [--out DIR]
     hilcontact --version
 
-Bad input (scenario, override, output folder) prints one ``error: ...`` line on stderr and
-exits with code 2; nothing is written then. An interrupted sweep (Ctrl-C) keeps its finished
-rows and exits with code 130.
+Bad input (scenario, override, option, output folder) prints one ``error: ...`` line on stderr
+and exits with code 2; nothing is written then. ``hil`` and ``demo-rt`` exit with 3 after a
+safety stop and 130 after Ctrl-C (the run is saved in both cases); a facility that cannot be
+reached or a port in use exits with 1. An interrupted sweep (Ctrl-C) keeps its finished rows
+and exits with code 130.
 """
 
 from __future__ import annotations
 
 import math
+import signal
+import socket
+import time
 import tomllib
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -30,7 +38,7 @@ from rich.table import Table
 
 from . import __version__
 from .comparison import ALL_KINDS, Comparison, comparison_scenarios, run_comparison
-from .errors import HilContactError, ScenarioError
+from .errors import HilContactError, RealtimeOptionError, ScenarioError
 from .run import Run, core_version, simulate
 from .scenario import load_scenario, presets
 
@@ -63,7 +71,7 @@ def _fail(message: str, code: int) -> None:
 def _errors() -> Iterator[None]:
     try:
         yield
-    except ScenarioError as exc:
+    except (ScenarioError, RealtimeOptionError) as exc:
         _fail(str(exc), 2)
     except HilContactError as exc:
         _fail(str(exc), 1)
@@ -436,6 +444,298 @@ def show(scenario: str, sets: tuple[str, ...]) -> None:
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
     click.echo(resolved.to_toml(), nl=False)
+
+
+# --------------------------------------------------------------------------------------
+# Real time: the emulated facility, the HIL loop, the demo
+# --------------------------------------------------------------------------------------
+
+
+def _rt_defaults() -> dict[str, dict[str, Any]]:
+    from .realtime import realtime_defaults
+
+    try:
+        return realtime_defaults()
+    except HilContactError:  # native core not built: help without defaults
+        return {"runtime": {}, "facility": {}}
+
+
+_RT_DEFAULTS = _rt_defaults()
+
+
+def _dflt(section: str, key: str, unit: str = "") -> str:
+    """``[default: VALUE UNIT]`` from the Rust defaults (the one place they live)."""
+    value: Any = _RT_DEFAULTS.get(section, {})
+    for part in key.split("."):
+        value = value.get(part) if isinstance(value, dict) else None
+    if value is None:
+        return ""
+    if isinstance(value, list):
+        value = ",".join(f"{v:g}" for v in value)
+    return f" [default: {value}{' ' + unit if unit else ''}]"
+
+
+def _numbers(text: str | None, n: int, option: str) -> list[float] | None:
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != n or not all(math.isfinite(v) for v in values):
+        raise RealtimeOptionError(f"{option} {text!r}: expected {n} comma-separated numbers")
+    return values
+
+
+def _raise_keyboard_interrupt(_signum: int, _frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def _hil_line(s: dict[str, Any]) -> str:
+    return (
+        f"{s['phase']}  t {s['time']:7.3f} s | F {s['force']:7.1f} N | E {s['energy'] * 1e3:8.3f} mJ | "
+        f"latency max {s['max_latency_us']:.0f} µs, overruns {s['overruns']} | "
+        f"sensor lost {s['sensor_lost']} late {s['sensor_late']} | robot lost {s['robot_lost']} late {s['robot_late']} | "
+        f"dropped {s['dropped']}"
+    )
+
+
+def _facility_line(s: dict[str, Any]) -> str:
+    return (
+        f"facility  t {s['time']:8.3f} s | contact {s['contact_force']:7.1f} N | RDT sent {s['rdt_sent']} | "
+        f"EGM sent {s['egm_sent']}, corrections {s['corrections']} (dropped {s['corrections_dropped']}) | "
+        f"overruns {s['overruns']}"
+    )
+
+
+def _report_realtime(console: Console, run: Run) -> None:
+    rt = run.metrics.get("realtime") or {}
+    timing = rt.get("timing", {})
+    lat, per, comp = (timing.get(k, {}) for k in ("wake_latency_us", "period_error_us", "compute_us"))
+    sensor, robot = rt.get("sensor", {}), rt.get("robot", {})
+    console.print(
+        f"loop: {rt.get('ticks')} ticks at {1.0 / rt.get('period', 1.0):g} Hz in {rt.get('wall_time', 0.0):.3f} s; "
+        f"wake latency p50/p99/max {lat.get('p50', 0):.0f}/{lat.get('p99', 0):.0f}/{lat.get('max', 0):.0f} µs; "
+        f"period jitter p50/p99/max {per.get('p50', 0):.0f}/{per.get('p99', 0):.0f}/{per.get('max', 0):.0f} µs; "
+        f"compute p99 {comp.get('p99', 0):.0f} µs; overruns {timing.get('overruns')}",
+        soft_wrap=True,
+    )
+    for name, link in (("sensor (RDT)", sensor), ("robot (EGM)", robot)):
+        console.print(
+            f"{name}: received {link.get('received')}, accepted {link.get('accepted')}, lost {link.get('lost')}, "
+            f"late {link.get('late')}, malformed {link.get('malformed')}, invalid {link.get('invalid')}, "
+            f"foreign {link.get('foreign')}, stale {link.get('stale')}",
+            soft_wrap=True,
+        )
+
+
+_FACILITY_OPTIONS = [
+    click.option("--bind-host", default=None, help="Address the sensor's RDT and HTTP servers bind to." + _dflt("facility", "bind_host")),
+    click.option("--sensor-port", type=int, default=None, help="RDT (UDP) port of the sensor." + _dflt("facility", "sensor_port")),
+    click.option("--http-port", type=int, default=None, help="HTTP port of /netftapi2.xml (0 = none)." + _dflt("facility", "http_port")),
+    click.option("--egm-host", default=None, help="Host the robot sends EGM feedback to (the PC)." + _dflt("facility", "egm_host")),
+    click.option("--egm-port", type=int, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("facility", "egm_port")),
+    click.option("--egm-local-port", type=int, default=None, help="The robot's own UDP port (0 = any)." + _dflt("facility", "egm_local_port")),
+    click.option("--counts-per-force", type=float, default=None, help="RDT counts per N (cfgcpf)." + _dflt("facility", "counts_per_force")),
+    click.option("--counts-per-torque", type=float, default=None, help="RDT counts per N m (cfgcpt)." + _dflt("facility", "counts_per_torque")),
+]
+
+
+def _with(options: list[Any]) -> Any:
+    def decorate(f: Any) -> Any:
+        for option in reversed(options):
+            f = option(f)
+        return f
+
+    return decorate
+
+
+_MAPPING_OPTIONS = [
+    click.option("--egm-offset", default=None, metavar="X,Y,Z", help="Origin of the target frame t in the EGM frame, mm." + _dflt("runtime", "egm_offset_mm")),
+    click.option("--egm-rotation", default=None, metavar="W,X,Y,Z", help="Rotation from t to the EGM frame, quaternion." + _dflt("runtime", "egm_rotation")),
+]
+
+
+@cli.command(name="facility", short_help="Run the emulated facility (Net F/T sensor + ABB EGM robot) in real time.")
+@click.argument("scenario")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
+@_with(_FACILITY_OPTIONS + _MAPPING_OPTIONS)
+@click.option("--silence-sensor-after", type=float, default=None, metavar="S", help="Fault injection: the sensor stops sending after S seconds.")
+@click.option("--silence-robot-after", type=float, default=None, metavar="S", help="Fault injection: the robot stops sending after S seconds.")
+@click.option("--duration", type=float, default=None, metavar="S", help="Stop after S seconds [default: run until Ctrl-C].")
+def facility_command(scenario: str, sets: tuple[str, ...], bind_host: str | None, sensor_port: int | None,
+                     http_port: int | None, egm_host: str | None, egm_port: int | None, egm_local_port: int | None,
+                     counts_per_force: float | None, counts_per_torque: float | None, egm_offset: str | None,
+                     egm_rotation: str | None, silence_sensor_after: float | None, silence_robot_after: float | None,
+                     duration: float | None) -> None:
+    """Emulate the facility of SCENARIO in real time: an F/T sensor speaking ATI's Net F/T RDT
+    protocol (UDP, 1 record per control period, /netftapi2.xml over HTTP) and a robot speaking
+    ABB's EGM (UDP + protobuf, feedback every 4 ms to --egm-host:--egm-port, corrections back),
+    with the scenario's robot delay, sensor delay and noise, and the contact between them.
+
+    \b
+    Example (then run `hilcontact hil` against it, see there):
+      hilcontact facility paper-table1 --set facility.robot_delay=0.02 --http-port 8080
+    """
+    from .realtime import start_facility
+
+    with _errors():
+        resolved = load_scenario(scenario, parse_set_options(sets))
+        options = {
+            "bind_host": bind_host, "sensor_port": sensor_port, "http_port": http_port, "egm_host": egm_host,
+            "egm_port": egm_port, "egm_local_port": egm_local_port, "counts_per_force": counts_per_force,
+            "counts_per_torque": counts_per_torque, "egm_offset_mm": _numbers(egm_offset, 3, "--egm-offset"),
+            "egm_rotation": _numbers(egm_rotation, 4, "--egm-rotation"),
+            "silence_sensor_after": silence_sensor_after, "silence_robot_after": silence_robot_after,
+        }
+        facility = start_facility(resolved, options)
+    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    a = facility.addresses
+    f = resolved.facility
+    click.echo(
+        f"ready: facility {resolved.name}: sensor RDT udp://{a['sensor']}, "
+        f"netftapi2.xml {'http://' + str(a['http']) + '/netftapi2.xml' if a['http'] else 'off'}, "
+        f"robot EGM udp://{a['robot']} -> udp://{a['egm_peer']}; robot delay {f.robot_delay * 1e3:g} ms, "
+        f"sensor delay {f.sensor_delay * 1e3:g} ms, noise {f.sensor_noise:g} N; Ctrl-C stops",
+        nl=True,
+    )
+    import sys
+
+    sys.stdout.flush()
+    stderr = Console(stderr=True)
+    try:
+        with stderr.status("facility starting ...") as status:
+            while duration is None or facility.status()["time"] < duration:
+                time.sleep(0.1)
+                status.update(_facility_line(facility.status()))
+    except KeyboardInterrupt:
+        pass
+    final = facility.stop()
+    click.echo("stopped: " + _facility_line(final))
+
+
+_HIL_OPTIONS = [
+    click.option("--sensor", "sensor_host", default=None, metavar="HOST", help="Host of the F/T sensor (Net F/T)." + _dflt("runtime", "sensor_host")),
+    click.option("--sensor-port", type=int, default=None, help="RDT port of the sensor." + _dflt("runtime", "sensor_port")),
+    click.option("--http-port", type=int, default=None, help="HTTP port of the sensor's /netftapi2.xml." + _dflt("runtime", "http_port")),
+    click.option("--counts-per-force", type=float, default=None, help="Counts per N; with --counts-per-torque, /netftapi2.xml is not read."),
+    click.option("--counts-per-torque", type=float, default=None, help="Counts per N m."),
+    click.option("--rdt-local-port", type=int, default=None, help="Local UDP port of the RDT client (0 = any)." + _dflt("runtime", "rdt_local_port")),
+    click.option("--bias", is_flag=True, default=None, help="Bias the sensor (RDT 0x0042) before streaming; the rod must be free."),
+    click.option("--egm-port", type=int, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("runtime", "egm_port")),
+    click.option("--egm-bind", "egm_bind_host", default=None, metavar="HOST", help="Address the EGM endpoint binds to." + _dflt("runtime", "egm_bind_host")),
+    click.option("--robot", "robot_host", default=None, metavar="HOST", help="Accept EGM only from this host [default: the first robot that sends]."),
+    click.option("--extrapolation", type=click.Choice(["quadratic", "linear", "hold"]), default=None, help="Actual motion between EGM feedback messages." + _dflt("runtime", "extrapolation")),
+    click.option("--force-limit", type=float, default=None, help="Safety stop above this measured force." + _dflt("runtime", "limits.force_limit", "N")),
+    click.option("--moment-limit", type=float, default=None, help="Safety stop above this measured moment." + _dflt("runtime", "limits.moment_limit", "N m")),
+    click.option("--watchdog-ms", type=float, default=None, help="Safety stop after this long without sensor records or robot feedback." + _dflt("runtime", "limits.watchdog_ms", "ms")),
+    click.option("--workspace", type=float, default=None, help="Safety stop when the commanded rod tip is this far from its start." + _dflt("runtime", "limits.workspace", "m")),
+    click.option("--connect-timeout", type=float, default=None, help="Longest wait for the sensor and the robot." + _dflt("runtime", "connect_timeout", "s")),
+    click.option("--start-tolerance", type=float, default=None, help="Largest distance of the robot from the initial pose at start." + _dflt("runtime", "start_tolerance", "m")),
+]
+
+
+def _runtime_options(sensor_host: str | None, sensor_port: int | None, http_port: int | None,
+                     counts_per_force: float | None, counts_per_torque: float | None, rdt_local_port: int | None,
+                     bias: bool | None, egm_port: int | None, egm_bind_host: str | None, robot_host: str | None,
+                     extrapolation: str | None, force_limit: float | None, moment_limit: float | None,
+                     watchdog_ms: float | None, workspace: float | None, connect_timeout: float | None,
+                     start_tolerance: float | None, egm_offset: str | None, egm_rotation: str | None) -> dict[str, Any]:
+    limits = {k: v for k, v in (("force_limit", force_limit), ("moment_limit", moment_limit),
+                                ("watchdog_ms", watchdog_ms), ("workspace", workspace)) if v is not None}
+    return {
+        "sensor_host": sensor_host, "sensor_port": sensor_port, "http_port": http_port,
+        "counts_per_force": counts_per_force, "counts_per_torque": counts_per_torque,
+        "rdt_local_port": rdt_local_port, "bias": bias, "egm_port": egm_port, "egm_bind_host": egm_bind_host,
+        "robot_host": robot_host, "extrapolation": extrapolation, "limits": limits or None,
+        "connect_timeout": connect_timeout, "start_tolerance": start_tolerance,
+        "egm_offset_mm": _numbers(egm_offset, 3, "--egm-offset"), "egm_rotation": _numbers(egm_rotation, 4, "--egm-rotation"),
+    }
+
+
+def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots: bool) -> None:
+    from .realtime import exit_code, run_hil
+
+    stderr = Console(stderr=True)
+    with stderr.status(f"{escape(resolved.name)}: connecting to the sensor and the robot ...") as status:
+        result = run_hil(resolved, options, on_status=lambda s: status.update(escape(_hil_line(s))))
+    result.save(folder, plots=not no_plots)
+    console = Console()
+    _report(console, result, folder)
+    _report_realtime(console, result)
+    code = exit_code(result)
+    if code:
+        raise click.exceptions.Exit(code)
+
+
+@cli.command(name="hil", short_help="Run the HIL loop in real time against a facility (real or emulated).")
+@click.argument("scenario")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
+@_with(_HIL_OPTIONS + _MAPPING_OPTIONS)
+@click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-rt].")
+@click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
+def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, **kw: Any) -> None:
+    """Run the HIL loop of SCENARIO in real time: RDT client of the F/T sensor at --sensor,
+    EGM endpoint on UDP --egm-port for the robot controller, the scenario's compensator and
+    virtual dynamics in a Rust real-time thread. Shows a live line; writes the same files as
+    `run` (metrics.json with a "realtime" section: timing statistics, packet counters, stop).
+
+    Exit code: 0 completed, 3 safety stop (force/moment limit, watchdog, workspace, divergence;
+    the robot is commanded to hold, streaming stops, the run is saved), 130 Ctrl-C (same),
+    1 facility unreachable, 2 bad input.
+
+    \b
+    Example, against `hilcontact facility paper-table1 --set facility.robot_delay=0.02 --http-port 8080`:
+      hilcontact hil paper-table1 --set compensator.kind=pida --sensor 127.0.0.1 --http-port 8080 --egm-port 6510 --out runs/rt1
+    """
+    with _errors():
+        resolved = load_scenario(scenario, parse_set_options(sets))
+        folder = Path(out) if out is not None else Path("runs") / f"{resolved.name}-rt"
+        if folder.exists() and not folder.is_dir():
+            raise ScenarioError(f"--out {folder}: exists and is not a directory")
+        _run_realtime(resolved, _runtime_options(**kw), folder, no_plots)
+
+
+def _free_port(kind: int) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@cli.command(name="demo-rt", short_help="Emulated facility and real-time HIL loop together, in one command.")
+@click.argument("scenario", default="paper-table1")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
+@click.option("--compensator", default="pida", show_default=True, help="Compensator kind of the loop (none shows the safety stop).")
+@click.option("--robot-delay", type=float, default=0.02, show_default=True, help="The emulated robot's response delay, s.")
+@click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-demo-rt].")
+@click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
+def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay: float, out: str | None, no_plots: bool) -> None:
+    """Run the emulated facility and the real-time HIL loop on loopback in one process (free
+    ports, HTTP included): `hilcontact facility` and `hilcontact hil` together.
+
+    \b
+    Examples:
+      hilcontact demo-rt                                  # paper-table1, 20 ms robot delay, pida
+      hilcontact demo-rt --compensator none               # diverges; the force limit stops it
+    """
+    from .realtime import start_facility
+
+    with _errors():
+        overrides = parse_set_options(sets)
+        overrides.setdefault("facility.robot_delay", robot_delay)
+        overrides["compensator.kind"] = compensator
+        resolved = load_scenario(scenario, overrides)
+        folder = Path(out) if out is not None else Path("runs") / f"{resolved.name}-demo-rt"
+        sensor_port, egm_port, http_port = _free_port(socket.SOCK_DGRAM), _free_port(socket.SOCK_DGRAM), _free_port(socket.SOCK_STREAM)
+        facility_options = {"sensor_port": sensor_port, "http_port": http_port, "egm_port": egm_port}
+        runtime_options = {"sensor_port": sensor_port, "http_port": http_port, "egm_port": egm_port, "egm_bind_host": "127.0.0.1"}
+        with start_facility(resolved, facility_options) as facility:
+            Console(stderr=True).print(
+                f"facility: sensor udp://{facility.addresses['sensor']}, http://{facility.addresses['http']}/netftapi2.xml, "
+                f"robot udp://{facility.addresses['robot']} -> udp://{facility.addresses['egm_peer']}",
+                soft_wrap=True,
+            )
+            _run_realtime(resolved, runtime_options, folder, no_plots)
 
 
 def main(argv: Sequence[str] | None = None) -> None:

@@ -19,6 +19,12 @@ pub struct Table {
 }
 
 impl Table {
+    /// This table with the columns of `other` appended.
+    fn with(mut self, other: Table) -> Table {
+        self.columns.extend(other.columns);
+        self
+    }
+
     /// The column called `name`.
     pub fn column(&self, name: &str) -> Option<&[f64]> {
         self.columns
@@ -312,7 +318,6 @@ pub fn simulate_metrics(s: &Scenario) -> Result<Metrics> {
 pub fn simulate(s: &Scenario) -> Result<SimulationOutput> {
     let Runs {
         reference,
-        reference_trace,
         hil,
         metrics,
     } = run(s, true)?;
@@ -345,18 +350,7 @@ pub fn simulate(s: &Scenario) -> Result<SimulationOutput> {
         .columns
         .extend(Table::from_rows(rows, &hil_scalars, &hil_vectors).columns);
 
-    let mut reference_table = Table::from_rows(
-        &reference,
-        &[("time", |r: &ReferenceRecord| r.time)],
-        &[
-            ("tip_position", |r| r.tip_position),
-            ("tip_velocity", |r| r.tip_velocity),
-            ("contact_force", |r| r.contact_force),
-        ],
-    );
-    reference_table
-        .columns
-        .push(("energy".to_string(), reference_trace.energy));
+    let reference_table = reference_table(&reference);
 
     Ok(SimulationOutput {
         timeseries,
@@ -365,10 +359,28 @@ pub fn simulate(s: &Scenario) -> Result<SimulationOutput> {
     })
 }
 
+/// The reference's table: `time`, `tip_position_*`, `tip_velocity_*`, `contact_force_*`,
+/// `energy` (one definition for simulations and real-time runs).
+pub fn reference_table(reference: &[ReferenceRecord]) -> Table {
+    Table::from_rows(
+        reference,
+        &[("time", |r: &ReferenceRecord| r.time)],
+        &[
+            ("tip_position", |r| r.tip_position),
+            ("tip_velocity", |r| r.tip_velocity),
+            ("contact_force", |r| r.contact_force),
+        ],
+    )
+    .with(Table::from_rows(
+        reference,
+        &[("energy", |r: &ReferenceRecord| r.energy)],
+        &[],
+    ))
+}
+
 /// The records and metrics of a run.
 struct Runs {
     reference: Vec<ReferenceRecord>,
-    reference_trace: Trace,
     hil: HilRun,
     metrics: Metrics,
 }
@@ -385,16 +397,39 @@ fn run(s: &Scenario, keep_rows: bool) -> Result<Runs> {
     );
     let hil = run_hil(s, &system, bound, keep_rows)?;
 
-    let threshold = s.metrics.contact_threshold;
-    let r = &reference_trace;
-    let ref_collisions = metrics::collisions(&r.time, &r.force, &r.speed, threshold);
-    let t = &hil.trace;
-    let hil_collisions = metrics::collisions(&t.time, &t.force, &t.speed, threshold);
-    let identification = match (
+    let metrics = trace_metrics(
+        s,
+        &reference_trace,
+        &hil.trace,
         hil.estimates_contact,
-        s.contact.model,
-        hil_collisions.first(),
-    ) {
+        hil.status,
+        hil.reason.clone(),
+    );
+    Ok(Runs {
+        reference,
+        hil,
+        metrics,
+    })
+}
+
+/// The metrics of a HIL trace against the reference's trace: the one computation used by
+/// simulations and by the real-time runtime. `estimates_contact`: whether the trace has
+/// stiffness and damping estimates; `status`, `reason`: how the run ended (`diverged_at` is
+/// the trace's last time for a diverged run).
+pub fn trace_metrics(
+    s: &Scenario,
+    reference: &Trace,
+    hil: &Trace,
+    estimates_contact: bool,
+    status: Status,
+    reason: Option<String>,
+) -> Metrics {
+    let threshold = s.metrics.contact_threshold;
+    let r = reference;
+    let ref_collisions = metrics::collisions(&r.time, &r.force, &r.speed, threshold);
+    let t = hil;
+    let hil_collisions = metrics::collisions(&t.time, &t.force, &t.speed, threshold);
+    let identification = match (estimates_contact, s.contact.model, hil_collisions.first()) {
         (true, ContactModelKind::Linear, Some(first)) => metrics::identification_error(
             &t.time,
             &t.force,
@@ -408,13 +443,12 @@ fn run(s: &Scenario, keep_rows: bool) -> Result<Runs> {
         _ => None,
     };
     let collisions = metrics::compare_with_reference(&hil_collisions, &ref_collisions);
-    let metrics = Metrics {
+    Metrics {
         scenario: s.name.clone(),
         compensator: s.compensator.kind().to_string(),
-        status: hil.status,
-        diverged_at: (hil.status == Status::Diverged)
-            .then(|| t.time.last().copied().unwrap_or(0.0)),
-        reason: hil.reason.clone(),
+        status,
+        diverged_at: (status == Status::Diverged).then(|| t.time.last().copied().unwrap_or(0.0)),
+        reason,
         summary: metrics::Summary::of(&collisions),
         collisions,
         reference_collisions: ref_collisions,
@@ -422,7 +456,7 @@ fn run(s: &Scenario, keep_rows: bool) -> Result<Runs> {
         energy: EnergySummary {
             initial: t.energy.first().copied().unwrap_or(f64::NAN),
             r#final: t.energy.last().copied().unwrap_or(f64::NAN),
-            reference_final: reference_energy.last().copied().unwrap_or(f64::NAN),
+            reference_final: r.energy.last().copied().unwrap_or(f64::NAN),
             max: t
                 .energy
                 .iter()
@@ -430,11 +464,5 @@ fn run(s: &Scenario, keep_rows: bool) -> Result<Runs> {
                 .filter(|e| e.is_finite())
                 .fold(0.0, f64::max),
         },
-    };
-    Ok(Runs {
-        reference,
-        reference_trace,
-        hil,
-        metrics,
-    })
+    }
 }

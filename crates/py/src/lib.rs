@@ -1,7 +1,10 @@
 //! Python bindings of hilcontact-core (`hilcontact._core`): convert types, map errors,
 //! release the GIL. No numerics here.
 
+use std::time::Duration;
+
 use hilcontact_core::{CoreError, Scenario, Table};
+use hilcontact_rt::{EmulatorOptions, FacilityHandle, HilHandle, RtError, RuntimeOptions};
 use numpy::IntoPyArray;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -17,6 +20,226 @@ fn scenario_error(py: Python<'_>, message: String) -> PyErr {
         Ok(class) => PyErr::from_type(class, message),
         Err(_) => PyValueError::new_err(message),
     }
+}
+
+/// An exception class of `hilcontact.errors` by name, carrying `message`; `fallback` if the
+/// package's error module cannot be imported.
+fn package_error(
+    py: Python<'_>,
+    name: &str,
+    message: String,
+    fallback: fn(String) -> PyErr,
+) -> PyErr {
+    let class = PyModule::import(py, "hilcontact.errors")
+        .and_then(|m| m.getattr(name))
+        .and_then(|c| c.downcast_into::<PyType>().map_err(PyErr::from));
+    match class {
+        Ok(class) => PyErr::from_type(class, message),
+        Err(_) => fallback(message),
+    }
+}
+
+/// The one conversion from real-time errors to Python exceptions: scenario errors are
+/// `ScenarioError`, option errors `RealtimeOptionError` (a `ValueError`), the others
+/// (sockets, protocol, connection) `RealtimeError`.
+fn rt_err(py: Python<'_>, error: RtError) -> PyErr {
+    match error {
+        RtError::Scenario(e) => to_py_err(py, e),
+        RtError::Option { .. } => package_error(
+            py,
+            "RealtimeOptionError",
+            error.to_string(),
+            PyValueError::new_err,
+        ),
+        _ => package_error(
+            py,
+            "RealtimeError",
+            error.to_string(),
+            pyo3::exceptions::PyRuntimeError::new_err,
+        ),
+    }
+}
+
+fn parse_scenario(py: Python<'_>, scenario_json: &str) -> PyResult<Scenario> {
+    serde_json::from_str(scenario_json).map_err(|e| scenario_error(py, format!("scenario: {e}")))
+}
+
+fn parse_options<T: serde::de::DeserializeOwned>(
+    py: Python<'_>,
+    options_json: &str,
+) -> PyResult<T> {
+    serde_json::from_str(options_json).map_err(|e| {
+        package_error(
+            py,
+            "RealtimeOptionError",
+            format!("options: {e}"),
+            PyValueError::new_err,
+        )
+    })
+}
+
+/// JSON text to a Python object (through the json module: the values are plain data).
+fn json_to_py<'py>(py: Python<'py>, value: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
+    let text = serde_json::to_string(value).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    PyModule::import(py, "json")?
+        .getattr("loads")?
+        .call1((text,))
+}
+
+/// A running real-time HIL loop (`start_hil`). The loop runs in Rust threads; every method
+/// returns at once except `wait` and `finish`, which release the GIL.
+#[pyclass(module = "hilcontact._core", name = "HilHandle")]
+struct PyHilHandle {
+    inner: Option<HilHandle>,
+}
+
+impl PyHilHandle {
+    fn handle(&self) -> PyResult<&HilHandle> {
+        self.inner
+            .as_ref()
+            .ok_or_else(|| PyValueError::new_err("the run has been finished already"))
+    }
+}
+
+#[pymethods]
+impl PyHilHandle {
+    /// A snapshot for the live line: phase, tick, time (s), force (N), energy (J),
+    /// max_latency_us, overruns, sensor_lost, sensor_late, robot_lost, robot_late, dropped, stop.
+    fn status<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &self.handle()?.status())
+    }
+
+    /// Asks the loop to stop: it commands the robot to hold, stops streaming and flushes.
+    fn stop(&self) -> PyResult<()> {
+        self.handle()?.stop();
+        Ok(())
+    }
+
+    /// Whether the loop has ended.
+    fn is_finished(&self) -> PyResult<bool> {
+        Ok(self.handle()?.is_finished())
+    }
+
+    /// Waits up to `timeout` seconds (GIL released); returns whether the loop has ended.
+    fn wait(&self, py: Python<'_>, timeout: f64) -> PyResult<bool> {
+        let handle = self.handle()?;
+        let timeout = Duration::from_secs_f64(timeout.max(0.0));
+        Ok(py.allow_threads(|| handle.wait(timeout)))
+    }
+
+    /// Waits for the loop and its writer (GIL released) and returns
+    /// `{"timeseries": {column: ndarray}, "reference": {...}, "metrics": str, "exit_code": int}`.
+    fn finish<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let handle = self
+            .inner
+            .take()
+            .ok_or_else(|| PyValueError::new_err("the run has been finished already"))?;
+        let output = py
+            .allow_threads(move || handle.finish())
+            .map_err(|e| rt_err(py, e))?;
+        let result = PyDict::new(py);
+        result.set_item("timeseries", table_to_dict(py, output.timeseries)?)?;
+        result.set_item("reference", table_to_dict(py, output.reference)?)?;
+        result.set_item("metrics", output.metrics.to_string())?;
+        result.set_item("exit_code", output.exit_code)?;
+        Ok(result)
+    }
+}
+
+/// Starts the real-time HIL loop of a scenario (JSON) with runtime options (JSON, keys of
+/// `RuntimeOptions`, defaults for the missing ones). Binds the sockets and reads the sensor's
+/// counts per unit before returning; raises RealtimeError if that fails.
+#[pyfunction]
+fn start_hil(py: Python<'_>, scenario_json: &str, options_json: &str) -> PyResult<PyHilHandle> {
+    let scenario = parse_scenario(py, scenario_json)?;
+    let options: RuntimeOptions = parse_options(py, options_json)?;
+    let handle = py
+        .allow_threads(|| HilHandle::start(&scenario, &options))
+        .map_err(|e| rt_err(py, e))?;
+    Ok(PyHilHandle {
+        inner: Some(handle),
+    })
+}
+
+/// A running emulated facility (`start_facility`).
+#[pyclass(module = "hilcontact._core", name = "FacilityHandle")]
+struct PyFacilityHandle {
+    inner: Option<FacilityHandle>,
+}
+
+impl PyFacilityHandle {
+    fn handle(&self) -> PyResult<&FacilityHandle> {
+        self.inner
+            .as_ref()
+            .ok_or_else(|| PyValueError::new_err("the facility has been joined already"))
+    }
+}
+
+#[pymethods]
+impl PyFacilityHandle {
+    /// Counters: finished, tick, time (s), contact_force (N), rdt_sent, rdt_requests,
+    /// rdt_bad_requests, egm_sent, corrections, corrections_dropped, overruns, max_latency_us.
+    fn status<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        json_to_py(py, &self.handle()?.status())
+    }
+
+    /// `{"sensor": "host:port", "http": "host:port" | None, "robot": ..., "egm_peer": ...}`.
+    fn addresses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let a = self.handle()?.addresses();
+        let d = PyDict::new(py);
+        d.set_item("sensor", a.sensor.to_string())?;
+        d.set_item("http", a.http.map(|h| h.to_string()))?;
+        d.set_item("robot", a.robot.to_string())?;
+        d.set_item("egm_peer", a.egm_peer.to_string())?;
+        Ok(d)
+    }
+
+    /// Asks the emulator to stop; returns at once.
+    fn stop(&self) -> PyResult<()> {
+        self.handle()?.stop();
+        Ok(())
+    }
+
+    /// Whether the emulator has ended.
+    fn is_finished(&self) -> PyResult<bool> {
+        Ok(self.handle()?.is_finished())
+    }
+
+    /// Stops the emulator, waits for it (GIL released) and returns its final counters.
+    fn join<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let handle = self
+            .inner
+            .take()
+            .ok_or_else(|| PyValueError::new_err("the facility has been joined already"))?;
+        let status = py.allow_threads(move || handle.join());
+        json_to_py(py, &status)
+    }
+}
+
+/// Starts the emulated facility of a scenario (JSON) with options (JSON, keys of
+/// `EmulatorOptions`). Raises RealtimeError if a port cannot be bound.
+#[pyfunction]
+fn start_facility(
+    py: Python<'_>,
+    scenario_json: &str,
+    options_json: &str,
+) -> PyResult<PyFacilityHandle> {
+    let scenario = parse_scenario(py, scenario_json)?;
+    let options: EmulatorOptions = parse_options(py, options_json)?;
+    let handle = py
+        .allow_threads(|| FacilityHandle::start(&scenario, &options))
+        .map_err(|e| rt_err(py, e))?;
+    Ok(PyFacilityHandle {
+        inner: Some(handle),
+    })
+}
+
+/// The default options of the runtime and the emulator, as JSON:
+/// `{"runtime": {...}, "facility": {...}}` (the one place the defaults live).
+#[pyfunction]
+fn realtime_defaults() -> PyResult<String> {
+    let value = serde_json::json!({"runtime": RuntimeOptions::default(), "facility": EmulatorOptions::default()});
+    Ok(value.to_string())
 }
 
 /// The one conversion from core errors to Python exceptions.
@@ -38,8 +261,7 @@ fn table_to_dict<'py>(py: Python<'py>, table: Table) -> PyResult<Bound<'py, PyDi
 /// Returns `{"timeseries": {column: ndarray}, "reference": {column: ndarray}, "metrics": str}`.
 #[pyfunction]
 fn simulate<'py>(py: Python<'py>, scenario_json: &str) -> PyResult<Bound<'py, PyDict>> {
-    let scenario: Scenario = serde_json::from_str(scenario_json)
-        .map_err(|e| scenario_error(py, format!("scenario: {e}")))?;
+    let scenario = parse_scenario(py, scenario_json)?;
     let output = py
         .allow_threads(|| hilcontact_core::simulate(&scenario))
         .map_err(|e| to_py_err(py, e))?;
@@ -50,10 +272,6 @@ fn simulate<'py>(py: Python<'py>, scenario_json: &str) -> PyResult<Bound<'py, Py
     result.set_item("reference", table_to_dict(py, output.reference)?)?;
     result.set_item("metrics", metrics)?;
     Ok(result)
-}
-
-fn parse_scenario(py: Python<'_>, json: &str) -> PyResult<Scenario> {
-    serde_json::from_str(json).map_err(|e| scenario_error(py, format!("scenario: {e}")))
 }
 
 /// Runs many scenarios (each its resolved form as JSON) in parallel on Rust threads, the GIL
@@ -188,5 +406,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate_batch, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(compensator_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(start_hil, m)?)?;
+    m.add_function(wrap_pyfunction!(start_facility, m)?)?;
+    m.add_function(wrap_pyfunction!(realtime_defaults, m)?)?;
+    m.add_class::<PyHilHandle>()?;
+    m.add_class::<PyFacilityHandle>()?;
     Ok(())
 }

@@ -1,0 +1,34 @@
+//! # hilcontact-rt
+//!
+//! The real-time side of hilcontact: the HIL loop against a facility over the devices' own
+//! network protocols, and an emulated facility that speaks them.
+//!
+//! - [`rdt`], [`netftapi`]: ATI Net F/T sensor (RDT over UDP, `/netftapi2.xml` over HTTP);
+//! - [`egm`], [`egm_proto`]: ABB Externally Guided Motion (protobuf over UDP);
+//! - [`mapping`]: the scenario's relative motion (`t` frame, m) as EGM poses (mm, quaternion);
+//! - [`emulator`]: robot, contact and sensor (the core's facility model) in real time behind
+//!   those protocols;
+//! - [`runtime`]: the HIL loop thread (the core's [`hilcontact_core::hil::VirtualDynamics`]) on a
+//!   monotonic clock, with [`safety`] limits, a lock-free sample log and timing statistics;
+//! - [`report`]: time series and metrics of a real-time run, as a simulation writes them.
+//!
+//! The numerics stay in `hilcontact-core`; this crate owns the I/O, the clocks and the threads.
+
+#![warn(missing_docs)]
+
+pub mod clock;
+pub mod egm;
+pub mod egm_proto;
+pub mod emulator;
+pub mod error;
+pub mod feedback;
+pub mod mapping;
+pub mod netftapi;
+pub mod rdt;
+pub mod report;
+pub mod runtime;
+pub mod safety;
+
+pub use emulator::{EmulatorOptions, FacilityHandle};
+pub use error::{Result, RtError};
+pub use runtime::{HilHandle, RuntimeOptions};

@@ -1,0 +1,211 @@
+//! The runtime against a scripted sensor and robot (plain sockets in the test): malformed,
+//! invalid, duplicate, out-of-sequence and foreign datagrams are each counted exactly and never
+//! reach the dynamics; when the robot goes silent the watchdog stops the run, the robot gets
+//! the hold command (its last fed-back pose, zero speed) and the sensor a stop request.
+
+mod common;
+
+use std::net::{SocketAddr, UdpSocket};
+use std::time::{Duration, Instant};
+
+use common::{free_udp_port, preset};
+use hilcontact_rt::egm::{CorrectionDecoder, FeedbackEncoder};
+use hilcontact_rt::mapping::EgmPoseMm;
+use hilcontact_rt::rdt::{RdtCommand, RdtRecord, RdtRequest};
+use hilcontact_rt::safety::SafetyLimits;
+use hilcontact_rt::{HilHandle, RuntimeOptions};
+
+fn pose(x: f64, w: f64) -> EgmPoseMm {
+    EgmPoseMm {
+        position_mm: [x, 0.0, 0.0],
+        orientation: [w, 0.0, 0.0, 0.0],
+    }
+}
+
+#[test]
+fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
+    let mut s = preset("paper-table1");
+    s.simulation.duration = 5.0;
+    let sensor = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let robot = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let foreign = UdpSocket::bind("127.0.0.1:0").unwrap();
+    sensor
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    let egm_port = free_udp_port();
+    let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
+    let options = RuntimeOptions {
+        sensor_port: sensor.local_addr().unwrap().port(),
+        egm_port,
+        egm_bind_host: "127.0.0.1".into(),
+        counts_per_force: Some(1e6),
+        counts_per_torque: Some(1e6),
+        limits: SafetyLimits {
+            watchdog_ms: 200.0,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let hil = HilHandle::start(&s, &options).unwrap();
+
+    let mut buf = [0u8; 64];
+    let (n, client) = sensor.recv_from(&mut buf).unwrap();
+    assert_eq!(
+        RdtRequest::decode(&buf[..n]).unwrap().command,
+        RdtCommand::StartRealtime
+    );
+
+    let mut feedback = FeedbackEncoder::new();
+    let initial = pose(-995.0, 1.0); // the servicer's CoM in t, mm: where paper-table1 starts
+    let (mut rdt_seq, mut egm_seq) = (0u32, 0u32);
+    let record = |seq: u32, status: u32| {
+        RdtRecord {
+            rdt_sequence: seq,
+            ft_sequence: seq,
+            status,
+            counts: [0; 6],
+        }
+        .encode()
+    };
+    // the corrections the robot receives, drained as they come (the socket buffer is small)
+    robot.set_nonblocking(true).unwrap();
+    let mut decoder = CorrectionDecoder::new();
+    let mut last = None;
+    let mut big = [0u8; 2048];
+    let mut drain = |last: &mut Option<_>| {
+        while let Ok(n) = robot.recv(&mut big) {
+            *last = Some(decoder.decode(&big[..n]).unwrap());
+        }
+    };
+    let start = Instant::now();
+    for ms in 0..700u32 {
+        drain(&mut last);
+        rdt_seq += 1;
+        sensor.send_to(&record(rdt_seq, 0), client).unwrap();
+        if ms % 4 == 0 && ms < 500 {
+            egm_seq += 1;
+            robot
+                .send_to(
+                    feedback.encode(egm_seq, ms as u64 * 1000, &initial, &initial),
+                    egm,
+                )
+                .unwrap();
+        }
+        if ms == 200 {
+            // sensor: 3 malformed, 2 stale, a gap of 4, 1 error status, 2 foreign
+            for len in [35usize, 37, 72] {
+                sensor.send_to(&vec![0u8; len], client).unwrap();
+            }
+            sensor.send_to(&record(rdt_seq, 0), client).unwrap();
+            sensor.send_to(&record(rdt_seq - 1, 0), client).unwrap();
+            rdt_seq += 5;
+            sensor.send_to(&record(rdt_seq, 0), client).unwrap();
+            rdt_seq += 1;
+            sensor
+                .send_to(&record(rdt_seq, 0x8000_0000), client)
+                .unwrap();
+            foreign.send_to(&record(rdt_seq + 1, 0), client).unwrap();
+            foreign.send_to(&record(rdt_seq + 2, 0), client).unwrap();
+            // robot: 2 malformed, 2 invalid (NaN, quaternion norm 0.5), 1 stale, 1 foreign, a gap of 2
+            robot.send_to(&[0xff, 0xff, 0xff], egm).unwrap();
+            robot.send_to(&record(1, 0), egm).unwrap();
+            robot
+                .send_to(
+                    feedback.encode(egm_seq + 1, 0, &pose(f64::NAN, 1.0), &initial),
+                    egm,
+                )
+                .unwrap();
+            robot
+                .send_to(
+                    feedback.encode(egm_seq + 1, 0, &pose(-995.0, 0.5), &initial),
+                    egm,
+                )
+                .unwrap();
+            robot
+                .send_to(feedback.encode(egm_seq, 0, &initial, &initial), egm)
+                .unwrap();
+            foreign
+                .send_to(
+                    feedback.encode(egm_seq + 1, 0, &pose(-900.0, 1.0), &initial),
+                    egm,
+                )
+                .unwrap();
+            egm_seq += 2;
+        }
+        let next = start + Duration::from_millis(ms as u64 + 1);
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+        if hil.is_finished() {
+            break;
+        }
+    }
+    assert!(
+        hil.wait(Duration::from_secs(5)),
+        "the watchdog did not stop the run"
+    );
+    let out = hil.finish().unwrap();
+    let m = &out.metrics;
+    let rt = &m["realtime"];
+    assert_eq!(m["status"], "stopped", "{}", m["reason"]);
+    assert_eq!(rt["stop"]["kind"], "robot-watchdog");
+    assert_eq!(out.exit_code, 3);
+    let (sensor_stats, robot_stats) = (&rt["sensor"], &rt["robot"]);
+    assert_eq!(
+        (
+            sensor_stats["malformed"].as_u64(),
+            sensor_stats["stale"].as_u64(),
+            sensor_stats["lost"].as_u64()
+        ),
+        (Some(3), Some(2), Some(4)),
+        "{sensor_stats}"
+    );
+    assert_eq!(
+        (
+            sensor_stats["invalid"].as_u64(),
+            sensor_stats["foreign"].as_u64()
+        ),
+        (Some(1), Some(2)),
+        "{sensor_stats}"
+    );
+    assert_eq!(
+        (
+            robot_stats["malformed"].as_u64(),
+            robot_stats["invalid"].as_u64()
+        ),
+        (Some(2), Some(2)),
+        "{robot_stats}"
+    );
+    assert_eq!(
+        (
+            robot_stats["stale"].as_u64(),
+            robot_stats["foreign"].as_u64(),
+            robot_stats["lost"].as_u64()
+        ),
+        (Some(1), Some(1), Some(2)),
+        "{robot_stats}"
+    );
+    // nothing bad reached the dynamics: the actual tip stayed where the robot is
+    let column = |name: &str| out.timeseries.column(name).unwrap().to_vec();
+    assert!(column("actual_tip_position_x")
+        .iter()
+        .all(|x| (x - 0.005).abs() < 1e-9));
+    assert!(column("energy").iter().all(|e| e.is_finite()));
+    let stop_time = rt["stop"]["time"].as_f64().unwrap();
+    assert!(
+        (0.45..0.75).contains(&stop_time),
+        "stopped at {stop_time} s"
+    );
+
+    // after the stop: hold corrections at the last fed-back pose, then an RDT stop request
+    drain(&mut last);
+    let hold = last.expect("no correction received").target;
+    assert_eq!(hold.pose, initial);
+    assert_eq!(hold.speed, [0.0; 6]);
+    sensor.set_nonblocking(true).unwrap();
+    let mut stops = 0;
+    while let Ok(n) = sensor.recv(&mut buf) {
+        if RdtRequest::decode(&buf[..n]).is_ok_and(|r| r.command == RdtCommand::Stop) {
+            stops += 1;
+        }
+    }
+    assert!(stops >= 1, "no RDT stop request");
+}

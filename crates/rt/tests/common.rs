@@ -1,0 +1,45 @@
+//! Helpers shared by the loopback tests.
+#![allow(dead_code)]
+
+use hilcontact_core::Scenario;
+use hilcontact_rt::{EmulatorOptions, RuntimeOptions};
+
+/// A preset scenario from `python/hilcontact/scenarios/<name>.toml`.
+pub fn preset(name: &str) -> Scenario {
+    let path = format!(
+        "{}/../../python/hilcontact/scenarios/{name}.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    toml::from_str(&text).unwrap_or_else(|e| panic!("{path}: {e}"))
+}
+
+/// A UDP port that was free a moment ago.
+pub fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// Emulator and runtime options that meet on loopback, without HTTP (counts given).
+pub fn loopback_options() -> (EmulatorOptions, RuntimeOptions) {
+    let sensor_port = free_udp_port();
+    let egm_port = free_udp_port();
+    let emulator = EmulatorOptions {
+        sensor_port,
+        http_port: 0,
+        egm_port,
+        ..Default::default()
+    };
+    let runtime = RuntimeOptions {
+        sensor_port,
+        egm_port,
+        egm_bind_host: "127.0.0.1".into(),
+        counts_per_force: Some(emulator.counts_per_force),
+        counts_per_torque: Some(emulator.counts_per_torque),
+        ..Default::default()
+    };
+    (emulator, runtime)
+}

@@ -1,0 +1,171 @@
+"""End to end on loopback, in real time: the emulated facility (`hilcontact facility`) and the
+HIL loop (`hilcontact hil`) as separate processes speaking RDT and EGM to each other."""
+
+from __future__ import annotations
+
+import json
+import selectors
+import signal
+import socket
+import subprocess
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+ROBOT_DELAY = "facility.robot_delay=0.02"
+
+
+def free_port(kind: int = socket.SOCK_DGRAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@contextmanager
+def facility_process(tmp_path: Path, *extra: str) -> Iterator[dict[str, str]]:
+    """`python -m hilcontact facility paper-table1` with free ports; yields the ports once it
+    prints its ready line; stops it with SIGINT and checks that it exits cleanly."""
+    ports = {"sensor": str(free_port()), "http": str(free_port(socket.SOCK_STREAM)), "egm": str(free_port())}
+    cmd = [
+        sys.executable, "-m", "hilcontact", "facility", "paper-table1", "--set", ROBOT_DELAY,
+        "--sensor-port", ports["sensor"], "--http-port", ports["http"], "--egm-port", ports["egm"], *extra,
+    ]
+    log = open(tmp_path / "facility.stderr", "w")
+    process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=log, text=True)
+    try:
+        selector = selectors.DefaultSelector()
+        selector.register(process.stdout, selectors.EVENT_READ)
+        assert selector.select(timeout=60), "the facility did not start"
+        ready = process.stdout.readline()
+        assert ready.startswith("ready: facility paper-table1"), ready
+        assert "robot delay 20 ms" in ready
+        yield ports
+    finally:
+        process.send_signal(signal.SIGINT)
+        try:
+            out, _ = process.communicate(timeout=20)
+        finally:
+            if process.poll() is None:
+                process.kill()
+            log.close()
+    assert process.returncode == 0, (tmp_path / "facility.stderr").read_text()
+    assert out.startswith("stopped: facility"), out
+
+
+def run_hil(ports: dict[str, str], out: Path, *sets: str, timeout: float = 90) -> subprocess.CompletedProcess[str]:
+    cmd = [
+        sys.executable, "-m", "hilcontact", "hil", "paper-table1", *(a for s in sets for a in ("--set", s)),
+        "--sensor", "127.0.0.1", "--sensor-port", ports["sensor"], "--http-port", ports["http"],
+        "--egm-port", ports["egm"], "--egm-bind", "127.0.0.1", "--out", str(out), "--no-plots",
+    ]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+
+
+def covs(metrics: dict) -> list[float]:
+    return [c["cov"] for c in metrics["collisions"] if c["cov"] is not None]
+
+
+def test_pida_at_20ms_in_real_time_across_processes(core, tmp_path):
+    out = tmp_path / "rt-pida"
+    with facility_process(tmp_path) as ports:
+        result = run_hil(ports, out, ROBOT_DELAY, "compensator.kind=pida", "simulation.duration=3.5")
+    assert result.returncode == 0, result.stderr + result.stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["status"] == "ok" and metrics["reason"] is None
+    values = covs(metrics)
+    assert len(values) >= 3, metrics["collisions"]
+    assert all(0.9 <= v <= 1.1 for v in values), values
+    rt = metrics["realtime"]
+    assert rt["ticks"] == 3501 and rt["samples"] == 3501 and rt["samples_dropped"] == 0
+    for key in ("wake_latency_us", "period_error_us", "compute_us"):
+        stats = rt["timing"][key]
+        assert stats["count"] >= 3500 and 0 <= stats["p50"] <= stats["p99"] <= stats["max"], (key, stats)
+    assert rt["timing"]["overruns"] >= 0
+    assert rt["sensor"]["accepted"] >= 3400 and rt["robot"]["accepted"] >= 850  # 1 kHz and 250 Hz
+    assert rt["stop"] == {**rt["stop"], "kind": "completed", "exit_code": 0, "safety_stop": False}
+    series = pd.read_parquet(out / "timeseries.parquet")
+    assert len(series) == 3501 and {"stiffness_estimate", "wake_latency", "sensor_age"} <= set(series.columns)
+    assert (out / "reference.parquet").exists() and (out / "scenario.toml").exists()
+    assert "loop: 3501 ticks" in result.stdout and "wake latency p50/p99/max" in result.stdout
+
+
+def test_uncompensated_loop_diverges_and_the_force_limit_stops_it(core, tmp_path):
+    out = tmp_path / "rt-none"
+    with facility_process(tmp_path) as ports:
+        result = run_hil(ports, out, ROBOT_DELAY, "compensator.kind=none", "simulation.duration=6")
+    assert result.returncode == 3, result.stderr + result.stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["status"] == "stopped"
+    assert metrics["reason"].startswith("force limit: |F| = ") and "> 500.0 N" in metrics["reason"]
+    stop = metrics["realtime"]["stop"]
+    assert stop["kind"] == "force-limit" and stop["exit_code"] == 3 and stop["value"] > stop["limit"] == 500.0
+    values = covs(metrics)
+    assert values and values[0] > 1.3, values  # every rebound faster than the ideal one
+    assert all(b > a for a, b in zip(values, values[1:])), values
+    series = pd.read_parquet(out / "timeseries.parquet")
+    # everything up to the stop is recorded, the stop tick included
+    assert len(series) == metrics["realtime"]["samples"] == round(stop["time"] / 0.001) + 1
+    measured = (series[["measured_force_x", "measured_force_y", "measured_force_z"]] ** 2).sum(axis=1) ** 0.5
+    assert measured.iloc[-1] > 500.0 and measured.iloc[:-1].max() <= 500.0
+    assert "status: stopped" in result.stdout
+
+
+def test_sensor_watchdog_stops_the_run_when_the_sensor_goes_silent(core, tmp_path):
+    out = tmp_path / "rt-watchdog"
+    with facility_process(tmp_path, "--silence-sensor-after", "3") as ports:
+        result = run_hil(ports, out, ROBOT_DELAY, "compensator.kind=pida", "simulation.duration=8")
+    assert result.returncode == 3, result.stderr + result.stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    stop = metrics["realtime"]["stop"]
+    assert stop["kind"] == "sensor-watchdog", stop
+    assert 50.0 < stop["value"] < 60.0 and stop["limit"] == 50.0  # ms without a record
+    assert "sensor watchdog" in metrics["reason"]
+    assert 0.5 < stop["time"] < 3.0  # the emulator went silent 3 s after its own start
+    series = pd.read_parquet(out / "timeseries.parquet")
+    assert series["sensor_age"].iloc[-1] > 0.05 and series["sensor_age"].iloc[:-60].max() < 0.01
+
+
+def test_ctrl_c_stops_cleanly_and_keeps_what_was_recorded(core, tmp_path):
+    import time
+
+    out = tmp_path / "rt-ctrl-c"
+    with facility_process(tmp_path) as ports:
+        cmd = [
+            sys.executable, "-m", "hilcontact", "hil", "paper-table1", "--set", ROBOT_DELAY,
+            "--set", "compensator.kind=pida", "--set", "simulation.duration=20",
+            "--sensor", "127.0.0.1", "--sensor-port", ports["sensor"], "--http-port", ports["http"],
+            "--egm-port", ports["egm"], "--egm-bind", "127.0.0.1", "--out", str(out), "--no-plots",
+        ]
+        process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(4.0)
+        process.send_signal(signal.SIGINT)
+        stdout, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130, stderr + stdout
+    metrics = json.loads((out / "metrics.json").read_text())
+    stop = metrics["realtime"]["stop"]
+    assert metrics["status"] == "interrupted" and stop["kind"] == "user" and stop["exit_code"] == 130
+    assert 1.0 < stop["time"] < 4.0
+    series = pd.read_parquet(out / "timeseries.parquet")
+    # every tick up to the stop is in the file
+    assert len(series) == metrics["realtime"]["samples"] == round(stop["time"] / 0.001) + 1
+    assert series["time"].diff().iloc[1:].round(9).eq(0.001).all()
+    assert metrics["realtime"]["samples_dropped"] == 0
+
+
+def test_hil_without_a_facility_fails_fast(core, tmp_path):
+    ports = {"sensor": str(free_port()), "http": str(free_port(socket.SOCK_STREAM)), "egm": str(free_port())}
+    cmd = [
+        sys.executable, "-m", "hilcontact", "hil", "paper-table1", "--sensor", "127.0.0.1",
+        "--sensor-port", ports["sensor"], "--counts-per-force", "1e6", "--counts-per-torque", "1e6",
+        "--egm-port", ports["egm"], "--connect-timeout", "0.3", "--out", str(tmp_path / "none"),
+    ]
+    result = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 1, result.stderr
+    assert "no RDT record from the sensor" in result.stderr and "no EGM feedback" in result.stderr
+    assert not (tmp_path / "none").exists()
+    bad = subprocess.run(cmd[:-6] + ["--force-limit", "-5"], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "force_limit: must be a positive number" in bad.stderr, bad.stderr
