@@ -101,6 +101,23 @@ impl Trace {
         }
     }
 
+    /// The trace of HIL records (with estimates if `estimates_contact`).
+    pub fn of_records(rows: &[HilRecord], estimates_contact: bool) -> Self {
+        let mut trace = Trace::with_capacity(rows.len(), estimates_contact);
+        for row in rows {
+            trace.push_record(row, estimates_contact);
+        }
+        trace
+    }
+
+    fn push_record(&mut self, row: &HilRecord, estimates_contact: bool) {
+        self.push(row.time, &row.contact_force, &row.tip_velocity, row.energy);
+        if estimates_contact {
+            self.stiffness_estimate.push(row.stiffness_estimate);
+            self.damping_estimate.push(row.damping_estimate);
+        }
+    }
+
     fn push(&mut self, time: f64, force: &Vector3<f64>, velocity: &Vector3<f64>, energy: f64) {
         self.time.push(time);
         self.force.push(force.norm());
@@ -125,7 +142,7 @@ pub struct ReferenceRecord {
 }
 
 /// One tick of the HIL loop.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct HilRecord {
     /// Time, s.
     pub time: f64,
@@ -271,11 +288,7 @@ pub fn run_hil(
             damping_estimate: out.estimate.map_or(f64::NAN, |e| e.damping),
             observed_energy: out.observed_energy,
         };
-        trace.push(row.time, &row.contact_force, &row.tip_velocity, row.energy);
-        if virt.estimates_contact() {
-            trace.stiffness_estimate.push(row.stiffness_estimate);
-            trace.damping_estimate.push(row.damping_estimate);
-        }
+        trace.push_record(&row, virt.estimates_contact());
         if keep_rows {
             rows.push(row);
         }
@@ -321,9 +334,24 @@ pub fn simulate(s: &Scenario) -> Result<SimulationOutput> {
         hil,
         metrics,
     } = run(s, true)?;
-    let rows = &hil.rows;
+    let timeseries = hil_table(&hil.rows, hil.estimates_contact, hil.observes_energy);
+    let reference_table = reference_table(&reference);
+
+    Ok(SimulationOutput {
+        timeseries,
+        reference: reference_table,
+        metrics,
+    })
+}
+
+/// The HIL loop's table, one row per record: `time`, the vectors `tip_position`,
+/// `tip_velocity`, `actual_tip_position`, `actual_tip_velocity`, `contact_force`,
+/// `measured_force`, `measured_moment`, `applied_force`, `applied_moment` (`_x`, `_y`, `_z`),
+/// `energy`, and `stiffness_estimate`, `damping_estimate` if `estimates_contact`,
+/// `observed_energy` if `observes_energy` (one definition for simulations and real-time runs).
+pub fn hil_table(rows: &[HilRecord], estimates_contact: bool, observes_energy: bool) -> Table {
     type V = Vector3<f64>;
-    let mut hil_vectors: Vec<(&str, fn(&HilRecord) -> V)> = vec![
+    let vectors: [(&str, fn(&HilRecord) -> V); 9] = [
         ("tip_position", |r| r.tip_position),
         ("tip_velocity", |r| r.tip_velocity),
         ("actual_tip_position", |r| r.actual_tip_position),
@@ -334,29 +362,19 @@ pub fn simulate(s: &Scenario) -> Result<SimulationOutput> {
         ("applied_force", |r| r.applied_force),
         ("applied_moment", |r| r.applied_moment),
     ];
-    let mut hil_scalars: Vec<(&str, fn(&HilRecord) -> f64)> = vec![("time", |r| r.time)];
-    let mut timeseries = Table::from_rows(rows, &hil_scalars, &hil_vectors);
-    hil_vectors.clear();
-    hil_scalars.clear();
-    hil_scalars.push(("energy", |r| r.energy));
-    if hil.estimates_contact {
-        hil_scalars.push(("stiffness_estimate", |r| r.stiffness_estimate));
-        hil_scalars.push(("damping_estimate", |r| r.damping_estimate));
+    let mut scalars: Vec<(&str, fn(&HilRecord) -> f64)> = vec![("energy", |r| r.energy)];
+    if estimates_contact {
+        scalars.push(("stiffness_estimate", |r| r.stiffness_estimate));
+        scalars.push(("damping_estimate", |r| r.damping_estimate));
     }
-    if hil.observes_energy {
-        hil_scalars.push(("observed_energy", |r| r.observed_energy));
+    if observes_energy {
+        scalars.push(("observed_energy", |r| r.observed_energy));
     }
-    timeseries
-        .columns
-        .extend(Table::from_rows(rows, &hil_scalars, &hil_vectors).columns);
-
-    let reference_table = reference_table(&reference);
-
-    Ok(SimulationOutput {
-        timeseries,
-        reference: reference_table,
-        metrics,
-    })
+    Table::from_rows(rows, &[("time", |r: &HilRecord| r.time)], &vectors).with(Table::from_rows(
+        rows,
+        &scalars,
+        &[],
+    ))
 }
 
 /// The reference's table: `time`, `tip_position_*`, `tip_velocity_*`, `contact_force_*`,

@@ -7,12 +7,13 @@
 //! `t`), so it carries the sensor's delay and noise; collisions, CoF and the identification
 //! error are computed from it.
 
-use nalgebra::Vector3;
 use serde_json::{json, Value};
 
 use hilcontact_core::hil::VirtualDynamics;
 use hilcontact_core::metrics::Status;
-use hilcontact_core::sim::{reference_table, run_reference, trace_metrics, Table, Trace};
+use hilcontact_core::sim::{
+    hil_table, reference_table, run_reference, trace_metrics, HilRecord, Table, Trace,
+};
 use hilcontact_core::world::TwoBodySystem;
 use hilcontact_core::Scenario;
 
@@ -33,29 +34,6 @@ pub struct HilOutput {
     pub exit_code: i32,
 }
 
-fn push_vector<R>(
-    columns: &mut Vec<(String, Vec<f64>)>,
-    rows: &[R],
-    name: &str,
-    get: impl Fn(&R) -> Vector3<f64>,
-) {
-    for (axis, label) in ["x", "y", "z"].iter().enumerate() {
-        columns.push((
-            format!("{name}_{label}"),
-            rows.iter().map(|r| get(r)[axis]).collect(),
-        ));
-    }
-}
-
-fn push_scalar<R>(
-    columns: &mut Vec<(String, Vec<f64>)>,
-    rows: &[R],
-    name: &str,
-    get: impl Fn(&R) -> f64,
-) {
-    columns.push((name.to_string(), rows.iter().map(get).collect()));
-}
-
 /// Builds the output of a run from its samples.
 pub fn build_output(
     scenario: &Scenario,
@@ -66,55 +44,21 @@ pub fn build_output(
 ) -> Result<HilOutput> {
     let virt = VirtualDynamics::from_scenario(scenario, system)?;
     let (estimates, observes) = (virt.estimates_contact(), virt.observes_energy());
-    let mut columns = Vec::new();
-    push_scalar(&mut columns, samples, "time", |s| s.time);
-    push_vector(&mut columns, samples, "tip_position", |s| s.tip_position);
-    push_vector(&mut columns, samples, "tip_velocity", |s| s.tip_velocity);
-    push_vector(&mut columns, samples, "actual_tip_position", |s| {
-        s.actual_tip_position
-    });
-    push_vector(&mut columns, samples, "actual_tip_velocity", |s| {
-        s.actual_tip_velocity
-    });
-    push_vector(&mut columns, samples, "contact_force", |s| s.contact_force);
-    push_vector(&mut columns, samples, "measured_force", |s| {
-        s.measured_force
-    });
-    push_vector(&mut columns, samples, "measured_moment", |s| {
-        s.measured_moment
-    });
-    push_vector(&mut columns, samples, "applied_force", |s| s.applied_force);
-    push_vector(&mut columns, samples, "applied_moment", |s| {
-        s.applied_moment
-    });
-    push_scalar(&mut columns, samples, "energy", |s| s.energy);
-    if estimates {
-        push_scalar(&mut columns, samples, "stiffness_estimate", |s| {
-            s.stiffness_estimate
-        });
-        push_scalar(&mut columns, samples, "damping_estimate", |s| {
-            s.damping_estimate
-        });
+    let records: Vec<HilRecord> = samples.iter().map(|s| s.record).collect();
+    let mut timeseries = hil_table(&records, estimates, observes);
+    let timing: [(&str, fn(&Sample) -> f64); 3] = [
+        ("wake_latency", |s| s.wake_latency),
+        ("sensor_age", |s| s.sensor_age),
+        ("robot_age", |s| s.robot_age),
+    ];
+    for (name, get) in timing {
+        timeseries
+            .columns
+            .push((name.to_string(), samples.iter().map(get).collect()));
     }
-    if observes {
-        push_scalar(&mut columns, samples, "observed_energy", |s| {
-            s.observed_energy
-        });
-    }
-    push_scalar(&mut columns, samples, "wake_latency", |s| s.wake_latency);
-    push_scalar(&mut columns, samples, "sensor_age", |s| s.sensor_age);
-    push_scalar(&mut columns, samples, "robot_age", |s| s.robot_age);
-    let timeseries = Table { columns };
 
     let (reference_trace, reference) = run_reference(scenario, system, true)?;
-    let trace = Trace {
-        time: samples.iter().map(|s| s.time).collect(),
-        force: samples.iter().map(|s| s.contact_force.norm()).collect(),
-        speed: samples.iter().map(|s| s.tip_velocity.norm()).collect(),
-        energy: samples.iter().map(|s| s.energy).collect(),
-        stiffness_estimate: samples.iter().map(|s| s.stiffness_estimate).collect(),
-        damping_estimate: samples.iter().map(|s| s.damping_estimate).collect(),
-    };
+    let trace = Trace::of_records(&records, estimates);
     // status and reason are the runtime's, set below
     let core_metrics = trace_metrics(
         scenario,

@@ -37,6 +37,7 @@ use serde::{Deserialize, Serialize};
 
 use hilcontact_core::facility::Measurement;
 use hilcontact_core::hil::VirtualDynamics;
+use hilcontact_core::sim::HilRecord;
 use hilcontact_core::world::{RelativeMotion, TwoBodySystem};
 use hilcontact_core::{metrics, sim, Scenario};
 
@@ -118,37 +119,16 @@ impl Default for RuntimeOptions {
     }
 }
 
-/// One tick of the loop, as logged (fixed size, `Copy`).
+/// One tick of the loop, as logged (fixed size, `Copy`): the simulation's record of a tick
+/// plus the loop's timing.
+///
+/// In the record, `time` is the virtual time (tick × period), `actual_*` the rod tip estimated
+/// from EGM feedback and `contact_force` the force on the rod that the sensor reports (the
+/// opposite of the measured force, in `t`): the true contact force is not observable.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Sample {
-    /// Virtual time, s (tick × period).
-    pub time: f64,
-    /// Desired (virtual) rod tip, `t`, m.
-    pub tip_position: Vector3<f64>,
-    /// Desired rod tip velocity, `t`, m/s.
-    pub tip_velocity: Vector3<f64>,
-    /// Actual rod tip (estimated from EGM feedback), `t`, m.
-    pub actual_tip_position: Vector3<f64>,
-    /// Actual rod tip velocity, `t`, m/s.
-    pub actual_tip_velocity: Vector3<f64>,
-    /// Contact force on the rod from the sensor (opposite of the measured force, in `t`), N.
-    pub contact_force: Vector3<f64>,
-    /// Measured force, sensor frame, N.
-    pub measured_force: Vector3<f64>,
-    /// Measured moment about the sensor origin, sensor frame, N·m.
-    pub measured_moment: Vector3<f64>,
-    /// Force applied to the virtual dynamics, sensor frame, N.
-    pub applied_force: Vector3<f64>,
-    /// Moment applied to the virtual dynamics, sensor frame, N·m.
-    pub applied_moment: Vector3<f64>,
-    /// Virtual kinetic energy, J.
-    pub energy: f64,
-    /// Identified stiffness, N/m (NaN if none).
-    pub stiffness_estimate: f64,
-    /// Identified damping, N·s/m (NaN if none).
-    pub damping_estimate: f64,
-    /// Observed port energy, J (NaN if none).
-    pub observed_energy: f64,
+    /// The tick, as the simulation records it.
+    pub record: HilRecord,
     /// Wake-up latency of the tick, s.
     pub wake_latency: f64,
     /// Age of the sensor record used (since its arrival), s.
@@ -849,24 +829,26 @@ impl Loop {
         let out = self.virt.compensate(&m);
         let desired = self.virt.command();
         let sample = Sample {
-            time,
-            tip_position: desired.point(&self.rod),
-            tip_velocity: desired.point_velocity(&self.rod),
-            actual_tip_position: actual.point(&self.rod),
-            actual_tip_velocity: actual.point_velocity(&self.rod),
-            contact_force: -(self.sensor_to_t * self.force),
-            measured_force: self.force,
-            measured_moment: self.moment,
-            applied_force: self
-                .sensor_to_t
-                .inverse_transform_vector(&out.applied.force),
-            applied_moment: self
-                .sensor_to_t
-                .inverse_transform_vector(&out.applied.moment),
-            energy: self.virt.energy(),
-            stiffness_estimate: out.estimate.map_or(f64::NAN, |e| e.stiffness),
-            damping_estimate: out.estimate.map_or(f64::NAN, |e| e.damping),
-            observed_energy: out.observed_energy,
+            record: HilRecord {
+                time,
+                tip_position: desired.point(&self.rod),
+                tip_velocity: desired.point_velocity(&self.rod),
+                actual_tip_position: actual.point(&self.rod),
+                actual_tip_velocity: actual.point_velocity(&self.rod),
+                contact_force: -(self.sensor_to_t * self.force),
+                measured_force: self.force,
+                measured_moment: self.moment,
+                applied_force: self
+                    .sensor_to_t
+                    .inverse_transform_vector(&out.applied.force),
+                applied_moment: self
+                    .sensor_to_t
+                    .inverse_transform_vector(&out.applied.moment),
+                energy: self.virt.energy(),
+                stiffness_estimate: out.estimate.map_or(f64::NAN, |e| e.stiffness),
+                damping_estimate: out.estimate.map_or(f64::NAN, |e| e.damping),
+                observed_energy: out.observed_energy,
+            },
             wake_latency: latency as f64 * 1e-9,
             sensor_age: wake.saturating_sub(self.last_rdt_ns) as f64 * 1e-9,
             robot_age: wake.saturating_sub(self.last_egm_ns) as f64 * 1e-9,
