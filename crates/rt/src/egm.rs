@@ -129,6 +129,16 @@ fn clear_planned(p: &mut Option<EgmPlanned>) {
     p.time = None;
 }
 
+/// Empties RAPID data in place, keeping its buffer (no allocation once it exists).
+fn clear_rapid(r: &mut Option<EgmRapiDdata>) {
+    let r = r.get_or_insert_with(|| EgmRapiDdata {
+        dig_val: None,
+        dnum: repeated(),
+    });
+    r.dig_val = None;
+    r.dnum.clear();
+}
+
 fn check_pose(pose: &EgmPose) -> Result<EgmPoseMm, EgmError> {
     let (Some(p), Some(q)) = (pose.pos, pose.orient) else {
         return Err(EgmError::MissingPose);
@@ -258,12 +268,7 @@ impl RobotDecoder {
         });
         c.collsion_triggered = None;
         c.coll_det_quota.clear();
-        let r = m.rapid_from_robot.get_or_insert_with(|| EgmRapiDdata {
-            dig_val: None,
-            dnum: repeated(),
-        });
-        r.dig_val = None;
-        r.dnum.clear();
+        clear_rapid(&mut m.rapid_from_robot);
     }
 
     /// Decodes and validates one datagram.
@@ -343,12 +348,7 @@ impl CorrectionDecoder {
             Some(c) => c.value.clear(),
             None => s.cartesians = Some(EgmCartesianSpeed { value: repeated() }),
         }
-        let r = m.rapid_to_robot.get_or_insert_with(|| EgmRapiDdata {
-            dig_val: None,
-            dnum: repeated(),
-        });
-        r.dig_val = None;
-        r.dnum.clear();
+        clear_rapid(&mut m.rapid_to_robot);
     }
 
     /// Decodes and validates one datagram. A speed reference other than 6 values (or none)
