@@ -17,6 +17,12 @@ impl<T: Copy> DelayLine<T> {
         }
     }
 
+    /// Sets every stored value to `value` (the signal held it for all earlier time); does not
+    /// allocate.
+    pub fn fill(&mut self, value: T) {
+        self.buffer.fill(value);
+    }
+
     /// Appends the newest value, dropping the oldest.
     pub fn push(&mut self, value: T) {
         self.head = (self.head + 1) % self.buffer.len();

@@ -96,7 +96,7 @@ impl ContactEstimator {
 
     /// Forgets everything but the parameters.
     pub fn reset(&mut self) {
-        self.kinematics = DelayLine::new(self.delay_ticks, (Vector3::zeros(), Vector3::zeros()));
+        self.kinematics.fill((Vector3::zeros(), Vector3::zeros()));
         self.previous_measured = (Vector3::zeros(), Vector3::zeros());
         self.previous_sample = None;
         self.filter.reset();
@@ -108,7 +108,7 @@ impl ContactEstimator {
         let (p_act, v_act) = (input.tip_position_actual, input.tip_velocity_actual);
         if self.previous_sample.is_none() {
             // first tick: the kinematics held their present value for all earlier time
-            self.kinematics = DelayLine::new(self.delay_ticks, (p_act, v_act));
+            self.kinematics.fill((p_act, v_act));
             self.previous_measured = (f_mea, m_mea);
         }
         self.kinematics.push((p_act, v_act));
