@@ -11,7 +11,7 @@ core = pytest.importorskip("hilcontact._core")
 
 @pytest.mark.parametrize("kind", ["none", "pic", "dac", "pida", "tdpa-impedance", "tdpa-admittance"])
 def test_python_defaults_are_the_core_defaults(kind):
-    rust = json.loads(core.compensator_defaults())[kind]
+    rust = {e["kind"]: e["defaults"] for e in json.loads(core.compensator_registry())}[kind]
     scenario = hc.load_scenario("paper-table1", {"compensator.kind": kind})
     python = json.loads(scenario.to_json())["compensator"]
     assert python == rust

@@ -49,9 +49,28 @@ def version() -> str:
     """Version of the native core."""
 
 
-def compensator_defaults() -> str:
-    """The core's default parameters of every compensator kind, as JSON text:
-    ``{kind: {"kind": kind, parameter: default, ...}}``."""
+def compensator_registry() -> str:
+    """The compensator registry (the one list of compensators), as JSON text: a list, in the
+    registry's order, of ``{"kind", "summary", "colour", "defaults": {"kind": kind,
+    parameter: default, ...}}``."""
+
+
+class HilContactError(Exception):
+    """Base class of every error raised on purpose by hilcontact."""
+
+
+class ScenarioError(HilContactError, ValueError):
+    """An invalid scenario; ``issues`` lists every problem as ``(key, message)``."""
+
+    issues: list[tuple[str, str]]
+
+
+class RealtimeError(HilContactError, OSError):
+    """The real-time runtime or the emulated facility could not start or finish."""
+
+
+class RealtimeOptionError(RealtimeError, ValueError):
+    """An invalid real-time option; the message names it."""
 
 
 class HilHandle:

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 import pandas as pd
 
 from .errors import HilContactError, ScenarioError
+from .registry import KINDS
 from .run import Run, simulate, write_atomically
 from .scenario import COMPENSATOR_MODELS, Scenario, _override_steps, _read_source, load_scenario
 
@@ -41,7 +42,7 @@ __all__ = [
 ]
 
 #: Every compensator kind, in the order of the tables and figures.
-ALL_KINDS: tuple[str, ...] = tuple(COMPENSATOR_MODELS)
+ALL_KINDS: tuple[str, ...] = KINDS
 
 #: Figures of a comparison (file stems); ``compare_identification`` only when a compared
 #: compensator identifies the contact.

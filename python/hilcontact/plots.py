@@ -27,6 +27,8 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from .registry import COMPENSATORS
+
 if TYPE_CHECKING:
     from .run import Run
 
@@ -201,14 +203,7 @@ def make_figures(run: Run) -> dict[str, Figure]:
 # Comparison figures
 # --------------------------------------------------------------------------------------
 
-_KIND_COLORS = {
-    "none": "tab:red",
-    "pic": "tab:blue",
-    "dac": "tab:orange",
-    "pida": "tab:green",
-    "tdpa-impedance": "tab:purple",
-    "tdpa-admittance": "tab:brown",
-}
+_KIND_COLORS = {kind: info.colour for kind, info in COMPENSATORS.items()}
 _EXTRA_COLORS = ("tab:pink", "tab:olive", "tab:cyan", "tab:gray")
 
 

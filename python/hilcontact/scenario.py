@@ -45,6 +45,7 @@ from pydantic import (
 )
 
 from .errors import ScenarioError
+from .registry import KINDS
 
 __all__ = [
     "COMPENSATOR_MODELS",
@@ -382,9 +383,14 @@ _COMPENSATOR_CLASSES: tuple[type[_Table], ...] = (
     TdpaAdmittanceCompensator,
 )
 
-COMPENSATOR_MODELS: dict[str, type[_Table]] = {
-    cls.model_fields["kind"].default: cls for cls in _COMPENSATOR_CLASSES
-}
+_MODELS_BY_KIND = {cls.model_fields["kind"].default: cls for cls in _COMPENSATOR_CLASSES}
+if set(_MODELS_BY_KIND) != set(KINDS):  # pragma: no cover - a registry change without its schema
+    raise ImportError(
+        f"the scenario schema's compensator kinds {sorted(_MODELS_BY_KIND)} differ from the "
+        f"core's registry {sorted(KINDS)}"
+    )
+COMPENSATOR_MODELS: dict[str, type[_Table]] = {kind: _MODELS_BY_KIND[kind] for kind in KINDS}
+"""The schema of each compensator kind's table, in the core registry's order."""
 
 
 def _compensator_kind(value: Any) -> Any:

@@ -13,7 +13,6 @@ use hilcontact_core::compensator::{
 };
 use hilcontact_core::facility::FacilityModel;
 use hilcontact_core::hil::VirtualDynamics;
-use hilcontact_core::world::TwoBodySystem;
 use hilcontact_core::Scenario;
 
 fn preset(name: &str) -> Scenario {
@@ -26,11 +25,12 @@ fn preset(name: &str) -> Scenario {
 
 /// The compensator inputs of every tick of a `pida` run, and its context.
 fn recorded_inputs(s: &Scenario) -> (Vec<CompensatorInput>, CompensatorContext) {
-    let system = TwoBodySystem::from_scenario(s).expect("system");
-    let mut virt = VirtualDynamics::from_scenario(s, &system).expect("virtual");
-    let mut facility = FacilityModel::from_scenario(s, &system, &virt.command()).expect("facility");
-    let mut inputs = Vec::with_capacity(s.ticks());
-    for _ in 0..s.ticks() {
+    let plan = s.resolve().expect("plan");
+    let system = &plan.system;
+    let mut virt = VirtualDynamics::new(&plan);
+    let mut facility = FacilityModel::new(&plan, &virt.command());
+    let mut inputs = Vec::with_capacity(plan.ticks);
+    for _ in 0..plan.ticks {
         let m = facility.measure();
         inputs.push(virt.input(&m));
         let out = virt.compensate(&m);
@@ -39,7 +39,7 @@ fn recorded_inputs(s: &Scenario) -> (Vec<CompensatorInput>, CompensatorContext) 
     }
     let context = CompensatorContext {
         period: s.simulation.period,
-        sensor_delay: s.facility.sensor_delay,
+        sensor_delay_ticks: plan.facility.sensor_delay_ticks,
         sensor_origin: system.sensor_origin,
         reduced_mass: system.reduced_mass(),
     };

@@ -5,7 +5,6 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use hilcontact_core::compensator::{CompensatorConfig, ModelParams};
 use hilcontact_core::sim::{run_hil, run_reference};
-use hilcontact_core::world::TwoBodySystem;
 use hilcontact_core::{simulate, simulate_metrics, Scenario};
 use std::hint::black_box;
 
@@ -21,7 +20,7 @@ fn bench(c: &mut Criterion) {
     let mut s = preset("paper-table1");
     s.facility.robot_delay = 0.02;
     s.compensator = CompensatorConfig::Pida(ModelParams::default());
-    let system = TwoBodySystem::from_scenario(&s).expect("system");
+    let plan = s.resolve().expect("plan");
     c.bench_function(
         "paper-table1 pida 20 ms: metrics only (a sweep's run)",
         |b| b.iter(|| simulate_metrics(black_box(&s)).expect("run")),
@@ -30,10 +29,10 @@ fn bench(c: &mut Criterion) {
         b.iter(|| simulate(black_box(&s)).expect("run"))
     });
     c.bench_function("paper-table1: reference only", |b| {
-        b.iter(|| run_reference(black_box(&s), &system, false).expect("run"))
+        b.iter(|| run_reference(black_box(&plan), false))
     });
     c.bench_function("paper-table1 pida 20 ms: HIL loop only", |b| {
-        b.iter(|| run_hil(black_box(&s), &system, f64::INFINITY, false).expect("run"))
+        b.iter(|| run_hil(black_box(&plan), f64::INFINITY, false))
     });
 }
 

@@ -1,12 +1,10 @@
 //! Runs a preset scenario file and prints its collisions:
 //! `cargo run --release --example run_preset -- python/hilcontact/scenarios/paper-table1.toml [key=value ...]`
-//! with keys `robot_delay`, `sensor_delay`, `noise` (N), `seed`, `kind` (compensator), `mode` (align|lead),
+//! with keys `robot_delay`, `sensor_delay`, `round_delays` (true|false), `noise` (N), `seed`, `kind` (compensator), `mode` (align|lead),
 //! `observer` (work|paper), `repeat` (more runs, metrics only as a sweep runs them, for profiling: `perf record -g`
 //! on this example).
 
-use hilcontact_core::compensator::{
-    CompensatorConfig, DelayMode, ModelParams, ObserverMode, TdpaParams,
-};
+use hilcontact_core::compensator::{CompensatorConfig, DelayMode, ModelParams, ObserverMode};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -26,6 +24,7 @@ fn main() {
             "sensor_delay" => s.facility.sensor_delay = value.parse().expect("s"),
             "noise" => s.facility.sensor_noise = value.parse().expect("N"),
             "seed" => s.facility.seed = value.parse().expect("integer"),
+            "round_delays" => s.facility.round_delays = value.parse().expect("true or false"),
             "kind" => kind = value.to_string(),
             "repeat" => repeat = value.parse().expect("integer"),
             "mode" => {
@@ -50,14 +49,12 @@ fn main() {
         observer,
         ..ModelParams::default()
     };
-    s.compensator = match kind.as_str() {
-        "none" => CompensatorConfig::None,
-        "pic" => CompensatorConfig::Pic(model),
-        "dac" => CompensatorConfig::Dac(model),
-        "pida" => CompensatorConfig::Pida(model),
-        "tdpa-impedance" => CompensatorConfig::TdpaImpedance(TdpaParams::default()),
-        "tdpa-admittance" => CompensatorConfig::TdpaAdmittance(TdpaParams::default()),
-        other => panic!("unknown compensator {other}"),
+    s.compensator = match CompensatorConfig::from_kind(&kind) {
+        Some(CompensatorConfig::Pic(_)) => CompensatorConfig::Pic(model),
+        Some(CompensatorConfig::Dac(_)) => CompensatorConfig::Dac(model),
+        Some(CompensatorConfig::Pida(_)) => CompensatorConfig::Pida(model),
+        Some(other) => other,
+        None => panic!("unknown compensator {kind}"),
     };
     let start = std::time::Instant::now();
     let out = hilcontact_core::simulate(&s).expect("simulate");

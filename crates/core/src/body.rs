@@ -11,8 +11,6 @@
 
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 
-use crate::config::BodyConfig;
-use crate::error::Result;
 
 /// Mass properties of a rigid body.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -103,19 +101,6 @@ impl BodyRate {
 }
 
 impl BodyState {
-    /// The initial state from a scenario's body table (checked there).
-    pub fn from_config(config: &BodyConfig, key: &str) -> Result<Self> {
-        Ok(BodyState {
-            position: Vector3::from(config.position),
-            orientation: crate::config::quaternion(
-                &format!("{key}.orientation"),
-                config.orientation,
-            )?,
-            velocity: Vector3::from(config.velocity),
-            angular_velocity: Vector3::from(config.angular_velocity),
-        })
-    }
-
     /// Angular velocity in the world frame, rad/s.
     pub fn angular_velocity_world(&self) -> Vector3<f64> {
         self.orientation * self.angular_velocity

@@ -1,19 +1,16 @@
-//! The resolved scenario, as the Python layer sends it (JSON) and the core validates it.
+//! The scenario as data: the schema of a scenario file (names, types, defaults, units), as
+//! serde reads it from TOML or JSON. Nothing here is checked: [`crate::plan::Plan::resolve`]
+//! turns a scenario into a validated plan once, and every physics constructor takes the plan.
 //!
 //! Field names are the scenario file's keys (`docs/scenario.md`); all values are SI.
-//! Validation here is a second line of defence: the Python layer already gives the user
-//! friendly messages, but the core must never run on an invalid scenario (the real-time
-//! runtime builds scenarios without Python).
 
-use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::compensator::CompensatorConfig;
-use crate::error::{CoreError, Result};
 
 /// A complete scenario: two satellites, the collision geometry, the contact, the facility,
 /// the compensator and the metric settings.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Scenario {
     /// Short name (used for the output folder).
@@ -45,7 +42,7 @@ pub struct Scenario {
 }
 
 /// Time stepping of the loop.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SimulationConfig {
     /// Simulated duration, s (> 0).
@@ -76,7 +73,7 @@ fn default_divergence_ratio() -> f64 {
 }
 
 /// A free-floating rigid body: mass properties and initial state (world frame).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BodyConfig {
     /// Mass, kg (> 0).
@@ -113,7 +110,7 @@ fn identity_quaternion() -> [f64; 4] {
 }
 
 /// The rod carried by the servicer.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RodConfig {
     /// Rod tip (the contact point) in the servicer body frame, m.
@@ -121,7 +118,7 @@ pub struct RodConfig {
 }
 
 /// A planar wall of the collision frame, fixed in the target frame.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct WallConfig {
     /// Name for reports.
@@ -145,7 +142,7 @@ pub enum ContactModelKind {
 }
 
 /// Contact law parameters.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ContactConfig {
     /// Contact law.
@@ -166,7 +163,7 @@ fn default_exponent() -> f64 {
 }
 
 /// The facility model: robot response and F/T sensor.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FacilityConfig {
     /// Pure delay of the robot's response, s (a whole number of periods).
@@ -231,7 +228,7 @@ impl Default for FacilityConfig {
 }
 
 /// Metric settings.
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MetricsConfig {
     /// A collision is an interval where the physical contact force exceeds this, N (> 0).
@@ -248,204 +245,5 @@ impl Default for MetricsConfig {
         MetricsConfig {
             contact_threshold: default_contact_threshold(),
         }
-    }
-}
-
-fn positive(key: &str, value: f64) -> Result<()> {
-    if value.is_finite() && value > 0.0 {
-        Ok(())
-    } else {
-        Err(CoreError::invalid(
-            key,
-            format!("must be a positive number, got {value}"),
-        ))
-    }
-}
-
-fn non_negative(key: &str, value: f64) -> Result<()> {
-    if value.is_finite() && value >= 0.0 {
-        Ok(())
-    } else {
-        Err(CoreError::invalid(
-            key,
-            format!("must be a number >= 0, got {value}"),
-        ))
-    }
-}
-
-fn finite_vector(key: &str, v: &[f64]) -> Result<()> {
-    if v.iter().all(|x| x.is_finite()) {
-        Ok(())
-    } else {
-        Err(CoreError::invalid(
-            key,
-            format!("must contain finite numbers, got {v:?}"),
-        ))
-    }
-}
-
-/// A unit quaternion from `[w, x, y, z]`, normalised; rejects a zero or non-finite one.
-pub fn quaternion(key: &str, q: [f64; 4]) -> Result<UnitQuaternion<f64>> {
-    finite_vector(key, &q)?;
-    let raw = Quaternion::new(q[0], q[1], q[2], q[3]);
-    if raw.norm() < 1e-12 {
-        return Err(CoreError::invalid(
-            key,
-            "must be a non-zero quaternion [w, x, y, z]",
-        ));
-    }
-    Ok(UnitQuaternion::new_normalize(raw))
-}
-
-/// `x` rounded to 12 decimals, so that `13 × 0.001` prints as `0.013`.
-fn tidy(x: f64) -> f64 {
-    (x * 1e12).round() / 1e12
-}
-
-/// Number of whole periods in `delay`; rejects a delay that is not a whole number of periods.
-pub fn delay_ticks(key: &str, delay: f64, period: f64) -> Result<usize> {
-    non_negative(key, delay)?;
-    let ticks = delay / period;
-    let rounded = ticks.round();
-    if (ticks - rounded).abs() > 1e-9 * rounded.max(1.0) {
-        return Err(CoreError::invalid(
-            key,
-            format!(
-                "{delay} s is not a whole number of periods (simulation.period = {period} s): use {} or {}, or set facility.round_delays = true",
-                tidy(ticks.floor() * period),
-                tidy(ticks.ceil() * period)
-            ),
-        ));
-    }
-    Ok(rounded as usize)
-}
-
-impl BodyConfig {
-    /// The inertia tensor, checked symmetric positive definite.
-    pub fn inertia_matrix(&self, key: &str) -> Result<Matrix3<f64>> {
-        let rows = match self.inertia {
-            Inertia::Principal(d) => [[d[0], 0.0, 0.0], [0.0, d[1], 0.0], [0.0, 0.0, d[2]]],
-            Inertia::Tensor(rows) => rows,
-        };
-        finite_vector(key, &rows.concat())?;
-        let m = Matrix3::from_fn(|i, j| rows[i][j]);
-        let scale = m.abs().max();
-        if (m - m.transpose()).abs().max() > 1e-9 * scale.max(1.0) {
-            return Err(CoreError::invalid(key, "must be a symmetric 3x3 matrix"));
-        }
-        if m.cholesky().is_none() {
-            return Err(CoreError::invalid(
-                key,
-                "must be positive definite (principal moments > 0)",
-            ));
-        }
-        Ok(m)
-    }
-
-    fn validate(&self, key: &str) -> Result<()> {
-        positive(&format!("{key}.mass"), self.mass)?;
-        self.inertia_matrix(&format!("{key}.inertia"))?;
-        quaternion(&format!("{key}.orientation"), self.orientation)?;
-        finite_vector(&format!("{key}.position"), &self.position)?;
-        finite_vector(&format!("{key}.velocity"), &self.velocity)?;
-        finite_vector(&format!("{key}.angular_velocity"), &self.angular_velocity)
-    }
-}
-
-impl WallConfig {
-    /// The unit normal; rejects a zero normal.
-    pub fn unit_normal(&self, key: &str) -> Result<Vector3<f64>> {
-        finite_vector(key, &self.normal)?;
-        let n = Vector3::from(self.normal);
-        let norm = n.norm();
-        if norm < 1e-12 {
-            return Err(CoreError::invalid(
-                key,
-                "must be a non-zero vector (the wall's normal into free space)",
-            ));
-        }
-        Ok(n / norm)
-    }
-}
-
-impl Scenario {
-    /// Number of control ticks in the run (`duration / period`, rounded).
-    pub fn ticks(&self) -> usize {
-        (self.simulation.duration / self.simulation.period).round() as usize
-    }
-
-    /// Robot delay in whole periods.
-    pub fn robot_delay_ticks(&self) -> Result<usize> {
-        delay_ticks(
-            "facility.robot_delay",
-            self.facility.robot_delay,
-            self.simulation.period,
-        )
-    }
-
-    /// Sensor delay in whole periods.
-    pub fn sensor_delay_ticks(&self) -> Result<usize> {
-        delay_ticks(
-            "facility.sensor_delay",
-            self.facility.sensor_delay,
-            self.simulation.period,
-        )
-    }
-
-    /// Checks every invariant the core relies on; the error names the key.
-    pub fn validate(&self) -> Result<()> {
-        let sim = &self.simulation;
-        positive("simulation.duration", sim.duration)?;
-        positive("simulation.period", sim.period)?;
-        if sim.duration < sim.period {
-            return Err(CoreError::invalid(
-                "simulation.duration",
-                "must be at least one period",
-            ));
-        }
-        if sim.plant_substeps == 0 {
-            return Err(CoreError::invalid(
-                "simulation.plant_substeps",
-                "must be >= 1",
-            ));
-        }
-        if sim.reference_substeps == 0 {
-            return Err(CoreError::invalid(
-                "simulation.reference_substeps",
-                "must be >= 1",
-            ));
-        }
-        if !(sim.divergence_energy_ratio.is_finite() && sim.divergence_energy_ratio > 1.0) {
-            return Err(CoreError::invalid(
-                "simulation.divergence_energy_ratio",
-                "must be a number > 1",
-            ));
-        }
-        self.servicer.validate("servicer")?;
-        self.target.validate("target")?;
-        finite_vector("rod.tip", &self.rod.tip)?;
-        if self.walls.is_empty() {
-            return Err(CoreError::invalid("walls", "at least one wall is required"));
-        }
-        for (i, wall) in self.walls.iter().enumerate() {
-            finite_vector(&format!("walls[{i}].point"), &wall.point)?;
-            wall.unit_normal(&format!("walls[{i}].normal"))?;
-        }
-        positive("contact.stiffness", self.contact.stiffness)?;
-        non_negative("contact.damping", self.contact.damping)?;
-        positive("contact.exponent", self.contact.exponent)?;
-        let f = &self.facility;
-        self.robot_delay_ticks()?;
-        self.sensor_delay_ticks()?;
-        non_negative("facility.servo_frequency", f.servo_frequency)?;
-        positive("facility.servo_damping", f.servo_damping)?;
-        non_negative("facility.sensor_noise", f.sensor_noise)?;
-        non_negative("facility.torque_noise", f.torque_noise)?;
-        non_negative("facility.force_resolution", f.force_resolution)?;
-        non_negative("facility.torque_resolution", f.torque_resolution)?;
-        finite_vector("facility.sensor_position", &f.sensor_position)?;
-        quaternion("facility.sensor_orientation", f.sensor_orientation)?;
-        positive("metrics.contact_threshold", self.metrics.contact_threshold)?;
-        self.compensator.validate()
     }
 }

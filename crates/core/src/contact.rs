@@ -7,8 +7,6 @@
 
 use nalgebra::Vector3;
 
-use crate::config::{ContactConfig, ContactModelKind, Scenario};
-use crate::error::Result;
 
 /// A contact law: the normal force magnitude from penetration and penetration rate.
 pub trait ContactLaw {
@@ -60,23 +58,6 @@ pub enum ContactModel {
     HuntCrossley(HuntCrossley),
 }
 
-impl ContactModel {
-    /// The law a scenario's `[contact]` table describes.
-    pub fn from_config(c: &ContactConfig) -> Self {
-        match c.model {
-            ContactModelKind::Linear => ContactModel::Linear(LinearSpringDamper {
-                stiffness: c.stiffness,
-                damping: c.damping,
-            }),
-            ContactModelKind::HuntCrossley => ContactModel::HuntCrossley(HuntCrossley {
-                stiffness: c.stiffness,
-                damping: c.damping,
-                exponent: c.exponent,
-            }),
-        }
-    }
-}
-
 impl ContactLaw for ContactModel {
     fn normal_force(&self, d: f64, d_dot: f64) -> f64 {
         match self {
@@ -118,25 +99,6 @@ pub struct ContactGeometry {
 }
 
 impl ContactGeometry {
-    /// The walls and law of a scenario.
-    pub fn from_scenario(s: &Scenario) -> Result<Self> {
-        let walls = s
-            .walls
-            .iter()
-            .enumerate()
-            .map(|(i, w)| {
-                Ok(Wall {
-                    point: Vector3::from(w.point),
-                    normal: w.unit_normal(&format!("walls[{i}].normal"))?,
-                })
-            })
-            .collect::<Result<Vec<_>>>()?;
-        Ok(ContactGeometry {
-            walls,
-            law: ContactModel::from_config(&s.contact),
-        })
-    }
-
     /// Physical contact force on the rod tip, target frame, N: the sum over the walls it
     /// penetrates of `max(0, f(d, ḋ))·n`. Allocation-free.
     pub fn force_on_rod(&self, tip: &Vector3<f64>, tip_velocity: &Vector3<f64>) -> Vector3<f64> {

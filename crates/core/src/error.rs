@@ -2,25 +2,104 @@
 
 use thiserror::Error;
 
+/// One problem of a scenario: the dotted key and what is wrong and allowed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ScenarioIssue {
+    /// Dotted path of the offending key, e.g. `facility.robot_delay` or `walls[1].normal`.
+    pub key: String,
+    /// What is wrong and what is allowed.
+    pub message: String,
+}
+
 /// An error of the core.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum CoreError {
-    /// A scenario value is invalid; `key` is the dotted path (`servicer.mass`).
-    #[error("{key}: {message}")]
+    /// A scenario is invalid. `key` and `message` are its first problem; `more` holds the
+    /// others (every problem of the scenario is reported, not only the first).
+    #[error("{key}: {message}{}", summary_of_more(more))]
     InvalidScenario {
-        /// Dotted path of the offending key, e.g. `facility.robot_delay`.
+        /// Dotted path of the first offending key, e.g. `facility.robot_delay`.
         key: String,
         /// What is wrong and what is allowed.
         message: String,
+        /// The scenario's other problems, in the order they were found.
+        more: Vec<ScenarioIssue>,
     },
 }
 
+/// ` (and 2 more: target.mass, contact.bogus)`, or nothing.
+fn summary_of_more(more: &[ScenarioIssue]) -> String {
+    if more.is_empty() {
+        return String::new();
+    }
+    let keys: Vec<&str> = more.iter().map(|i| i.key.as_str()).collect();
+    format!(" (and {} more: {})", more.len(), keys.join(", "))
+}
+
 impl CoreError {
-    /// Shorthand for [`CoreError::InvalidScenario`].
+    /// A scenario error with one problem.
     pub fn invalid(key: impl Into<String>, message: impl Into<String>) -> Self {
         CoreError::InvalidScenario {
             key: key.into(),
             message: message.into(),
+            more: Vec::new(),
+        }
+    }
+
+    /// Every problem of an invalid scenario, first one first (empty for other errors).
+    pub fn issues(&self) -> Vec<ScenarioIssue> {
+        match self {
+            CoreError::InvalidScenario { key, message, more } => {
+                let mut all = vec![ScenarioIssue {
+                    key: key.clone(),
+                    message: message.clone(),
+                }];
+                all.extend(more.iter().cloned());
+                all
+            }
+        }
+    }
+}
+
+/// Collects the problems of a scenario while it is resolved, so that all are reported.
+#[derive(Debug, Default)]
+pub struct Issues(Vec<ScenarioIssue>);
+
+impl Issues {
+    /// Records a problem of `key`.
+    pub fn push(&mut self, key: impl Into<String>, message: impl Into<String>) {
+        self.0.push(ScenarioIssue {
+            key: key.into(),
+            message: message.into(),
+        });
+    }
+
+    /// Records the problem of `check`, if any; returns its value otherwise.
+    pub fn take<T>(&mut self, check: Result<T>) -> Option<T> {
+        match check {
+            Ok(v) => Some(v),
+            Err(e) => {
+                self.0.extend(e.issues());
+                None
+            }
+        }
+    }
+
+    /// Whether no problem was recorded.
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    /// `Ok(())` if no problem was recorded, else the error with every problem.
+    pub fn finish(self) -> Result<()> {
+        let mut all = self.0.into_iter();
+        match all.next() {
+            None => Ok(()),
+            Some(first) => Err(CoreError::InvalidScenario {
+                key: first.key,
+                message: first.message,
+                more: all.collect(),
+            }),
         }
     }
 }

@@ -14,10 +14,10 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
 
-use crate::config::{quaternion, Scenario};
 use crate::delay_line::DelayLine;
-use crate::error::Result;
-use crate::world::{FrameWrench, RelativeMotion, TwoBodySystem};
+use crate::frames::{FrameWrench, RelativeMotion};
+use crate::plan::{FacilityPlan, Plan};
+use crate::world::TwoBodySystem;
 
 /// What the loop receives from the facility at a control tick: the sensor reading and the
 /// robot's actual motion (its forward kinematics).
@@ -154,20 +154,18 @@ fn quantise(v: Vector3<f64>, step: f64) -> Vector3<f64> {
 }
 
 impl SensorModel {
-    /// The sensor of a scenario, having read `initial` for all earlier time.
-    pub fn from_scenario(s: &Scenario, initial: &FrameWrench) -> Result<Self> {
-        let f = &s.facility;
-        let delay_ticks = s.sensor_delay_ticks()?;
-        Ok(SensorModel {
-            delay_ticks,
-            history: DelayLine::new(delay_ticks, *initial),
-            orientation: quaternion("facility.sensor_orientation", f.sensor_orientation)?,
-            force_noise: f.sensor_noise,
+    /// The sensor of a plan's facility, having read `initial` for all earlier time.
+    pub fn new(f: &FacilityPlan, initial: &FrameWrench) -> Self {
+        SensorModel {
+            delay_ticks: f.sensor_delay_ticks,
+            history: DelayLine::new(f.sensor_delay_ticks, *initial),
+            orientation: f.sensor_orientation,
+            force_noise: f.force_noise,
             torque_noise: f.torque_noise,
             force_resolution: f.force_resolution,
             torque_resolution: f.torque_resolution,
             rng: Pcg64Mcg::seed_from_u64(f.seed),
-        })
+        }
     }
 
     fn noise(&mut self, std: f64) -> Vector3<f64> {
@@ -207,29 +205,24 @@ pub struct FacilityModel {
 }
 
 impl FacilityModel {
-    /// The facility of a scenario with the robot at rest at the initial command.
-    pub fn from_scenario(
-        s: &Scenario,
-        system: &TwoBodySystem,
-        initial_command: &RelativeMotion,
-    ) -> Result<Self> {
-        let f = &s.facility;
+    /// The facility of a plan with the robot at rest at the initial command.
+    pub fn new(plan: &Plan, initial_command: &RelativeMotion) -> Self {
+        let f = &plan.facility;
         let robot = RobotModel::new(
-            s.robot_delay_ticks()?,
-            s.simulation.period,
-            s.simulation.plant_substeps,
+            f.robot_delay_ticks,
+            plan.period,
+            plan.plant_substeps,
             f.servo_frequency,
             f.servo_damping,
             initial_command,
         );
-        let (contact_force, initial_wrench) = physical_wrench(system, robot.actual());
-        let sensor = SensorModel::from_scenario(s, &initial_wrench)?;
-        Ok(FacilityModel {
-            system: system.clone(),
+        let (contact_force, initial_wrench) = physical_wrench(&plan.system, robot.actual());
+        FacilityModel {
+            system: plan.system.clone(),
             robot,
-            sensor,
+            sensor: SensorModel::new(f, &initial_wrench),
             contact_force,
-        })
+        }
     }
 
     /// The physical contact force on the rod at the last tick, `t` frame, N (the truth that a

@@ -1,20 +1,23 @@
-//! The virtual side of the HIL loop: compensator and satellite dynamics. The simulation
-//! couples it to a [`crate::facility::FacilityModel`]; the real-time runtime will couple the
-//! same code to real devices.
+//! The virtual side of the HIL loop: compensator and satellite dynamics, and [`HilStep`], the
+//! one HIL tick that both the simulation (against [`crate::facility::FacilityModel`]) and the
+//! real-time runtime (against real devices) drive.
 //!
-//! One control tick k (period T):
+//! One control tick k (period T), [`HilStep::observe`] then [`HilStep::advance`]:
 //! 1. the facility has advanced to k and reports a [`Measurement`] (sensor wrench, robot motion);
-//! 2. [`VirtualDynamics::compensate`] turns it into the wrench to apply;
-//! 3. [`VirtualDynamics::integrate`] advances eqs. (1), (2) by T; [`VirtualDynamics::command`]
-//!    is the relative motion the robot must reproduce at k+1.
+//! 2. the compensator turns it into the wrench to apply ([`VirtualDynamics::compensate`]);
+//! 3. the tick's [`HilRecord`] is built and judged: a record that is not finite or whose energy
+//!    passed the divergence bound stops the run, and so does the last tick;
+//! 4. eqs. (1), (2) advance by T ([`VirtualDynamics::integrate`]); the new command, the relative
+//!    motion the robot must reproduce at k+1, must be finite.
 
-use nalgebra::UnitQuaternion;
+use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::compensator::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
-use crate::config::{quaternion, Scenario};
-use crate::error::Result;
 use crate::facility::Measurement;
-use crate::world::{FrameWrench, RelativeMotion, TwoBodyState, TwoBodySystem};
+use crate::frames::{FrameWrench, RelativeMotion};
+use crate::metrics::{Stop, StopKind};
+use crate::plan::Plan;
+use crate::world::{TwoBodyState, TwoBodySystem};
 
 /// Compensator plus virtual satellite dynamics.
 pub struct VirtualDynamics {
@@ -29,26 +32,23 @@ pub struct VirtualDynamics {
 }
 
 impl VirtualDynamics {
-    /// The virtual side of a (validated) scenario, at its initial state.
-    pub fn from_scenario(s: &Scenario, system: &TwoBodySystem) -> Result<Self> {
+    /// The virtual side of a plan, at its initial state (allocates the compensator once).
+    pub fn new(plan: &Plan) -> Self {
+        let system = &plan.system;
         let context = CompensatorContext {
-            period: s.simulation.period,
-            sensor_delay: s.sensor_delay_ticks()? as f64 * s.simulation.period,
+            period: plan.period,
+            sensor_delay_ticks: plan.facility.sensor_delay_ticks,
             sensor_origin: system.sensor_origin,
             reduced_mass: system.reduced_mass(),
         };
-        let state = TwoBodyState::from_scenario(s)?;
-        Ok(VirtualDynamics {
+        VirtualDynamics {
             system: system.clone(),
-            command: system.relative_motion(&state),
-            state,
-            period: s.simulation.period,
-            sensor_orientation: quaternion(
-                "facility.sensor_orientation",
-                s.facility.sensor_orientation,
-            )?,
-            compensator: s.compensator.build(&context),
-        })
+            command: system.relative_motion(&plan.initial),
+            state: plan.initial,
+            period: plan.period,
+            sensor_orientation: plan.facility.sensor_orientation,
+            compensator: plan.compensator.build(&context),
+        }
     }
 
     /// The virtual state of both satellites.
@@ -118,5 +118,163 @@ impl VirtualDynamics {
     /// Sensor attitude in `t`.
     pub fn sensor_orientation(&self) -> UnitQuaternion<f64> {
         self.sensor_orientation
+    }
+}
+
+/// One tick of the HIL loop, as recorded by simulations and real-time runs alike.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct HilRecord {
+    /// Time, s (tick × period).
+    pub time: f64,
+    /// Desired (virtual) rod tip relative to the target, `t` frame, m.
+    pub tip_position: Vector3<f64>,
+    /// Desired (virtual) rod tip velocity, `t` frame, m/s.
+    pub tip_velocity: Vector3<f64>,
+    /// Actual (robot) rod tip, `t` frame, m.
+    pub actual_tip_position: Vector3<f64>,
+    /// Actual (robot) rod tip velocity, `t` frame, m/s.
+    pub actual_tip_velocity: Vector3<f64>,
+    /// Physical contact force on the rod, `t` frame, N (on a real facility, where it is not
+    /// observable: the force on the rod that the sensor reports).
+    pub contact_force: Vector3<f64>,
+    /// Sensor force on the frame, sensor frame, N.
+    pub measured_force: Vector3<f64>,
+    /// Sensor moment about its origin, sensor frame, N·m.
+    pub measured_moment: Vector3<f64>,
+    /// Force applied to the virtual dynamics, sensor frame and convention, N.
+    pub applied_force: Vector3<f64>,
+    /// Moment applied to the virtual dynamics, sensor frame and convention, N·m.
+    pub applied_moment: Vector3<f64>,
+    /// Kinetic energy of the virtual relative motion, J.
+    pub energy: f64,
+    /// Identified stiffness, N/m (NaN when not identified).
+    pub stiffness_estimate: f64,
+    /// Identified damping, N·s/m (NaN when not identified).
+    pub damping_estimate: f64,
+    /// Energy observed by the compensator at the environment port, J (NaN when not observed).
+    pub observed_energy: f64,
+}
+
+impl HilRecord {
+    /// Whether every state and force of the record is finite.
+    pub fn is_finite(&self) -> bool {
+        let v = [
+            self.tip_position,
+            self.tip_velocity,
+            self.actual_tip_position,
+            self.contact_force,
+            self.applied_force,
+            self.applied_moment,
+        ];
+        self.energy.is_finite() && v.iter().all(|x| x.iter().all(|c| c.is_finite()))
+    }
+}
+
+/// The virtual side of one HIL tick, the same for simulations and real-time runs: compensate
+/// the measurement, record, judge (divergence, end of run), integrate. Never allocates.
+pub struct HilStep {
+    virt: VirtualDynamics,
+    /// Last tick of the run.
+    ticks: usize,
+    period: f64,
+    /// Energy past which the run is diverged, J.
+    energy_bound: f64,
+    /// The compensator's output of the tick being run.
+    output: CompensatorOutput,
+}
+
+impl HilStep {
+    /// The step of a plan, with the run's divergence bound (J, see
+    /// [`crate::metrics::divergence_bound`]).
+    pub fn new(plan: &Plan, energy_bound: f64) -> Self {
+        HilStep {
+            virt: VirtualDynamics::new(plan),
+            ticks: plan.ticks,
+            period: plan.period,
+            energy_bound,
+            output: CompensatorOutput::wrench(FrameWrench::default()),
+        }
+    }
+
+    /// The virtual dynamics (state, command, energy, what the compensator reports).
+    pub fn dynamics(&self) -> &VirtualDynamics {
+        &self.virt
+    }
+
+    /// The relative motion the robot must reproduce now.
+    pub fn command(&self) -> RelativeMotion {
+        self.virt.command()
+    }
+
+    /// Energy past which the run is diverged, J.
+    pub fn energy_bound(&self) -> f64 {
+        self.energy_bound
+    }
+
+    /// Tick `k`'s first half: compensates `m` and returns the tick's record, with the stop it
+    /// calls for: [`StopKind::NonFinite`] or [`StopKind::Diverged`] for the record, or
+    /// [`StopKind::Completed`] at the last tick. `contact_force` is the physical contact force
+    /// on the rod (`t`, N) where the facility knows it; `None` on a real facility, where the
+    /// record keeps the force on the rod that the sensor reports.
+    pub fn observe(
+        &mut self,
+        k: usize,
+        m: &Measurement,
+        contact_force: Option<Vector3<f64>>,
+    ) -> (HilRecord, Option<Stop>) {
+        let out = self.virt.compensate(m);
+        self.output = out;
+        let sensor_to_t = self.virt.sensor_orientation();
+        let rod = self.virt.system().rod_tip;
+        let desired = self.virt.command();
+        let time = k as f64 * self.period;
+        let record = HilRecord {
+            time,
+            tip_position: desired.point(&rod),
+            tip_velocity: desired.point_velocity(&rod),
+            actual_tip_position: m.actual.point(&rod),
+            actual_tip_velocity: m.actual.point_velocity(&rod),
+            contact_force: contact_force.unwrap_or_else(|| -(sensor_to_t * m.force)),
+            measured_force: m.force,
+            measured_moment: m.moment,
+            applied_force: sensor_to_t.inverse_transform_vector(&out.applied.force),
+            applied_moment: sensor_to_t.inverse_transform_vector(&out.applied.moment),
+            energy: self.virt.energy(),
+            stiffness_estimate: out.estimate.map_or(f64::NAN, |e| e.stiffness),
+            damping_estimate: out.estimate.map_or(f64::NAN, |e| e.damping),
+            observed_energy: out.observed_energy,
+        };
+        let stop = if !record.is_finite() {
+            Some(Stop::plain(StopKind::NonFinite, time))
+        } else if record.energy > self.energy_bound {
+            Some(Stop {
+                kind: StopKind::Diverged,
+                time,
+                value: record.energy,
+                limit: self.energy_bound,
+            })
+        } else if k >= self.ticks {
+            Some(Stop::plain(StopKind::Completed, time))
+        } else {
+            None
+        };
+        (record, stop)
+    }
+
+    /// Tick `k`'s second half: integrates the virtual dynamics one period under the
+    /// compensator's output of [`HilStep::observe`] and returns the command for tick k+1, or
+    /// a [`StopKind::NonFinite`] stop if it is not finite (never send it to a robot).
+    pub fn advance(&mut self, k: usize) -> Result<RelativeMotion, Stop> {
+        self.virt.integrate(&self.output);
+        let command = self.virt.command();
+        let finite = command.position.iter().all(|x| x.is_finite())
+            && command.velocity.iter().all(|x| x.is_finite())
+            && command.angular_velocity.iter().all(|x| x.is_finite())
+            && command.orientation.coords.iter().all(|x| x.is_finite());
+        if finite {
+            Ok(command)
+        } else {
+            Err(Stop::plain(StopKind::NonFinite, k as f64 * self.period))
+        }
     }
 }

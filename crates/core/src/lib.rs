@@ -20,11 +20,14 @@ pub mod contact;
 pub mod delay_line;
 pub mod error;
 pub mod facility;
+pub mod frames;
 pub mod hil;
 pub mod metrics;
+pub mod plan;
 pub mod sim;
 pub mod world;
 
 pub use config::Scenario;
-pub use error::{CoreError, Result};
+pub use error::{CoreError, Result, ScenarioIssue};
+pub use plan::Plan;
 pub use sim::{simulate, simulate_metrics, SimulationOutput, Table};

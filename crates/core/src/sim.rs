@@ -7,9 +7,10 @@ use nalgebra::Vector3;
 use crate::config::{ContactModelKind, Scenario};
 use crate::error::Result;
 use crate::facility::FacilityModel;
-use crate::hil::VirtualDynamics;
-use crate::metrics::{self, EnergySummary, Metrics, Status};
-use crate::world::{TwoBodyState, TwoBodySystem};
+pub use crate::hil::HilRecord;
+use crate::hil::HilStep;
+use crate::metrics::{self, EnergySummary, Metrics, Stop};
+use crate::plan::Plan;
 
 /// Named columns of equal length.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -141,53 +142,6 @@ pub struct ReferenceRecord {
     pub energy: f64,
 }
 
-/// One tick of the HIL loop.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct HilRecord {
-    /// Time, s.
-    pub time: f64,
-    /// Desired (virtual) rod tip relative to the target, `t` frame, m.
-    pub tip_position: Vector3<f64>,
-    /// Desired (virtual) rod tip velocity, `t` frame, m/s.
-    pub tip_velocity: Vector3<f64>,
-    /// Actual (robot) rod tip, `t` frame, m.
-    pub actual_tip_position: Vector3<f64>,
-    /// Actual (robot) rod tip velocity, `t` frame, m/s.
-    pub actual_tip_velocity: Vector3<f64>,
-    /// Physical contact force on the rod, `t` frame, N.
-    pub contact_force: Vector3<f64>,
-    /// Sensor force on the frame, sensor frame, N.
-    pub measured_force: Vector3<f64>,
-    /// Sensor moment about its origin, sensor frame, N·m.
-    pub measured_moment: Vector3<f64>,
-    /// Force applied to the virtual dynamics, sensor frame and convention, N.
-    pub applied_force: Vector3<f64>,
-    /// Moment applied to the virtual dynamics, sensor frame and convention, N·m.
-    pub applied_moment: Vector3<f64>,
-    /// Kinetic energy of the virtual relative motion, J.
-    pub energy: f64,
-    /// Identified stiffness, N/m (NaN when not identified).
-    pub stiffness_estimate: f64,
-    /// Identified damping, N·s/m (NaN when not identified).
-    pub damping_estimate: f64,
-    /// Energy observed by the compensator at the environment port, J (NaN when not observed).
-    pub observed_energy: f64,
-}
-
-impl HilRecord {
-    fn is_finite(&self) -> bool {
-        let v = [
-            self.tip_position,
-            self.tip_velocity,
-            self.actual_tip_position,
-            self.contact_force,
-            self.applied_force,
-            self.applied_moment,
-        ];
-        self.energy.is_finite() && v.iter().all(|x| x.iter().all(|c| c.is_finite()))
-    }
-}
-
 /// Result of a simulation.
 #[derive(Debug, Clone)]
 pub struct SimulationOutput {
@@ -200,17 +154,12 @@ pub struct SimulationOutput {
 }
 
 /// The ideal reference: the true contact law, no facility, sampled at every tick; integrated by
-/// [`TwoBodySystem::step_reference`] (one force-free step per period in free flight; in
-/// contact RK4 with `simulation.reference_substeps` steps per period and the contact's
-/// start and end located). Returns the trace and, if `keep_rows`, every record.
-pub fn run_reference(
-    s: &Scenario,
-    system: &TwoBodySystem,
-    keep_rows: bool,
-) -> Result<(Trace, Vec<ReferenceRecord>)> {
-    let n = s.ticks();
-    let period = s.simulation.period;
-    let mut x = TwoBodyState::from_scenario(s)?;
+/// [`crate::world::TwoBodySystem::step_reference`] (one force-free step per period in free
+/// flight; in contact RK4 with `simulation.reference_substeps` steps per period and the
+/// contact's start and end located). Returns the trace and, if `keep_rows`, every record.
+pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecord>) {
+    let (n, period, system) = (plan.ticks, plan.period, &plan.system);
+    let mut x = plan.initial;
     let mut trace = Trace::with_capacity(n + 1, false);
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     for k in 0..=n {
@@ -228,10 +177,10 @@ pub fn run_reference(
             rows.push(row);
         }
         if k < n {
-            system.step_reference(&mut x, period, s.simulation.reference_substeps);
+            system.step_reference(&mut x, period, plan.reference_substeps);
         }
     }
-    Ok((trace, rows))
+    (trace, rows)
 }
 
 /// How a HIL run ended.
@@ -245,103 +194,74 @@ pub struct HilRun {
     pub estimates_contact: bool,
     /// Whether the compensator observed the port energy.
     pub observes_energy: bool,
-    /// `ok` or `diverged`.
-    pub status: Status,
-    /// Why it stopped early.
-    pub reason: Option<String>,
+    /// How it stopped.
+    pub stop: Stop,
 }
 
-/// The HIL loop against the facility model, stopped once the energy passes `energy_bound` (J);
-/// every record is kept if `keep_rows`, the trace always.
-pub fn run_hil(
-    s: &Scenario,
-    system: &TwoBodySystem,
-    energy_bound: f64,
-    keep_rows: bool,
-) -> Result<HilRun> {
-    let n = s.ticks();
-    let period = s.simulation.period;
-    let mut virt = VirtualDynamics::from_scenario(s, system)?;
-    let mut facility = FacilityModel::from_scenario(s, system, &virt.command())?;
-    let sensor_to_t = virt.sensor_orientation();
-    let rod = system.rod_tip;
+/// The HIL loop of [`HilStep`] against the facility model, stopped once the energy passes
+/// `energy_bound` (J); every record is kept if `keep_rows`, the trace always.
+pub fn run_hil(plan: &Plan, energy_bound: f64, keep_rows: bool) -> HilRun {
+    let n = plan.ticks;
+    let mut step = HilStep::new(plan, energy_bound);
+    let mut facility = FacilityModel::new(plan, &step.command());
+    let estimates = step.dynamics().estimates_contact();
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
-    let mut trace = Trace::with_capacity(n + 1, virt.estimates_contact());
-    let (mut status, mut reason) = (Status::Ok, None);
-    for k in 0..=n {
+    let mut trace = Trace::with_capacity(n + 1, estimates);
+    let mut k = 0;
+    let stop = loop {
         let m = facility.measure();
-        let out = virt.compensate(&m);
-        let desired = virt.command();
-        let row = HilRecord {
-            time: k as f64 * period,
-            tip_position: desired.point(&rod),
-            tip_velocity: desired.point_velocity(&rod),
-            actual_tip_position: m.actual.point(&rod),
-            actual_tip_velocity: m.actual.point_velocity(&rod),
-            contact_force: facility.contact_force(),
-            measured_force: m.force,
-            measured_moment: m.moment,
-            applied_force: sensor_to_t.inverse_transform_vector(&out.applied.force),
-            applied_moment: sensor_to_t.inverse_transform_vector(&out.applied.moment),
-            energy: virt.energy(),
-            stiffness_estimate: out.estimate.map_or(f64::NAN, |e| e.stiffness),
-            damping_estimate: out.estimate.map_or(f64::NAN, |e| e.damping),
-            observed_energy: out.observed_energy,
-        };
-        trace.push_record(&row, virt.estimates_contact());
+        let (row, stop) = step.observe(k, &m, Some(facility.contact_force()));
+        trace.push_record(&row, estimates);
         if keep_rows {
             rows.push(row);
         }
-        if !row.is_finite() {
-            status = Status::Diverged;
-            reason = Some("a state or force stopped being finite".to_string());
-            break;
+        if let Some(stop) = stop {
+            break stop;
         }
-        if row.energy > energy_bound {
-            status = Status::Diverged;
-            reason = Some(format!(
-                "energy {:.4} J passed the divergence bound {:.4} J (simulation.divergence_energy_ratio = {})",
-                row.energy, energy_bound, s.simulation.divergence_energy_ratio
-            ));
-            break;
+        match step.advance(k) {
+            Ok(command) => facility.advance(&command),
+            Err(stop) => break stop,
         }
-        if k == n {
-            break;
-        }
-        virt.integrate(&out);
-        facility.advance(&virt.command());
-    }
-    Ok(HilRun {
+        k += 1;
+    };
+    HilRun {
         trace,
         rows,
-        estimates_contact: virt.estimates_contact(),
-        observes_energy: virt.observes_energy(),
-        status,
-        reason,
-    })
+        estimates_contact: estimates,
+        observes_energy: step.dynamics().observes_energy(),
+        stop,
+    }
 }
 
 /// Runs the reference and the HIL loop of a scenario and computes the metrics, without
 /// keeping the records (what a sweep keeps of a run).
 pub fn simulate_metrics(s: &Scenario) -> Result<Metrics> {
-    run(s, false).map(|r| r.metrics)
+    Ok(simulate_plan_metrics(&s.resolve()?))
+}
+
+/// Runs the reference and the HIL loop of a resolved plan and computes the metrics, without
+/// keeping the records (what a sweep keeps of a run).
+pub fn simulate_plan_metrics(plan: &Plan) -> Metrics {
+    run(plan, false).metrics
 }
 
 /// Runs the reference and the HIL loop of a scenario and computes the metrics.
 pub fn simulate(s: &Scenario) -> Result<SimulationOutput> {
+    Ok(simulate_plan(&s.resolve()?))
+}
+
+/// Runs the reference and the HIL loop of a resolved plan and computes the metrics.
+pub fn simulate_plan(plan: &Plan) -> SimulationOutput {
     let Runs {
         reference,
         hil,
         metrics,
-    } = run(s, true)?;
-    let timeseries = hil_table(&hil.rows, hil.estimates_contact, hil.observes_energy);
-    let reference_table = reference_table(&reference);
-
-    Ok(SimulationOutput {
-        timeseries,
-        reference: reference_table,
+    } = run(plan, true);
+    SimulationOutput {
+        timeseries: hil_table(&hil.rows, hil.estimates_contact, hil.observes_energy),
+        reference: reference_table(&reference),
         metrics,
-    })
+    }
 }
 
 /// The HIL loop's table, one row per record: `time`, the vectors `tip_position`,
@@ -403,46 +323,37 @@ struct Runs {
     metrics: Metrics,
 }
 
-fn run(s: &Scenario, keep_rows: bool) -> Result<Runs> {
-    s.validate()?;
-    let system = TwoBodySystem::from_scenario(s)?;
-    let (reference_trace, reference) = run_reference(s, &system, keep_rows)?;
+fn run(plan: &Plan, keep_rows: bool) -> Runs {
+    let (reference_trace, reference) = run_reference(plan, keep_rows);
     let reference_energy = &reference_trace.energy;
     let bound = metrics::divergence_bound(
-        s.simulation.divergence_energy_ratio,
+        plan.divergence_energy_ratio,
         reference_energy[0],
         reference_energy,
     );
-    let hil = run_hil(s, &system, bound, keep_rows)?;
-
-    let metrics = trace_metrics(
-        s,
-        &reference_trace,
-        &hil.trace,
-        hil.estimates_contact,
-        hil.status,
-        hil.reason.clone(),
-    );
-    Ok(Runs {
+    let hil = run_hil(plan, bound, keep_rows);
+    let metrics = trace_metrics(plan, &reference_trace, &hil.trace, hil.estimates_contact, hil.stop);
+    Runs {
         reference,
         hil,
         metrics,
-    })
+    }
 }
 
 /// The metrics of a HIL trace against the reference's trace: the one computation used by
 /// simulations and by the real-time runtime. `estimates_contact`: whether the trace has
-/// stiffness and damping estimates; `status`, `reason`: how the run ended (`diverged_at` is
-/// the trace's last time for a diverged run).
+/// stiffness and damping estimates; `stop`: how the run ended (`diverged_at` is the trace's
+/// last time for a diverged run).
 pub fn trace_metrics(
-    s: &Scenario,
+    plan: &Plan,
     reference: &Trace,
     hil: &Trace,
     estimates_contact: bool,
-    status: Status,
-    reason: Option<String>,
+    stop: Stop,
 ) -> Metrics {
-    let threshold = s.metrics.contact_threshold;
+    let s = &plan.scenario;
+    let threshold = plan.contact_threshold;
+    let status = stop.kind.status();
     let r = reference;
     let ref_collisions = metrics::collisions(&r.time, &r.force, &r.speed, threshold);
     let t = hil;
@@ -465,8 +376,10 @@ pub fn trace_metrics(
         scenario: s.name.clone(),
         compensator: s.compensator.kind().to_string(),
         status,
-        diverged_at: (status == Status::Diverged).then(|| t.time.last().copied().unwrap_or(0.0)),
-        reason,
+        diverged_at: (status == metrics::Status::Diverged)
+            .then(|| t.time.last().copied().unwrap_or(0.0)),
+        reason: stop.reason(),
+        stop,
         summary: metrics::Summary::of(&collisions),
         collisions,
         reference_collisions: ref_collisions,

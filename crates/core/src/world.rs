@@ -7,64 +7,11 @@
 //! A wrench "on the frame" is what the sensor measures: the force the rod exerts on the
 //! target's collision frame, with its moment about the sensor origin.
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 
 use crate::body::{BodyRate, BodyState, MassProperties};
-use crate::config::Scenario;
 use crate::contact::ContactGeometry;
-use crate::error::Result;
-
-/// Pose and twist of the servicer body frame relative to the target frame `t`, expressed in `t`:
-/// what the robot is commanded to reproduce, and what it actually reproduces.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RelativeMotion {
-    /// Position of the servicer's CoM in `t`, m.
-    pub position: Vector3<f64>,
-    /// Attitude of the servicer relative to `t` (servicer to `t`).
-    pub orientation: UnitQuaternion<f64>,
-    /// Rate of `position` (seen in `t`), m/s.
-    pub velocity: Vector3<f64>,
-    /// Angular velocity of the servicer relative to `t`, expressed in `t`, rad/s.
-    pub angular_velocity: Vector3<f64>,
-}
-
-impl RelativeMotion {
-    /// Position of a point fixed in the servicer (body coordinates) in `t`, eq. (3)/(25), m.
-    pub fn point(&self, r_body: &Vector3<f64>) -> Vector3<f64> {
-        self.position + self.orientation * r_body
-    }
-
-    /// Velocity of a point fixed in the servicer, seen in `t`, eq. (4)/(26), m/s.
-    pub fn point_velocity(&self, r_body: &Vector3<f64>) -> Vector3<f64> {
-        self.velocity + self.angular_velocity.cross(&(self.orientation * r_body))
-    }
-}
-
-/// A wrench on the target's collision frame: force (N) and moment about the sensor origin
-/// (N·m), both expressed in the target frame `t`.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct FrameWrench {
-    /// Force on the frame, `t` frame, N.
-    pub force: Vector3<f64>,
-    /// Moment about the sensor origin, `t` frame, N·m.
-    pub moment: Vector3<f64>,
-}
-
-impl FrameWrench {
-    /// The wrench on the frame of a force `force_on_rod` (N, `t`) acting on the rod at `point`
-    /// (m, `t`): the frame gets the opposite force, with its moment about `sensor_origin`.
-    pub fn from_rod_force(
-        force_on_rod: &Vector3<f64>,
-        point: &Vector3<f64>,
-        sensor_origin: &Vector3<f64>,
-    ) -> Self {
-        let force = -force_on_rod;
-        FrameWrench {
-            force,
-            moment: (point - sensor_origin).cross(&force),
-        }
-    }
-}
+pub use crate::frames::{FrameWrench, RelativeMotion};
 
 /// Mass properties, rod and sensor: the fixed description of the two-body system.
 #[derive(Debug, Clone, PartialEq)]
@@ -91,20 +38,6 @@ pub struct TwoBodyState {
 }
 
 impl TwoBodySystem {
-    /// The system of a (validated) scenario.
-    pub fn from_scenario(s: &Scenario) -> Result<Self> {
-        Ok(TwoBodySystem {
-            servicer: MassProperties::new(
-                s.servicer.mass,
-                s.servicer.inertia_matrix("servicer.inertia")?,
-            ),
-            target: MassProperties::new(s.target.mass, s.target.inertia_matrix("target.inertia")?),
-            rod_tip: Vector3::from(s.rod.tip),
-            sensor_origin: Vector3::from(s.facility.sensor_position),
-            contact: ContactGeometry::from_scenario(s)?,
-        })
-    }
-
     /// Reduced mass μ = m_s m_t / (m_s + m_t), kg.
     pub fn reduced_mass(&self) -> f64 {
         self.servicer.mass * self.target.mass / (self.servicer.mass + self.target.mass)
@@ -304,15 +237,5 @@ impl TwoBodySystem {
             self.step_rk4(x, hi - lo);
             remaining -= hi;
         }
-    }
-}
-
-impl TwoBodyState {
-    /// The initial state of a scenario.
-    pub fn from_scenario(s: &Scenario) -> Result<Self> {
-        Ok(TwoBodyState {
-            servicer: BodyState::from_config(&s.servicer, "servicer")?,
-            target: BodyState::from_config(&s.target, "target")?,
-        })
     }
 }

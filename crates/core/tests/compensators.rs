@@ -212,7 +212,7 @@ fn nothing_diverges_up_to_60_ms() {
         table1(0.020, 0.0),
         CompensatorConfig::TdpaAdmittance(TdpaParams::default()),
     );
-    let none = run(table1(0.020, 0.0), CompensatorConfig::None);
+    let none = run(table1(0.020, 0.0), CompensatorConfig::default());
     assert!(covs(&out)[0] < 0.6 * covs(&none)[0]);
 }
 

@@ -28,8 +28,7 @@ struct Measured {
 
 /// First collision of the ideal reference.
 fn first_collision(s: &Scenario) -> Measured {
-    let system = TwoBodySystem::from_scenario(s).unwrap();
-    let (trace, _) = run_reference(s, &system, false).unwrap();
+    let (trace, _) = run_reference(&s.resolve().unwrap(), false);
     let c = &collisions(
         &trace.time,
         &trace.force,
@@ -164,8 +163,7 @@ fn hunt_crossley_collision_matches_energy_balance() {
 fn reference_collisions(s: &Scenario, substeps: u32) -> Vec<(f64, f64)> {
     let mut s = s.clone();
     s.simulation.reference_substeps = substeps;
-    let system = TwoBodySystem::from_scenario(&s).unwrap();
-    let (trace, _) = run_reference(&s, &system, false).unwrap();
+    let (trace, _) = run_reference(&s.resolve().unwrap(), false);
     collisions(
         &trace.time,
         &trace.force,
@@ -212,10 +210,10 @@ fn reference_locates_contact_start_and_end_so_one_substep_is_as_good_as_a_hundre
 fn reference_free_flight_step_matches_fine_rk4() {
     // one force-free step per period while clear of the walls: same motion as RK4 at 0.1 ms
     let s = tumbling();
-    let system = TwoBodySystem::from_scenario(&s).unwrap();
+    let system = s.resolve().unwrap().system;
     let (mut x, mut y) = (
-        TwoBodyState::from_scenario(&s).unwrap(),
-        TwoBodyState::from_scenario(&s).unwrap(),
+        s.resolve().unwrap().initial,
+        s.resolve().unwrap().initial,
     );
     for _ in 0..5_000 {
         system.step_reference(&mut x, 1e-3, 1);
@@ -280,8 +278,8 @@ fn assert_conserved(
 #[test]
 fn free_flight_conserves_momentum_angular_momentum_and_energy() {
     let s = tumbling();
-    let system = TwoBodySystem::from_scenario(&s).unwrap();
-    let x0 = TwoBodyState::from_scenario(&s).unwrap();
+    let system = s.resolve().unwrap().system;
+    let x0 = s.resolve().unwrap().initial;
     // RK4 (the reference integrator)
     let mut x = x0;
     for _ in 0..50_000 {
@@ -303,8 +301,8 @@ fn free_flight_conserves_momentum_angular_momentum_and_energy() {
 fn contact_is_internal_reference_conserves_momentum_and_total_energy() {
     // the oblique case: contact forces and moments on both bodies
     let s = preset("oblique-6dof");
-    let system = TwoBodySystem::from_scenario(&s).unwrap();
-    let x0 = TwoBodyState::from_scenario(&s).unwrap();
+    let system = s.resolve().unwrap().system;
+    let x0 = s.resolve().unwrap().initial;
     let mut x = x0;
     let mut max_moment = 0.0f64;
     for _ in 0..40_000 {
@@ -338,8 +336,8 @@ proptest! {
         s.servicer.angular_velocity = w;
         prop_assume!(q.iter().map(|x| x * x).sum::<f64>() > 0.1);
         s.target.orientation = q;
-        let system = TwoBodySystem::from_scenario(&s).unwrap();
-        let x0 = TwoBodyState::from_scenario(&s).unwrap();
+        let system = s.resolve().unwrap().system;
+        let x0 = s.resolve().unwrap().initial;
         let mut x = x0;
         let wrench = FrameWrench { force: Vector3::from(f), moment: Vector3::from(m) };
         for _ in 0..20 {

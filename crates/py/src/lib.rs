@@ -3,79 +3,136 @@
 
 use std::time::Duration;
 
-use hilcontact_core::{CoreError, Scenario, Table};
+use hilcontact_core::{CoreError, Plan, Scenario, Table};
 use hilcontact_rt::{EmulatorOptions, FacilityHandle, HilHandle, RtError, RuntimeOptions};
 use numpy::IntoPyArray;
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyException, PyOSError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyType};
+use pyo3::sync::GILOnceCell;
+use pyo3::types::{PyDict, PyTuple, PyType};
 
-/// `hilcontact.errors.ScenarioError` (a `ValueError`) carrying `message`; a plain
-/// `ValueError` if the package's error module cannot be imported.
-fn scenario_error(py: Python<'_>, message: String) -> PyErr {
-    let class = PyModule::import(py, "hilcontact.errors")
-        .and_then(|m| m.getattr("ScenarioError"))
-        .and_then(|c| c.downcast_into::<PyType>().map_err(PyErr::from));
-    match class {
-        Ok(class) => PyErr::from_type(class, message),
-        Err(_) => PyValueError::new_err(message),
-    }
+/// The package's exception classes, defined here once (`hilcontact.errors` re-exports them):
+/// `HilContactError(Exception)`, `ScenarioError(HilContactError, ValueError)`,
+/// `RealtimeError(HilContactError, OSError)` and `RealtimeOptionError(RealtimeError,
+/// ValueError)`.
+struct ErrorClasses {
+    base: Py<PyType>,
+    scenario: Py<PyType>,
+    realtime: Py<PyType>,
+    option: Py<PyType>,
 }
 
-/// An exception class of `hilcontact.errors` by name, carrying `message`; `fallback` if the
-/// package's error module cannot be imported.
-fn package_error(
+static ERRORS: GILOnceCell<ErrorClasses> = GILOnceCell::new();
+
+/// A new exception class `hilcontact.errors.<name>` with the given bases.
+fn exception_class(
     py: Python<'_>,
     name: &str,
-    message: String,
-    fallback: fn(String) -> PyErr,
-) -> PyErr {
-    let class = PyModule::import(py, "hilcontact.errors")
-        .and_then(|m| m.getattr(name))
-        .and_then(|c| c.downcast_into::<PyType>().map_err(PyErr::from));
-    match class {
-        Ok(class) => PyErr::from_type(class, message),
-        Err(_) => fallback(message),
+    bases: &[&Bound<'_, PyType>],
+    doc: &str,
+) -> PyResult<Py<PyType>> {
+    let namespace = PyDict::new(py);
+    namespace.set_item("__module__", "hilcontact.errors")?;
+    namespace.set_item("__doc__", doc)?;
+    let bases = PyTuple::new(py, bases)?;
+    let class = PyModule::import(py, "builtins")?
+        .getattr("type")?
+        .call1((name, bases, namespace))?;
+    Ok(class.downcast_into::<PyType>()?.unbind())
+}
+
+fn error_classes(py: Python<'_>) -> PyResult<&ErrorClasses> {
+    ERRORS.get_or_try_init(py, || {
+        let base = exception_class(
+            py,
+            "HilContactError",
+            &[&py.get_type::<PyException>()],
+            "Base class of every error raised on purpose by hilcontact.",
+        )?;
+        let scenario = exception_class(
+            py,
+            "ScenarioError",
+            &[base.bind(py), &py.get_type::<PyValueError>()],
+            "A scenario (file, preset name, override or value) is invalid. The message is one \
+             line naming the first offending key as a dotted path and what is allowed; \
+             `issues` lists every problem as (key, message).",
+        )?;
+        let realtime = exception_class(
+            py,
+            "RealtimeError",
+            &[base.bind(py), &py.get_type::<PyOSError>()],
+            "The real-time runtime or the emulated facility could not start or finish: a port \
+             in use, a peer that does not answer, a bad /netftapi2.xml. An OSError: `errno` is \
+             set where the cause was an operating-system error.",
+        )?;
+        let option = exception_class(
+            py,
+            "RealtimeOptionError",
+            &[realtime.bind(py), &py.get_type::<PyValueError>()],
+            "A real-time option (limit, port, mapping) is invalid; the message names it.",
+        )?;
+        Ok(ErrorClasses {
+            base,
+            scenario,
+            realtime,
+            option,
+        })
+    })
+}
+
+/// An exception of `class` carrying `message`.
+fn raise(py: Python<'_>, class: fn(&ErrorClasses) -> &Py<PyType>, message: String) -> PyErr {
+    match error_classes(py) {
+        Ok(classes) => PyErr::from_type(class(classes).bind(py).clone(), message),
+        Err(e) => e,
     }
 }
 
-/// The one conversion from real-time errors to Python exceptions: scenario errors are
-/// `ScenarioError`, option errors `RealtimeOptionError` (a `ValueError`), the others
-/// (sockets, protocol, connection) `RealtimeError`.
+/// The one conversion from core errors: `ScenarioError`, with every problem in `issues`.
+fn to_py_err(py: Python<'_>, error: CoreError) -> PyErr {
+    let issues: Vec<(String, String)> = error
+        .issues()
+        .into_iter()
+        .map(|i| (i.key, i.message))
+        .collect();
+    let err = match error {
+        CoreError::InvalidScenario { .. } => raise(py, |c| &c.scenario, error.to_string()),
+    };
+    // best effort: the message already holds the first problem and the other keys
+    let _ = err.value(py).setattr("issues", issues);
+    err
+}
+
+/// The one conversion from real-time errors: scenario errors are `ScenarioError`, option
+/// errors `RealtimeOptionError`, the others (sockets, protocol, connection) `RealtimeError`.
 fn rt_err(py: Python<'_>, error: RtError) -> PyErr {
     match error {
         RtError::Scenario(e) => to_py_err(py, e),
-        RtError::Option { .. } => package_error(
-            py,
-            "RealtimeOptionError",
-            error.to_string(),
-            PyValueError::new_err,
-        ),
-        _ => package_error(
-            py,
-            "RealtimeError",
-            error.to_string(),
-            pyo3::exceptions::PyRuntimeError::new_err,
-        ),
+        RtError::Option { .. } => raise(py, |c| &c.option, error.to_string()),
+        RtError::Io(_) | RtError::Protocol(_) | RtError::Connect(_) => {
+            raise(py, |c| &c.realtime, error.to_string())
+        }
     }
 }
 
-fn parse_scenario(py: Python<'_>, scenario_json: &str) -> PyResult<Scenario> {
-    serde_json::from_str(scenario_json).map_err(|e| scenario_error(py, format!("scenario: {e}")))
+/// A scenario's JSON, resolved into a plan (every problem reported).
+fn parse_scenario(py: Python<'_>, scenario_json: &str) -> PyResult<Plan> {
+    let scenario: Scenario = serde_json::from_str(scenario_json)
+        .map_err(|e| raise(py, |c| &c.scenario, format!("scenario: {e}")))?;
+    scenario.resolve().map_err(|e| to_py_err(py, e))
+}
+
+/// A scenario's JSON, as data (the runtime and the emulator resolve it themselves).
+fn scenario_data(py: Python<'_>, scenario_json: &str) -> PyResult<Scenario> {
+    serde_json::from_str(scenario_json)
+        .map_err(|e| raise(py, |c| &c.scenario, format!("scenario: {e}")))
 }
 
 fn parse_options<T: serde::de::DeserializeOwned>(
     py: Python<'_>,
     options_json: &str,
 ) -> PyResult<T> {
-    serde_json::from_str(options_json).map_err(|e| {
-        package_error(
-            py,
-            "RealtimeOptionError",
-            format!("options: {e}"),
-            PyValueError::new_err,
-        )
-    })
+    serde_json::from_str(options_json).map_err(|e| raise(py, |c| &c.option, format!("options: {e}")))
 }
 
 /// JSON text to a Python object (through the json module: the values are plain data).
@@ -151,7 +208,7 @@ impl PyHilHandle {
 /// counts per unit before returning; raises RealtimeError if that fails.
 #[pyfunction]
 fn start_hil(py: Python<'_>, scenario_json: &str, options_json: &str) -> PyResult<PyHilHandle> {
-    let scenario = parse_scenario(py, scenario_json)?;
+    let scenario = scenario_data(py, scenario_json)?;
     let options: RuntimeOptions = parse_options(py, options_json)?;
     let handle = py
         .allow_threads(|| HilHandle::start(&scenario, &options))
@@ -224,7 +281,7 @@ fn start_facility(
     scenario_json: &str,
     options_json: &str,
 ) -> PyResult<PyFacilityHandle> {
-    let scenario = parse_scenario(py, scenario_json)?;
+    let scenario = scenario_data(py, scenario_json)?;
     let options: EmulatorOptions = parse_options(py, options_json)?;
     let handle = py
         .allow_threads(|| FacilityHandle::start(&scenario, &options))
@@ -242,13 +299,6 @@ fn realtime_defaults() -> PyResult<String> {
     Ok(value.to_string())
 }
 
-/// The one conversion from core errors to Python exceptions.
-fn to_py_err(py: Python<'_>, error: CoreError) -> PyErr {
-    match error {
-        CoreError::InvalidScenario { .. } => scenario_error(py, error.to_string()),
-    }
-}
-
 fn table_to_dict<'py>(py: Python<'py>, table: Table) -> PyResult<Bound<'py, PyDict>> {
     let dict = PyDict::new(py);
     for (name, values) in table.columns {
@@ -261,10 +311,8 @@ fn table_to_dict<'py>(py: Python<'py>, table: Table) -> PyResult<Bound<'py, PyDi
 /// Returns `{"timeseries": {column: ndarray}, "reference": {column: ndarray}, "metrics": str}`.
 #[pyfunction]
 fn simulate<'py>(py: Python<'py>, scenario_json: &str) -> PyResult<Bound<'py, PyDict>> {
-    let scenario = parse_scenario(py, scenario_json)?;
-    let output = py
-        .allow_threads(|| hilcontact_core::simulate(&scenario))
-        .map_err(|e| to_py_err(py, e))?;
+    let plan = parse_scenario(py, scenario_json)?;
+    let output = py.allow_threads(|| hilcontact_core::sim::simulate_plan(&plan));
     let metrics =
         serde_json::to_string(&output.metrics).map_err(|e| PyValueError::new_err(e.to_string()))?;
     let result = PyDict::new(py);
@@ -300,7 +348,7 @@ fn simulate_batch<'py>(
             .par_iter()
             .map(|s| {
                 let start = std::time::Instant::now();
-                let metrics = hilcontact_core::simulate_metrics(s);
+                let metrics = hilcontact_core::sim::simulate_plan_metrics(s);
                 (metrics, start.elapsed().as_secs_f64())
             })
             .collect::<Vec<_>>()
@@ -334,7 +382,7 @@ fn simulate_batch<'py>(
     .map(|name| (*name, Vec::with_capacity(n)))
     .collect();
     for (metrics, wall_time) in results {
-        let m = metrics.map_err(|e| to_py_err(py, e))?;
+        let m = metrics;
         status.push(
             serde_json::to_value(m.status)
                 .map_err(|e| PyValueError::new_err(e.to_string()))?
@@ -368,30 +416,25 @@ fn simulate_batch<'py>(
     Ok(result)
 }
 
-/// The core's default parameters of every compensator kind, as JSON
-/// (`{"pida": {"kind": "pida", "delay_mode": "align", ...}, ...}`): the Python schema is checked
-/// against it so that both layers share one set of defaults.
+/// The compensator registry, as JSON: a list, in the registry's order, of
+/// `{"kind", "summary", "colour", "defaults": {"kind": ..., parameter: default, ...}}`
+/// (the one list of compensators: Python's allowed kinds, defaults and plot colours).
 #[pyfunction]
-fn compensator_defaults() -> PyResult<String> {
-    use hilcontact_core::compensator::{CompensatorConfig, ModelParams, TdpaParams};
-    let kinds = [
-        CompensatorConfig::None,
-        CompensatorConfig::Pic(ModelParams::default()),
-        CompensatorConfig::Dac(ModelParams::default()),
-        CompensatorConfig::Pida(ModelParams::default()),
-        CompensatorConfig::TdpaImpedance(TdpaParams::default()),
-        CompensatorConfig::TdpaAdmittance(TdpaParams::default()),
-    ];
-    let map: serde_json::Map<String, serde_json::Value> = kinds
+fn compensator_registry() -> PyResult<String> {
+    use hilcontact_core::compensator::REGISTRY;
+    let entries = REGISTRY
         .iter()
         .map(|k| {
-            Ok((
-                k.kind().to_string(),
-                serde_json::to_value(k).map_err(|e| PyValueError::new_err(e.to_string()))?,
-            ))
+            Ok(serde_json::json!({
+                "kind": k.kind,
+                "summary": k.summary.trim(),
+                "colour": k.colour,
+                "defaults": serde_json::to_value((k.default)())
+                    .map_err(|e| PyValueError::new_err(e.to_string()))?,
+            }))
         })
-        .collect::<PyResult<_>>()?;
-    Ok(serde_json::Value::Object(map).to_string())
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok(serde_json::Value::Array(entries).to_string())
 }
 
 /// Version of the native core.
@@ -405,11 +448,16 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(simulate_batch, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
-    m.add_function(wrap_pyfunction!(compensator_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(compensator_registry, m)?)?;
     m.add_function(wrap_pyfunction!(start_hil, m)?)?;
     m.add_function(wrap_pyfunction!(start_facility, m)?)?;
     m.add_function(wrap_pyfunction!(realtime_defaults, m)?)?;
     m.add_class::<PyHilHandle>()?;
     m.add_class::<PyFacilityHandle>()?;
+    let errors = error_classes(m.py())?;
+    m.add("HilContactError", errors.base.clone_ref(m.py()))?;
+    m.add("ScenarioError", errors.scenario.clone_ref(m.py()))?;
+    m.add("RealtimeError", errors.realtime.clone_ref(m.py()))?;
+    m.add("RealtimeOptionError", errors.option.clone_ref(m.py()))?;
     Ok(())
 }

@@ -30,7 +30,7 @@ use serde::{Deserialize, Serialize};
 
 use hilcontact_core::facility::FacilityModel;
 use hilcontact_core::hil::VirtualDynamics;
-use hilcontact_core::world::{RelativeMotion, TwoBodySystem};
+use hilcontact_core::world::RelativeMotion;
 use hilcontact_core::Scenario;
 
 use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack};
@@ -185,7 +185,7 @@ impl FacilityHandle {
     /// Starts the emulated facility of a scenario: binds the sockets (errors here, e.g. a
     /// port in use) and starts the real-time thread.
     pub fn start(scenario: &Scenario, options: &EmulatorOptions) -> Result<Self> {
-        scenario.validate()?;
+        let plan = scenario.resolve()?;
         let o = options;
         for (key, v) in [
             ("counts_per_force", o.counts_per_force),
@@ -215,7 +215,7 @@ impl FacilityHandle {
             force: o.counts_per_force,
             torque: o.counts_per_torque,
         };
-        let period = scenario.simulation.period;
+        let period = plan.period;
 
         let rdt = bind_udp(
             "sensor (RDT)",
@@ -246,14 +246,13 @@ impl FacilityHandle {
             egm_peer,
         };
 
-        let system = TwoBodySystem::from_scenario(scenario)?;
-        let initial = VirtualDynamics::from_scenario(scenario, &system)?.command();
+        let initial = VirtualDynamics::new(&plan).command();
         let initial = RelativeMotion {
             velocity: Vector3::zeros(),
             angular_velocity: Vector3::zeros(),
             ..initial
         };
-        let facility = FacilityModel::from_scenario(scenario, &system, &initial)?;
+        let facility = FacilityModel::new(&plan, &initial);
         let shared = Arc::new(Shared::default());
         let period_ns = (period * 1e9).round() as u64;
         let egm_every = ((o.egm_period / period).round() as u64).max(1);

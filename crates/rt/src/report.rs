@@ -10,12 +10,11 @@
 use serde_json::{json, Value};
 
 use hilcontact_core::hil::VirtualDynamics;
-use hilcontact_core::metrics::Status;
+use hilcontact_core::metrics::Metrics;
 use hilcontact_core::sim::{
     hil_table, reference_table, run_reference, trace_metrics, HilRecord, Table, Trace,
 };
-use hilcontact_core::world::TwoBodySystem;
-use hilcontact_core::Scenario;
+use hilcontact_core::Plan;
 
 use crate::error::{Result, RtError};
 use crate::runtime::{RunOutcome, RuntimeOptions, Sample};
@@ -28,21 +27,31 @@ pub struct HilOutput {
     pub timeseries: Table,
     /// The ideal reference over the scenario's duration.
     pub reference: Table,
-    /// `metrics.json`, with its `realtime` section.
+    /// `metrics.json`: a [`RealtimeMetrics`] as JSON.
     pub metrics: Value,
     /// Exit code of the `hil` command (0, 3 safety stop, 130 user stop).
     pub exit_code: i32,
 }
 
+/// `metrics.json` of a real-time run: the core's metrics (status, reason and stop from the
+/// run's [`crate::safety::StopEvent`]) and the loop's timing and packet statistics.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct RealtimeMetrics {
+    /// The metrics of the run, as a simulation computes them.
+    #[serde(flatten)]
+    pub core: Metrics,
+    /// Timing, packet counters, options.
+    pub realtime: Value,
+}
+
 /// Builds the output of a run from its samples.
 pub fn build_output(
-    scenario: &Scenario,
-    system: &TwoBodySystem,
+    plan: &Plan,
     options: &RuntimeOptions,
     samples: &[Sample],
     outcome: &RunOutcome,
 ) -> Result<HilOutput> {
-    let virt = VirtualDynamics::from_scenario(scenario, system)?;
+    let virt = VirtualDynamics::new(plan);
     let (estimates, observes) = (virt.estimates_contact(), virt.observes_energy());
     let records: Vec<HilRecord> = samples.iter().map(|s| s.record).collect();
     let mut timeseries = hil_table(&records, estimates, observes);
@@ -57,30 +66,13 @@ pub fn build_output(
             .push((name.to_string(), samples.iter().map(get).collect()));
     }
 
-    let (reference_trace, reference) = run_reference(scenario, system, true)?;
+    let (reference_trace, reference) = run_reference(plan, true);
     let trace = Trace::of_records(&records, estimates);
-    // status and reason are the runtime's, set below
-    let core_metrics = trace_metrics(
-        scenario,
-        &reference_trace,
-        &trace,
-        estimates,
-        Status::Ok,
-        None,
-    );
-    let mut metrics =
-        serde_json::to_value(&core_metrics).map_err(|e| RtError::Io(format!("metrics: {e}")))?;
     let stop = &outcome.stop;
+    let core = trace_metrics(plan, &reference_trace, &trace, estimates, *stop);
     let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
-    metrics["status"] = json!(stop.kind.status());
-    metrics["reason"] = stop.reason().map_or(Value::Null, Value::from);
-    metrics["diverged_at"] = if stop.kind == crate::safety::StopKind::Diverged {
-        json!(stop.time)
-    } else {
-        Value::Null
-    };
-    metrics["realtime"] = json!({
-        "period": scenario.simulation.period,
+    let realtime = json!({
+        "period": plan.period,
         "ticks": outcome.ticks,
         "samples": samples.len(),
         "wall_time": outcome.wall_time,
@@ -112,7 +104,8 @@ pub fn build_output(
     Ok(HilOutput {
         timeseries,
         reference: reference_table(&reference),
-        metrics,
+        metrics: serde_json::to_value(RealtimeMetrics { core, realtime })
+            .map_err(|e| RtError::Io(format!("metrics: {e}")))?,
         exit_code: stop.kind.exit_code(),
     })
 }

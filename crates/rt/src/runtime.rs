@@ -32,14 +32,13 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use hilcontact_core::facility::Measurement;
-use hilcontact_core::hil::VirtualDynamics;
-use hilcontact_core::sim::HilRecord;
-use hilcontact_core::world::{RelativeMotion, TwoBodySystem};
-use hilcontact_core::{metrics, sim, Scenario};
+use hilcontact_core::hil::{HilRecord, HilStep};
+use hilcontact_core::world::RelativeMotion;
+use hilcontact_core::{metrics, sim, Plan, Scenario};
 
 use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack, Histogram, TimingSummary};
 use crate::egm::{CorrectionEncoder, EgmError, RobotDecoder, EGM_PERIOD, EGM_PORT};
@@ -252,8 +251,7 @@ pub struct HilHandle {
     shared: Arc<SharedStatus>,
     thread: Option<JoinHandle<Result<RunOutcome>>>,
     writer: Option<JoinHandle<Vec<Sample>>>,
-    scenario: Scenario,
-    system: TwoBodySystem,
+    plan: Plan,
     options: RuntimeOptions,
     period: f64,
 }
@@ -265,7 +263,7 @@ impl HilHandle {
     /// Validates, binds the sockets, reads the sensor's counts per unit (HTTP, unless given),
     /// computes the ideal reference's energy bound, and starts the writer and loop threads.
     pub fn start(scenario: &Scenario, options: &RuntimeOptions) -> Result<Self> {
-        scenario.validate()?;
+        let plan = scenario.resolve()?;
         let o = options;
         o.limits.validate()?;
         for (key, v) in [
@@ -313,16 +311,15 @@ impl HilHandle {
             None => None,
         };
 
-        let system = TwoBodySystem::from_scenario(scenario)?;
-        let reference_energy = sim::run_reference(scenario, &system, false)?.0.energy;
-        let virt = VirtualDynamics::from_scenario(scenario, &system)?;
+        let reference_energy = sim::run_reference(&plan, false).0.energy;
         let energy_bound = metrics::divergence_bound(
-            scenario.simulation.divergence_energy_ratio,
-            virt.energy(),
+            plan.divergence_energy_ratio,
+            plan.system.energy(&plan.initial),
             &reference_energy,
         );
-        let period = scenario.simulation.period;
-        let ticks = scenario.ticks() as u64;
+        let step = HilStep::new(&plan, energy_bound);
+        let period = plan.period;
+        let ticks = plan.ticks as u64;
 
         let shared = Arc::new(SharedStatus::default());
         let (producer, mut consumer) = rtrb::RingBuffer::<Sample>::new(RING_CAPACITY);
@@ -344,17 +341,16 @@ impl HilHandle {
             })
             .map_err(|e| RtError::Io(format!("writer thread: {e}")))?;
 
-        let start_tip = virt.command().point(&system.rod_tip);
-        let initial = virt.command();
+        let rod = plan.system.rod_tip;
+        let initial = step.command();
+        let start_tip = initial.point(&rod);
         let mut state = Loop {
-            sensor_to_t: virt.sensor_orientation(),
-            rod: system.rod_tip,
-            virt,
+            rod,
+            step,
             period,
             period_ns: (period * 1e9).round() as u64,
             ticks,
             limits: o.limits,
-            energy_bound,
             start_tip,
             initial: RelativeMotion {
                 velocity: Vector3::zeros(),
@@ -409,8 +405,7 @@ impl HilHandle {
             shared,
             thread: Some(thread),
             writer: Some(writer),
-            scenario: scenario.clone(),
-            system,
+            plan,
             options: o.clone(),
             period,
         })
@@ -471,8 +466,7 @@ impl HilHandle {
             _ => return Err(RtError::Io("the writer thread panicked".into())),
         };
         build_output(
-            &self.scenario,
-            &self.system,
+            &self.plan,
             &self.options,
             &samples,
             &outcome?,
@@ -493,14 +487,13 @@ impl Drop for HilHandle {
 }
 
 struct Loop {
-    virt: VirtualDynamics,
-    sensor_to_t: UnitQuaternion<f64>,
+    /// The virtual side of a tick: the core's one HIL step.
+    step: HilStep,
     rod: Vector3<f64>,
     period: f64,
     period_ns: u64,
     ticks: u64,
     limits: SafetyLimits,
-    energy_bound: f64,
     start_tip: Vector3<f64>,
     initial: RelativeMotion,
     mapping: PoseMapping,
@@ -826,29 +819,9 @@ impl Loop {
             moment: self.moment,
             actual,
         };
-        let out = self.virt.compensate(&m);
-        let desired = self.virt.command();
+        let (record, verdict) = self.step.observe(k as usize, &m, None);
         let sample = Sample {
-            record: HilRecord {
-                time,
-                tip_position: desired.point(&self.rod),
-                tip_velocity: desired.point_velocity(&self.rod),
-                actual_tip_position: actual.point(&self.rod),
-                actual_tip_velocity: actual.point_velocity(&self.rod),
-                contact_force: -(self.sensor_to_t * self.force),
-                measured_force: self.force,
-                measured_moment: self.moment,
-                applied_force: self
-                    .sensor_to_t
-                    .inverse_transform_vector(&out.applied.force),
-                applied_moment: self
-                    .sensor_to_t
-                    .inverse_transform_vector(&out.applied.moment),
-                energy: self.virt.energy(),
-                stiffness_estimate: out.estimate.map_or(f64::NAN, |e| e.stiffness),
-                damping_estimate: out.estimate.map_or(f64::NAN, |e| e.damping),
-                observed_energy: out.observed_energy,
-            },
+            record,
             wake_latency: latency as f64 * 1e-9,
             sensor_age: wake.saturating_sub(self.last_rdt_ns) as f64 * 1e-9,
             robot_age: wake.saturating_sub(self.last_egm_ns) as f64 * 1e-9,
@@ -882,11 +855,14 @@ impl Loop {
         if let Some(stop) = check_wrench(&self.limits, &self.force, &self.moment, time) {
             return Some(stop);
         }
-        if k == self.ticks {
-            return Some(StopEvent::plain(StopKind::Completed, time));
+        // divergence, a non-finite record, or the end of the run
+        if let Some(stop) = verdict {
+            return Some(stop);
         }
-        self.virt.integrate(&out);
-        let command = self.virt.command();
+        let command = match self.step.advance(k as usize) {
+            Ok(command) => command,
+            Err(stop) => return Some(stop),
+        };
         if let Some(stop) = check_workspace(
             &self.limits,
             &command.point(&self.rod),
@@ -894,15 +870,6 @@ impl Loop {
             time,
         ) {
             return Some(stop);
-        }
-        let energy = self.virt.energy();
-        if energy.is_nan() || energy > self.energy_bound {
-            return Some(StopEvent {
-                kind: StopKind::Diverged,
-                time,
-                value: energy,
-                limit: self.energy_bound,
-            });
         }
         let target = self.mapping.to_egm(&command);
         self.send(&target);
@@ -915,7 +882,7 @@ impl Loop {
         s.force_bits
             .store(self.force.norm().to_bits(), Ordering::Relaxed);
         s.energy_bits
-            .store(self.virt.energy().to_bits(), Ordering::Relaxed);
+            .store(self.step.dynamics().energy().to_bits(), Ordering::Relaxed);
         s.max_latency_ns.fetch_max(latency, Ordering::Relaxed);
         s.overruns.store(self.overruns, Ordering::Relaxed);
         s.sensor_lost.store(self.sensor.lost, Ordering::Relaxed);

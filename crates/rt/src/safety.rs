@@ -63,120 +63,9 @@ impl SafetyLimits {
     }
 }
 
-/// Why a run stopped.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum StopKind {
-    /// Ran for the whole duration.
-    Completed,
-    /// `stop()` was called (Ctrl-C).
-    User,
-    /// Measured force magnitude above the limit.
-    ForceLimit,
-    /// Measured moment magnitude above the limit.
-    MomentLimit,
-    /// No valid sensor record for longer than the watchdog.
-    SensorWatchdog,
-    /// No valid robot feedback for longer than the watchdog.
-    RobotWatchdog,
-    /// Commanded rod tip outside the workspace.
-    Workspace,
-    /// The command stopped being finite.
-    NonFinite,
-    /// The virtual energy passed the scenario's divergence bound.
-    Diverged,
-}
-
-impl StopKind {
-    /// Whether a safety function stopped the run.
-    pub fn is_safety_stop(self) -> bool {
-        !matches!(self, StopKind::Completed | StopKind::User)
-    }
-
-    /// Exit code of the `hilcontact hil` command: 0 completed, 130 user stop (Ctrl-C),
-    /// 3 any safety stop.
-    pub fn exit_code(self) -> i32 {
-        match self {
-            StopKind::Completed => 0,
-            StopKind::User => 130,
-            _ => 3,
-        }
-    }
-
-    /// The status written to `metrics.json`: `ok`, `interrupted`, `diverged` or `stopped`.
-    pub fn status(self) -> &'static str {
-        match self {
-            StopKind::Completed => "ok",
-            StopKind::User => "interrupted",
-            StopKind::Diverged => "diverged",
-            _ => "stopped",
-        }
-    }
-
-    /// Small integer for the status atomics (0 = still running).
-    pub fn code(self) -> u8 {
-        self as u8 + 1
-    }
-
-    /// The kind of a [`StopKind::code`].
-    pub fn from_code(code: u8) -> Option<Self> {
-        use StopKind::*;
-        [
-            Completed,
-            User,
-            ForceLimit,
-            MomentLimit,
-            SensorWatchdog,
-            RobotWatchdog,
-            Workspace,
-            NonFinite,
-            Diverged,
-        ]
-        .get((code as usize).checked_sub(1)?)
-        .copied()
-    }
-}
-
-/// A stop: kind, tick time (s), and the value that tripped against its limit (same units).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct StopEvent {
-    /// Why.
-    pub kind: StopKind,
-    /// Time of the tick, s.
-    pub time: f64,
-    /// The offending value (N, N·m, ms, m or J), NaN when there is none.
-    pub value: f64,
-    /// The limit it passed, same unit, NaN when there is none.
-    pub limit: f64,
-}
-
-impl StopEvent {
-    /// A stop without a value.
-    pub fn plain(kind: StopKind, time: f64) -> Self {
-        StopEvent {
-            kind,
-            time,
-            value: f64::NAN,
-            limit: f64::NAN,
-        }
-    }
-
-    /// One line for humans (formats, so call it outside the loop).
-    pub fn reason(&self) -> Option<String> {
-        let (v, l, t) = (self.value, self.limit, self.time);
-        Some(match self.kind {
-            StopKind::Completed => return None,
-            StopKind::User => format!("stopped by the user at {t:.3} s"),
-            StopKind::ForceLimit => format!("force limit: |F| = {v:.1} N > {l:.1} N (force_limit) at {t:.3} s"),
-            StopKind::MomentLimit => format!("moment limit: |M| = {v:.2} N·m > {l:.2} N·m (moment_limit) at {t:.3} s"),
-            StopKind::SensorWatchdog => format!("sensor watchdog: no valid RDT record for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
-            StopKind::RobotWatchdog => format!("robot watchdog: no valid EGM feedback for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
-            StopKind::Workspace => format!("workspace limit: commanded rod tip {:.1} mm from its start > {:.1} mm (workspace) at {t:.3} s", v * 1e3, l * 1e3),
-            StopKind::NonFinite => format!("the command stopped being finite at {t:.3} s"),
-            StopKind::Diverged => format!("diverged: energy {v:.4} J passed the divergence bound {l:.4} J at {t:.3} s"),
-        })
-    }
-}
+/// A stop of the real-time loop: the core's one vocabulary of how runs stop.
+pub type StopEvent = hilcontact_core::metrics::Stop;
+pub use hilcontact_core::metrics::StopKind;
 
 /// Checks the wrench limits (magnitudes of the measured force N and moment N·m).
 pub fn check_wrench(
@@ -227,6 +116,7 @@ pub fn check_workspace(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hilcontact_core::metrics::Status;
 
     #[test]
     fn limits_trip_above_and_on_nan() {
@@ -286,7 +176,7 @@ mod tests {
         assert_eq!(StopKind::Completed.exit_code(), 0);
         assert_eq!(StopKind::User.exit_code(), 130);
         assert_eq!(StopKind::SensorWatchdog.exit_code(), 3);
-        assert_eq!(StopKind::ForceLimit.status(), "stopped");
+        assert_eq!(StopKind::ForceLimit.status(), Status::Stopped);
     }
 
     #[test]

@@ -58,7 +58,7 @@ fn pida_at_20ms_keeps_the_rebound_speed_in_real_time() {
 
 #[test]
 fn uncompensated_loop_is_stopped_by_the_force_limit() {
-    let m = run(CompensatorConfig::None, 6.0);
+    let m = run(CompensatorConfig::default(), 6.0);
     assert_eq!(m["status"], "stopped");
     assert_eq!(m["realtime"]["stop"]["kind"], "force-limit");
     assert_eq!(m["realtime"]["stop"]["exit_code"], 3);

@@ -66,7 +66,7 @@ pub struct ContactEstimator {
 impl ContactEstimator {
     /// A front end with the given parameters.
     pub fn new(p: &ModelParams, context: &CompensatorContext) -> Self {
-        let delay_ticks = (context.sensor_delay / context.period).round() as usize;
+        let delay_ticks = context.sensor_delay_ticks;
         let filter = SageHusaFilter::new(
             Vector2::new(p.stiffness_initial, p.damping_initial),
             Matrix2::from_diagonal(&Vector2::new(
@@ -84,7 +84,7 @@ impl ContactEstimator {
             mode: p.delay_mode,
             threshold: p.contact_force,
             period: context.period,
-            sensor_delay: context.sensor_delay,
+            sensor_delay: context.sensor_delay(),
             delay_ticks,
             sensor_origin: context.sensor_origin,
             kinematics: DelayLine::new(delay_ticks, (Vector3::zeros(), Vector3::zeros())),

@@ -32,7 +32,7 @@ use nalgebra::Vector3;
 use super::delay::ContactView;
 use super::params::{ModelParams, ObserverMode};
 use super::{CompensatorContext, CompensatorInput};
-use crate::world::FrameWrench;
+use crate::frames::FrameWrench;
 
 /// One tick of the observer's history.
 #[derive(Debug, Clone, Copy, PartialEq)]

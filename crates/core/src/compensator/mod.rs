@@ -20,7 +20,7 @@ pub use dac::Dac;
 pub use delay::{ContactEstimator, ContactView};
 pub use energy::{DampingAmendment, EnergyController, EnergyObserver};
 pub use force::{compensate_force, CompensatedWrench};
-pub use none::PassThrough;
+pub use none::{NoParams, PassThrough};
 pub use params::{DelayMode, ModelParams, ObserverMode, TdpaParams};
 pub use pic::Pic;
 pub use pida::Pida;
@@ -29,8 +29,8 @@ pub use tdpa::{TdpaAdmittance, TdpaImpedance};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use crate::error::Result;
-use crate::world::FrameWrench;
+use crate::error::Issues;
+use crate::frames::FrameWrench;
 
 /// What a compensator sees at a tick. All vectors in the target frame `t`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -88,13 +88,20 @@ impl CompensatorOutput {
 pub struct CompensatorContext {
     /// Control period T, s.
     pub period: f64,
-    /// Known sensor delay τ_p, s.
-    pub sensor_delay: f64,
+    /// Known sensor delay τ_p, in control ticks.
+    pub sensor_delay_ticks: usize,
     /// Sensor origin in `t`, m.
     pub sensor_origin: Vector3<f64>,
     /// Reduced mass of the virtual satellites μ = m_s m_t/(m_s + m_t), kg (the virtual model
     /// is software, so its masses are known).
     pub reduced_mass: f64,
+}
+
+impl CompensatorContext {
+    /// Known sensor delay τ_p, s.
+    pub fn sensor_delay(&self) -> f64 {
+        self.sensor_delay_ticks as f64 * self.period
+    }
 }
 
 /// A delay compensator.
@@ -113,60 +120,89 @@ pub trait Compensator: Send {
     }
 }
 
-/// Which compensator, with its parameters (`[compensator]` in a scenario, tagged by `kind`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
-pub enum CompensatorConfig {
+/// One registered compensator kind: what Python, plots and docs learn of it.
+#[derive(Debug, Clone, Copy)]
+pub struct KindInfo {
+    /// The `kind` string of `[compensator]`.
+    pub kind: &'static str,
+    /// One line for humans (the variant's doc).
+    pub summary: &'static str,
+    /// Plot colour (a matplotlib colour name).
+    pub colour: &'static str,
+    /// Its config with default parameters.
+    pub default: fn() -> CompensatorConfig,
+}
+
+/// Builds the registry from one line per compensator: `Variant = "kind", Params, Type,
+/// "colour";` with the variant's doc comment. `Params` implements `Default`, serde and
+/// `check(&self, &mut Issues)`; `Type::new(&Params, &CompensatorContext)` implements
+/// [`Compensator`].
+macro_rules! registry {
+    ($( $(#[doc = $doc:literal])+ $variant:ident = $kind:literal, $params:ty, $imp:ty, $colour:literal; )+) => {
+        /// Which compensator, with its parameters (`[compensator]` in a scenario, tagged by
+        /// `kind`).
+        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+        #[serde(tag = "kind", deny_unknown_fields)]
+        pub enum CompensatorConfig {
+            $( $(#[doc = $doc])+ #[serde(rename = $kind)] $variant($params), )+
+        }
+
+        /// Every compensator kind, in the order of the docs and plots: the one list.
+        pub const REGISTRY: &[KindInfo] = &[
+            $( KindInfo {
+                kind: $kind,
+                summary: concat!($($doc),+),
+                colour: $colour,
+                default: || CompensatorConfig::$variant(<$params>::default()),
+            }, )+
+        ];
+
+        impl CompensatorConfig {
+            /// The `kind` string.
+            pub fn kind(&self) -> &'static str {
+                match self { $( CompensatorConfig::$variant(_) => $kind, )+ }
+            }
+
+            /// Records every parameter out of its range.
+            pub fn check(&self, issues: &mut Issues) {
+                match self { $( CompensatorConfig::$variant(p) => p.check(issues), )+ }
+            }
+
+            /// Builds the compensator (allocates once, here).
+            pub fn build(&self, context: &CompensatorContext) -> Box<dyn Compensator> {
+                match self { $( CompensatorConfig::$variant(p) => Box::new(<$imp>::new(p, context)), )+ }
+            }
+        }
+    };
+}
+
+registry! {
     /// Pass-through: the measured wrench goes straight into the dynamics (diverges with delay).
-    #[default]
-    None,
+    None = "none", NoParams, PassThrough, "tab:red";
     /// Algorithm 1: parameter identification control, `F_comp`, `M_comp` into the dynamics.
-    Pic(ModelParams),
+    Pic = "pic", ModelParams, Pic, "tab:blue";
     /// Algorithm 2: damping amendment control, `F_act + F_α`.
-    Dac(ModelParams),
+    Dac = "dac", ModelParams, Dac, "tab:orange";
     /// Algorithm 3: identification and damping amendment, `F_comp + F_α`, eqs. (29), (30).
-    Pida(ModelParams),
+    Pida = "pida", ModelParams, Pida, "tab:green";
     /// Time-domain passivity, impedance type (a series damper on the force).
-    TdpaImpedance(TdpaParams),
+    TdpaImpedance = "tdpa-impedance", TdpaParams, TdpaImpedance, "tab:purple";
     /// Time-domain passivity, admittance type (a damper on the velocity command).
-    TdpaAdmittance(TdpaParams),
+    TdpaAdmittance = "tdpa-admittance", TdpaParams, TdpaAdmittance, "tab:brown";
+}
+
+impl Default for CompensatorConfig {
+    fn default() -> Self {
+        CompensatorConfig::None(NoParams)
+    }
 }
 
 impl CompensatorConfig {
-    /// The `kind` string.
-    pub fn kind(&self) -> &'static str {
-        match self {
-            CompensatorConfig::None => "none",
-            CompensatorConfig::Pic(_) => "pic",
-            CompensatorConfig::Dac(_) => "dac",
-            CompensatorConfig::Pida(_) => "pida",
-            CompensatorConfig::TdpaImpedance(_) => "tdpa-impedance",
-            CompensatorConfig::TdpaAdmittance(_) => "tdpa-admittance",
-        }
-    }
-
-    /// Checks the parameters' ranges.
-    pub fn validate(&self) -> Result<()> {
-        match self {
-            CompensatorConfig::None => Ok(()),
-            CompensatorConfig::Pic(p) | CompensatorConfig::Dac(p) | CompensatorConfig::Pida(p) => {
-                p.validate()
-            }
-            CompensatorConfig::TdpaImpedance(p) | CompensatorConfig::TdpaAdmittance(p) => {
-                p.validate()
-            }
-        }
-    }
-
-    /// Builds the compensator (allocates once, here).
-    pub fn build(&self, context: &CompensatorContext) -> Box<dyn Compensator> {
-        match self {
-            CompensatorConfig::None => Box::new(PassThrough),
-            CompensatorConfig::Pic(p) => Box::new(Pic::new(p, context)),
-            CompensatorConfig::Dac(p) => Box::new(Dac::new(p, context)),
-            CompensatorConfig::Pida(p) => Box::new(Pida::new(p, context)),
-            CompensatorConfig::TdpaImpedance(p) => Box::new(TdpaImpedance::new(p, context)),
-            CompensatorConfig::TdpaAdmittance(p) => Box::new(TdpaAdmittance::new(p, context)),
-        }
+    /// The config of `kind` with default parameters, if `kind` is registered.
+    pub fn from_kind(kind: &str) -> Option<Self> {
+        REGISTRY
+            .iter()
+            .find(|k| k.kind == kind)
+            .map(|k| (k.default)())
     }
 }

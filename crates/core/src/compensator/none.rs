@@ -2,11 +2,31 @@
 //! With any delay in the loop the simulation diverges; it is the baseline that shows why
 //! compensation is needed.
 
-use super::{Compensator, CompensatorInput, CompensatorOutput};
+use serde::{Deserialize, Serialize};
+
+use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
+use crate::error::Issues;
+
+/// The pass-through compensator has no parameters (`kind = "none"` and nothing else).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoParams;
+
+impl NoParams {
+    /// Nothing to check.
+    pub fn check(&self, _issues: &mut Issues) {}
+}
 
 /// The pass-through compensator (`kind = "none"`).
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PassThrough;
+
+impl PassThrough {
+    /// The pass-through (it uses neither parameters nor context).
+    pub fn new(_params: &NoParams, _context: &CompensatorContext) -> Self {
+        PassThrough
+    }
+}
 
 impl Compensator for PassThrough {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {

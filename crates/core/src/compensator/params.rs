@@ -3,7 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{CoreError, Result};
+use crate::error::Issues;
+use crate::plan::check_parameter;
 
 /// How the measurement delay `τ_p` is compensated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -77,75 +78,24 @@ impl Default for ModelParams {
     }
 }
 
-fn check(key: &str, ok: bool, allowed: &str, value: f64) -> Result<()> {
-    if ok && value.is_finite() {
-        Ok(())
-    } else {
-        Err(CoreError::invalid(
-            format!("compensator.{key}"),
-            format!("must be {allowed}, got {value}"),
-        ))
-    }
-}
-
 impl ModelParams {
-    /// Checks every range.
-    pub fn validate(&self) -> Result<()> {
-        check(
-            "contact_force",
-            self.contact_force > 0.0,
-            "> 0 N",
-            self.contact_force,
-        )?;
-        check(
-            "stiffness_initial",
-            self.stiffness_initial > 0.0,
-            "> 0 N/m",
-            self.stiffness_initial,
-        )?;
-        check(
-            "damping_initial",
-            self.damping_initial >= 0.0,
-            ">= 0 N s/m",
-            self.damping_initial,
-        )?;
-        check(
-            "stiffness_std",
-            self.stiffness_std > 0.0,
-            "> 0 N/m",
-            self.stiffness_std,
-        )?;
-        check(
-            "damping_std",
-            self.damping_std > 0.0,
-            "> 0 N s/m",
-            self.damping_std,
-        )?;
-        check(
-            "stiffness_walk",
-            self.stiffness_walk >= 0.0,
-            ">= 0 N/m",
-            self.stiffness_walk,
-        )?;
-        check(
-            "damping_walk",
-            self.damping_walk >= 0.0,
-            ">= 0 N s/m",
-            self.damping_walk,
-        )?;
-        check("noise_std", self.noise_std > 0.0, "> 0 N", self.noise_std)?;
-        check(
-            "forgetting",
-            self.forgetting > 0.0 && self.forgetting < 1.0,
-            "between 0 and 1 (exclusive)",
-            self.forgetting,
-        )?;
-        check(
-            "alpha_max",
-            self.alpha_max > 0.0,
-            "> 0 N s/m",
-            self.alpha_max,
-        )
+    /// Records every parameter out of its range.
+    pub fn check(&self, issues: &mut Issues) {
+        let p = self;
+        let mut check = |key: &str, value: f64, ok: bool, allowed: &str| {
+            check_parameter(issues, key, value, ok, allowed)
+        };
+        check("contact_force", p.contact_force, p.contact_force > 0.0, "> 0");
+        check("stiffness_initial", p.stiffness_initial, p.stiffness_initial > 0.0, "> 0");
+        check("damping_initial", p.damping_initial, p.damping_initial >= 0.0, ">= 0");
+        check("stiffness_std", p.stiffness_std, p.stiffness_std > 0.0, "> 0");
+        check("damping_std", p.damping_std, p.damping_std > 0.0, "> 0");
+        check("stiffness_walk", p.stiffness_walk, p.stiffness_walk >= 0.0, ">= 0");
+        check("damping_walk", p.damping_walk, p.damping_walk >= 0.0, ">= 0");
+        check("noise_std", p.noise_std, p.noise_std > 0.0, "> 0");
+        let b = p.forgetting;
+        check("forgetting", b, b > 0.0 && b < 1.0, "between 0 and 1 (exclusive)");
+        check("alpha_max", p.alpha_max, p.alpha_max > 0.0, "> 0");
     }
 }
 
@@ -179,37 +129,16 @@ impl Default for TdpaParams {
 }
 
 impl TdpaParams {
-    /// Checks every range.
-    pub fn validate(&self) -> Result<()> {
-        check(
-            "contact_force",
-            self.contact_force > 0.0,
-            "> 0 N",
-            self.contact_force,
-        )?;
-        check(
-            "alpha_max",
-            self.alpha_max > 0.0,
-            "> 0 N s/m",
-            self.alpha_max,
-        )?;
-        check(
-            "beta_max",
-            self.beta_max > 0.0,
-            "> 0 m/(N s)",
-            self.beta_max,
-        )?;
-        check(
-            "velocity_floor",
-            self.velocity_floor > 0.0,
-            "> 0 m/s",
-            self.velocity_floor,
-        )?;
-        check(
-            "force_floor",
-            self.force_floor > 0.0,
-            "> 0 N",
-            self.force_floor,
-        )
+    /// Records every parameter out of its range.
+    pub fn check(&self, issues: &mut Issues) {
+        let p = self;
+        let mut check = |key: &str, value: f64, ok: bool, allowed: &str| {
+            check_parameter(issues, key, value, ok, allowed)
+        };
+        check("contact_force", p.contact_force, p.contact_force > 0.0, "> 0");
+        check("alpha_max", p.alpha_max, p.alpha_max > 0.0, "> 0");
+        check("beta_max", p.beta_max, p.beta_max > 0.0, "> 0");
+        check("velocity_floor", p.velocity_floor, p.velocity_floor > 0.0, "> 0");
+        check("force_floor", p.force_floor, p.force_floor > 0.0, "> 0");
     }
 }

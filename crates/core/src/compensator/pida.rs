@@ -9,7 +9,7 @@ use super::params::ModelParams;
 use super::{
     Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
 };
-use crate::world::FrameWrench;
+use crate::frames::FrameWrench;
 use nalgebra::Vector3;
 
 /// Parameter identification and damping amendment.

@@ -1,0 +1,461 @@
+//! A scenario resolved once into a validated plan: the only place a scenario is checked.
+//!
+//! [`Plan::resolve`] checks every value of a [`Scenario`] and reports every problem (not only
+//! the first), each naming its dotted key. It produces typed values that cannot be invalid:
+//! unit quaternions, unit wall normals, symmetric positive-definite inertia tensors, delays in
+//! whole ticks (`facility.round_delays` applied), the compensator's checked parameters. Every
+//! physics constructor ([`crate::facility::FacilityModel`], [`crate::hil::VirtualDynamics`],
+//! the reference in [`crate::sim`]) takes the plan and checks nothing again.
+//!
+//! The plan also keeps the *resolved scenario* ([`Plan::scenario`]): the input with defaults
+//! filled in, quaternions and normals normalised, the inertia symmetrised, wall names set and
+//! delays rounded; writing it out and resolving it again gives the same plan.
+
+use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
+
+use crate::body::{BodyState, MassProperties};
+use crate::compensator::CompensatorConfig;
+use crate::config::{BodyConfig, ContactModelKind, Inertia, Scenario};
+use crate::contact::{ContactGeometry, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
+use crate::error::{CoreError, Issues, Result};
+use crate::world::{TwoBodyState, TwoBodySystem};
+
+/// The facility model's settings, checked; delays in whole control ticks.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FacilityPlan {
+    /// Robot response delay τ_r in control ticks.
+    pub robot_delay_ticks: usize,
+    /// Sensor delay τ_p in control ticks.
+    pub sensor_delay_ticks: usize,
+    /// Servo lag natural frequency, Hz (0 = no lag).
+    pub servo_frequency: f64,
+    /// Servo lag damping ratio (> 0).
+    pub servo_damping: f64,
+    /// Force noise per axis (standard deviation), N.
+    pub force_noise: f64,
+    /// Moment noise per axis (standard deviation), N·m.
+    pub torque_noise: f64,
+    /// Force quantisation step, N (0 = none).
+    pub force_resolution: f64,
+    /// Moment quantisation step, N·m (0 = none).
+    pub torque_resolution: f64,
+    /// Sensor attitude in `t` (sensor to `t`).
+    pub sensor_orientation: UnitQuaternion<f64>,
+    /// Seed of the sensor-noise generator.
+    pub seed: u64,
+}
+
+/// A validated scenario: everything a run needs, in the types the physics uses.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    /// The resolved scenario (defaults filled in, normalised, delays rounded): what a run
+    /// writes out as `scenario.toml`.
+    pub scenario: Scenario,
+    /// Control period T, s.
+    pub period: f64,
+    /// Control ticks after the initial one (`duration / period`, rounded).
+    pub ticks: usize,
+    /// Facility sub-steps per control period (>= 1).
+    pub plant_substeps: u32,
+    /// RK4 steps per period of the ideal reference in contact (>= 1).
+    pub reference_substeps: u32,
+    /// A run is diverged once its energy exceeds this many times its bound's base (> 1).
+    pub divergence_energy_ratio: f64,
+    /// Mass properties, rod, sensor origin, walls and contact law.
+    pub system: TwoBodySystem,
+    /// The initial state of both satellites (world frame).
+    pub initial: TwoBodyState,
+    /// The facility model.
+    pub facility: FacilityPlan,
+    /// The compensator and its checked parameters.
+    pub compensator: CompensatorConfig,
+    /// A collision is an interval where the contact force exceeds this, N.
+    pub contact_threshold: f64,
+}
+
+impl Plan {
+    /// Checks every value of `scenario` and resolves it; the error lists every problem.
+    pub fn resolve(scenario: &Scenario) -> Result<Plan> {
+        let mut issues = Issues::default();
+        let mut resolved = scenario.clone();
+        let r = &mut resolved;
+
+        check_name(&mut issues, &r.name);
+        let sim = &r.simulation;
+        positive(&mut issues, "simulation.duration", sim.duration);
+        let period_ok = positive(&mut issues, "simulation.period", sim.period);
+        at_least_one(&mut issues, "simulation.plant_substeps", sim.plant_substeps);
+        at_least_one(&mut issues, "simulation.reference_substeps", sim.reference_substeps);
+        greater(
+            &mut issues,
+            "simulation.divergence_energy_ratio",
+            sim.divergence_energy_ratio,
+            1.0,
+        );
+        if period_ok && sim.duration.is_finite() && sim.duration < sim.period {
+            issues.push(
+                "simulation.duration",
+                format!(
+                    "{} s is shorter than one period (simulation.period = {} s)",
+                    g12(sim.duration),
+                    g12(sim.period)
+                ),
+            );
+        }
+
+        let servicer = body(&mut issues, "servicer", &mut r.servicer);
+        let target = body(&mut issues, "target", &mut r.target);
+        finite(&mut issues, "rod.tip", &r.rod.tip);
+
+        if r.walls.is_empty() {
+            issues.push("walls", "at least one [[walls]] table is required");
+        }
+        let mut walls = Vec::with_capacity(r.walls.len());
+        for i in 0..r.walls.len() {
+            if r.walls[i].name.is_empty() {
+                r.walls[i].name = format!("wall{i}");
+            }
+            if let Some(j) = r.walls[..i].iter().position(|w| w.name == r.walls[i].name) {
+                issues.push(
+                    format!("walls[{i}].name"),
+                    format!("duplicate wall name '{}' (also walls[{j}])", r.walls[i].name),
+                );
+            }
+            let wall = &mut r.walls[i];
+            let point_ok = finite(&mut issues, &format!("walls[{i}].point"), &wall.point);
+            let normal = unit_vector(&mut issues, &format!("walls[{i}].normal"), wall.normal);
+            if let (true, Some(n)) = (point_ok, normal) {
+                wall.normal = n;
+                walls.push(Wall {
+                    point: Vector3::from(wall.point),
+                    normal: Vector3::from(n),
+                });
+            }
+        }
+
+        let c = &r.contact;
+        positive(&mut issues, "contact.stiffness", c.stiffness);
+        non_negative(&mut issues, "contact.damping", c.damping);
+        positive(&mut issues, "contact.exponent", c.exponent);
+        let law = match c.model {
+            ContactModelKind::Linear => ContactModel::Linear(LinearSpringDamper {
+                stiffness: c.stiffness,
+                damping: c.damping,
+            }),
+            ContactModelKind::HuntCrossley => ContactModel::HuntCrossley(HuntCrossley {
+                stiffness: c.stiffness,
+                damping: c.damping,
+                exponent: c.exponent,
+            }),
+        };
+
+        let period = r.simulation.period;
+        let round = r.facility.round_delays;
+        let f = &mut r.facility;
+        let robot_delay_ticks = delay(&mut issues, "robot_delay", &mut f.robot_delay, period, round);
+        let sensor_delay_ticks =
+            delay(&mut issues, "sensor_delay", &mut f.sensor_delay, period, round);
+        non_negative(&mut issues, "facility.servo_frequency", f.servo_frequency);
+        positive(&mut issues, "facility.servo_damping", f.servo_damping);
+        non_negative(&mut issues, "facility.sensor_noise", f.sensor_noise);
+        non_negative(&mut issues, "facility.torque_noise", f.torque_noise);
+        non_negative(&mut issues, "facility.force_resolution", f.force_resolution);
+        non_negative(&mut issues, "facility.torque_resolution", f.torque_resolution);
+        finite(&mut issues, "facility.sensor_position", &f.sensor_position);
+        let sensor_orientation =
+            unit_quaternion(&mut issues, "facility.sensor_orientation", f.sensor_orientation);
+        if let Some(q) = sensor_orientation {
+            f.sensor_orientation = q;
+        }
+        positive(&mut issues, "metrics.contact_threshold", r.metrics.contact_threshold);
+        r.compensator.check(&mut issues);
+
+        issues.finish()?;
+        // every check passed, so every part is there
+        let (Some(servicer), Some(target), Some(robot), Some(sensor), Some(q)) = (
+            servicer,
+            target,
+            robot_delay_ticks,
+            sensor_delay_ticks,
+            sensor_orientation,
+        ) else {
+            return Err(CoreError::invalid("scenario", "could not be resolved"));
+        };
+        let f = &resolved.facility;
+        let sim = &resolved.simulation;
+        Ok(Plan {
+            period: sim.period,
+            ticks: (sim.duration / sim.period).round() as usize,
+            plant_substeps: sim.plant_substeps,
+            reference_substeps: sim.reference_substeps,
+            divergence_energy_ratio: sim.divergence_energy_ratio,
+            system: TwoBodySystem {
+                servicer: servicer.0,
+                target: target.0,
+                rod_tip: Vector3::from(resolved.rod.tip),
+                sensor_origin: Vector3::from(f.sensor_position),
+                contact: ContactGeometry { walls, law },
+            },
+            initial: TwoBodyState {
+                servicer: servicer.1,
+                target: target.1,
+            },
+            facility: FacilityPlan {
+                robot_delay_ticks: robot,
+                sensor_delay_ticks: sensor,
+                servo_frequency: f.servo_frequency,
+                servo_damping: f.servo_damping,
+                force_noise: f.sensor_noise,
+                torque_noise: f.torque_noise,
+                force_resolution: f.force_resolution,
+                torque_resolution: f.torque_resolution,
+                sensor_orientation: to_unit(q),
+                seed: f.seed,
+            },
+            compensator: resolved.compensator.clone(),
+            contact_threshold: resolved.metrics.contact_threshold,
+            scenario: resolved,
+        })
+    }
+
+    /// The sensor delay τ_p, s (whole ticks).
+    pub fn sensor_delay(&self) -> f64 {
+        self.facility.sensor_delay_ticks as f64 * self.period
+    }
+
+    /// The robot delay τ_r, s (whole ticks).
+    pub fn robot_delay(&self) -> f64 {
+        self.facility.robot_delay_ticks as f64 * self.period
+    }
+
+    /// The scenario's name.
+    pub fn name(&self) -> &str {
+        &self.scenario.name
+    }
+}
+
+impl Scenario {
+    /// Resolves the scenario into a validated [`Plan`] (see [`Plan::resolve`]).
+    pub fn resolve(&self) -> Result<Plan> {
+        Plan::resolve(self)
+    }
+}
+
+/// `x` with 12 significant digits, as the scenario files and messages show numbers
+/// (`13 × 0.001` is `0.013`).
+pub fn g12(x: f64) -> f64 {
+    format!("{x:.11e}").parse().unwrap_or(x)
+}
+
+fn check_name(issues: &mut Issues, name: &str) {
+    let trimmed = name.trim();
+    if trimmed.is_empty()
+        || trimmed == "."
+        || trimmed == ".."
+        || name.contains('/')
+        || name.contains('\\')
+    {
+        issues.push(
+            "name",
+            format!("must be a non-empty name without '/' or '\\' (it names the output folder), got '{name}'"),
+        );
+    }
+}
+
+/// Records a problem unless `value` is finite and satisfies `ok`; returns whether it does.
+fn range(issues: &mut Issues, key: &str, value: f64, ok: bool, allowed: &str) -> bool {
+    if !value.is_finite() {
+        issues.push(key, format!("must be a finite number, got {value}"));
+        false
+    } else if !ok {
+        issues.push(key, format!("must be {allowed}, got {value}"));
+        false
+    } else {
+        true
+    }
+}
+
+fn positive(issues: &mut Issues, key: &str, value: f64) -> bool {
+    range(issues, key, value, value > 0.0, "> 0")
+}
+
+fn non_negative(issues: &mut Issues, key: &str, value: f64) -> bool {
+    range(issues, key, value, value >= 0.0, ">= 0")
+}
+
+fn greater(issues: &mut Issues, key: &str, value: f64, bound: f64) -> bool {
+    range(issues, key, value, value > bound, &format!("> {bound}"))
+}
+
+fn at_least_one(issues: &mut Issues, key: &str, value: u32) {
+    if value < 1 {
+        issues.push(key, format!("must be >= 1, got {value}"));
+    }
+}
+
+fn finite(issues: &mut Issues, key: &str, v: &[f64]) -> bool {
+    let ok = v.iter().all(|x| x.is_finite());
+    if !ok {
+        issues.push(key, format!("must contain finite numbers, got {v:?}"));
+    }
+    ok
+}
+
+/// `v / |v|`, keeping a vector that is already of unit norm (to 1e-12) bit for bit, so that
+/// resolving a resolved scenario changes nothing.
+fn normalised<const N: usize>(v: [f64; N], norm: f64) -> [f64; N] {
+    if (norm - 1.0).abs() <= 1e-12 {
+        v
+    } else {
+        v.map(|x| x / norm)
+    }
+}
+
+fn unit_vector(issues: &mut Issues, key: &str, v: [f64; 3]) -> Option<[f64; 3]> {
+    if !finite(issues, key, &v) {
+        return None;
+    }
+    let norm = Vector3::from(v).norm();
+    if norm < 1e-12 {
+        issues.push(
+            key,
+            format!("must be a nonzero vector (it is normalised), got {v:?}"),
+        );
+        return None;
+    }
+    Some(normalised(v, norm))
+}
+
+fn quaternion_norm(q: &[f64; 4]) -> f64 {
+    Quaternion::new(q[0], q[1], q[2], q[3]).norm()
+}
+
+/// A unit quaternion `[w, x, y, z]` from a nonzero finite one.
+fn unit_quaternion(issues: &mut Issues, key: &str, q: [f64; 4]) -> Option<[f64; 4]> {
+    if !finite(issues, key, &q) {
+        return None;
+    }
+    let norm = quaternion_norm(&q);
+    if norm < 1e-12 {
+        issues.push(
+            key,
+            format!("must be a nonzero quaternion [w, x, y, z] (it is normalised), got {q:?}"),
+        );
+        return None;
+    }
+    Some(normalised(q, norm))
+}
+
+/// The unit quaternion of a resolved `[w, x, y, z]`.
+fn to_unit(q: [f64; 4]) -> UnitQuaternion<f64> {
+    UnitQuaternion::new_normalize(Quaternion::new(q[0], q[1], q[2], q[3]))
+}
+
+/// The inertia as a symmetric positive-definite tensor (symmetrised exactly), or a problem.
+fn inertia(issues: &mut Issues, key: &str, inertia: &Inertia) -> Option<Matrix3<f64>> {
+    let rows = match *inertia {
+        Inertia::Principal(d) => {
+            if !finite(issues, key, &d) {
+                return None;
+            }
+            if d.iter().any(|&m| m <= 0.0) {
+                issues.push(
+                    key,
+                    format!("principal moments must all be > 0, got {d:?}"),
+                );
+                return None;
+            }
+            [[d[0], 0.0, 0.0], [0.0, d[1], 0.0], [0.0, 0.0, d[2]]]
+        }
+        Inertia::Tensor(rows) => rows,
+    };
+    if !finite(issues, key, &rows.concat()) {
+        return None;
+    }
+    let m = Matrix3::from_fn(|i, j| rows[i][j]);
+    let scale = m.abs().max();
+    if (m - m.transpose()).abs().max() > 1e-9 * scale {
+        issues.push(key, format!("the 3x3 matrix must be symmetric, got {rows:?}"));
+        return None;
+    }
+    let symmetric = Matrix3::from_fn(|i, j| if i == j { m[(i, i)] } else { 0.5 * (m[(i, j)] + m[(j, i)]) });
+    if symmetric.cholesky().is_none() {
+        issues.push(
+            key,
+            format!("the 3x3 matrix must be positive definite, got {rows:?}"),
+        );
+        return None;
+    }
+    Some(symmetric)
+}
+
+/// The mass properties and initial state of a body; normalises its orientation and
+/// symmetrises its inertia in `config`.
+fn body(issues: &mut Issues, key: &str, config: &mut BodyConfig) -> Option<(MassProperties, BodyState)> {
+    let mass_ok = positive(issues, &format!("{key}.mass"), config.mass);
+    let tensor = inertia(issues, &format!("{key}.inertia"), &config.inertia);
+    let q = unit_quaternion(issues, &format!("{key}.orientation"), config.orientation);
+    let vectors_ok = [
+        ("position", config.position),
+        ("velocity", config.velocity),
+        ("angular_velocity", config.angular_velocity),
+    ]
+    .iter()
+    .fold(true, |ok, (name, v)| finite(issues, &format!("{key}.{name}"), v) && ok);
+    let (Some(tensor), Some(q), true, true) = (tensor, q, mass_ok, vectors_ok) else {
+        return None;
+    };
+    if let Inertia::Tensor(_) = config.inertia {
+        config.inertia = Inertia::Tensor([0, 1, 2].map(|i| [0, 1, 2].map(|j| tensor[(i, j)])));
+    }
+    config.orientation = q;
+    Some((
+        MassProperties::new(config.mass, tensor),
+        BodyState {
+            position: Vector3::from(config.position),
+            orientation: to_unit(q),
+            velocity: Vector3::from(config.velocity),
+            angular_velocity: Vector3::from(config.angular_velocity),
+        },
+    ))
+}
+
+/// A delay in whole periods: `facility.<name>` (s) rounded to the nearest period if `round`
+/// (and written back rounded), else rejected unless it is a whole number of periods.
+fn delay(
+    issues: &mut Issues,
+    name: &str,
+    delay: &mut f64,
+    period: f64,
+    round: bool,
+) -> Option<usize> {
+    let key = format!("facility.{name}");
+    if !non_negative(issues, &key, *delay) || !(period.is_finite() && period > 0.0) {
+        return None;
+    }
+    let ratio = *delay / period;
+    let n = (ratio + 0.5).floor();
+    if round {
+        *delay = g12(n * period);
+    } else if (ratio - n).abs() > 1e-9 * ratio.max(1.0) {
+        let lo = ratio.floor();
+        issues.push(
+            key,
+            format!(
+                "{} s is not a whole number of periods (simulation.period = {} s): use {} or {}, or set facility.round_delays = true",
+                g12(*delay),
+                g12(period),
+                g12(lo * period),
+                g12((lo + 1.0) * period)
+            ),
+        );
+        return None;
+    }
+    Some(n as usize)
+}
+
+/// Shorthand used by the compensators' parameter checks: records a problem of
+/// `compensator.<key>` unless `value` is finite and `ok`.
+pub fn check_parameter(issues: &mut Issues, key: &str, value: f64, ok: bool, allowed: &str) {
+    range(issues, &format!("compensator.{key}"), value, ok, allowed);
+}
