@@ -73,7 +73,8 @@ pub fn build_output(
     let stop = &outcome.stop;
     let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
     metrics["status"] = json!(stop.kind.status());
-    metrics["reason"] = stop.reason().map_or(Value::Null, Value::from);
+    let reason = stop.reason_for(outcome.sensor_name, outcome.robot_name);
+    metrics["reason"] = reason.clone().map_or(Value::Null, Value::from);
     metrics["diverged_at"] = if stop.kind == crate::safety::StopKind::Diverged {
         json!(stop.time)
     } else {
@@ -86,7 +87,7 @@ pub fn build_output(
         "wall_time": outcome.wall_time,
         "stop": {
             "kind": stop.kind,
-            "reason": stop.reason(),
+            "reason": reason,
             "time": stop.time,
             "value": finite(stop.value),
             "limit": finite(stop.limit),
@@ -104,11 +105,16 @@ pub fn build_output(
         "commands_sent": outcome.commands_sent,
         "send_errors": outcome.send_errors,
         "samples_dropped": outcome.samples_dropped,
-        "counts_per_force": outcome.counts.force,
-        "counts_per_torque": outcome.counts.torque,
+        "pacing": outcome.pacing,
         "robot_address": outcome.robot_address.map(|a| a.to_string()),
         "options": options,
     });
+    // the sensor link's own facts (RDT: counts_per_force, counts_per_torque)
+    if let Some(realtime) = metrics["realtime"].as_object_mut() {
+        for (key, value) in &outcome.sensor_report {
+            realtime.insert(key.clone(), value.clone());
+        }
+    }
     Ok(HilOutput {
         timeseries,
         reference: reference_table(&reference),

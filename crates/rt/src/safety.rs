@@ -161,16 +161,23 @@ impl StopEvent {
         }
     }
 
-    /// One line for humans (formats, so call it outside the loop).
+    /// One line for humans (formats, so call it outside the loop), naming the links
+    /// generically ("sensor record", "robot feedback").
     pub fn reason(&self) -> Option<String> {
+        self.reason_for("sensor", "robot")
+    }
+
+    /// One line for humans naming the links' protocols, e.g. `reason_for("RDT", "EGM")`:
+    /// "no valid RDT record", "no valid EGM feedback" (formats, so call it outside the loop).
+    pub fn reason_for(&self, sensor: &str, robot: &str) -> Option<String> {
         let (v, l, t) = (self.value, self.limit, self.time);
         Some(match self.kind {
             StopKind::Completed => return None,
             StopKind::User => format!("stopped by the user at {t:.3} s"),
             StopKind::ForceLimit => format!("force limit: |F| = {v:.1} N > {l:.1} N (force_limit) at {t:.3} s"),
             StopKind::MomentLimit => format!("moment limit: |M| = {v:.2} N·m > {l:.2} N·m (moment_limit) at {t:.3} s"),
-            StopKind::SensorWatchdog => format!("sensor watchdog: no valid RDT record for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
-            StopKind::RobotWatchdog => format!("robot watchdog: no valid EGM feedback for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
+            StopKind::SensorWatchdog => format!("sensor watchdog: no valid {sensor} record for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
+            StopKind::RobotWatchdog => format!("robot watchdog: no valid {robot} feedback for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
             StopKind::Workspace => format!("workspace limit: commanded rod tip {:.1} mm from its start > {:.1} mm (workspace) at {t:.3} s", v * 1e3, l * 1e3),
             StopKind::NonFinite => format!("the command stopped being finite at {t:.3} s"),
             StopKind::Diverged => format!("diverged: energy {v:.4} J passed the divergence bound {l:.4} J at {t:.3} s"),
