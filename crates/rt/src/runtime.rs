@@ -214,9 +214,34 @@ pub struct HilHandle {
 const RING_CAPACITY: usize = 8192;
 
 impl HilHandle {
-    /// Validates, binds the sockets, reads the sensor's counts per unit (HTTP, unless given),
-    /// computes the ideal reference's energy bound, and starts the writer and loop threads.
+    /// Validates, opens the links of `options` (binds the sockets, reads the sensor's counts
+    /// per unit over HTTP unless given), computes the ideal reference's energy bound, and
+    /// starts the writer and loop threads.
     pub fn start(scenario: &Scenario, options: &RuntimeOptions) -> Result<Self> {
+        Self::validate(scenario, options)?;
+        let context = LinkContext {
+            period: scenario.simulation.period,
+            connect_timeout: options.connect_timeout,
+        };
+        let sensor = open_sensor(&options.sensor, &context)?;
+        let robot = open_robot(&options.robot, &context)?;
+        Self::start_inner(scenario, options, sensor, robot)
+    }
+
+    /// As [`HilHandle::start`], with links opened by the caller (a protocol outside the
+    /// registry, or a test double); `options.sensor` and `options.robot` are not used but
+    /// are reported in `metrics.json`.
+    pub fn start_with_links(
+        scenario: &Scenario,
+        options: &RuntimeOptions,
+        sensor: Box<dyn SensorLink>,
+        robot: Box<dyn RobotLink>,
+    ) -> Result<Self> {
+        Self::validate(scenario, options)?;
+        Self::start_inner(scenario, options, sensor, robot)
+    }
+
+    fn validate(scenario: &Scenario, options: &RuntimeOptions) -> Result<()> {
         scenario.validate()?;
         let o = options;
         o.limits.validate()?;
@@ -237,12 +262,16 @@ impl HilHandle {
                 format!("must be a number >= 0, got {}", o.hold_time),
             ));
         }
-        let context = LinkContext {
-            period: scenario.simulation.period,
-            connect_timeout: o.connect_timeout,
-        };
-        let sensor = open_sensor(&o.sensor, &context)?;
-        let robot = open_robot(&o.robot, &context)?;
+        Ok(())
+    }
+
+    fn start_inner(
+        scenario: &Scenario,
+        options: &RuntimeOptions,
+        sensor: Box<dyn SensorLink>,
+        robot: Box<dyn RobotLink>,
+    ) -> Result<Self> {
+        let o = options;
         let pacing = robot.pacing();
         let feedback_period = robot.feedback_period();
         if !(feedback_period.is_finite() && feedback_period > 0.0) {
