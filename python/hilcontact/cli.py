@@ -457,7 +457,7 @@ def _rt_defaults() -> dict[str, dict[str, Any]]:
     try:
         return realtime_defaults()
     except HilContactError:  # native core not built: help without defaults
-        return {"runtime": {}, "facility": {}}
+        return {"runtime": {}, "facility": {}, "protocols": {}}
 
 
 _RT_DEFAULTS = _rt_defaults()
@@ -473,6 +473,20 @@ def _dflt(section: str, key: str, unit: str = "") -> str:
     if isinstance(value, list):
         value = ",".join(f"{v:g}" for v in value)
     return f" [default: {value}{' ' + unit if unit else ''}]"
+
+
+def _protocols(link: str) -> list[str]:
+    """The protocols of a link (``sensor``/``robot``), from the Rust registry (the one list)."""
+    return list(_RT_DEFAULTS.get("protocols", {}).get(link, []))
+
+
+def _protocol_option(link: str, section: str) -> Any:
+    choices = _protocols(link)
+    return click.option(
+        f"--{link}-protocol", f"{link}_protocol", default=None,
+        type=click.Choice(choices) if choices else str,
+        help=f"Protocol of the {link}." + _dflt(section, f"{link}.kind"),
+    )
 
 
 def _numbers(text: str | None, n: int, option: str) -> list[float] | None:
@@ -551,8 +565,8 @@ def _with(options: list[Any]) -> Any:
 
 
 _MAPPING_OPTIONS = [
-    click.option("--egm-offset", default=None, metavar="X,Y,Z", help="Origin of the target frame t in the EGM frame, mm." + _dflt("runtime", "egm_offset_mm")),
-    click.option("--egm-rotation", default=None, metavar="W,X,Y,Z", help="Rotation from t to the EGM frame, quaternion." + _dflt("runtime", "egm_rotation")),
+    click.option("--egm-offset", default=None, metavar="X,Y,Z", help="Origin of the target frame t in the EGM frame, mm." + _dflt("runtime", "robot.offset_mm")),
+    click.option("--egm-rotation", default=None, metavar="W,X,Y,Z", help="Rotation from t to the EGM frame, quaternion." + _dflt("runtime", "robot.rotation")),
 ]
 
 
@@ -615,15 +629,17 @@ def facility_command(scenario: str, sets: tuple[str, ...], bind_host: str | None
 
 
 _HIL_OPTIONS = [
-    click.option("--sensor", "sensor_host", default=None, metavar="HOST", help="Host of the F/T sensor (Net F/T)." + _dflt("runtime", "sensor_host")),
-    click.option("--sensor-port", type=int, default=None, help="RDT port of the sensor." + _dflt("runtime", "sensor_port")),
-    click.option("--http-port", type=int, default=None, help="HTTP port of the sensor's /netftapi2.xml." + _dflt("runtime", "http_port")),
+    _protocol_option("sensor", "runtime"),
+    _protocol_option("robot", "runtime"),
+    click.option("--sensor", "sensor_host", default=None, metavar="HOST", help="Host of the F/T sensor (Net F/T)." + _dflt("runtime", "sensor.host")),
+    click.option("--sensor-port", type=int, default=None, help="RDT port of the sensor." + _dflt("runtime", "sensor.port")),
+    click.option("--http-port", type=int, default=None, help="HTTP port of the sensor's /netftapi2.xml." + _dflt("runtime", "sensor.http_port")),
     click.option("--counts-per-force", type=float, default=None, help="Counts per N; with --counts-per-torque, /netftapi2.xml is not read."),
     click.option("--counts-per-torque", type=float, default=None, help="Counts per N m."),
-    click.option("--rdt-local-port", type=int, default=None, help="Local UDP port of the RDT client (0 = any)." + _dflt("runtime", "rdt_local_port")),
+    click.option("--rdt-local-port", type=int, default=None, help="Local UDP port of the RDT client (0 = any)." + _dflt("runtime", "sensor.local_port")),
     click.option("--bias", is_flag=True, default=None, help="Bias the sensor (RDT 0x0042) before streaming; the rod must be free."),
-    click.option("--egm-port", type=int, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("runtime", "egm_port")),
-    click.option("--egm-bind", "egm_bind_host", default=None, metavar="HOST", help="Address the EGM endpoint binds to." + _dflt("runtime", "egm_bind_host")),
+    click.option("--egm-port", type=int, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("runtime", "robot.port")),
+    click.option("--egm-bind", "egm_bind_host", default=None, metavar="HOST", help="Address the EGM endpoint binds to." + _dflt("runtime", "robot.bind_host")),
     click.option("--robot", "robot_host", default=None, metavar="HOST", help="Accept EGM only from this host [default: the first robot that sends]."),
     click.option("--extrapolation", type=click.Choice(["quadratic", "linear", "hold"]), default=None, help="Actual motion between EGM feedback messages." + _dflt("runtime", "extrapolation")),
     click.option("--force-limit", type=float, default=None, help="Safety stop above this measured force." + _dflt("runtime", "limits.force_limit", "N")),
@@ -635,7 +651,7 @@ _HIL_OPTIONS = [
 ]
 
 
-def _runtime_options(sensor_host: str | None, sensor_port: int | None, http_port: int | None,
+def _runtime_options(sensor_protocol: str | None, robot_protocol: str | None, sensor_host: str | None, sensor_port: int | None, http_port: int | None,
                      counts_per_force: float | None, counts_per_torque: float | None, rdt_local_port: int | None,
                      bias: bool | None, egm_port: int | None, egm_bind_host: str | None, robot_host: str | None,
                      extrapolation: str | None, force_limit: float | None, moment_limit: float | None,
@@ -643,7 +659,10 @@ def _runtime_options(sensor_host: str | None, sensor_port: int | None, http_port
                      start_tolerance: float | None, egm_offset: str | None, egm_rotation: str | None) -> dict[str, Any]:
     limits = {k: v for k, v in (("force_limit", force_limit), ("moment_limit", moment_limit),
                                 ("watchdog_ms", watchdog_ms), ("workspace", workspace)) if v is not None}
+    # the flags keep their flat keys; hilcontact.realtime.LEGACY_KEYS moves them into the links
     return {
+        "sensor": {"kind": sensor_protocol} if sensor_protocol else None,
+        "robot": {"kind": robot_protocol} if robot_protocol else None,
         "sensor_host": sensor_host, "sensor_port": sensor_port, "http_port": http_port,
         "counts_per_force": counts_per_force, "counts_per_torque": counts_per_torque,
         "rdt_local_port": rdt_local_port, "bias": bias, "egm_port": egm_port, "egm_bind_host": egm_bind_host,

@@ -11,7 +11,11 @@ facility that speaks them.
 
 Options are plain dicts with the keys of the Rust ``RuntimeOptions`` / ``EmulatorOptions``
 (see :func:`realtime_defaults`, the one place the defaults live); keys left out take their
-defaults. Units: SI, except where the key says otherwise (``watchdog_ms``, ``egm_offset_mm``).
+defaults. The devices are grouped per link, each with its protocol: ``{"sensor": {"kind":
+"rdt", "port": 49152, ...}, "robot": {"kind": "egm", "port": 6510, ...}, "limits": {...}}``;
+the flat keys of earlier versions (``sensor_port``, ``egm_port``, ...) still work and are
+moved into their link by :data:`LEGACY_KEYS`. Units: SI, except where the key says otherwise
+(``watchdog_ms``, ``offset_mm``).
 
 Ctrl-C: :func:`run_hil` polls the loop with the GIL released and, on ``KeyboardInterrupt``,
 asks it to stop; the loop then commands the robot to hold, stops the sensor's streaming and
@@ -32,6 +36,7 @@ __all__ = [
     "EXIT_INTERRUPTED",
     "EXIT_OK",
     "EXIT_SAFETY_STOP",
+    "LEGACY_KEYS",
     "REALTIME_COLUMNS",
     "Facility",
     "exit_code",
@@ -53,21 +58,70 @@ EXIT_INTERRUPTED = 130
 REALTIME_COLUMNS: list[str] = ["wake_latency", "sensor_age", "robot_age"]
 
 
-def realtime_defaults() -> dict[str, dict[str, Any]]:
-    """The default options: ``{"runtime": {...}, "facility": {...}}``."""
+def realtime_defaults() -> dict[str, Any]:
+    """The default options: ``{"runtime": {...}, "facility": {...}, "protocols": {...}}``
+    (``protocols``: the sensor and robot kinds the runtime implements)."""
     return json.loads(_core().realtime_defaults())
 
 
+#: Flat option keys of earlier versions, per section: ``key -> (link, kind, key in the link)``.
+#: ``{"sensor_port": 49152}`` is ``{"sensor": {"kind": "rdt", "port": 49152}}``. The one
+#: mapping table between the flat keys (and the CLI flags built on them) and the grouped form.
+LEGACY_KEYS: dict[str, dict[str, tuple[str, str, str]]] = {
+    "runtime": {
+        "sensor_host": ("sensor", "rdt", "host"),
+        "sensor_port": ("sensor", "rdt", "port"),
+        "http_port": ("sensor", "rdt", "http_port"),
+        "counts_per_force": ("sensor", "rdt", "counts_per_force"),
+        "counts_per_torque": ("sensor", "rdt", "counts_per_torque"),
+        "rdt_local_port": ("sensor", "rdt", "local_port"),
+        "bias": ("sensor", "rdt", "bias"),
+        "egm_bind_host": ("robot", "egm", "bind_host"),
+        "egm_port": ("robot", "egm", "port"),
+        "robot_host": ("robot", "egm", "robot_host"),
+        "egm_offset_mm": ("robot", "egm", "offset_mm"),
+        "egm_rotation": ("robot", "egm", "rotation"),
+    },
+    "facility": {},
+}
+
+#: The link groups of the options (each a dict with a ``kind``).
+LINKS = ("sensor", "robot")
+
+
 def _options(options: Mapping[str, Any] | None, section: str) -> str:
+    """Options as the Rust side takes them: grouped links (``sensor``/``robot`` with a
+    ``kind``), flat legacy keys moved into their link (see :data:`LEGACY_KEYS`), ``None`` values
+    left out (defaults)."""
     known = realtime_defaults()[section]
+    legacy = LEGACY_KEYS.get(section, {})
     clean: dict[str, Any] = {}
+    links: dict[str, dict[str, Any]] = {}
+    implied: dict[str, tuple[str, str]] = {}  # link -> (kind, the legacy key that implies it)
     for key, value in (options or {}).items():
         if value is None:
             continue
-        if key not in known:
-            allowed = ", ".join(sorted(known))
+        if key in legacy:
+            link, kind, inner = legacy[key]
+            links.setdefault(link, {})[inner] = value
+            implied.setdefault(link, (kind, key))
+        elif key in LINKS and key in known:
+            if not isinstance(value, Mapping):
+                raise RealtimeOptionError(f"{section} option {key!r} must be a table with a 'kind', got {value!r}")
+            links.setdefault(key, {}).update({k: v for k, v in value.items() if v is not None})
+        elif key in known:
+            clean[key] = value
+        else:
+            allowed = ", ".join(sorted(set(known) | set(legacy)))
             raise RealtimeOptionError(f"unknown {section} option {key!r}; allowed: {allowed}")
-        clean[key] = value
+    for link, group in links.items():
+        default_kind = known[link]["kind"] if isinstance(known.get(link), dict) else None
+        kind = group.setdefault("kind", implied[link][0] if link in implied else default_kind)
+        if link in implied and implied[link][0] != kind:
+            raise RealtimeOptionError(
+                f"{section} option {implied[link][1]!r} belongs to {link} kind {implied[link][0]!r}, not {kind!r}"
+            )
+        clean[link] = group
     return json.dumps(clean)
 
 

@@ -320,14 +320,20 @@ impl Stop {
 
     /// One line for humans, `None` for a completed run (formats: call it outside a loop).
     pub fn reason(&self) -> Option<String> {
+        self.reason_naming("sensor", "robot")
+    }
+
+    /// [`Stop::reason`] naming the devices' protocols, e.g. `reason_naming("RDT", "EGM")`:
+    /// "no valid RDT record", "no valid EGM feedback".
+    pub fn reason_naming(&self, sensor: &str, robot: &str) -> Option<String> {
         let (v, l, t) = (self.value, self.limit, self.time);
         Some(match self.kind {
             StopKind::Completed => return None,
             StopKind::User => format!("stopped by the user at {t:.3} s"),
             StopKind::ForceLimit => format!("force limit: |F| = {v:.1} N > {l:.1} N (force_limit) at {t:.3} s"),
             StopKind::MomentLimit => format!("moment limit: |M| = {v:.2} N·m > {l:.2} N·m (moment_limit) at {t:.3} s"),
-            StopKind::SensorWatchdog => format!("sensor watchdog: no valid sensor record for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
-            StopKind::RobotWatchdog => format!("robot watchdog: no valid robot feedback for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
+            StopKind::SensorWatchdog => format!("sensor watchdog: no valid {sensor} record for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
+            StopKind::RobotWatchdog => format!("robot watchdog: no valid {robot} feedback for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
             StopKind::Workspace => format!("workspace limit: commanded rod tip {:.1} mm from its start > {:.1} mm (workspace) at {t:.3} s", v * 1e3, l * 1e3),
             StopKind::NonFinite => format!("a state, force or command stopped being finite at {t:.3} s"),
             StopKind::Diverged => format!("diverged: energy {v:.4} J passed the divergence bound {l:.4} J at {t:.3} s"),

@@ -204,7 +204,8 @@ impl PyHilHandle {
 }
 
 /// Starts the real-time HIL loop of a scenario (JSON) with runtime options (JSON, keys of
-/// `RuntimeOptions`, defaults for the missing ones). Binds the sockets and reads the sensor's
+/// `RuntimeOptions`: `sensor` and `robot` grouped with their `kind`, defaults for the missing
+/// ones). Binds the sockets and reads the sensor's
 /// counts per unit before returning; raises RealtimeError if that fails.
 #[pyfunction]
 fn start_hil(py: Python<'_>, scenario_json: &str, options_json: &str) -> PyResult<PyHilHandle> {
@@ -291,11 +292,19 @@ fn start_facility(
     })
 }
 
-/// The default options of the runtime and the emulator, as JSON:
-/// `{"runtime": {...}, "facility": {...}}` (the one place the defaults live).
+/// The default options of the runtime and the emulator, and the device protocols, as JSON:
+/// `{"runtime": {...}, "facility": {...}, "protocols": {"sensor": [...], "robot": [...]}}`
+/// (the one place the defaults and the protocol lists live).
 #[pyfunction]
 fn realtime_defaults() -> PyResult<String> {
-    let value = serde_json::json!({"runtime": RuntimeOptions::default(), "facility": EmulatorOptions::default()});
+    let value = serde_json::json!({
+        "runtime": RuntimeOptions::default(),
+        "facility": EmulatorOptions::default(),
+        "protocols": {
+            "sensor": hilcontact_rt::links::SENSOR_KINDS,
+            "robot": hilcontact_rt::links::ROBOT_KINDS,
+        },
+    });
     Ok(value.to_string())
 }
 

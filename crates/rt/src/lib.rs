@@ -5,6 +5,8 @@
 //!
 //! - [`rdt`], [`netftapi`]: ATI Net F/T sensor (RDT over UDP, `/netftapi2.xml` over HTTP);
 //! - [`egm`], [`egm_proto`]: ABB Externally Guided Motion (protobuf over UDP);
+//! - [`links`]: the loop's seam to the devices: the [`SensorLink`] and [`RobotLink`] traits,
+//!   [`Pacing`], and their RDT and EGM implementations;
 //! - [`mapping`]: the scenario's relative motion (`t` frame, m) as EGM poses (mm, quaternion);
 //! - [`emulator`]: robot, contact and sensor (the core's facility model) in real time behind
 //!   those protocols;
@@ -22,6 +24,7 @@ pub mod egm_proto;
 pub mod emulator;
 pub mod error;
 pub mod feedback;
+pub mod links;
 pub mod mapping;
 pub mod netftapi;
 pub mod rdt;
@@ -31,4 +34,5 @@ pub mod safety;
 
 pub use emulator::{EmulatorOptions, FacilityHandle};
 pub use error::{Result, RtError};
+pub use links::{LinkStats, Pacing, RobotLink, RobotOptions, SensorLink, SensorOptions};
 pub use runtime::{HilHandle, RuntimeOptions};

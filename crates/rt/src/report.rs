@@ -33,14 +33,15 @@ pub struct HilOutput {
     pub exit_code: i32,
 }
 
-/// `metrics.json` of a real-time run: the core's metrics (status, reason and stop from the
-/// run's [`crate::safety::StopEvent`]) and the loop's timing and packet statistics.
+/// `metrics.json` of a real-time run: the core's metrics (status, reason, `diverged_at` and
+/// `stop` from the run's stop, as for a simulation) and the loop's timing and packet
+/// statistics.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct RealtimeMetrics {
     /// The metrics of the run, as a simulation computes them.
     #[serde(flatten)]
     pub core: Metrics,
-    /// Timing, packet counters, options.
+    /// Timing, packet counters, links, options.
     pub realtime: Value,
 }
 
@@ -69,16 +70,19 @@ pub fn build_output(
     let (reference_trace, reference) = run_reference(plan, true);
     let trace = Trace::of_records(&records, estimates);
     let stop = &outcome.stop;
-    let core = trace_metrics(plan, &reference_trace, &trace, estimates, *stop);
+    let mut core = trace_metrics(plan, &reference_trace, &trace, estimates, *stop);
+    // the reason names the links' protocols ("no valid RDT record")
+    core.reason = stop.reason_naming(outcome.sensor_name, outcome.robot_name);
     let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
-    let realtime = json!({
+    let reason = core.reason.clone();
+    let mut realtime = json!({
         "period": plan.period,
         "ticks": outcome.ticks,
         "samples": samples.len(),
         "wall_time": outcome.wall_time,
         "stop": {
             "kind": stop.kind,
-            "reason": stop.reason(),
+            "reason": reason,
             "time": stop.time,
             "value": finite(stop.value),
             "limit": finite(stop.limit),
@@ -96,16 +100,22 @@ pub fn build_output(
         "commands_sent": outcome.commands_sent,
         "send_errors": outcome.send_errors,
         "samples_dropped": outcome.samples_dropped,
-        "counts_per_force": outcome.counts.force,
-        "counts_per_torque": outcome.counts.torque,
+        "pacing": outcome.pacing,
         "robot_address": outcome.robot_address.map(|a| a.to_string()),
         "options": options,
     });
+    // the sensor link's own facts (RDT: counts_per_force, counts_per_torque)
+    if let Some(section) = realtime.as_object_mut() {
+        for (key, value) in &outcome.sensor_report {
+            section.insert(key.clone(), value.clone());
+        }
+    }
+    let metrics = serde_json::to_value(RealtimeMetrics { core, realtime })
+        .map_err(|e| RtError::Io(format!("metrics: {e}")))?;
     Ok(HilOutput {
         timeseries,
         reference: reference_table(&reference),
-        metrics: serde_json::to_value(RealtimeMetrics { core, realtime })
-            .map_err(|e| RtError::Io(format!("metrics: {e}")))?,
+        metrics,
         exit_code: stop.kind.exit_code(),
     })
 }

@@ -1,32 +1,32 @@
-//! The real-time HIL loop: RDT sensor client, EGM endpoint, compensator and virtual dynamics
-//! in one thread at the scenario's period on the monotonic clock.
+//! The real-time HIL loop: a sensor link, a robot link, compensator and virtual dynamics in
+//! one thread, paced by the PC's monotonic clock at the scenario's period or by the robot's
+//! packets ([`Pacing`], the robot link's choice).
 //!
-//! One tick k (deadline `t0 + k·T`, absolute sleep):
-//! 1. drain the RDT socket (non-blocking): keep the newest valid record from the sensor's
-//!    address; drain the EGM socket: keep the newest valid feedback from the robot;
-//! 2. the measurement: the record's wrench (sensor frame) and the actual motion estimated from
-//!    the feedback ([`crate::feedback`]);
-//! 3. [`VirtualDynamics::compensate`], the sample into the lock-free ring buffer, the safety
-//!    checks ([`crate::safety`]);
-//! 4. [`VirtualDynamics::integrate`], the new command checked against the workspace and the
-//!    energy bound, and sent as an `EgmSensor` correction to the robot.
+//! One tick k (clock pacing: deadline `t0 + k·T`, absolute sleep; robot pacing: the robot's
+//! next packet, waited for up to the watchdog):
+//! 1. poll the sensor link (non-blocking): the newest valid wrench; poll the robot link: every
+//!    valid feedback pose into the [`FeedbackEstimator`];
+//! 2. the measurement: the wrench (sensor frame) and the actual motion estimated from the
+//!    feedback ([`crate::feedback`]);
+//! 3. [`Loop::virtual_step`]: the core's [`HilStep`] (compensate, the record, divergence and
+//!    end of run, integrate: the same code as a simulation), the sample into the lock-free
+//!    ring buffer, the loop's safety checks ([`crate::safety`]), the new command checked
+//!    against the workspace;
+//! 4. the command sent through the robot link.
 //!
-//! The tick never allocates, locks or logs: sockets are non-blocking, codecs and buffers are
-//! preallocated, samples go to an `rtrb` ring buffer that a writer thread drains, counters and
-//! the live status are atomics. Lateness is counted, never hidden: every wake-up latency and
-//! period goes into a histogram, a tick that ends after the next deadline is an overrun, and
-//! missed periods are caught up (the virtual time stays `k·T`).
-//!
-//! Bad input is counted and dropped, never reaches the dynamics: datagrams of the wrong size,
-//! header or type, undecodable, non-finite or out-of-range values, stale sequence numbers
-//! (duplicates, reordering), and datagrams from any address but the configured peers.
+//! The loop names no device: the links ([`crate::links`]) own the protocols, their counters
+//! ([`LinkStats`], socket errors included) and their units. The tick never allocates, locks or
+//! logs: sockets are non-blocking, codecs and buffers are preallocated, samples go to an
+//! `rtrb` ring buffer that a writer thread drains, counters and the live status are atomics.
+//! Lateness is counted, never hidden: every wake-up latency and period goes into a histogram,
+//! a tick that ends after the next deadline is an overrun, and missed periods are caught up
+//! (the virtual time stays `k·T`).
 //!
 //! Every stop (end of run, `stop()`, a safety limit) ends the same way: the robot is commanded
 //! to hold its last fed-back pose for `hold_time`, the sensor's streaming is stopped, and the
 //! writer thread drains the ring buffer completely before the results are built.
 
-use std::io::ErrorKind;
-use std::net::{IpAddr, SocketAddr, UdpSocket};
+use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -41,46 +41,27 @@ use hilcontact_core::world::RelativeMotion;
 use hilcontact_core::{metrics, sim, Plan, Scenario};
 
 use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack, Histogram, TimingSummary};
-use crate::egm::{CorrectionEncoder, EgmError, RobotDecoder, EGM_PERIOD, EGM_PORT};
-use crate::emulator::{bind_udp, resolve};
 use crate::error::{Result, RtError};
 use crate::feedback::{Extrapolation, FeedbackEstimator};
-use crate::mapping::{EgmTarget, PoseMapping};
-use crate::netftapi::fetch_counts;
-use crate::rdt::{
-    CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, SequenceTracker, SequenceVerdict, RDT_PORT,
+pub use crate::links::LinkStats;
+use crate::links::{
+    open_robot, open_sensor, LinkContext, Pacing, RobotLink, RobotOptions, SensorLink,
+    SensorOptions, Wrench,
 };
 use crate::report::{build_output, HilOutput};
 use crate::safety::{check_workspace, check_wrench, SafetyLimits, StopEvent, StopKind};
 
 /// Options of the real-time runtime (defaults in [`Default`]; the CLI documents each).
+///
+/// As TOML: `[sensor] kind = "rdt"`, `port = 49152`, ...; `[robot] kind = "egm"`, ...; the
+/// other keys at the top level.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RuntimeOptions {
-    /// Host of the F/T sensor (Net F/T).
-    pub sensor_host: String,
-    /// RDT port of the sensor (49152).
-    pub sensor_port: u16,
-    /// HTTP port of the sensor's `/netftapi2.xml` (80).
-    pub http_port: u16,
-    /// Counts per N; with `counts_per_torque`, skips reading `/netftapi2.xml`.
-    pub counts_per_force: Option<f64>,
-    /// Counts per N·m.
-    pub counts_per_torque: Option<f64>,
-    /// Local UDP port of the RDT client (0 = any free port).
-    pub rdt_local_port: u16,
-    /// Send the sensor a bias command (0x0042) before streaming: the rod must be free.
-    pub bias: bool,
-    /// Address the EGM endpoint binds to.
-    pub egm_bind_host: String,
-    /// UDP port the robot controller sends its EGM feedback to (6510).
-    pub egm_port: u16,
-    /// Accept EGM feedback only from this host; None = from the first robot that sends.
-    pub robot_host: Option<String>,
-    /// Origin of the target frame `t` in the EGM frame, mm.
-    pub egm_offset_mm: [f64; 3],
-    /// Rotation from `t` to the EGM frame, quaternion `[w, x, y, z]`.
-    pub egm_rotation: [f64; 4],
+    /// The sensor link: its protocol (`kind`) and that protocol's options.
+    pub sensor: SensorOptions,
+    /// The robot link: its protocol (`kind`) and that protocol's options.
+    pub robot: RobotOptions,
     /// How the actual motion is estimated between feedback messages.
     pub extrapolation: Extrapolation,
     /// Safety limits.
@@ -97,18 +78,8 @@ pub struct RuntimeOptions {
 impl Default for RuntimeOptions {
     fn default() -> Self {
         RuntimeOptions {
-            sensor_host: "127.0.0.1".into(),
-            sensor_port: RDT_PORT,
-            http_port: 80,
-            counts_per_force: None,
-            counts_per_torque: None,
-            rdt_local_port: 0,
-            bias: false,
-            egm_bind_host: "0.0.0.0".into(),
-            egm_port: EGM_PORT,
-            robot_host: None,
-            egm_offset_mm: [0.0; 3],
-            egm_rotation: [1.0, 0.0, 0.0, 0.0],
+            sensor: SensorOptions::default(),
+            robot: RobotOptions::default(),
             extrapolation: Extrapolation::default(),
             limits: SafetyLimits::default(),
             connect_timeout: 5.0,
@@ -136,33 +107,6 @@ pub struct Sample {
     pub robot_age: f64,
 }
 
-/// Packet counters of one link.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
-pub struct LinkStats {
-    /// Datagrams received.
-    pub received: u64,
-    /// Datagrams accepted.
-    pub accepted: u64,
-    /// Wrong size, header or type, or undecodable.
-    pub malformed: u64,
-    /// Non-finite or out-of-range values, or an error status.
-    pub invalid: u64,
-    /// From an address that is not the peer.
-    pub foreign: u64,
-    /// Duplicates or older than the newest accepted.
-    pub stale: u64,
-    /// Missing sequence numbers (gaps).
-    pub lost: u64,
-    /// Sensor: ticks without a new record. Robot: feedback more than 1.5 EGM periods after the previous.
-    pub late: u64,
-}
-
-impl LinkStats {
-    fn dropped(&self) -> u64 {
-        self.malformed + self.invalid + self.foreign + self.stale
-    }
-}
-
 #[derive(Debug, Default)]
 struct SharedStatus {
     stop_requested: AtomicBool,
@@ -180,6 +124,7 @@ struct SharedStatus {
     robot_lost: AtomicU64,
     robot_late: AtomicU64,
     dropped: AtomicU64,
+    io_errors: AtomicU64,
 }
 
 /// A snapshot of the loop's state for a live display.
@@ -209,6 +154,8 @@ pub struct StatusSnapshot {
     pub robot_late: u64,
     /// Datagrams dropped (malformed, invalid, foreign, stale) on both links.
     pub dropped: u64,
+    /// Socket errors (receive or send) on both links.
+    pub io_errors: u64,
     /// Why it stopped, once it has.
     pub stop: Option<StopKind>,
 }
@@ -234,14 +181,20 @@ pub struct RunOutcome {
     pub sensor: LinkStats,
     /// Robot link.
     pub robot: LinkStats,
-    /// Corrections sent.
+    /// Commands sent to the robot.
     pub commands_sent: u64,
-    /// Corrections that could not be sent.
+    /// Commands that could not be sent.
     pub send_errors: u64,
     /// Samples lost because the ring buffer was full.
     pub samples_dropped: u64,
-    /// Counts per unit in use.
-    pub counts: CountsPerUnit,
+    /// The sensor link's protocol name (e.g. `RDT`).
+    pub sensor_name: &'static str,
+    /// The robot link's protocol name (e.g. `EGM`).
+    pub robot_name: &'static str,
+    /// What clocked the loop.
+    pub pacing: Pacing,
+    /// The sensor link's own facts for the metrics (e.g. counts per unit).
+    pub sensor_report: serde_json::Map<String, serde_json::Value>,
     /// The robot's address.
     pub robot_address: Option<SocketAddr>,
 }
@@ -260,9 +213,35 @@ pub struct HilHandle {
 const RING_CAPACITY: usize = 8192;
 
 impl HilHandle {
-    /// Validates, binds the sockets, reads the sensor's counts per unit (HTTP, unless given),
-    /// computes the ideal reference's energy bound, and starts the writer and loop threads.
+    /// Validates, opens the links of `options` (binds the sockets, reads the sensor's counts
+    /// per unit over HTTP unless given), computes the ideal reference's energy bound, and
+    /// starts the writer and loop threads.
     pub fn start(scenario: &Scenario, options: &RuntimeOptions) -> Result<Self> {
+        let plan = Self::validate(scenario, options)?;
+        let context = LinkContext {
+            period: plan.period,
+            connect_timeout: options.connect_timeout,
+        };
+        let sensor = open_sensor(&options.sensor, &context)?;
+        let robot = open_robot(&options.robot, &context)?;
+        Self::start_inner(plan, options, sensor, robot)
+    }
+
+    /// As [`HilHandle::start`], with links opened by the caller (a protocol outside the
+    /// registry, or a test double); `options.sensor` and `options.robot` are not used but
+    /// are reported in `metrics.json`.
+    pub fn start_with_links(
+        scenario: &Scenario,
+        options: &RuntimeOptions,
+        sensor: Box<dyn SensorLink>,
+        robot: Box<dyn RobotLink>,
+    ) -> Result<Self> {
+        let plan = Self::validate(scenario, options)?;
+        Self::start_inner(plan, options, sensor, robot)
+    }
+
+    /// The scenario's plan, once the options are checked too.
+    fn validate(scenario: &Scenario, options: &RuntimeOptions) -> Result<Plan> {
         let plan = scenario.resolve()?;
         let o = options;
         o.limits.validate()?;
@@ -283,33 +262,37 @@ impl HilHandle {
                 format!("must be a number >= 0, got {}", o.hold_time),
             ));
         }
-        let counts = match (o.counts_per_force, o.counts_per_torque) {
-            (Some(force), Some(torque)) => {
-                if !(force.is_finite() && force > 0.0 && torque.is_finite() && torque > 0.0) {
-                    return Err(RtError::option("counts_per_force", "counts per unit must be positive numbers"));
-                }
-                CountsPerUnit { force, torque }
-            }
-            (None, None) => fetch_counts(&o.sensor_host, o.http_port, Duration::from_secs_f64(o.connect_timeout.min(5.0)))
-                .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit: {e} (or give counts_per_force and counts_per_torque)")))?,
-            _ => return Err(RtError::option("counts_per_force", "give both counts_per_force and counts_per_torque, or neither")),
-        };
-        let mapping = PoseMapping::new(o.egm_offset_mm, o.egm_rotation)?;
-        let sensor_addr = resolve("sensor_host", &o.sensor_host, o.sensor_port)?;
-        let rdt_bind: SocketAddr = if sensor_addr.ip().is_loopback() {
-            ([127, 0, 0, 1], o.rdt_local_port).into()
-        } else {
-            ([0, 0, 0, 0], o.rdt_local_port).into()
-        };
-        let rdt = bind_udp("RDT client", rdt_bind)?;
-        let egm = bind_udp(
-            "EGM endpoint",
-            resolve("egm_bind_host", &o.egm_bind_host, o.egm_port)?,
-        )?;
-        let robot_ip = match &o.robot_host {
-            Some(h) => Some(resolve("robot_host", h, 0)?.ip()),
-            None => None,
-        };
+        Ok(plan)
+    }
+
+    fn start_inner(
+        plan: Plan,
+        options: &RuntimeOptions,
+        sensor: Box<dyn SensorLink>,
+        robot: Box<dyn RobotLink>,
+    ) -> Result<Self> {
+        let o = options;
+        let pacing = robot.pacing();
+        let feedback_period = robot.feedback_period();
+        if !(feedback_period.is_finite() && feedback_period > 0.0) {
+            return Err(RtError::option(
+                "robot",
+                format!("the {} link reports a feedback period of {feedback_period} s", robot.name()),
+            ));
+        }
+        if pacing == Pacing::Robot
+            && (feedback_period - plan.period).abs() > 1e-6 * feedback_period
+        {
+            return Err(RtError::option(
+                "simulation.period",
+                format!(
+                    "the {} robot paces the loop every {} s: set simulation.period = {}",
+                    robot.name(),
+                    feedback_period,
+                    feedback_period
+                ),
+            ));
+        }
 
         let reference_energy = sim::run_reference(&plan, false).0.energy;
         let energy_bound = metrics::divergence_bound(
@@ -357,30 +340,18 @@ impl HilHandle {
                 angular_velocity: Vector3::zeros(),
                 ..initial
             },
-            mapping,
-            counts,
-            options: o.clone(),
-            rdt,
-            sensor_addr,
-            rdt_seq: SequenceTracker::new(),
-            sensor: LinkStats::default(),
-            last_rdt_ns: 0,
-            new_record: false,
+            connect_timeout: o.connect_timeout,
+            start_tolerance: o.start_tolerance,
+            hold_time: o.hold_time,
+            pacing,
+            late_ns: (1.5 * feedback_period * 1e9) as u64,
+            sensor,
+            last_sensor_ns: 0,
             force: Vector3::zeros(),
             moment: Vector3::zeros(),
-            egm,
-            robot_ip,
-            robot_addr: None,
-            egm_seq: SequenceTracker::new(),
-            robot: LinkStats::default(),
-            last_egm_ns: 0,
-            decoder: RobotDecoder::new(),
-            encoder: CorrectionEncoder::new(),
+            robot,
+            last_robot_ns: 0,
             estimator: FeedbackEstimator::new(o.extrapolation),
-            send_seq: 0,
-            commands_sent: 0,
-            send_errors: 0,
-            buf: [0u8; 2048],
             producer,
             samples_dropped: 0,
             shared: shared.clone(),
@@ -429,6 +400,7 @@ impl HilHandle {
             robot_lost: s.robot_lost.load(Ordering::Relaxed),
             robot_late: s.robot_late.load(Ordering::Relaxed),
             dropped: s.dropped.load(Ordering::Relaxed),
+            io_errors: s.io_errors.load(Ordering::Relaxed),
             stop: StopKind::from_code(s.stop_code.load(Ordering::Acquire)),
         }
     }
@@ -486,6 +458,7 @@ impl Drop for HilHandle {
     }
 }
 
+/// The loop thread's state: the virtual side, the two links and the timing statistics.
 struct Loop {
     /// The virtual side of a tick: the core's one HIL step.
     step: HilStep,
@@ -496,32 +469,20 @@ struct Loop {
     limits: SafetyLimits,
     start_tip: Vector3<f64>,
     initial: RelativeMotion,
-    mapping: PoseMapping,
-    counts: CountsPerUnit,
-    options: RuntimeOptions,
-    // sensor link
-    rdt: UdpSocket,
-    sensor_addr: SocketAddr,
-    rdt_seq: SequenceTracker,
-    sensor: LinkStats,
-    last_rdt_ns: u64,
-    new_record: bool,
+    connect_timeout: f64,
+    start_tolerance: f64,
+    hold_time: f64,
+    // the links
+    pacing: Pacing,
+    /// Robot feedback later than this after the previous one is `late`, ns.
+    late_ns: u64,
+    sensor: Box<dyn SensorLink>,
+    last_sensor_ns: u64,
     force: Vector3<f64>,
     moment: Vector3<f64>,
-    // robot link
-    egm: UdpSocket,
-    robot_ip: Option<IpAddr>,
-    robot_addr: Option<SocketAddr>,
-    egm_seq: SequenceTracker,
-    robot: LinkStats,
-    last_egm_ns: u64,
-    decoder: RobotDecoder,
-    encoder: CorrectionEncoder,
+    robot: Box<dyn RobotLink>,
+    last_robot_ns: u64,
     estimator: FeedbackEstimator,
-    send_seq: u32,
-    commands_sent: u64,
-    send_errors: u64,
-    buf: [u8; 2048],
     // log and timing
     producer: rtrb::Producer<Sample>,
     samples_dropped: u64,
@@ -537,7 +498,7 @@ impl Loop {
     fn run(&mut self) -> Result<RunOutcome> {
         let connected = self.connect();
         if let Err(e) = connected {
-            self.stop_streaming();
+            self.sensor.stop_streaming();
             return Err(e);
         }
         self.shared.phase.store(1, Ordering::Release);
@@ -546,9 +507,14 @@ impl Loop {
         let mut last_wake: Option<u64> = None;
         let mut k = 0u64;
         while k <= self.ticks {
-            let deadline = self.t0_ns + k * self.period_ns;
-            sleep_until_ns(deadline);
-            let wake = now_ns();
+            let (wake, deadline) = match self.pacing {
+                Pacing::Clock => {
+                    let deadline = self.t0_ns + k * self.period_ns;
+                    sleep_until_ns(deadline);
+                    (now_ns(), deadline)
+                }
+                Pacing::Robot => self.wait_for_robot(last_wake),
+            };
             let latency = wake.saturating_sub(deadline);
             self.wake.record(latency);
             if let Some(prev) = last_wake {
@@ -575,7 +541,8 @@ impl Loop {
             .store(stop.kind.code(), Ordering::Release);
         self.shared.phase.store(2, Ordering::Release);
         self.hold();
-        self.stop_streaming();
+        self.sensor.stop_streaming();
+        let robot = *self.robot.stats();
         Ok(RunOutcome {
             stop,
             ticks: k.min(self.ticks) + 1,
@@ -584,27 +551,41 @@ impl Loop {
             period_error: self.period_hist.summary(),
             compute: self.compute.summary(),
             overruns: self.overruns,
-            sensor: self.sensor,
-            robot: self.robot,
-            commands_sent: self.commands_sent,
-            send_errors: self.send_errors,
+            sensor: *self.sensor.stats(),
+            robot,
+            commands_sent: robot.sent,
+            send_errors: robot.send_errors,
             samples_dropped: self.samples_dropped,
-            counts: self.counts,
-            robot_address: self.robot_addr,
+            sensor_name: self.sensor.name(),
+            robot_name: self.robot.name(),
+            pacing: self.pacing,
+            sensor_report: self.sensor.report(),
+            robot_address: self.robot.peer(),
         })
+    }
+
+    /// Robot pacing: waits for the robot's next packet, at most the watchdog (then the tick
+    /// runs and the watchdog stops the run). Returns the wake-up time and the tick's nominal
+    /// deadline (one period after the previous wake-up; the first tick has none), ns.
+    fn wait_for_robot(&mut self, last_wake: Option<u64>) -> (u64, u64) {
+        let start = now_ns();
+        let n = self
+            .robot
+            .wait(start + self.limits.watchdog_ns(), &mut self.estimator);
+        let wake = now_ns();
+        self.robot_arrived(n, wake);
+        let deadline = last_wake.map_or(wake, |w| w + self.period_ns);
+        (wake, deadline)
     }
 
     /// Start-up (not real-time): requests streaming, waits for the first record and feedback,
     /// keeps the robot at the initial pose meanwhile, checks the start pose.
     fn connect(&mut self) -> Result<()> {
-        if self.options.bias {
-            self.request(RdtCommand::SetBias);
-        }
-        self.request(RdtCommand::StartRealtime);
+        self.sensor.start_streaming();
         let start = now_ns();
-        let timeout_ns = (self.options.connect_timeout * 1e9) as u64;
+        let timeout_ns = (self.connect_timeout * 1e9) as u64;
         let mut last_request = start;
-        let hold = self.mapping.to_egm(&self.initial);
+        let hold = self.initial;
         loop {
             if self.shared.stop_requested.load(Ordering::Acquire) {
                 return Err(RtError::Connect(
@@ -612,36 +593,35 @@ impl Loop {
                 ));
             }
             let now = now_ns();
-            self.poll_sensor(now);
-            self.poll_robot(now);
-            if self.robot_addr.is_some() {
-                self.send(&hold);
-            }
-            if self.sensor.accepted > 0 && self.estimator.has_feedback() {
+            self.poll_links(now);
+            self.robot.send(&hold, now_ns().saturating_sub(self.t0_ns));
+            if self.sensor.stats().accepted > 0 && self.estimator.has_feedback() {
                 break;
             }
             if now - start > timeout_ns {
                 let mut missing = Vec::new();
-                if self.sensor.accepted == 0 {
+                if self.sensor.stats().accepted == 0 {
                     missing.push(format!(
-                        "no RDT record from the sensor at {}",
-                        self.sensor_addr
+                        "no {} record from {}",
+                        self.sensor.name(),
+                        self.sensor.describe()
                     ));
                 }
                 if !self.estimator.has_feedback() {
                     missing.push(format!(
-                        "no EGM feedback from the robot on UDP port {}",
-                        self.options.egm_port
+                        "no {} feedback from {}",
+                        self.robot.name(),
+                        self.robot.describe()
                     ));
                 }
                 return Err(RtError::Connect(format!(
                     "{} within {} s (connect_timeout)",
                     missing.join(" and "),
-                    self.options.connect_timeout
+                    self.connect_timeout
                 )));
             }
-            if self.sensor.accepted == 0 && now - last_request > 200_000_000 {
-                self.request(RdtCommand::StartRealtime);
+            if self.sensor.stats().accepted == 0 && now - last_request > 200_000_000 {
+                self.sensor.start_streaming();
                 last_request = now;
             }
             std::thread::sleep(Duration::from_millis(1));
@@ -652,166 +632,75 @@ impl Loop {
             .last_pose()
             .map_or(self.initial.position, |p| p.point(&self.rod));
         let distance = (actual - self.initial.point(&self.rod)).norm();
-        if distance > self.options.start_tolerance {
+        if distance > self.start_tolerance {
             self.hold();
             return Err(RtError::Connect(format!(
                 "the robot's rod tip is {:.1} mm from the scenario's initial position (start_tolerance {:.1} mm): move it there first",
                 distance * 1e3,
-                self.options.start_tolerance * 1e3
+                self.start_tolerance * 1e3
             )));
         }
         // forget the start-up's sequence bookkeeping for the lateness counters
-        self.sensor.late = 0;
-        self.robot.late = 0;
+        self.sensor.stats_mut().late = 0;
+        self.robot.stats_mut().late = 0;
         Ok(())
     }
 
-    fn request(&mut self, command: RdtCommand) {
-        let bytes = RdtRequest {
-            command,
-            sample_count: 0,
-        }
-        .encode();
-        let _ = self.rdt.send_to(&bytes, self.sensor_addr);
-    }
-
-    fn stop_streaming(&mut self) {
-        for _ in 0..2 {
-            self.request(RdtCommand::Stop);
-        }
-    }
-
-    /// Streams the hold command (the last fed-back pose, at rest) for `hold_time`.
+    /// Streams the hold command (the last fed-back pose, at rest) for `hold_time`: one per
+    /// period on the clock, or one per robot packet (waiting at most two periods for each).
     fn hold(&mut self) {
         let Some(pose) = self.estimator.last_pose() else {
             return;
         };
-        let target = self.mapping.to_egm(&pose);
-        let periods = (self.options.hold_time / self.period).ceil() as u64;
+        let periods = (self.hold_time / self.period).ceil() as u64;
         let start = now_ns();
         for i in 0..periods.max(1) {
-            sleep_until_ns(start + i * self.period_ns);
-            self.poll_sensor(now_ns());
-            self.poll_robot(now_ns());
-            self.send(&target);
+            match self.pacing {
+                Pacing::Clock => sleep_until_ns(start + i * self.period_ns),
+                Pacing::Robot => {
+                    let n = self
+                        .robot
+                        .wait(now_ns() + 2 * self.period_ns, &mut self.estimator);
+                    self.robot_arrived(n, now_ns());
+                }
+            }
+            self.poll_links(now_ns());
+            self.robot
+                .hold(&pose, now_ns().saturating_sub(self.t0_ns));
         }
     }
 
-    fn send(&mut self, target: &EgmTarget) {
-        let Some(addr) = self.robot_addr else { return };
-        self.send_seq = self.send_seq.wrapping_add(1);
-        let tm = ((now_ns().saturating_sub(self.t0_ns)) / 1_000_000) as u32;
-        let bytes = self.encoder.encode(self.send_seq, tm, target);
-        match self.egm.send_to(bytes, addr) {
-            Ok(_) => self.commands_sent += 1,
-            Err(_) => self.send_errors += 1,
-        }
+    /// Polls both links; returns whether a new sensor record arrived.
+    fn poll_links(&mut self, now: u64) -> bool {
+        let new_record = match self.sensor.poll(now) {
+            Some(Wrench { force, moment }) => {
+                self.force = force;
+                self.moment = moment;
+                self.last_sensor_ns = now;
+                true
+            }
+            None => false,
+        };
+        let n = self.robot.poll(now, &mut self.estimator);
+        self.robot_arrived(n, now);
+        new_record
     }
 
-    fn poll_sensor(&mut self, now: u64) {
-        loop {
-            let (n, from) = match self.rdt.recv_from(&mut self.buf) {
-                Ok(x) => x,
-                Err(e) if e.kind() == ErrorKind::WouldBlock => break,
-                Err(_) => break, // e.g. ICMP port unreachable surfaced on the socket
-            };
-            self.sensor.received += 1;
-            if from != self.sensor_addr {
-                self.sensor.foreign += 1;
-                continue;
-            }
-            let record = match RdtRecord::decode(&self.buf[..n]) {
-                Ok(r) => r,
-                Err(_) => {
-                    self.sensor.malformed += 1;
-                    continue;
-                }
-            };
-            match self.rdt_seq.check(record.rdt_sequence) {
-                SequenceVerdict::Stale => {
-                    self.sensor.stale += 1;
-                    continue;
-                }
-                SequenceVerdict::Gap(n) => self.sensor.lost += n as u64,
-                SequenceVerdict::First | SequenceVerdict::Next => {}
-            }
-            // a record with an error status arrived (not lost) but its values are not used
-            if record.status != 0 {
-                self.sensor.invalid += 1;
-                continue;
-            }
-            let (f, m) = self.counts.to_wrench(&record.counts);
-            self.force = Vector3::from(f);
-            self.moment = Vector3::from(m);
-            self.sensor.accepted += 1;
-            self.last_rdt_ns = now;
-            self.new_record = true;
+    /// Bookkeeping of `n` feedback messages accepted at `now`: lateness and the watchdog.
+    fn robot_arrived(&mut self, n: usize, now: u64) {
+        if n == 0 {
+            return;
         }
-    }
-
-    fn poll_robot(&mut self, now: u64) {
-        loop {
-            let (n, from) = match self.egm.recv_from(&mut self.buf) {
-                Ok(x) => x,
-                Err(e) if e.kind() == ErrorKind::WouldBlock => break,
-                Err(_) => break,
-            };
-            self.robot.received += 1;
-            let peer_ok = match (self.robot_ip, self.robot_addr) {
-                (_, Some(addr)) => from == addr,
-                (Some(ip), None) => from.ip() == ip,
-                (None, None) => true,
-            };
-            if !peer_ok {
-                self.robot.foreign += 1;
-                continue;
-            }
-            let feedback = match self.decoder.decode(&self.buf[..n]) {
-                Ok(f) => f,
-                Err(
-                    EgmError::WrongSize(_)
-                    | EgmError::Decode
-                    | EgmError::MissingHeader
-                    | EgmError::WrongType(_),
-                ) => {
-                    self.robot.malformed += 1;
-                    continue;
-                }
-                Err(_) => {
-                    self.robot.invalid += 1;
-                    continue;
-                }
-            };
-            match self.egm_seq.check(feedback.seqno) {
-                SequenceVerdict::Stale => {
-                    self.robot.stale += 1;
-                    continue;
-                }
-                SequenceVerdict::Gap(n) => self.robot.lost += n as u64,
-                SequenceVerdict::First | SequenceVerdict::Next => {}
-            }
-            if self.robot_addr.is_none() {
-                self.robot_addr = Some(from);
-            }
-            if self.last_egm_ns > 0 && (now - self.last_egm_ns) as f64 > 1.5 * EGM_PERIOD * 1e9 {
-                self.robot.late += 1;
-            }
-            let (position, orientation) = self.mapping.from_egm(&feedback.actual);
-            self.estimator
-                .push(feedback.robot_time(), now, position, orientation);
-            self.robot.accepted += 1;
-            self.last_egm_ns = now;
+        if self.last_robot_ns > 0 && now - self.last_robot_ns > self.late_ns {
+            self.robot.stats_mut().late += 1;
         }
+        self.last_robot_ns = now;
     }
 
     /// One control tick; returns a stop, if any. Never allocates.
     fn tick(&mut self, k: u64, wake: u64, latency: u64) -> Option<StopEvent> {
-        let time = k as f64 * self.period;
-        self.new_record = false;
-        self.poll_sensor(wake);
-        self.poll_robot(wake);
-        if !self.new_record {
-            self.sensor.late += 1;
+        if !self.poll_links(wake) {
+            self.sensor.stats_mut().late += 1;
         }
         let actual = self.estimator.estimate(wake).unwrap_or(self.initial);
         let m = Measurement {
@@ -819,22 +708,23 @@ impl Loop {
             moment: self.moment,
             actual,
         };
-        let (record, verdict) = self.step.observe(k as usize, &m, None);
-        let sample = Sample {
-            record,
-            wake_latency: latency as f64 * 1e-9,
-            sensor_age: wake.saturating_sub(self.last_rdt_ns) as f64 * 1e-9,
-            robot_age: wake.saturating_sub(self.last_egm_ns) as f64 * 1e-9,
-        };
-        if self.producer.push(sample).is_err() {
-            self.samples_dropped += 1;
+        match self.virtual_step(k, &m, wake, latency) {
+            Ok(command) => {
+                self.robot
+                    .send(&command, now_ns().saturating_sub(self.t0_ns));
+                None
+            }
+            Err(stop) => Some(stop),
         }
+    }
 
+    /// Stops that are the loop's, not the dynamics': `stop()` and the links' watchdogs.
+    fn loop_checks(&self, time: f64, wake: u64) -> Option<StopEvent> {
         if self.shared.stop_requested.load(Ordering::Acquire) {
             return Some(StopEvent::plain(StopKind::User, time));
         }
         let watchdog = self.limits.watchdog_ns();
-        let sensor_silence = wake.saturating_sub(self.last_rdt_ns);
+        let sensor_silence = wake.saturating_sub(self.last_sensor_ns);
         if sensor_silence > watchdog {
             return Some(StopEvent {
                 kind: StopKind::SensorWatchdog,
@@ -843,7 +733,7 @@ impl Loop {
                 limit: self.limits.watchdog_ms,
             });
         }
-        let robot_silence = wake.saturating_sub(self.last_egm_ns);
+        let robot_silence = wake.saturating_sub(self.last_robot_ns);
         if robot_silence > watchdog {
             return Some(StopEvent {
                 kind: StopKind::RobotWatchdog,
@@ -852,32 +742,56 @@ impl Loop {
                 limit: self.limits.watchdog_ms,
             });
         }
-        if let Some(stop) = check_wrench(&self.limits, &self.force, &self.moment, time) {
-            return Some(stop);
+        None
+    }
+
+    /// The virtual side of tick `k` (virtual time `k·T`): compensate the measurement, log the
+    /// sample, the checks, integrate, check the new command (workspace, energy bound); returns
+    /// the command (relative motion in `t`) to send, or the stop. Never allocates.
+    fn virtual_step(
+        &mut self,
+        k: u64,
+        m: &Measurement,
+        wake: u64,
+        latency: u64,
+    ) -> std::result::Result<RelativeMotion, StopEvent> {
+        let time = k as f64 * self.period;
+        let (record, verdict) = self.step.observe(k as usize, m, None);
+        let sample = Sample {
+            record,
+            wake_latency: latency as f64 * 1e-9,
+            sensor_age: wake.saturating_sub(self.last_sensor_ns) as f64 * 1e-9,
+            robot_age: wake.saturating_sub(self.last_robot_ns) as f64 * 1e-9,
+        };
+        if self.producer.push(sample).is_err() {
+            self.samples_dropped += 1;
+        }
+
+        if let Some(stop) = self.loop_checks(time, wake) {
+            return Err(stop);
+        }
+        if let Some(stop) = check_wrench(&self.limits, &m.force, &m.moment, time) {
+            return Err(stop);
         }
         // divergence, a non-finite record, or the end of the run
         if let Some(stop) = verdict {
-            return Some(stop);
+            return Err(stop);
         }
-        let command = match self.step.advance(k as usize) {
-            Ok(command) => command,
-            Err(stop) => return Some(stop),
-        };
+        let command = self.step.advance(k as usize)?;
         if let Some(stop) = check_workspace(
             &self.limits,
             &command.point(&self.rod),
             &self.start_tip,
             time,
         ) {
-            return Some(stop);
+            return Err(stop);
         }
-        let target = self.mapping.to_egm(&command);
-        self.send(&target);
-        None
+        Ok(command)
     }
 
     fn publish(&self, tick: u64, latency: u64) {
         let s = &self.shared;
+        let (sensor, robot) = (self.sensor.stats(), self.robot.stats());
         s.tick.store(tick, Ordering::Relaxed);
         s.force_bits
             .store(self.force.norm().to_bits(), Ordering::Relaxed);
@@ -885,13 +799,13 @@ impl Loop {
             .store(self.step.dynamics().energy().to_bits(), Ordering::Relaxed);
         s.max_latency_ns.fetch_max(latency, Ordering::Relaxed);
         s.overruns.store(self.overruns, Ordering::Relaxed);
-        s.sensor_lost.store(self.sensor.lost, Ordering::Relaxed);
-        s.sensor_late.store(self.sensor.late, Ordering::Relaxed);
-        s.robot_lost.store(self.robot.lost, Ordering::Relaxed);
-        s.robot_late.store(self.robot.late, Ordering::Relaxed);
-        s.dropped.store(
-            self.sensor.dropped() + self.robot.dropped(),
-            Ordering::Relaxed,
-        );
+        s.sensor_lost.store(sensor.lost, Ordering::Relaxed);
+        s.sensor_late.store(sensor.late, Ordering::Relaxed);
+        s.robot_lost.store(robot.lost, Ordering::Relaxed);
+        s.robot_late.store(robot.late, Ordering::Relaxed);
+        s.dropped
+            .store(sensor.dropped() + robot.dropped(), Ordering::Relaxed);
+        s.io_errors
+            .store(sensor.io_errors + robot.io_errors, Ordering::Relaxed);
     }
 }

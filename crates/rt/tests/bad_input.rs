@@ -13,7 +13,9 @@ use hilcontact_rt::egm::{CorrectionDecoder, FeedbackEncoder};
 use hilcontact_rt::mapping::EgmPoseMm;
 use hilcontact_rt::rdt::{RdtCommand, RdtRecord, RdtRequest};
 use hilcontact_rt::safety::SafetyLimits;
-use hilcontact_rt::{HilHandle, RuntimeOptions};
+use hilcontact_rt::links::egm::EgmOptions;
+use hilcontact_rt::links::rdt::RdtOptions;
+use hilcontact_rt::{HilHandle, RobotOptions, RuntimeOptions, SensorOptions};
 
 fn pose(x: f64, w: f64) -> EgmPoseMm {
     EgmPoseMm {
@@ -35,11 +37,17 @@ fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
     let egm_port = free_udp_port();
     let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
     let options = RuntimeOptions {
-        sensor_port: sensor.local_addr().unwrap().port(),
-        egm_port,
-        egm_bind_host: "127.0.0.1".into(),
-        counts_per_force: Some(1e6),
-        counts_per_torque: Some(1e6),
+        sensor: SensorOptions::Rdt(RdtOptions {
+            port: sensor.local_addr().unwrap().port(),
+            counts_per_force: Some(1e6),
+            counts_per_torque: Some(1e6),
+            ..Default::default()
+        }),
+        robot: RobotOptions::Egm(EgmOptions {
+            port: egm_port,
+            bind_host: "127.0.0.1".into(),
+            ..Default::default()
+        }),
         limits: SafetyLimits {
             watchdog_ms: 200.0,
             ..Default::default()

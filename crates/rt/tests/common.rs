@@ -2,7 +2,9 @@
 #![allow(dead_code)]
 
 use hilcontact_core::Scenario;
-use hilcontact_rt::{EmulatorOptions, RuntimeOptions};
+use hilcontact_rt::links::egm::EgmOptions;
+use hilcontact_rt::links::rdt::RdtOptions;
+use hilcontact_rt::{EmulatorOptions, RobotOptions, RuntimeOptions, SensorOptions};
 
 /// A preset scenario from `python/hilcontact/scenarios/<name>.toml`.
 pub fn preset(name: &str) -> Scenario {
@@ -34,11 +36,17 @@ pub fn loopback_options() -> (EmulatorOptions, RuntimeOptions) {
         ..Default::default()
     };
     let runtime = RuntimeOptions {
-        sensor_port,
-        egm_port,
-        egm_bind_host: "127.0.0.1".into(),
-        counts_per_force: Some(emulator.counts_per_force),
-        counts_per_torque: Some(emulator.counts_per_torque),
+        sensor: SensorOptions::Rdt(RdtOptions {
+            port: sensor_port,
+            counts_per_force: Some(emulator.counts_per_force),
+            counts_per_torque: Some(emulator.counts_per_torque),
+            ..Default::default()
+        }),
+        robot: RobotOptions::Egm(EgmOptions {
+            port: egm_port,
+            bind_host: "127.0.0.1".into(),
+            ..Default::default()
+        }),
         ..Default::default()
     };
     (emulator, runtime)

@@ -1,5 +1,5 @@
 //! The real-time threads never allocate once running: a counting global allocator is armed
-//! while the loop, the writer and the emulator run in steady state (no HTTP server, the test's
+//! from the loop's first tick while the loop, the writer and the emulator run (no HTTP server, the test's
 //! own thread asleep), and must count zero allocations.
 
 mod common;
@@ -47,13 +47,13 @@ fn loop_writer_and_emulator_do_not_allocate() {
     let (emu, rt) = loopback_options();
     let facility = FacilityHandle::start(&s, &emu).unwrap();
     let hil = HilHandle::start(&s, &rt).unwrap();
-    // wait until the loop runs, then count over a window that spans the first collision
+    // count from the loop's first tick over a window that spans the first collision
     while hil.status().phase != "running" {
-        std::thread::sleep(Duration::from_millis(5));
+        std::thread::sleep(Duration::from_micros(20));
     }
-    std::thread::sleep(Duration::from_millis(100));
     ARMED.store(true, Ordering::SeqCst);
-    std::thread::sleep(Duration::from_millis(1500));
+    let first = hil.status().tick;
+    std::thread::sleep(Duration::from_millis(1600));
     ARMED.store(false, Ordering::SeqCst);
     let counted = ALLOCATIONS.load(Ordering::SeqCst);
     let ticks = hil.status().tick;
@@ -62,6 +62,7 @@ fn loop_writer_and_emulator_do_not_allocate() {
     drop(facility);
     assert_eq!(out.metrics["status"], "ok", "{}", out.metrics["reason"]);
     assert!(ticks > 1500, "the loop ran only {ticks} ticks");
+    assert!(first <= 2, "armed only after tick {first}");
     assert!(!out.metrics["collisions"].as_array().unwrap().is_empty());
     assert_eq!(counted, 0, "{counted} allocations while running");
 }

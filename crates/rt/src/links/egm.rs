@@ -1,0 +1,182 @@
+//! [`RobotLink`] for an ABB robot controller over Externally Guided Motion (EGM): `EgmRobot`
+//! feedback in, `EgmSensor` corrections out, protobuf over UDP (codec in [`crate::egm`]).
+//!
+//! The controller sends feedback every 4 ms ([`EGM_PERIOD`]) to the PC's EGM port; the loop
+//! runs on the PC's clock ([`Pacing::Clock`]) and answers each tick with a correction to the
+//! address the feedback came from. Poses cross the link through [`PoseMapping`] (m and the
+//! `t` frame on the loop's side, mm and quaternions in the EGM frame on the robot's).
+//!
+//! A feedback message is accepted when it comes from the robot (`robot_host` if given, else
+//! the first robot that sent valid feedback), decodes, has finite in-range values and a unit
+//! quaternion, and a sequence number newer than the last accepted one.
+
+use std::net::{IpAddr, SocketAddr, UdpSocket};
+
+use serde::{Deserialize, Serialize};
+
+use hilcontact_core::world::RelativeMotion;
+
+use super::{recv_counted, LinkContext, LinkStats, Pacing, RobotLink};
+use crate::egm::{CorrectionEncoder, EgmError, RobotDecoder, EGM_PERIOD, EGM_PORT};
+use crate::emulator::{bind_udp, resolve};
+use crate::error::Result;
+use crate::feedback::FeedbackEstimator;
+use crate::mapping::PoseMapping;
+use crate::rdt::{SequenceTracker, SequenceVerdict};
+
+/// Options of an EGM robot link (`[robot] kind = "egm"`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EgmOptions {
+    /// Address the EGM endpoint binds to (CLI `--egm-bind`).
+    pub bind_host: String,
+    /// UDP port the robot controller sends its EGM feedback to (6510) (CLI `--egm-port`).
+    pub port: u16,
+    /// Accept EGM feedback only from this host; None = from the first robot that sends
+    /// (CLI `--robot`).
+    pub robot_host: Option<String>,
+    /// Origin of the target frame `t` in the EGM frame, mm (CLI `--egm-offset`).
+    pub offset_mm: [f64; 3],
+    /// Rotation from `t` to the EGM frame, quaternion `[w, x, y, z]` (CLI `--egm-rotation`).
+    pub rotation: [f64; 4],
+}
+
+impl Default for EgmOptions {
+    fn default() -> Self {
+        EgmOptions {
+            bind_host: "0.0.0.0".into(),
+            port: EGM_PORT,
+            robot_host: None,
+            offset_mm: [0.0; 3],
+            rotation: [1.0, 0.0, 0.0, 0.0],
+        }
+    }
+}
+
+/// The PC side of ABB EGM.
+pub struct EgmRobot {
+    socket: UdpSocket,
+    port: u16,
+    robot_ip: Option<IpAddr>,
+    robot_addr: Option<SocketAddr>,
+    mapping: PoseMapping,
+    sequence: SequenceTracker,
+    decoder: RobotDecoder,
+    encoder: CorrectionEncoder,
+    send_seq: u32,
+    stats: LinkStats,
+    buf: [u8; 2048],
+}
+
+impl EgmRobot {
+    /// Validates the mapping and binds the EGM endpoint.
+    pub fn open(o: &EgmOptions, _context: &LinkContext) -> Result<Self> {
+        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
+        let socket = bind_udp("EGM endpoint", resolve("egm_bind_host", &o.bind_host, o.port)?)?;
+        let robot_ip = match &o.robot_host {
+            Some(h) => Some(resolve("robot_host", h, 0)?.ip()),
+            None => None,
+        };
+        Ok(EgmRobot {
+            port: o.port,
+            socket,
+            robot_ip,
+            robot_addr: None,
+            mapping,
+            sequence: SequenceTracker::new(),
+            decoder: RobotDecoder::new(),
+            encoder: CorrectionEncoder::new(),
+            send_seq: 0,
+            stats: LinkStats::default(),
+            buf: [0u8; 2048],
+        })
+    }
+}
+
+impl RobotLink for EgmRobot {
+    fn name(&self) -> &'static str {
+        "EGM"
+    }
+
+    fn describe(&self) -> String {
+        format!("the robot on UDP port {}", self.port)
+    }
+
+    fn pacing(&self) -> Pacing {
+        Pacing::Clock
+    }
+
+    fn feedback_period(&self) -> f64 {
+        EGM_PERIOD
+    }
+
+    fn poll(&mut self, now_ns: u64, estimator: &mut FeedbackEstimator) -> usize {
+        let mut accepted = 0;
+        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
+            self.stats.received += 1;
+            let peer_ok = match (self.robot_ip, self.robot_addr) {
+                (_, Some(addr)) => from == addr,
+                (Some(ip), None) => from.ip() == ip,
+                (None, None) => true,
+            };
+            if !peer_ok {
+                self.stats.foreign += 1;
+                continue;
+            }
+            let feedback = match self.decoder.decode(&self.buf[..n]) {
+                Ok(f) => f,
+                Err(
+                    EgmError::WrongSize(_)
+                    | EgmError::Decode
+                    | EgmError::MissingHeader
+                    | EgmError::WrongType(_),
+                ) => {
+                    self.stats.malformed += 1;
+                    continue;
+                }
+                Err(_) => {
+                    self.stats.invalid += 1;
+                    continue;
+                }
+            };
+            match self.sequence.check(feedback.seqno) {
+                SequenceVerdict::Stale => {
+                    self.stats.stale += 1;
+                    continue;
+                }
+                SequenceVerdict::Gap(n) => self.stats.lost += n as u64,
+                SequenceVerdict::First | SequenceVerdict::Next => {}
+            }
+            if self.robot_addr.is_none() {
+                self.robot_addr = Some(from);
+            }
+            let (position, orientation) = self.mapping.from_egm(&feedback.actual);
+            estimator.push(feedback.robot_time(), now_ns, position, orientation);
+            self.stats.accepted += 1;
+            accepted += 1;
+        }
+        accepted
+    }
+
+    fn send(&mut self, command: &RelativeMotion, clock_ns: u64) {
+        let Some(addr) = self.robot_addr else { return };
+        self.send_seq = self.send_seq.wrapping_add(1);
+        let tm = (clock_ns / 1_000_000) as u32;
+        let target = self.mapping.to_egm(command);
+        let bytes = self.encoder.encode(self.send_seq, tm, &target);
+        let sent = self.socket.send_to(bytes, addr);
+        self.stats.count_send(sent);
+    }
+
+    fn peer(&self) -> Option<SocketAddr> {
+        self.robot_addr
+    }
+
+    fn stats(&self) -> &LinkStats {
+        &self.stats
+    }
+
+    fn stats_mut(&mut self) -> &mut LinkStats {
+        &mut self.stats
+    }
+}

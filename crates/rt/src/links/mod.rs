@@ -1,0 +1,304 @@
+//! Device links: the seam between the real-time loop and the devices' protocols.
+//!
+//! The loop ([`crate::runtime`]) talks to one [`SensorLink`] (a force/torque sensor) and one
+//! [`RobotLink`] (a robot controller's external-motion interface) and names neither device:
+//! every protocol detail (ports, codecs, units, counts per unit, pose mapping, the feedback
+//! period) lives in the link's implementation. The robot link also chooses the loop's
+//! [`Pacing`]: the PC's monotonic clock at the scenario's period ([`Pacing::Clock`], ABB EGM),
+//! or one tick per robot packet ([`Pacing::Robot`], e.g. KUKA RSI, whose 4 ms packet must be
+//! answered).
+//!
+//! Implementations: [`rdt::RdtSensor`] (ATI Net F/T, RDT over UDP) and [`egm::EgmRobot`] (ABB
+//! EGM, protobuf over UDP). A new protocol is one file implementing the trait plus one line in
+//! [`open_sensor`] / [`open_robot`] and one variant in [`SensorOptions`] / [`RobotOptions`].
+//!
+//! Every datagram a link receives is counted in its [`LinkStats`], and so is every socket
+//! error, on receive and on send ([`LinkStats::io_errors`]): nothing is dropped uncounted.
+//! Polling, sending and holding never allocate.
+
+pub mod egm;
+pub mod rdt;
+
+use std::io::ErrorKind;
+use std::net::{SocketAddr, UdpSocket};
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use hilcontact_core::world::RelativeMotion;
+
+use crate::clock::now_ns;
+use crate::error::Result;
+use crate::feedback::FeedbackEstimator;
+
+/// Sensor protocols, as `[sensor] kind` / `--sensor-protocol` accept them (the one list).
+pub const SENSOR_KINDS: &[&str] = &["rdt"];
+/// Robot protocols, as `[robot] kind` / `--robot-protocol` accept them (the one list).
+pub const ROBOT_KINDS: &[&str] = &["egm"];
+
+/// Packet counters of one link.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct LinkStats {
+    /// Datagrams (messages) received.
+    pub received: u64,
+    /// Datagrams accepted.
+    pub accepted: u64,
+    /// Wrong size, header or type, or undecodable.
+    pub malformed: u64,
+    /// Non-finite or out-of-range values, or an error status.
+    pub invalid: u64,
+    /// From an address that is not the peer.
+    pub foreign: u64,
+    /// Duplicates or older than the newest accepted.
+    pub stale: u64,
+    /// Missing sequence numbers (gaps).
+    pub lost: u64,
+    /// Sensor: ticks without a new record. Robot: feedback more than 1.5 feedback periods
+    /// after the previous.
+    pub late: u64,
+    /// Datagrams (requests, commands) sent.
+    pub sent: u64,
+    /// Sends that failed (also counted in `io_errors`).
+    pub send_errors: u64,
+    /// Socket errors on receive or send (e.g. ICMP port unreachable surfaced on the socket).
+    pub io_errors: u64,
+}
+
+impl LinkStats {
+    /// Datagrams received and dropped: malformed, invalid, foreign or stale.
+    pub fn dropped(&self) -> u64 {
+        self.malformed + self.invalid + self.foreign + self.stale
+    }
+
+    /// Counts the result of one send.
+    pub fn count_send<T, E>(&mut self, result: std::result::Result<T, E>) {
+        match result {
+            Ok(_) => self.sent += 1,
+            Err(_) => {
+                self.send_errors += 1;
+                self.io_errors += 1;
+            }
+        }
+    }
+}
+
+/// A wrench measured by the sensor, in the sensor's frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Wrench {
+    /// Force, N.
+    pub force: Vector3<f64>,
+    /// Moment about the sensor's origin, N·m.
+    pub moment: Vector3<f64>,
+}
+
+/// What clocks the loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Pacing {
+    /// The PC's monotonic clock, one tick per scenario period (absolute sleeps).
+    Clock,
+    /// The robot's packets: the loop waits (up to the watchdog) for the robot's next packet
+    /// and runs one tick per packet; the scenario's period must equal the robot's.
+    Robot,
+}
+
+/// A force/torque sensor as the loop sees it.
+pub trait SensorLink: Send {
+    /// Short protocol name for messages, e.g. `"RDT"`.
+    fn name(&self) -> &'static str;
+
+    /// The peer for messages, e.g. `"the sensor at 127.0.0.1:49152"` (allocates: not in a tick).
+    fn describe(&self) -> String;
+
+    /// Asks the sensor to stream (called again every 200 ms while nothing arrives at start);
+    /// a bias configured in the link's options is sent before the first request.
+    fn start_streaming(&mut self);
+
+    /// Asks the sensor to stop streaming.
+    fn stop_streaming(&mut self);
+
+    /// Asks the sensor to bias its output (zero it at the current load; the rod must be free).
+    fn bias(&mut self);
+
+    /// Reads everything that arrived (non-blocking, never allocates) and returns the newest
+    /// valid wrench, if a new one arrived; `now_ns` is the monotonic time of the call.
+    fn poll(&mut self, now_ns: u64) -> Option<Wrench>;
+
+    /// The link's counters.
+    fn stats(&self) -> &LinkStats;
+
+    /// The link's counters, for the loop's own (`late`).
+    fn stats_mut(&mut self) -> &mut LinkStats;
+
+    /// Device-specific facts for `metrics.json`'s `realtime` section (e.g. counts per unit),
+    /// merged into it at the end of a run.
+    fn report(&self) -> serde_json::Map<String, serde_json::Value> {
+        serde_json::Map::new()
+    }
+}
+
+/// A robot controller's external-motion interface as the loop sees it: feedback in, command
+/// poses out, in the target frame `t` (m, SI) on the loop's side of the link.
+pub trait RobotLink: Send {
+    /// Short protocol name for messages, e.g. `"EGM"`.
+    fn name(&self) -> &'static str;
+
+    /// The peer for messages, e.g. `"the robot on UDP port 6510"` (allocates: not in a tick).
+    fn describe(&self) -> String;
+
+    /// What clocks the loop with this link.
+    fn pacing(&self) -> Pacing;
+
+    /// The robot's feedback period, s (EGM: 0.004).
+    fn feedback_period(&self) -> f64;
+
+    /// Reads everything that arrived (non-blocking, never allocates), pushes each valid
+    /// feedback pose with the robot's time into `estimator`; returns how many were accepted.
+    fn poll(&mut self, now_ns: u64, estimator: &mut FeedbackEstimator) -> usize;
+
+    /// Waits until at least one valid feedback arrived or the monotonic time passes
+    /// `deadline_ns`; returns how many were accepted (0 = timed out). The default polls every
+    /// 100 µs; a robot-paced link should block on its socket ([`wait_readable`]).
+    fn wait(&mut self, deadline_ns: u64, estimator: &mut FeedbackEstimator) -> usize {
+        loop {
+            let n = self.poll(now_ns(), estimator);
+            if n > 0 || now_ns() >= deadline_ns {
+                return n;
+            }
+            std::thread::sleep(std::time::Duration::from_micros(100));
+        }
+    }
+
+    /// Sends a command (pose and velocity in `t`); `clock_ns` is the loop's time since its
+    /// start, ns. Does nothing before the robot is known (no feedback yet). Errors are counted.
+    fn send(&mut self, command: &RelativeMotion, clock_ns: u64);
+
+    /// Commands the robot to hold `pose` (at rest: zero velocity). By default a [`send`] with
+    /// the velocity zeroed.
+    ///
+    /// [`send`]: RobotLink::send
+    fn hold(&mut self, pose: &RelativeMotion, clock_ns: u64) {
+        let at_rest = RelativeMotion {
+            velocity: Vector3::zeros(),
+            angular_velocity: Vector3::zeros(),
+            ..*pose
+        };
+        self.send(&at_rest, clock_ns);
+    }
+
+    /// The robot's address, once known.
+    fn peer(&self) -> Option<SocketAddr>;
+
+    /// The link's counters.
+    fn stats(&self) -> &LinkStats;
+
+    /// The link's counters, for the loop's own (`late`).
+    fn stats_mut(&mut self) -> &mut LinkStats;
+}
+
+/// Options of the sensor link, one variant per protocol (`kind`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum SensorOptions {
+    /// ATI Net F/T over RDT.
+    Rdt(rdt::RdtOptions),
+}
+
+impl Default for SensorOptions {
+    fn default() -> Self {
+        SensorOptions::Rdt(rdt::RdtOptions::default())
+    }
+}
+
+/// Options of the robot link, one variant per protocol (`kind`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum RobotOptions {
+    /// ABB Externally Guided Motion.
+    Egm(egm::EgmOptions),
+}
+
+impl Default for RobotOptions {
+    fn default() -> Self {
+        RobotOptions::Egm(egm::EgmOptions::default())
+    }
+}
+
+/// What a link needs to know of the run when it is opened.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkContext {
+    /// The scenario's control period, s.
+    pub period: f64,
+    /// Longest wait for the peers at start, s (also bounds the HTTP read of the counts).
+    pub connect_timeout: f64,
+}
+
+/// Opens the sensor link of `options` (binds, reads what it needs before the loop starts).
+pub fn open_sensor(options: &SensorOptions, context: &LinkContext) -> Result<Box<dyn SensorLink>> {
+    Ok(match options {
+        SensorOptions::Rdt(o) => Box::new(rdt::RdtSensor::open(o, context)?),
+    })
+}
+
+/// Opens the robot link of `options` (binds its endpoint).
+pub fn open_robot(options: &RobotOptions, context: &LinkContext) -> Result<Box<dyn RobotLink>> {
+    Ok(match options {
+        RobotOptions::Egm(o) => Box::new(egm::EgmRobot::open(o, context)?),
+    })
+}
+
+/// Receives one datagram from a non-blocking socket: `Some((len, from))`, or None when
+/// nothing is waiting. A socket error is counted in `stats.io_errors` and the read goes on
+/// (at most 64 errors per call, so a persistently failing socket cannot spin the tick).
+pub fn recv_counted(
+    socket: &UdpSocket,
+    buf: &mut [u8],
+    stats: &mut LinkStats,
+) -> Option<(usize, SocketAddr)> {
+    for _ in 0..64 {
+        match socket.recv_from(buf) {
+            Ok(x) => return Some(x),
+            Err(e) if e.kind() == ErrorKind::WouldBlock => return None,
+            Err(e) if e.kind() == ErrorKind::Interrupted => continue,
+            Err(_) => stats.io_errors += 1, // e.g. ICMP port unreachable surfaced on the socket
+        }
+    }
+    None
+}
+
+/// Blocks until `socket` is readable or the monotonic time passes `deadline_ns` (`poll(2)`,
+/// no allocation); returns whether it is readable. For robot-paced links.
+pub fn wait_readable(socket: &UdpSocket, deadline_ns: u64) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::fd::AsRawFd;
+        loop {
+            let now = now_ns();
+            if now >= deadline_ns {
+                return false;
+            }
+            let timeout_ms = (deadline_ns - now).div_ceil(1_000_000).min(i32::MAX as u64) as i32;
+            let mut fd = libc::pollfd {
+                fd: socket.as_raw_fd(),
+                events: libc::POLLIN,
+                revents: 0,
+            };
+            // SAFETY: one valid pollfd for the duration of the call.
+            let r = unsafe { libc::poll(&mut fd, 1, timeout_ms) };
+            if r > 0 {
+                return true;
+            }
+            if r < 0 && std::io::Error::last_os_error().kind() != ErrorKind::Interrupted {
+                return false;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = socket;
+        while now_ns() < deadline_ns {
+            std::thread::sleep(std::time::Duration::from_micros(100));
+        }
+        true
+    }
+}

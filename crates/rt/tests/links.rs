@@ -1,0 +1,357 @@
+//! The device-link seam: a robot-paced loop with a test-only robot link (one tick per robot
+//! packet, each answered with its packet counter echoed, as KUKA RSI needs), socket errors
+//! counted per link, and the grouped options (kinds) as TOML/JSON.
+
+mod common;
+
+use std::net::{SocketAddr, UdpSocket};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use common::{free_udp_port, preset};
+use hilcontact_core::compensator::CompensatorConfig;
+use hilcontact_core::world::RelativeMotion;
+use hilcontact_rt::clock::now_ns;
+use hilcontact_rt::feedback::FeedbackEstimator;
+use hilcontact_rt::links::egm::EgmOptions;
+use hilcontact_rt::links::rdt::{RdtOptions, RdtSensor};
+use hilcontact_rt::links::{wait_readable, LinkContext, LinkStats, Pacing, Wrench};
+use hilcontact_rt::safety::SafetyLimits;
+use hilcontact_rt::{
+    HilHandle, RobotLink, RobotOptions, RuntimeOptions, SensorLink, SensorOptions,
+};
+use nalgebra::{UnitQuaternion, Vector3};
+
+/// Feedback packet of the test robot: counter (u64), robot time (f64, s), position (3 × f64,
+/// m, `t`), big-endian. The answer: the counter echoed, then the command position.
+const PACKET: usize = 40;
+const ANSWER: usize = 32;
+const PERIOD: f64 = 0.002;
+
+/// A robot-paced link over UDP: the loop answers each packet (RSI-like).
+struct FakePacedRobot {
+    socket: UdpSocket,
+    peer: Option<SocketAddr>,
+    last_counter: Option<u64>,
+    answered: Option<u64>,
+    stats: LinkStats,
+    buf: [u8; 256],
+}
+
+impl RobotLink for FakePacedRobot {
+    fn name(&self) -> &'static str {
+        "FAKE"
+    }
+    fn describe(&self) -> String {
+        "the test robot".into()
+    }
+    fn pacing(&self) -> Pacing {
+        Pacing::Robot
+    }
+    fn feedback_period(&self) -> f64 {
+        PERIOD
+    }
+    fn poll(&mut self, now: u64, estimator: &mut FeedbackEstimator) -> usize {
+        let mut accepted = 0;
+        while let Some((n, from)) =
+            hilcontact_rt::links::recv_counted(&self.socket, &mut self.buf, &mut self.stats)
+        {
+            self.stats.received += 1;
+            if n != PACKET {
+                self.stats.malformed += 1;
+                continue;
+            }
+            let f = |i: usize| f64::from_be_bytes(self.buf[i..i + 8].try_into().unwrap());
+            let counter = u64::from_be_bytes(self.buf[..8].try_into().unwrap());
+            estimator.push(
+                f(8),
+                now,
+                Vector3::new(f(16), f(24), f(32)),
+                UnitQuaternion::identity(),
+            );
+            self.peer = Some(from);
+            self.last_counter = Some(counter);
+            self.stats.accepted += 1;
+            accepted += 1;
+        }
+        accepted
+    }
+    fn wait(&mut self, deadline_ns: u64, estimator: &mut FeedbackEstimator) -> usize {
+        while wait_readable(&self.socket, deadline_ns) {
+            let n = self.poll(now_ns(), estimator);
+            if n > 0 {
+                return n;
+            }
+        }
+        0
+    }
+    fn send(&mut self, command: &RelativeMotion, _clock_ns: u64) {
+        // one answer per packet, echoing its counter
+        let (Some(peer), Some(counter)) = (self.peer, self.last_counter) else {
+            return;
+        };
+        if self.answered == Some(counter) {
+            return;
+        }
+        self.answered = Some(counter);
+        let mut out = [0u8; ANSWER];
+        out[..8].copy_from_slice(&counter.to_be_bytes());
+        for (i, v) in command.position.iter().enumerate() {
+            out[8 + 8 * i..16 + 8 * i].copy_from_slice(&v.to_be_bytes());
+        }
+        let sent = self.socket.send_to(&out, peer);
+        self.stats.count_send(sent);
+    }
+    fn peer(&self) -> Option<SocketAddr> {
+        self.peer
+    }
+    fn stats(&self) -> &LinkStats {
+        &self.stats
+    }
+    fn stats_mut(&mut self) -> &mut LinkStats {
+        &mut self.stats
+    }
+}
+
+/// A sensor that always has a new zero wrench (no contact in this test).
+struct FreeSensor {
+    stats: LinkStats,
+}
+
+impl SensorLink for FreeSensor {
+    fn name(&self) -> &'static str {
+        "FREE"
+    }
+    fn describe(&self) -> String {
+        "the free sensor".into()
+    }
+    fn start_streaming(&mut self) {}
+    fn stop_streaming(&mut self) {}
+    fn bias(&mut self) {}
+    fn poll(&mut self, _now_ns: u64) -> Option<Wrench> {
+        self.stats.received += 1;
+        self.stats.accepted += 1;
+        Some(Wrench::default())
+    }
+    fn stats(&self) -> &LinkStats {
+        &self.stats
+    }
+    fn stats_mut(&mut self) -> &mut LinkStats {
+        &mut self.stats
+    }
+}
+
+#[test]
+fn robot_paced_loop_runs_one_tick_per_robot_packet_and_answers_each() {
+    let mut s = preset("paper-table1");
+    s.simulation.period = PERIOD;
+    s.simulation.duration = 10.0;
+    s.compensator = CompensatorConfig::default();
+    let link_socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    link_socket.set_nonblocking(true).unwrap();
+    let link_addr = link_socket.local_addr().unwrap();
+    let robot = FakePacedRobot {
+        socket: link_socket,
+        peer: None,
+        last_counter: None,
+        answered: None,
+        stats: LinkStats::default(),
+        buf: [0; 256],
+    };
+    let options = RuntimeOptions {
+        limits: SafetyLimits {
+            watchdog_ms: 100.0,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    // the robot: a packet every 2 ms at the scenario's start pose, 300 of them after the
+    // loop answers the first, then silence (the watchdog stops the run)
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    socket.set_nonblocking(true).unwrap(); // (SO_RCVTIMEO has jiffy resolution)
+    let done = Arc::new(AtomicBool::new(false));
+    let hil = HilHandle::start_with_links(
+        &s,
+        &options,
+        Box::new(FreeSensor {
+            stats: LinkStats::default(),
+        }),
+        Box::new(robot),
+    )
+    .unwrap();
+    let flag = done.clone();
+    let robot_thread = std::thread::spawn(move || {
+        let mut echoed = Vec::new();
+        let start = Instant::now();
+        let mut counter = 0u64;
+        let mut running_from = None;
+        let mut buf = [0u8; 64];
+        while !flag.load(Ordering::Relaxed) && counter < 5000 {
+            counter += 1;
+            let mut packet = [0u8; PACKET];
+            packet[..8].copy_from_slice(&counter.to_be_bytes());
+            packet[8..16].copy_from_slice(&(counter as f64 * PERIOD).to_be_bytes());
+            packet[16..24].copy_from_slice(&(-0.995f64).to_be_bytes());
+            socket.send_to(&packet, link_addr).unwrap();
+            let next = start + Duration::from_secs_f64(counter as f64 * PERIOD);
+            while Instant::now() < next {
+                match socket.recv(&mut buf) {
+                    Ok(n) => {
+                        assert_eq!(n, ANSWER);
+                        echoed.push(u64::from_be_bytes(buf[..8].try_into().unwrap()));
+                    }
+                    Err(_) => std::thread::sleep(Duration::from_micros(50)),
+                }
+            }
+            if running_from.is_none() && !echoed.is_empty() {
+                running_from = Some(counter);
+            }
+            if running_from.is_some_and(|c| counter >= c + 300) {
+                break;
+            }
+        }
+        (counter, running_from, echoed)
+    });
+    assert!(hil.wait(Duration::from_secs(20)), "the run did not end");
+    done.store(true, Ordering::Relaxed);
+    let (sent, running_from, echoed) = robot_thread.join().unwrap();
+    let out = hil.finish().unwrap();
+    let rt = &out.metrics["realtime"];
+    assert_eq!(rt["stop"]["kind"], "robot-watchdog", "{}", out.metrics["reason"]);
+    assert!(
+        out.metrics["reason"]
+            .as_str()
+            .unwrap()
+            .contains("no valid FAKE feedback"),
+        "{}",
+        out.metrics["reason"]
+    );
+    assert_eq!(rt["pacing"], "robot");
+    // each packet answered once, in order, echoing its counter
+    assert!(echoed.windows(2).all(|w| w[1] > w[0]), "{echoed:?}");
+    let running_from = running_from.unwrap();
+    // one tick per packet after the first answer (the connect phase answered the first
+    // ones); the last tick is the watchdog's, after the silence
+    let ticks = rt["ticks"].as_u64().unwrap();
+    let packets = sent - running_from + 1;
+    assert!(
+        ticks + 3 >= packets && ticks <= packets + 3,
+        "{ticks} ticks for {packets} packets (sent {sent}, running from {running_from}, {} echoed, stop {})",
+        echoed.len(),
+        rt["stop"]
+    );
+    assert!(echoed.len() + 3 >= packets as usize, "{} answers for {packets} packets", echoed.len());
+    // virtual time advances by one period per packet
+    let time = out.timeseries.column("time").unwrap();
+    assert!(time
+        .windows(2)
+        .all(|w| ((w[1] - w[0]) - PERIOD).abs() < 1e-12));
+    let robot_stats = &rt["robot"];
+    assert_eq!(robot_stats["io_errors"], 0);
+    assert!(robot_stats["sent"].as_u64().unwrap() >= ticks - 1);
+}
+
+#[test]
+fn robot_paced_link_needs_the_scenario_period_to_match() {
+    let s = preset("paper-table1"); // 1 ms
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let robot = FakePacedRobot {
+        socket,
+        peer: None,
+        last_counter: None,
+        answered: None,
+        stats: LinkStats::default(),
+        buf: [0; 256],
+    };
+    let sensor = FreeSensor {
+        stats: LinkStats::default(),
+    };
+    let err = HilHandle::start_with_links(
+        &s,
+        &RuntimeOptions::default(),
+        Box::new(sensor),
+        Box::new(robot),
+    )
+    .err()
+    .unwrap();
+    assert!(err.to_string().contains("simulation.period"), "{err}");
+}
+
+#[test]
+fn socket_errors_are_counted_per_link() {
+    // a sensor at the broadcast address: the kernel refuses the request (no SO_BROADCAST);
+    // the error is counted, not dropped
+    let port = free_udp_port();
+    let mut sensor = RdtSensor::open(
+        &RdtOptions {
+            host: "255.255.255.255".into(),
+            port,
+            counts_per_force: Some(1e6),
+            counts_per_torque: Some(1e6),
+            ..Default::default()
+        },
+        &LinkContext {
+            period: 0.001,
+            connect_timeout: 1.0,
+        },
+    )
+    .unwrap();
+    sensor.start_streaming();
+    std::thread::sleep(Duration::from_millis(50));
+    assert!(sensor.poll(now_ns()).is_none());
+    sensor.stop_streaming();
+    let stats = *sensor.stats();
+    assert_eq!((stats.sent, stats.received), (0, 0), "{stats:?}");
+    assert_eq!((stats.send_errors, stats.io_errors), (3, 3), "{stats:?}");
+    let json = serde_json::to_value(stats).unwrap();
+    assert_eq!(json["io_errors"], stats.io_errors);
+}
+
+#[test]
+fn options_are_grouped_per_device_kind() {
+    let text = r#"
+        connect_timeout = 2.0
+        [sensor]
+        kind = "rdt"
+        host = "192.168.1.1"
+        port = 49153
+        counts_per_force = 1000000.0
+        counts_per_torque = 1000000.0
+        [robot]
+        kind = "egm"
+        port = 6511
+        offset_mm = [1.0, 2.0, 3.0]
+    "#;
+    let o: RuntimeOptions = toml::from_str(text).unwrap();
+    let SensorOptions::Rdt(sensor) = &o.sensor;
+    let RobotOptions::Egm(robot) = &o.robot;
+    assert_eq!((sensor.host.as_str(), sensor.port, sensor.http_port), ("192.168.1.1", 49153, 80));
+    assert_eq!((robot.port, robot.bind_host.as_str()), (6511, "0.0.0.0"));
+    assert_eq!(robot.offset_mm, [1.0, 2.0, 3.0]);
+    assert_eq!(o.connect_timeout, 2.0);
+    // defaults are today's
+    let d = RuntimeOptions::default();
+    let json = serde_json::to_value(&d).unwrap();
+    assert_eq!(json["sensor"]["kind"], "rdt");
+    assert_eq!(json["sensor"]["port"], 49152);
+    assert_eq!(json["robot"]["kind"], "egm");
+    assert_eq!(json["robot"]["port"], 6510);
+    assert_eq!(json["robot"]["bind_host"], "0.0.0.0");
+    assert_eq!(serde_json::from_value::<RuntimeOptions>(json).unwrap(), d);
+    assert_eq!(
+        RobotOptions::default(),
+        RobotOptions::Egm(EgmOptions::default())
+    );
+    // an unknown kind, a key of another kind, and a missing kind are errors
+    for bad in [
+        r#"{"robot": {"kind": "rsi"}}"#,
+        r#"{"robot": {"kind": "egm", "http_port": 80}}"#,
+        r#"{"sensor": {"port": 5}}"#,
+    ] {
+        assert!(
+            serde_json::from_str::<RuntimeOptions>(bad).is_err(),
+            "{bad} was accepted"
+        );
+    }
+}
