@@ -262,17 +262,8 @@ fn check_name(issues: &mut Issues, name: &str) {
     }
 }
 
-/// Records a problem unless `value` is finite and satisfies `ok`; returns whether it does.
 fn range(issues: &mut Issues, key: &str, value: f64, ok: bool, allowed: &str) -> bool {
-    if !value.is_finite() {
-        issues.push(key, format!("must be a finite number, got {value}"));
-        false
-    } else if !ok {
-        issues.push(key, format!("must be {allowed}, got {value}"));
-        false
-    } else {
-        true
-    }
+    issues.check_range(key, value, ok, allowed)
 }
 
 fn positive(issues: &mut Issues, key: &str, value: f64) -> bool {
@@ -452,10 +443,4 @@ fn delay(
         return None;
     }
     Some(n as usize)
-}
-
-/// Shorthand used by the compensators' parameter checks: records a problem of
-/// `compensator.<key>` unless `value` is finite and `ok`.
-pub fn check_parameter(issues: &mut Issues, key: &str, value: f64, ok: bool, allowed: &str) {
-    range(issues, &format!("compensator.{key}"), value, ok, allowed);
 }

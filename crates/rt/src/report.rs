@@ -16,8 +16,69 @@ use hilcontact_core::sim::{
 };
 use hilcontact_core::Plan;
 
+use std::net::SocketAddr;
+
+use crate::clock::TimingSummary;
 use crate::error::{Result, RtError};
-use crate::runtime::{RunOutcome, RuntimeOptions, Sample};
+use crate::links::{LinkStats, Pacing};
+use crate::safety::StopEvent;
+
+/// One tick of the loop, as logged (fixed size, `Copy`): the simulation's record of a tick
+/// plus the loop's timing.
+///
+/// In the record, `time` is the virtual time (tick × period), `actual_*` the rod tip estimated
+/// from EGM feedback and `contact_force` the force on the rod that the sensor reports (the
+/// opposite of the measured force, in `t`): the true contact force is not observable.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Sample {
+    /// The tick, as the simulation records it.
+    pub record: HilRecord,
+    /// Wake-up latency of the tick, s.
+    pub wake_latency: f64,
+    /// Age of the sensor record used (since its arrival), s.
+    pub sensor_age: f64,
+    /// Age of the newest robot feedback (since its arrival), s.
+    pub robot_age: f64,
+}
+
+/// What the loop thread hands back.
+#[derive(Debug, Clone)]
+pub struct RunOutcome {
+    /// Why it stopped.
+    pub stop: StopEvent,
+    /// Ticks run.
+    pub ticks: u64,
+    /// Wall time of the loop, s.
+    pub wall_time: f64,
+    /// Wake-up latency (wake − deadline), µs.
+    pub wake_latency: TimingSummary,
+    /// |actual period − T|, µs.
+    pub period_error: TimingSummary,
+    /// Time from wake-up to the command sent, µs.
+    pub compute: TimingSummary,
+    /// Ticks that ended after the next deadline.
+    pub overruns: u64,
+    /// Sensor link.
+    pub sensor: LinkStats,
+    /// Robot link.
+    pub robot: LinkStats,
+    /// Commands sent to the robot.
+    pub commands_sent: u64,
+    /// Commands that could not be sent.
+    pub send_errors: u64,
+    /// Samples lost because the ring buffer was full.
+    pub samples_dropped: u64,
+    /// The sensor link's protocol name (e.g. `RDT`).
+    pub sensor_name: &'static str,
+    /// The robot link's protocol name (e.g. `EGM`).
+    pub robot_name: &'static str,
+    /// What clocked the loop.
+    pub pacing: Pacing,
+    /// The sensor link's own facts for the metrics (e.g. counts per unit).
+    pub sensor_report: serde_json::Map<String, serde_json::Value>,
+    /// The robot's address.
+    pub robot_address: Option<SocketAddr>,
+}
 
 /// Everything a real-time run produces.
 #[derive(Debug, Clone)]
@@ -48,7 +109,7 @@ pub struct RealtimeMetrics {
 /// Builds the output of a run from its samples.
 pub fn build_output(
     plan: &Plan,
-    options: &RuntimeOptions,
+    options: &impl serde::Serialize,
     samples: &[Sample],
     outcome: &RunOutcome,
 ) -> Result<HilOutput> {

@@ -26,7 +26,6 @@
 //! to hold its last fed-back pose for `hold_time`, the sensor's streaming is stopped, and the
 //! writer thread drains the ring buffer completely before the results are built.
 
-use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -36,11 +35,11 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use hilcontact_core::facility::Measurement;
-use hilcontact_core::hil::{HilRecord, HilStep};
+use hilcontact_core::hil::HilStep;
 use hilcontact_core::world::RelativeMotion;
 use hilcontact_core::{metrics, sim, Plan, Scenario};
 
-use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack, Histogram, TimingSummary};
+use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack, Histogram};
 use crate::error::{Result, RtError};
 use crate::feedback::{Extrapolation, FeedbackEstimator};
 pub use crate::links::LinkStats;
@@ -48,6 +47,7 @@ use crate::links::{
     open_robot, open_sensor, LinkContext, Pacing, RobotLink, RobotOptions, SensorLink,
     SensorOptions, Wrench,
 };
+pub use crate::report::{RunOutcome, Sample};
 use crate::report::{build_output, HilOutput};
 use crate::safety::{check_workspace, check_wrench, SafetyLimits, StopEvent, StopKind};
 
@@ -89,23 +89,6 @@ impl Default for RuntimeOptions {
     }
 }
 
-/// One tick of the loop, as logged (fixed size, `Copy`): the simulation's record of a tick
-/// plus the loop's timing.
-///
-/// In the record, `time` is the virtual time (tick × period), `actual_*` the rod tip estimated
-/// from EGM feedback and `contact_force` the force on the rod that the sensor reports (the
-/// opposite of the measured force, in `t`): the true contact force is not observable.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Sample {
-    /// The tick, as the simulation records it.
-    pub record: HilRecord,
-    /// Wake-up latency of the tick, s.
-    pub wake_latency: f64,
-    /// Age of the sensor record used (since its arrival), s.
-    pub sensor_age: f64,
-    /// Age of the newest robot feedback (since its arrival), s.
-    pub robot_age: f64,
-}
 
 #[derive(Debug, Default)]
 struct SharedStatus {
@@ -160,44 +143,6 @@ pub struct StatusSnapshot {
     pub stop: Option<StopKind>,
 }
 
-/// What the loop thread hands back.
-#[derive(Debug, Clone)]
-pub struct RunOutcome {
-    /// Why it stopped.
-    pub stop: StopEvent,
-    /// Ticks run.
-    pub ticks: u64,
-    /// Wall time of the loop, s.
-    pub wall_time: f64,
-    /// Wake-up latency (wake − deadline), µs.
-    pub wake_latency: TimingSummary,
-    /// |actual period − T|, µs.
-    pub period_error: TimingSummary,
-    /// Time from wake-up to the command sent, µs.
-    pub compute: TimingSummary,
-    /// Ticks that ended after the next deadline.
-    pub overruns: u64,
-    /// Sensor link.
-    pub sensor: LinkStats,
-    /// Robot link.
-    pub robot: LinkStats,
-    /// Commands sent to the robot.
-    pub commands_sent: u64,
-    /// Commands that could not be sent.
-    pub send_errors: u64,
-    /// Samples lost because the ring buffer was full.
-    pub samples_dropped: u64,
-    /// The sensor link's protocol name (e.g. `RDT`).
-    pub sensor_name: &'static str,
-    /// The robot link's protocol name (e.g. `EGM`).
-    pub robot_name: &'static str,
-    /// What clocked the loop.
-    pub pacing: Pacing,
-    /// The sensor link's own facts for the metrics (e.g. counts per unit).
-    pub sensor_report: serde_json::Map<String, serde_json::Value>,
-    /// The robot's address.
-    pub robot_address: Option<SocketAddr>,
-}
 
 /// A running HIL loop.
 pub struct HilHandle {

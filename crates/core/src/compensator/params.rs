@@ -4,7 +4,6 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::Issues;
-use crate::plan::check_parameter;
 
 /// How the measurement delay `τ_p` is compensated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -82,8 +81,9 @@ impl ModelParams {
     /// Records every parameter out of its range.
     pub fn check(&self, issues: &mut Issues) {
         let p = self;
+        // every key is `compensator.<name>`
         let mut check = |key: &str, value: f64, ok: bool, allowed: &str| {
-            check_parameter(issues, key, value, ok, allowed)
+            issues.check_range(&format!("compensator.{key}"), value, ok, allowed);
         };
         check("contact_force", p.contact_force, p.contact_force > 0.0, "> 0");
         check("stiffness_initial", p.stiffness_initial, p.stiffness_initial > 0.0, "> 0");
@@ -132,8 +132,9 @@ impl TdpaParams {
     /// Records every parameter out of its range.
     pub fn check(&self, issues: &mut Issues) {
         let p = self;
+        // every key is `compensator.<name>`
         let mut check = |key: &str, value: f64, ok: bool, allowed: &str| {
-            check_parameter(issues, key, value, ok, allowed)
+            issues.check_range(&format!("compensator.{key}"), value, ok, allowed);
         };
         check("contact_force", p.contact_force, p.contact_force > 0.0, "> 0");
         check("alpha_max", p.alpha_max, p.alpha_max > 0.0, "> 0");
