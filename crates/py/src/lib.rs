@@ -62,8 +62,7 @@ fn error_classes(py: Python<'_>) -> PyResult<&ErrorClasses> {
             "RealtimeError",
             &[base.bind(py), &py.get_type::<PyOSError>()],
             "The real-time runtime or the emulated facility could not start or finish: a port \
-             in use, a peer that does not answer, a bad /netftapi2.xml. An OSError: `errno` is \
-             set where the cause was an operating-system error.",
+             in use, a peer that does not answer, a bad /netftapi2.xml. Also an OSError.",
         )?;
         let option = exception_class(
             py,
