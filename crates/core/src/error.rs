@@ -74,17 +74,6 @@ impl Issues {
         });
     }
 
-    /// Records the problem of `check`, if any; returns its value otherwise.
-    pub fn take<T>(&mut self, check: Result<T>) -> Option<T> {
-        match check {
-            Ok(v) => Some(v),
-            Err(e) => {
-                self.0.extend(e.issues());
-                None
-            }
-        }
-    }
-
     /// Records a problem of `key` unless `value` is finite and `ok`; `allowed` says what is
     /// allowed (`"> 0"`). Returns whether the value passed.
     pub fn check_range(&mut self, key: &str, value: f64, ok: bool, allowed: &str) -> bool {

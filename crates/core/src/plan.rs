@@ -262,20 +262,16 @@ fn check_name(issues: &mut Issues, name: &str) {
     }
 }
 
-fn range(issues: &mut Issues, key: &str, value: f64, ok: bool, allowed: &str) -> bool {
-    issues.check_range(key, value, ok, allowed)
-}
-
 fn positive(issues: &mut Issues, key: &str, value: f64) -> bool {
-    range(issues, key, value, value > 0.0, "> 0")
+    issues.check_range(key, value, value > 0.0, "> 0")
 }
 
 fn non_negative(issues: &mut Issues, key: &str, value: f64) -> bool {
-    range(issues, key, value, value >= 0.0, ">= 0")
+    issues.check_range(key, value, value >= 0.0, ">= 0")
 }
 
 fn greater(issues: &mut Issues, key: &str, value: f64, bound: f64) -> bool {
-    range(issues, key, value, value > bound, &format!("> {bound}"))
+    issues.check_range(key, value, value > bound, &format!("> {bound}"))
 }
 
 fn at_least_one(issues: &mut Issues, key: &str, value: u32) {
