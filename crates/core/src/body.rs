@@ -5,9 +5,9 @@
 //! I ω̇ = τ_b − ω × (I ω)                      (2)   body frame (the paper writes Iω×ω)
 //! q̇ = ½ q ⊗ (0, ω)                                attitude, body to world
 //! ```
-//! Two integrators: [`BodyState::step_symplectic`] for the virtual dynamics of the HIL loop
-//! (wrench held over a control period; symplectic in translation, so a delay-free loop neither
-//! gains nor loses energy), and [`BodyRate`] arithmetic for the RK4 ideal reference.
+//! Two integrators: [`BodyState::step_kick_drift`] for the virtual dynamics of the HIL loop
+//! (wrench held over a control period; a leapfrog splitting, second order and symplectic, so
+//! a delay-free loop neither gains nor loses energy), and [`BodyRate`] arithmetic for the RK4 ideal reference.
 
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 
@@ -144,12 +144,19 @@ impl BodyState {
         }
     }
 
-    /// One step of the virtual dynamics with the wrench held constant over `h` (zero-order hold).
+    /// One step of the virtual dynamics with the wrench held constant over `h` (zero-order
+    /// hold): a kick, then a drift (the splitting of the leapfrog / Störmer–Verlet method).
     ///
-    /// Translation is symplectic Euler (`v ← v + h F/m`, `p ← p + h v`); the body-frame angular
-    /// velocity follows eq. (2) by RK4 with the torque held, and the attitude turns by the mean
-    /// of the old and new angular velocities. Allocation-free.
-    pub fn step_symplectic(
+    /// ```text
+    /// kick:   v ← v + h F/m,   L_world ← L_world + h τ_world   (at the attitude of the tick)
+    /// drift:  force- and torque-free motion over h            ([`BodyState::drift`])
+    /// ```
+    /// The wrench is the one measured at the tick (a function of the pose at the tick), so
+    /// the velocities the step leaves are those of the middle of the coming period, as in
+    /// the leapfrog: second order in `h` for position-dependent wrenches, in translation and
+    /// in rotation alike, and symplectic (a delay-free loop neither gains nor loses energy).
+    /// Allocation-free.
+    pub fn step_kick_drift(
         &mut self,
         mp: &MassProperties,
         force_world: &Vector3<f64>,
@@ -157,21 +164,12 @@ impl BodyState {
         h: f64,
     ) {
         self.velocity += force_world * (h / mp.mass);
-        self.position += self.velocity * h;
-        if self.angular_velocity == Vector3::zeros() && *torque_world == Vector3::zeros() {
-            return; // neither turning nor made to turn
+        if *torque_world != Vector3::zeros() {
+            // ΔL = h τ in the world; in the body frame at this attitude Δω = I⁻¹ Rᵀ h τ
+            let torque_body = self.orientation.inverse_transform_vector(torque_world);
+            self.angular_velocity += mp.inertia_inv * torque_body * h;
         }
-        let torque_body = self.orientation.inverse_transform_vector(torque_world);
-        let w0 = self.angular_velocity;
-        let f = |w: &Vector3<f64>| mp.angular_acceleration(w, &torque_body);
-        let k1 = f(&w0);
-        let k2 = f(&(w0 + k1 * (0.5 * h)));
-        let k3 = f(&(w0 + k2 * (0.5 * h)));
-        let k4 = f(&(w0 + k3 * h));
-        let w1 = w0 + (k1 + 2.0 * k2 + 2.0 * k3 + k4) * (h / 6.0);
-        self.orientation *= UnitQuaternion::from_scaled_axis((w0 + w1) * (0.5 * h));
-        self.orientation.renormalize_fast();
-        self.angular_velocity = w1;
+        self.drift(mp, h);
     }
 
     /// Force- and torque-free motion over `h`: translation exact, rotation (eq. 2 without

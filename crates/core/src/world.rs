@@ -119,12 +119,13 @@ impl TwoBodySystem {
         x.target.velocity -= dv_world * (mu / self.target.mass);
     }
 
-    /// One control period of the virtual dynamics with the wrench held (zero-order hold).
+    /// One control period of the virtual dynamics with the wrench held (zero-order hold), by
+    /// [`crate::body::BodyState::step_kick_drift`] for each body.
     pub fn step_virtual(&self, x: &mut TwoBodyState, w: &FrameWrench, period: f64) {
         let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, w);
         x.servicer
-            .step_symplectic(&self.servicer, &f_s, &tau_s, period);
-        x.target.step_symplectic(&self.target, &f_t, &tau_t, period);
+            .step_kick_drift(&self.servicer, &f_s, &tau_s, period);
+        x.target.step_kick_drift(&self.target, &f_t, &tau_t, period);
     }
 
     /// The physical contact force on the rod (N, `t`) at a state of the true system.
