@@ -7,6 +7,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::compensator::CompensatorConfig;
+use crate::metrics::Tolerances;
 
 /// A complete scenario: two satellites, the collision geometry, the contact, the facility,
 /// the compensator and the metric settings.
@@ -234,16 +235,59 @@ pub struct MetricsConfig {
     /// A collision is an interval where the physical contact force exceeds this, N (> 0).
     #[serde(default = "default_contact_threshold")]
     pub contact_threshold: f64,
+    /// Largest `|CoV − 1|` of a faithful collision (fraction, >= 0).
+    #[serde(default = "default_cov_tolerance")]
+    pub cov_tolerance: f64,
+    /// Largest CoF of a faithful collision (> 0).
+    #[serde(default = "default_max_cof")]
+    pub max_cof: f64,
+    /// Largest rebound velocity error `|v − v_ref| / |v_ref|` of a faithful collision
+    /// (fraction, >= 0).
+    #[serde(default = "default_max_velocity_error")]
+    pub max_velocity_error: f64,
+    /// How many reference collisions a faithful run may lose (integer >= 0).
+    #[serde(default)]
+    pub max_lost_collisions: u32,
+    /// How many collisions without a reference collision a faithful run may have (>= 0).
+    #[serde(default)]
+    pub max_extra_collisions: u32,
 }
 
 fn default_contact_threshold() -> f64 {
     0.5
+}
+fn default_cov_tolerance() -> f64 {
+    Tolerances::default().cov
+}
+fn default_max_cof() -> f64 {
+    Tolerances::default().cof
+}
+fn default_max_velocity_error() -> f64 {
+    Tolerances::default().velocity_error
+}
+
+impl MetricsConfig {
+    /// The tolerances of the verdict.
+    pub fn tolerances(&self) -> Tolerances {
+        Tolerances {
+            cov: self.cov_tolerance,
+            cof: self.max_cof,
+            velocity_error: self.max_velocity_error,
+            lost_collisions: self.max_lost_collisions as usize,
+            extra_collisions: self.max_extra_collisions as usize,
+        }
+    }
 }
 
 impl Default for MetricsConfig {
     fn default() -> Self {
         MetricsConfig {
             contact_threshold: default_contact_threshold(),
+            cov_tolerance: default_cov_tolerance(),
+            max_cof: default_max_cof(),
+            max_velocity_error: default_max_velocity_error(),
+            max_lost_collisions: 0,
+            max_extra_collisions: 0,
         }
     }
 }

@@ -130,6 +130,8 @@ pub struct HilRecord {
     pub tip_position: Vector3<f64>,
     /// Desired (virtual) rod tip velocity, `t` frame, m/s.
     pub tip_velocity: Vector3<f64>,
+    /// Desired (virtual) angular velocity of the servicer relative to the target, `t`, rad/s.
+    pub angular_velocity: Vector3<f64>,
     /// Actual (robot) rod tip, `t` frame, m.
     pub actual_tip_position: Vector3<f64>,
     /// Actual (robot) rod tip velocity, `t` frame, m/s.
@@ -232,6 +234,7 @@ impl HilStep {
             time,
             tip_position: desired.point(&rod),
             tip_velocity: desired.point_velocity(&rod),
+            angular_velocity: desired.angular_velocity,
             actual_tip_position: m.actual.point(&rod),
             actual_tip_velocity: m.actual.point_velocity(&rod),
             contact_force: contact_force.unwrap_or_else(|| -(sensor_to_t * m.force)),

@@ -1,103 +1,501 @@
-//! Metrics (spec hil-loop.md §5), defined once for simulations, reports and the real-time loop.
+//! Metrics (spec hil-loop.md §5, docs/model.md "Metrics"), defined once for simulations,
+//! sweeps, reports and the real-time loop.
 //!
-//! - Collision n: a maximal interval of samples where the physical contact force magnitude
-//!   exceeds `metrics.contact_threshold`. Start: first sample above; end: first sample below
-//!   (or the last sample, for a collision still under way, which then has no rebound).
-//! - Rebound speed of collision n: speed of the virtual relative motion of the rod tip in the
-//!   middle of the free flight that follows (halfway to the next collision's start, or to the
-//!   end of the run), where the sensor-delayed tail of the force has long ended.
-//! - `CoV_n` = rebound speed / the reference's rebound speed of collision n;
-//!   `CoF_n` = peak force / the reference's peak force of collision n.
+//! - **Collision**: a maximal interval of samples where the physical contact force magnitude
+//!   exceeds `metrics.contact_threshold`. Start: first sample above; end: first sample below.
+//!   A collision still under way at the last sample is *incomplete*: it is listed, but has no
+//!   rebound and counts in no ratio, no worst value and no verdict.
+//! - **Matching**: HIL collisions are matched to reference collisions in order, by the
+//!   alignment of least cost: leaving a collision unmatched costs 1, matching two costs the
+//!   difference of their starts (the HIL's less the facility's lag: robot delay and servo lag)
+//!   in units of the reference's median time between collisions (at most 3), plus
+//!   `2 (1 − cos θ)` for the angle θ between their contact forces at the peak, so that
+//!   collisions on different walls never match. A complete reference collision without a match that
+//!   ended at least the loop's lag before the HIL run's last sample is *lost*; a complete HIL
+//!   collision without a match is *extra*.
+//! - **Rebound sample** of a matched pair: the middle of the common part of the two free
+//!   flights that follow (each from its collision's end to the next collision's start or the
+//!   end of the run), so both are read at the same time, where the sensor-delayed tail of the
+//!   force has ended; each trace's own middle if the free flights do not overlap.
+//! - Per matched pair of complete collisions:
+//!   - `CoV = |v| / |v_ref|` (rebound speed of the rod tip relative to the target);
+//!   - `velocity_error = |v − v_ref| / |v_ref|` (the rebound velocity as a vector: a rebound
+//!     in the wrong direction has an error near 2 whatever its speed);
+//!   - `angular_velocity_error = |ω − ω_ref| / |ω_ref|` of the servicer's angular velocity
+//!     relative to the target (none when `|ω_ref|` < 1e-6 rad/s);
+//!   - `CoF = F_peak / F_peak,ref` (physical contact force);
+//!   - `impulse_ratio = |∫F dt| / |∫F_ref dt|` and `angular_impulse_ratio = |∫M dt| /
+//!     |∫M_ref dt|`, the wrench the virtual dynamics felt (on the frame, moment about the
+//!     sensor origin), from the collision's start to its rebound sample.
+//! - **Verdict**: a run that ran to its end is `unfaithful` when any matched collision breaks
+//!   the tolerances ([`Tolerances`], `[metrics]` in the scenario: `|CoV − 1|`, CoF, velocity
+//!   error) or more collisions are lost or extra than allowed; else `ok`.
 //! - Identification error: mean of `|k̂/k − 1|` and of `|ĉ − c|` over contact samples after
 //!   the first collision.
 //! - Energy: kinetic energy of the virtual relative motion; a run whose energy passes a bound
 //!   is `diverged` (a status, never a NaN or a crash).
 
-use serde::Serialize;
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
 
-/// One collision.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Collision {
-    /// 1-based index.
-    pub index: usize,
-    /// Start time, s.
-    pub start: f64,
-    /// End time, s.
-    pub end: f64,
-    /// Peak physical contact force, N.
-    pub peak_force: f64,
-    /// Rebound speed, m/s (none for a collision still under way at the end).
-    pub rebound_speed: Option<f64>,
+use crate::frames::FrameWrench;
+
+/// What the metrics read of a run, one value per tick (the compact record a sweep keeps).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Trace {
+    /// Time, s.
+    pub time: Vec<f64>,
+    /// Magnitude of the physical contact force on the rod, N.
+    pub force: Vec<f64>,
+    /// The physical contact force on the rod, `t` frame, N.
+    pub contact_force: Vec<Vector3<f64>>,
+    /// Velocity of the (virtual) rod tip relative to the target, `t` frame, m/s.
+    pub velocity: Vec<Vector3<f64>>,
+    /// Angular velocity of the (virtual) servicer relative to the target, `t` frame, rad/s.
+    pub angular_velocity: Vec<Vector3<f64>>,
+    /// Force the (virtual) dynamics felt, on the frame (the sensor's convention), `t`, N.
+    pub wrench_force: Vec<Vector3<f64>>,
+    /// Its moment about the sensor origin, `t`, N·m.
+    pub wrench_moment: Vec<Vector3<f64>>,
+    /// Kinetic energy of the (virtual) relative motion, J.
+    pub energy: Vec<f64>,
+    /// Identified stiffness, N/m (NaN when not identified; empty when nothing is identified).
+    pub stiffness_estimate: Vec<f64>,
+    /// Identified damping, N·s/m (NaN when not identified; empty when nothing is identified).
+    pub damping_estimate: Vec<f64>,
 }
 
-/// A HIL collision compared with the reference's collision of the same index.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct ComparedCollision {
-    /// The collision itself.
-    #[serde(flatten)]
-    pub collision: Collision,
-    /// CoV: rebound speed / the reference's (none without a matching reference rebound).
-    pub cov: Option<f64>,
-    /// CoF: peak force / the reference's (none without a matching reference collision).
-    pub cof: Option<f64>,
+/// One tick of a [`Trace`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TraceSample {
+    /// Time, s.
+    pub time: f64,
+    /// Physical contact force on the rod, `t`, N.
+    pub contact_force: Vector3<f64>,
+    /// Rod tip velocity relative to the target, `t`, m/s.
+    pub velocity: Vector3<f64>,
+    /// Servicer angular velocity relative to the target, `t`, rad/s.
+    pub angular_velocity: Vector3<f64>,
+    /// Wrench the dynamics felt, on the frame, `t` (moment about the sensor origin).
+    pub wrench: FrameWrench,
+    /// Kinetic energy of the relative motion, J.
+    pub energy: f64,
 }
 
-/// Finds the collisions in a record: `time` (s), contact force magnitude (N) and the virtual
-/// tip speed (m/s), sample by sample.
-pub fn collisions(time: &[f64], force: &[f64], speed: &[f64], threshold: f64) -> Vec<Collision> {
-    let n = time.len().min(force.len()).min(speed.len());
-    let mut spans: Vec<(usize, usize, bool)> = Vec::new(); // (start, end, complete)
+impl Trace {
+    /// An empty trace with room for `n` ticks (and estimates if `estimates`).
+    pub fn with_capacity(n: usize, estimates: bool) -> Self {
+        let e = if estimates { n } else { 0 };
+        Trace {
+            time: Vec::with_capacity(n),
+            force: Vec::with_capacity(n),
+            contact_force: Vec::with_capacity(n),
+            velocity: Vec::with_capacity(n),
+            angular_velocity: Vec::with_capacity(n),
+            wrench_force: Vec::with_capacity(n),
+            wrench_moment: Vec::with_capacity(n),
+            energy: Vec::with_capacity(n),
+            stiffness_estimate: Vec::with_capacity(e),
+            damping_estimate: Vec::with_capacity(e),
+        }
+    }
+
+    /// Appends one tick.
+    pub fn push(&mut self, s: &TraceSample) {
+        self.time.push(s.time);
+        self.force.push(s.contact_force.norm());
+        self.contact_force.push(s.contact_force);
+        self.velocity.push(s.velocity);
+        self.angular_velocity.push(s.angular_velocity);
+        self.wrench_force.push(s.wrench.force);
+        self.wrench_moment.push(s.wrench.moment);
+        self.energy.push(s.energy);
+    }
+
+    /// Appends one tick's contact estimates (N/m, N·s/m).
+    pub fn push_estimates(&mut self, stiffness: f64, damping: f64) {
+        self.stiffness_estimate.push(stiffness);
+        self.damping_estimate.push(damping);
+    }
+
+    /// Number of ticks.
+    pub fn len(&self) -> usize {
+        self.time.len()
+    }
+
+    /// Whether the trace has no tick.
+    pub fn is_empty(&self) -> bool {
+        self.time.is_empty()
+    }
+
+    /// The sample nearest to time `t` (s); 0 for an empty trace.
+    fn index_at(&self, t: f64) -> usize {
+        let i = self.time.partition_point(|&x| x < t);
+        if i == 0 {
+            return 0;
+        }
+        if i >= self.time.len() {
+            return self.time.len().saturating_sub(1);
+        }
+        if t - self.time[i - 1] <= self.time[i] - t {
+            i - 1
+        } else {
+            i
+        }
+    }
+
+    /// `∫ v dt` over samples `from..to` with each sample held until the next (ZOH).
+    fn integral(&self, v: &[Vector3<f64>], from: usize, to: usize) -> Vector3<f64> {
+        (from..to.min(self.len().saturating_sub(1)))
+            .map(|i| v[i] * (self.time[i + 1] - self.time[i]))
+            .sum()
+    }
+}
+
+/// Where a collision lies in its trace, by sample index.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct Span {
+    /// First sample above the threshold.
+    start: usize,
+    /// First sample below (the last sample of an incomplete collision).
+    end: usize,
+    /// Start of the next collision, or the last sample.
+    next: usize,
+    /// Whether the force fell below the threshold before the last sample.
+    complete: bool,
+}
+
+fn spans(trace: &Trace, threshold: f64) -> Vec<Span> {
+    let n = trace.len();
+    let mut out: Vec<Span> = Vec::new();
     let mut start: Option<usize> = None;
     for i in 0..n {
-        let in_contact = force[i] > threshold;
+        let in_contact = trace.force[i] > threshold;
         match (start, in_contact) {
             (None, true) => start = Some(i),
             (Some(s), false) => {
-                spans.push((s, i, true));
+                out.push(Span { start: s, end: i, next: n - 1, complete: true });
                 start = None;
             }
             _ => {}
         }
     }
     if let Some(s) = start {
-        spans.push((s, n - 1, false));
+        out.push(Span { start: s, end: n - 1, next: n - 1, complete: false });
     }
-    spans
+    for j in 1..out.len() {
+        out[j - 1].next = out[j].start;
+    }
+    out
+}
+
+/// One collision of a run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Collision {
+    /// 1-based index among the run's collisions.
+    pub index: usize,
+    /// Start time, s.
+    pub start: f64,
+    /// End time, s (the last sample's time for an incomplete collision).
+    pub end: f64,
+    /// Peak physical contact force, N.
+    pub peak_force: f64,
+    /// Whether the collision ended before the run did.
+    pub complete: bool,
+    /// Rebound speed, m/s, in the middle of the free flight that follows (none for an
+    /// incomplete collision).
+    pub rebound_speed: Option<f64>,
+}
+
+impl Collision {
+    fn of(trace: &Trace, j: usize, s: &Span) -> Self {
+        Collision {
+            index: j + 1,
+            start: trace.time[s.start],
+            end: trace.time[s.end],
+            peak_force: trace.force[s.start..=s.end].iter().cloned().fold(0.0, f64::max),
+            complete: s.complete,
+            rebound_speed: s.complete.then(|| trace.velocity[(s.end + s.next) / 2].norm()),
+        }
+    }
+}
+
+/// Finds the collisions of a trace (see the module doc).
+pub fn collisions(trace: &Trace, threshold: f64) -> Vec<Collision> {
+    spans(trace, threshold)
         .iter()
         .enumerate()
-        .map(|(j, &(s, e, complete))| {
-            let next = spans.get(j + 1).map_or(n - 1, |next| next.0);
-            Collision {
-                index: j + 1,
-                start: time[s],
-                end: time[e],
-                peak_force: force[s..=e].iter().cloned().fold(0.0, f64::max),
-                rebound_speed: complete.then(|| speed[(e + next) / 2]),
-            }
-        })
+        .map(|(j, s)| Collision::of(trace, j, s))
         .collect()
 }
 
-/// CoV and CoF of each collision against the reference's collision of the same index.
-pub fn compare_with_reference(
-    collisions: &[Collision],
-    reference: &[Collision],
-) -> Vec<ComparedCollision> {
-    let ratio = |a: Option<f64>, b: Option<f64>| match (a, b) {
-        (Some(a), Some(b)) if b > 0.0 => Some(a / b),
-        _ => None,
-    };
-    collisions
+/// A HIL collision compared with the reference collision it is matched to.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ComparedCollision {
+    /// The collision itself.
+    #[serde(flatten)]
+    pub collision: Collision,
+    /// Index of the matched reference collision (none for an extra collision).
+    pub reference: Option<usize>,
+    /// Time of the rebound sample, s (none unless both collisions are complete).
+    pub rebound_time: Option<f64>,
+    /// CoV = |v| / |v_ref|.
+    pub cov: Option<f64>,
+    /// CoF = F_peak / F_peak,ref.
+    pub cof: Option<f64>,
+    /// |v − v_ref| / |v_ref| of the rebound velocity (fraction).
+    pub velocity_error: Option<f64>,
+    /// |ω − ω_ref| / |ω_ref| of the relative angular velocity after the collision (fraction;
+    /// none when the reference hardly turns).
+    pub angular_velocity_error: Option<f64>,
+    /// |∫F dt| / |∫F_ref dt| of the wrench the virtual dynamics felt.
+    pub impulse_ratio: Option<f64>,
+    /// |∫M dt| / |∫M_ref dt| (moments about the sensor origin).
+    pub angular_impulse_ratio: Option<f64>,
+}
+
+/// When a run is faithful (`[metrics]` in the scenario; docs/model.md "Metrics").
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Tolerances {
+    /// Largest `|CoV − 1|` of a collision (fraction).
+    pub cov: f64,
+    /// Largest CoF of a collision.
+    pub cof: f64,
+    /// Largest rebound velocity error `|v − v_ref| / |v_ref|` (fraction).
+    pub velocity_error: f64,
+    /// How many reference collisions may be lost.
+    pub lost_collisions: usize,
+    /// How many HIL collisions may have no reference collision.
+    pub extra_collisions: usize,
+}
+
+impl Default for Tolerances {
+    fn default() -> Self {
+        Tolerances {
+            cov: 0.05,
+            cof: 1.2,
+            velocity_error: 0.05,
+            lost_collisions: 0,
+            extra_collisions: 0,
+        }
+    }
+}
+
+/// The collisions of a HIL run against the reference's, and the verdict on them.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Comparison {
+    /// The HIL run's collisions, compared.
+    pub collisions: Vec<ComparedCollision>,
+    /// The reference's collisions.
+    pub reference_collisions: Vec<Collision>,
+    /// Indices of the lost reference collisions.
+    pub lost_collisions: Vec<usize>,
+    /// Indices of the extra HIL collisions.
+    pub extra_collisions: Vec<usize>,
+    /// Every tolerance the run breaks, one line each (empty for a faithful run).
+    pub violations: Vec<String>,
+}
+
+/// Compares a HIL trace with the reference's (see the module doc). `lag`: the loop's lag, s
+/// (robot delay plus servo lag: HIL collisions start that much after the reference's);
+/// `settle`: how long after a reference collision's end its HIL collision must have ended,
+/// s (the lag plus the sensor delay and a few ticks), before it can be called lost.
+pub fn compare(
+    hil: &Trace,
+    reference: &Trace,
+    threshold: f64,
+    tolerances: &Tolerances,
+    lag: f64,
+    settle: f64,
+) -> Comparison {
+    let hs = spans(hil, threshold);
+    let rs = spans(reference, threshold);
+    let matched = align(hil, &hs, reference, &rs, lag);
+    let mut partner: Vec<Option<usize>> = vec![None; hs.len()];
+    for (i, m) in matched.iter().enumerate() {
+        if let Some(j) = *m {
+            partner[j] = Some(i);
+        }
+    }
+    let ratio = |a: f64, b: f64| (b > 0.0 && a.is_finite()).then(|| a / b);
+    let collisions: Vec<ComparedCollision> = hs
         .iter()
-        .map(|c| {
-            let r = reference.get(c.index - 1);
-            ComparedCollision {
-                collision: c.clone(),
-                cov: ratio(c.rebound_speed, r.and_then(|r| r.rebound_speed)),
-                cof: ratio(Some(c.peak_force), r.map(|r| r.peak_force)),
+        .enumerate()
+        .map(|(j, h)| {
+            let collision = Collision::of(hil, j, h);
+            let mut c = ComparedCollision {
+                collision,
+                reference: partner[j].map(|i| i + 1),
+                rebound_time: None,
+                cov: None,
+                cof: None,
+                velocity_error: None,
+                angular_velocity_error: None,
+                impulse_ratio: None,
+                angular_impulse_ratio: None,
+            };
+            let Some(i) = partner[j] else { return c };
+            let r = &rs[i];
+            if !(h.complete && r.complete) {
+                return c;
             }
+            // the rebound sample: the middle of the common free flight
+            let lo = hil.time[h.end].max(reference.time[r.end]);
+            let hi = hil.time[h.next].min(reference.time[r.next]);
+            let (hi_i, ri) = if hi > lo {
+                let t = 0.5 * (lo + hi);
+                (hil.index_at(t), reference.index_at(t))
+            } else {
+                ((h.end + h.next) / 2, (r.end + r.next) / 2)
+            };
+            let (v, v_ref) = (hil.velocity[hi_i], reference.velocity[ri]);
+            let (w, w_ref) = (hil.angular_velocity[hi_i], reference.angular_velocity[ri]);
+            let peak = |t: &Trace, s: &Span| t.force[s.start..=s.end].iter().cloned().fold(0.0, f64::max);
+            let impulse = |t: &Trace, s: &Span, to: usize| {
+                (t.integral(&t.wrench_force, s.start, to), t.integral(&t.wrench_moment, s.start, to))
+            };
+            let (j_h, m_h) = impulse(hil, h, hi_i);
+            let (j_r, m_r) = impulse(reference, r, ri);
+            c.rebound_time = Some(hil.time[hi_i]);
+            c.cov = ratio(v.norm(), v_ref.norm());
+            c.velocity_error = ratio((v - v_ref).norm(), v_ref.norm());
+            c.angular_velocity_error =
+                (w_ref.norm() >= 1e-6).then(|| (w - w_ref).norm() / w_ref.norm());
+            c.cof = ratio(peak(hil, h), peak(reference, r));
+            c.impulse_ratio = ratio(j_h.norm(), j_r.norm());
+            c.angular_impulse_ratio = ratio(m_h.norm(), m_r.norm());
+            c
         })
-        .collect()
+        .collect();
+    let last = hil.time.last().copied().unwrap_or(f64::NEG_INFINITY);
+    let lost_collisions: Vec<usize> = rs
+        .iter()
+        .enumerate()
+        .filter(|(i, r)| {
+            matched[*i].is_none() && r.complete && reference.time[r.end] + settle <= last
+        })
+        .map(|(i, _)| i + 1)
+        .collect();
+    let extra_collisions: Vec<usize> = hs
+        .iter()
+        .enumerate()
+        .filter(|(j, h)| partner[*j].is_none() && h.complete)
+        .map(|(j, _)| j + 1)
+        .collect();
+    let violations = verdict(&collisions, &lost_collisions, &extra_collisions, tolerances);
+    Comparison {
+        collisions,
+        reference_collisions: rs
+            .iter()
+            .enumerate()
+            .map(|(i, s)| Collision::of(reference, i, s))
+            .collect(),
+        lost_collisions,
+        extra_collisions,
+        violations,
+    }
+}
+
+/// Matches HIL collisions to reference collisions: the order-keeping alignment of least
+/// cost (Needleman–Wunsch), where leaving a collision unmatched costs 1 and matching two costs
+/// `min(|Δt| / gap, 3) + 2 (1 − cos θ)`: `Δt` the difference of their starts after the lag,
+/// `gap` the reference's median time between collision starts, `θ` the angle between their
+/// contact forces at the peak (collisions on different walls do not match). Returns, for
+/// each reference collision, the index of its HIL collision.
+fn align(hil: &Trace, hs: &[Span], reference: &Trace, rs: &[Span], lag: f64) -> Vec<Option<usize>> {
+    let (n, m) = (rs.len(), hs.len());
+    let mut gaps: Vec<f64> = rs
+        .windows(2)
+        .map(|w| reference.time[w[1].start] - reference.time[w[0].start])
+        .collect();
+    gaps.sort_by(f64::total_cmp);
+    let span = |t: &Trace| t.time.last().copied().unwrap_or(0.0) - t.time.first().copied().unwrap_or(0.0);
+    let gap = gaps.get(gaps.len() / 2).copied().unwrap_or_else(|| span(reference)).max(1e-9);
+    let direction = |t: &Trace, s: &Span| {
+        let peak = (s.start..=s.end).max_by(|&a, &b| t.force[a].total_cmp(&t.force[b])).unwrap_or(s.start);
+        t.contact_force[peak].try_normalize(1e-12).unwrap_or_else(Vector3::zeros)
+    };
+    let (dr, dh): (Vec<_>, Vec<_>) = (
+        rs.iter().map(|s| direction(reference, s)).collect(),
+        hs.iter().map(|s| direction(hil, s)).collect(),
+    );
+    let cost = |i: usize, j: usize| {
+        let dt = (hil.time[hs[j].start] - lag - reference.time[rs[i].start]).abs();
+        (dt / gap).min(3.0) + 2.0 * (1.0 - dr[i].dot(&dh[j]))
+    };
+    // d[i][j]: least cost of aligning the first i reference and the first j HIL collisions
+    let mut d = vec![vec![0.0f64; m + 1]; n + 1];
+    for i in 0..=n {
+        for j in 0..=m {
+            d[i][j] = match (i, j) {
+                (0, _) => j as f64,
+                (_, 0) => i as f64,
+                _ => (d[i - 1][j - 1] + cost(i - 1, j - 1))
+                    .min(d[i - 1][j] + 1.0)
+                    .min(d[i][j - 1] + 1.0),
+            };
+        }
+    }
+    let mut matched = vec![None; n];
+    let (mut i, mut j) = (n, m);
+    while i > 0 && j > 0 {
+        if d[i][j] == d[i - 1][j - 1] + cost(i - 1, j - 1) {
+            matched[i - 1] = Some(j - 1);
+            i -= 1;
+            j -= 1;
+        } else if d[i][j] == d[i - 1][j] + 1.0 {
+            i -= 1;
+        } else {
+            j -= 1;
+        }
+    }
+    matched
+}
+
+/// Every tolerance broken, one line each (formats: not for a real-time tick).
+fn verdict(
+    collisions: &[ComparedCollision],
+    lost: &[usize],
+    extra: &[usize],
+    tol: &Tolerances,
+) -> Vec<String> {
+    let mut out = Vec::new();
+    for c in collisions {
+        let n = c.collision.index;
+        if let Some(cov) = c.cov.filter(|v| (v - 1.0).abs() > tol.cov) {
+            out.push(format!("collision {n}: |CoV - 1| = {:.3} > {}", (cov - 1.0).abs(), tol.cov));
+        }
+        if let Some(cof) = c.cof.filter(|v| *v > tol.cof) {
+            out.push(format!("collision {n}: CoF = {cof:.3} > {}", tol.cof));
+        }
+        if let Some(e) = c.velocity_error.filter(|v| *v > tol.velocity_error) {
+            out.push(format!(
+                "collision {n}: rebound velocity error {e:.3} > {}",
+                tol.velocity_error
+            ));
+        }
+    }
+    if lost.len() > tol.lost_collisions {
+        out.push(format!(
+            "{} reference collision(s) lost ({}) > {} allowed",
+            lost.len(),
+            list(lost),
+            tol.lost_collisions
+        ));
+    }
+    if extra.len() > tol.extra_collisions {
+        out.push(format!(
+            "{} extra collision(s) ({}) > {} allowed",
+            extra.len(),
+            list(extra),
+            tol.extra_collisions
+        ));
+    }
+    out
+}
+
+fn list(indices: &[usize]) -> String {
+    indices.iter().map(|i| format!("#{i}")).collect::<Vec<_>>().join(", ")
 }
 
 /// Identification error of the contact estimates.
@@ -112,21 +510,22 @@ pub struct IdentificationError {
 }
 
 /// Identification error over samples in contact (`force > threshold`) after the first
-/// collision's end; `None` if there is no such sample.
+/// collision's end; `None` if there is no such sample or the trace has no estimates.
 pub fn identification_error(
-    time: &[f64],
-    force: &[f64],
+    trace: &Trace,
     threshold: f64,
     first_collision_end: f64,
-    stiffness_estimate: &[f64],
-    damping_estimate: &[f64],
     stiffness: f64,
     damping: f64,
 ) -> Option<IdentificationError> {
     let (mut sk, mut sc, mut n) = (0.0, 0.0, 0usize);
-    for i in 0..time.len() {
-        let (k, c) = (stiffness_estimate[i], damping_estimate[i]);
-        if time[i] > first_collision_end && force[i] > threshold && k.is_finite() && c.is_finite() {
+    let estimates = trace.stiffness_estimate.iter().zip(&trace.damping_estimate);
+    for (i, (&k, &c)) in estimates.enumerate() {
+        if trace.time[i] > first_collision_end
+            && trace.force[i] > threshold
+            && k.is_finite()
+            && c.is_finite()
+        {
             sk += (k / stiffness - 1.0).abs();
             sc += (c - damping).abs();
             n += 1;
@@ -139,43 +538,63 @@ pub fn identification_error(
     })
 }
 
-/// A run in a few numbers: what a comparison table or a sweep row shows.
+/// The value farthest from `target` of the finite values, and their mean (NaN, NaN if none).
+fn mean_and_worst(values: impl Iterator<Item = f64>, target: f64) -> (f64, f64) {
+    let (mut sum, mut n, mut worst) = (0.0, 0usize, f64::NAN);
+    for v in values.filter(|v| v.is_finite()) {
+        sum += v;
+        n += 1;
+        if worst.is_nan() || (v - target).abs() > (worst - target).abs() {
+            worst = v;
+        }
+    }
+    (if n > 0 { sum / n as f64 } else { f64::NAN }, worst)
+}
+
+/// A run's collisions in a few numbers (complete, matched collisions only).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Summary {
-    /// Number of HIL collisions.
+    /// Number of HIL collisions (complete or not).
     pub collisions: usize,
-    /// Mean CoV over the collisions that have one (NaN if none).
+    /// Number of collisions compared with the reference (both complete).
+    pub compared: usize,
+    /// Mean CoV (NaN if none).
     pub mean_cov: f64,
     /// The CoV farthest from 1 (NaN if none).
     pub worst_cov: f64,
-    /// Mean CoF over the collisions that have one (NaN if none).
+    /// Mean CoF (NaN if none).
     pub mean_cof: f64,
     /// The CoF farthest from 1 (NaN if none).
     pub worst_cof: f64,
+    /// The largest rebound velocity error (fraction, NaN if none).
+    pub worst_velocity_error: f64,
+    /// The largest angular velocity error (fraction, NaN if none).
+    pub worst_angular_velocity_error: f64,
+    /// The impulse ratio farthest from 1 (NaN if none).
+    pub worst_impulse_ratio: f64,
+    /// The angular impulse ratio farthest from 1 (NaN if none).
+    pub worst_angular_impulse_ratio: f64,
 }
 
 impl Summary {
     /// The summary of compared collisions.
     pub fn of(collisions: &[ComparedCollision]) -> Self {
-        let stats = |values: &mut dyn Iterator<Item = f64>| {
-            let (mut sum, mut n, mut worst) = (0.0, 0usize, f64::NAN);
-            for v in values.filter(|v| v.is_finite()) {
-                sum += v;
-                n += 1;
-                if worst.is_nan() || (v - 1.0).abs() > (worst - 1.0).abs() {
-                    worst = v;
-                }
-            }
-            (if n > 0 { sum / n as f64 } else { f64::NAN }, worst)
+        let pick = |f: fn(&ComparedCollision) -> Option<f64>, target: f64| {
+            mean_and_worst(collisions.iter().filter_map(f), target)
         };
-        let (mean_cov, worst_cov) = stats(&mut collisions.iter().filter_map(|c| c.cov));
-        let (mean_cof, worst_cof) = stats(&mut collisions.iter().filter_map(|c| c.cof));
+        let (mean_cov, worst_cov) = pick(|c| c.cov, 1.0);
+        let (mean_cof, worst_cof) = pick(|c| c.cof, 1.0);
         Summary {
             collisions: collisions.len(),
+            compared: collisions.iter().filter(|c| c.cov.is_some()).count(),
             mean_cov,
             worst_cov,
             mean_cof,
             worst_cof,
+            worst_velocity_error: pick(|c| c.velocity_error, 0.0).1,
+            worst_angular_velocity_error: pick(|c| c.angular_velocity_error, 0.0).1,
+            worst_impulse_ratio: pick(|c| c.impulse_ratio, 1.0).1,
+            worst_angular_impulse_ratio: pick(|c| c.angular_impulse_ratio, 1.0).1,
         }
     }
 }
@@ -198,8 +617,10 @@ pub struct EnergySummary {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Status {
-    /// Ran to the end.
+    /// Ran to the end, faithful to the reference within the tolerances.
     Ok,
+    /// Ran to the end, but broke a tolerance (see `violations`).
+    Unfaithful,
     /// Stopped by the user (Ctrl-C).
     Interrupted,
     /// Stopped when the energy passed its bound or a value stopped being finite.
@@ -348,24 +769,115 @@ pub struct Metrics {
     pub scenario: String,
     /// Compensator kind.
     pub compensator: String,
-    /// `ok`, `interrupted`, `diverged` or `stopped` (from `stop`).
+    /// `ok`, `unfaithful`, `interrupted`, `diverged` or `stopped` (from `stop` and, for a run
+    /// that ran to its end, `violations`).
     pub status: Status,
     /// Time at which divergence was detected, s.
     pub diverged_at: Option<f64>,
-    /// Why the run stopped early (from `stop`).
+    /// Why the run stopped early (from `stop`), or why it is unfaithful (the first
+    /// violation and how many more).
     pub reason: Option<String>,
     /// How the run stopped.
     pub stop: Stop,
-    /// The HIL run's collisions, with CoV and CoF.
+    /// The HIL run's collisions, compared with the reference's.
     pub collisions: Vec<ComparedCollision>,
-    /// Mean and worst CoV and CoF of `collisions`.
+    /// Mean and worst values of `collisions`.
     pub summary: Summary,
     /// The ideal reference's collisions.
     pub reference_collisions: Vec<Collision>,
+    /// Indices of the reference collisions the HIL run lost.
+    pub lost_collisions: Vec<usize>,
+    /// Indices of the HIL collisions that have no reference collision.
+    pub extra_collisions: Vec<usize>,
+    /// Every tolerance the run breaks, one line each.
+    pub violations: Vec<String>,
+    /// The tolerances of the verdict.
+    pub tolerances: Tolerances,
     /// Identification error, when the compensator identifies the contact.
     pub identification: Option<IdentificationError>,
     /// Energy summary.
     pub energy: EnergySummary,
+}
+
+impl Metrics {
+    /// The status of a run that stopped with `stop` and broke `violations`: `unfaithful`
+    /// instead of `ok` when it broke any.
+    pub fn verdict(stop: &Stop, violations: &[String]) -> Status {
+        match stop.kind.status() {
+            Status::Ok if !violations.is_empty() => Status::Unfaithful,
+            status => status,
+        }
+    }
+}
+
+/// One column of a table the core produces: name, unit, meaning.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct Column {
+    /// Column name.
+    pub name: &'static str,
+    /// SI unit ("" for counts and ratios, "1" for fractions).
+    pub unit: &'static str,
+    /// What it holds.
+    pub doc: &'static str,
+}
+
+/// A run in one row: what a sweep keeps of each run ([`RunSummary::COLUMNS`] in order,
+/// after `status`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RunSummary {
+    /// The run's status.
+    pub status: Status,
+    /// The numbers, in the order of [`RunSummary::COLUMNS`] (NaN where a run has none).
+    pub values: [f64; RunSummary::COLUMNS.len()],
+}
+
+impl RunSummary {
+    /// The numeric columns of a run's row, after `status`.
+    pub const COLUMNS: [Column; 16] = [
+        Column { name: "diverged_at", unit: "s", doc: "time the run diverged (NaN if it did not)" },
+        Column { name: "collisions", unit: "", doc: "HIL collisions" },
+        Column { name: "reference_collisions", unit: "", doc: "reference collisions" },
+        Column { name: "lost_collisions", unit: "", doc: "reference collisions the run lost" },
+        Column { name: "extra_collisions", unit: "", doc: "HIL collisions without a reference collision" },
+        Column { name: "mean_cov", unit: "", doc: "mean CoV" },
+        Column { name: "worst_cov", unit: "", doc: "the CoV farthest from 1" },
+        Column { name: "mean_cof", unit: "", doc: "mean CoF" },
+        Column { name: "worst_cof", unit: "", doc: "the CoF farthest from 1" },
+        Column { name: "worst_velocity_error", unit: "1", doc: "largest rebound velocity error |v - v_ref| / |v_ref|" },
+        Column { name: "worst_angular_velocity_error", unit: "1", doc: "largest angular velocity error |w - w_ref| / |w_ref|" },
+        Column { name: "worst_impulse_ratio", unit: "", doc: "the impulse ratio farthest from 1" },
+        Column { name: "worst_angular_impulse_ratio", unit: "", doc: "the angular impulse ratio farthest from 1" },
+        Column { name: "stiffness_error", unit: "1", doc: "mean |k_hat / k - 1|" },
+        Column { name: "damping_error", unit: "N s/m", doc: "mean |c_hat - c|" },
+        Column { name: "energy_ratio", unit: "", doc: "final energy / the reference's" },
+    ];
+
+    /// The row of a run's metrics.
+    pub fn of(m: &Metrics) -> Self {
+        let id = m.identification.as_ref();
+        let s = &m.summary;
+        RunSummary {
+            status: m.status,
+            values: [
+                m.diverged_at.unwrap_or(f64::NAN),
+                s.collisions as f64,
+                m.reference_collisions.len() as f64,
+                m.lost_collisions.len() as f64,
+                m.extra_collisions.len() as f64,
+                s.mean_cov,
+                s.worst_cov,
+                s.mean_cof,
+                s.worst_cof,
+                s.worst_velocity_error,
+                s.worst_angular_velocity_error,
+                s.worst_impulse_ratio,
+                s.worst_angular_impulse_ratio,
+                id.map_or(f64::NAN, |i| i.stiffness_error),
+                id.map_or(f64::NAN, |i| i.damping_error),
+                m.energy.r#final / m.energy.reference_final,
+            ],
+        }
+    }
 }
 
 /// Energy bound past which a run is `diverged`, J: `ratio × max(initial, reference peak)`.
@@ -381,76 +893,195 @@ pub fn divergence_bound(ratio: f64, initial_energy: f64, reference_energy: &[f64
 mod tests {
     use super::*;
 
+    /// A trace sampled every 0.1 s: contact force magnitude (along −x on the rod, so the
+    /// frame feels +x) and rod tip velocity per sample.
+    fn trace(force: &[f64], velocity: &[Vector3<f64>]) -> Trace {
+        let mut t = Trace::with_capacity(force.len(), false);
+        for (i, (&f, v)) in force.iter().zip(velocity).enumerate() {
+            t.push(&TraceSample {
+                time: i as f64 * 0.1,
+                contact_force: Vector3::new(-f, 0.0, 0.0),
+                velocity: *v,
+                angular_velocity: Vector3::new(0.0, 0.0, 0.01),
+                wrench: FrameWrench {
+                    force: Vector3::new(f, 0.0, 0.0),
+                    moment: Vector3::new(0.0, 0.0, 0.1 * f),
+                },
+                energy: 1.0,
+            });
+        }
+        t
+    }
+
+    /// Contact `peak` N on the sample ranges given, 0 elsewhere, over `n` samples.
+    fn pulses(n: usize, spans: &[(usize, usize, f64)]) -> Vec<f64> {
+        (0..n)
+            .map(|i| spans.iter().find(|s| (s.0..s.1).contains(&i)).map_or(0.0, |s| s.2))
+            .collect()
+    }
+
+    /// Velocity +x before sample `a`, `after` from then on.
+    fn velocities(n: usize, a: usize, after: Vector3<f64>) -> Vec<Vector3<f64>> {
+        (0..n).map(|i| if i < a { Vector3::x() } else { after }).collect()
+    }
+
+    fn tol() -> Tolerances {
+        Tolerances::default()
+    }
+
     #[test]
     fn finds_collisions_and_rebounds() {
         // 0..10: free, 10..20 contact, 20..40 free, 40..50 contact, 50..60 free
-        let time: Vec<f64> = (0..60).map(|i| i as f64 * 0.1).collect();
-        let force: Vec<f64> = (0..60)
-            .map(|i| {
-                if (10..20).contains(&i) {
-                    5.0
-                } else if (40..50).contains(&i) {
-                    7.0
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let speed: Vec<f64> = (0..60).map(|i| i as f64).collect();
-        let c = collisions(&time, &force, &speed, 0.5);
+        let speed: Vec<Vector3<f64>> = (0..60).map(|i| Vector3::new(i as f64, 0.0, 0.0)).collect();
+        let t = trace(&pulses(60, &[(10, 20, 5.0), (40, 50, 7.0)]), &speed);
+        let c = collisions(&t, 0.5);
         assert_eq!(c.len(), 2);
         assert!((c[0].start - 1.0).abs() < 1e-12 && (c[0].end - 2.0).abs() < 1e-12);
         assert_eq!(c[0].rebound_speed, Some(30.0)); // midway between 20 and 40
         assert_eq!(c[1].rebound_speed, Some(54.0)); // midway between 50 and 59
         assert_eq!(c[1].peak_force, 7.0);
+        assert!(c[0].complete && c[1].complete);
     }
 
     #[test]
-    fn unfinished_collision_has_no_rebound() {
-        let time = [0.0, 1.0, 2.0];
-        let c = collisions(&time, &[0.0, 3.0, 3.0], &[1.0, 1.0, 1.0], 0.5);
-        assert_eq!(c.len(), 1);
-        assert_eq!(c[0].rebound_speed, None);
+    fn identical_runs_are_faithful_with_unit_ratios() {
+        let v = velocities(60, 20, Vector3::new(-0.9, 0.1, 0.0));
+        let t = trace(&pulses(60, &[(10, 20, 5.0)]), &v);
+        let c = compare(&t, &t, 0.5, &tol(), 0.0, 0.0);
+        assert!(c.violations.is_empty(), "{:?}", c.violations);
+        let x = &c.collisions[0];
+        assert_eq!(x.reference, Some(1));
+        for r in [x.cov, x.cof, x.impulse_ratio, x.angular_impulse_ratio] {
+            assert!((r.unwrap() - 1.0).abs() < 1e-12);
+        }
+        assert_eq!(x.velocity_error, Some(0.0));
+        assert_eq!(x.angular_velocity_error, Some(0.0));
     }
 
     #[test]
-    fn cov_and_cof_are_ratios_to_the_reference() {
-        let mk = |speed, peak| Collision {
-            index: 1,
-            start: 0.0,
-            end: 1.0,
-            peak_force: peak,
-            rebound_speed: Some(speed),
-        };
-        let hil = compare_with_reference(&[mk(0.03, 120.0)], &[mk(0.02, 100.0)]);
-        assert!((hil[0].cov.unwrap() - 1.5).abs() < 1e-12);
-        assert!((hil[0].cof.unwrap() - 1.2).abs() < 1e-12);
+    fn ratios_against_the_reference_and_the_impulse_over_the_collision() {
+        let r = trace(&pulses(60, &[(10, 20, 100.0)]), &velocities(60, 20, -0.02 * Vector3::x()));
+        let h = trace(&pulses(60, &[(10, 20, 120.0)]), &velocities(60, 20, -0.03 * Vector3::x()));
+        let c = compare(&h, &r, 0.5, &tol(), 0.0, 0.0);
+        let x = &c.collisions[0];
+        assert!((x.cov.unwrap() - 1.5).abs() < 1e-12);
+        assert!((x.cof.unwrap() - 1.2).abs() < 1e-12);
+        assert!((x.velocity_error.unwrap() - 0.5).abs() < 1e-12);
+        assert!((x.impulse_ratio.unwrap() - 1.2).abs() < 1e-12);
+        assert!((x.angular_impulse_ratio.unwrap() - 1.2).abs() < 1e-12);
+        // CoV 1.5 and velocity error 0.5 break their tolerances; CoF 1.2 is at its limit
+        assert_eq!(c.violations.len(), 2, "{:?}", c.violations);
+        assert!(c.violations[0].contains("CoV"));
+    }
+
+    #[test]
+    fn a_rebound_in_the_wrong_direction_is_unfaithful_though_its_speed_is_right() {
+        let r = trace(&pulses(60, &[(10, 20, 5.0)]), &velocities(60, 20, Vector3::new(-0.6, 0.8, 0.0)));
+        let h = trace(&pulses(60, &[(10, 20, 5.0)]), &velocities(60, 20, Vector3::new(0.6, 0.8, 0.0)));
+        let c = compare(&h, &r, 0.5, &tol(), 0.0, 0.0);
+        let x = &c.collisions[0];
+        assert!((x.cov.unwrap() - 1.0).abs() < 1e-12);
+        assert!((x.velocity_error.unwrap() - 1.2).abs() < 1e-12);
+        assert_eq!(c.violations.len(), 1);
+        assert!(c.violations[0].contains("velocity error"), "{:?}", c.violations);
+        let stop = Stop::plain(StopKind::Completed, 6.0);
+        assert_eq!(Metrics::verdict(&stop, &c.violations), Status::Unfaithful);
+        assert_eq!(Metrics::verdict(&stop, &[]), Status::Ok);
+        let diverged = Stop::plain(StopKind::Diverged, 3.0);
+        assert_eq!(Metrics::verdict(&diverged, &c.violations), Status::Diverged);
+    }
+
+    #[test]
+    fn a_truncated_collision_counts_in_no_ratio_and_no_verdict() {
+        // the HIL's second collision is cut off by the end of the run: a small peak, no ratio
+        let v = velocities(60, 20, -Vector3::x());
+        let r = trace(&pulses(60, &[(10, 20, 100.0), (40, 50, 100.0)]), &v);
+        let h = trace(&pulses(60, &[(10, 20, 100.0), (57, 60, 16.6)]), &v);
+        let c = compare(&h, &r, 0.5, &tol(), 0.0, 0.0);
+        assert_eq!(c.collisions.len(), 2);
+        let cut = &c.collisions[1];
+        assert!(!cut.collision.complete && cut.collision.rebound_speed.is_none());
+        assert!(cut.cof.is_none() && cut.cov.is_none());
+        let s = Summary::of(&c.collisions);
+        assert_eq!(s.worst_cof, 1.0); // not 0.166
+        assert_eq!(s.compared, 1);
+    }
+
+    #[test]
+    fn a_lost_collision_is_reported_and_unfaithful() {
+        let v = velocities(80, 20, -Vector3::x());
+        let r = trace(&pulses(80, &[(10, 20, 100.0), (40, 50, 100.0)]), &v);
+        let h = trace(&pulses(80, &[(10, 20, 100.0)]), &v);
+        let c = compare(&h, &r, 0.5, &tol(), 0.0, 0.5);
+        assert_eq!(c.lost_collisions, vec![2]);
+        assert!(c.violations.iter().any(|v| v.contains("lost (#2)")), "{:?}", c.violations);
+        // allowed by the tolerances, it is not a violation
+        let lenient = Tolerances { lost_collisions: 1, ..tol() };
+        assert!(compare(&h, &r, 0.5, &lenient, 0.0, 0.5).violations.is_empty());
+        // one that ended too close to the end of the run to be judged is not lost
+        let late = trace(&pulses(80, &[(10, 20, 100.0), (70, 75, 100.0)]), &v);
+        assert!(compare(&h, &late, 0.5, &tol(), 0.0, 0.6).lost_collisions.is_empty());
+    }
+
+    #[test]
+    fn an_extra_collision_is_reported_and_collisions_are_matched_after_the_lag() {
+        let v = velocities(100, 20, -Vector3::x());
+        let r = trace(&pulses(100, &[(10, 20, 100.0), (50, 60, 100.0)]), &v);
+        // the HIL's collisions start 0.3 s later (the lag), and there is one more at the end
+        let h = trace(&pulses(100, &[(13, 23, 100.0), (53, 63, 100.0), (85, 90, 10.0)]), &v);
+        let c = compare(&h, &r, 0.5, &tol(), 0.3, 0.5);
+        assert_eq!(c.collisions[0].reference, Some(1));
+        assert_eq!(c.collisions[1].reference, Some(2));
+        assert_eq!(c.collisions[2].reference, None);
+        assert_eq!(c.extra_collisions, vec![3]);
+        assert!(c.lost_collisions.is_empty());
+        assert!(c.violations.iter().any(|v| v.contains("extra")), "{:?}", c.violations);
     }
 
     #[test]
     fn summary_takes_the_values_farthest_from_one() {
-        let mk = |cov: Option<f64>, cof: Option<f64>| ComparedCollision {
+        let mk = |cov: Option<f64>, cof: Option<f64>, ve: Option<f64>| ComparedCollision {
             collision: Collision {
                 index: 1,
                 start: 0.0,
                 end: 1.0,
                 peak_force: 1.0,
+                complete: true,
                 rebound_speed: None,
             },
+            reference: Some(1),
+            rebound_time: None,
             cov,
             cof,
+            velocity_error: ve,
+            angular_velocity_error: None,
+            impulse_ratio: cof,
+            angular_impulse_ratio: None,
         };
         let s = Summary::of(&[
-            mk(Some(1.02), Some(1.1)),
-            mk(Some(0.9), Some(1.3)),
-            mk(None, Some(0.6)),
+            mk(Some(1.02), Some(1.1), Some(0.03)),
+            mk(Some(0.9), Some(1.3), Some(0.01)),
+            mk(None, Some(0.6), None),
         ]);
         assert_eq!(s.collisions, 3);
+        assert_eq!(s.compared, 2);
         assert_eq!(s.worst_cov, 0.9);
         assert_eq!(s.worst_cof, 0.6);
+        assert_eq!(s.worst_velocity_error, 0.03);
+        assert_eq!(s.worst_impulse_ratio, 0.6);
+        assert!(s.worst_angular_impulse_ratio.is_nan());
         assert!((s.mean_cov - 0.96).abs() < 1e-12);
         assert!((s.mean_cof - 1.0).abs() < 1e-12);
         let empty = Summary::of(&[]);
         assert!(empty.worst_cov.is_nan() && empty.mean_cof.is_nan() && empty.collisions == 0);
+    }
+
+    #[test]
+    fn run_summary_has_a_value_per_column() {
+        let names: Vec<&str> = RunSummary::COLUMNS.iter().map(|c| c.name).collect();
+        let mut sorted = names.clone();
+        sorted.sort();
+        sorted.dedup();
+        assert_eq!(sorted.len(), names.len(), "duplicate column names");
     }
 }

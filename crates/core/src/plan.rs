@@ -18,6 +18,7 @@ use crate::compensator::CompensatorConfig;
 use crate::config::{BodyConfig, ContactModelKind, Inertia, Scenario};
 use crate::contact::{ContactGeometry, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
 use crate::error::{CoreError, Issues, Result};
+use crate::metrics::Tolerances;
 use crate::world::{TwoBodyState, TwoBodySystem};
 
 /// The facility model's settings, checked; delays in whole control ticks.
@@ -71,6 +72,8 @@ pub struct Plan {
     pub compensator: CompensatorConfig,
     /// A collision is an interval where the contact force exceeds this, N.
     pub contact_threshold: f64,
+    /// When a run that ran to its end is faithful (`[metrics]`).
+    pub tolerances: Tolerances,
 }
 
 impl Plan {
@@ -167,7 +170,11 @@ impl Plan {
         if let Some(q) = sensor_orientation {
             f.sensor_orientation = q;
         }
-        positive(&mut issues, "metrics.contact_threshold", r.metrics.contact_threshold);
+        let m = &r.metrics;
+        positive(&mut issues, "metrics.contact_threshold", m.contact_threshold);
+        non_negative(&mut issues, "metrics.cov_tolerance", m.cov_tolerance);
+        positive(&mut issues, "metrics.max_cof", m.max_cof);
+        non_negative(&mut issues, "metrics.max_velocity_error", m.max_velocity_error);
         r.compensator.check(&mut issues);
 
         issues.finish()?;
@@ -214,6 +221,7 @@ impl Plan {
             },
             compensator: resolved.compensator.clone(),
             contact_threshold: resolved.metrics.contact_threshold,
+            tolerances: resolved.metrics.tolerances(),
             scenario: resolved,
         })
     }
@@ -221,6 +229,18 @@ impl Plan {
     /// The sensor delay τ_p, s (whole ticks).
     pub fn sensor_delay(&self) -> f64 {
         self.facility.sensor_delay_ticks as f64 * self.period
+    }
+
+    /// The facility's lag, s: the robot delay τ_r plus, with a servo lag, its time constant
+    /// 2ζ/ω_n (the lag of a second-order servo behind a ramp).
+    pub fn facility_lag(&self) -> f64 {
+        let f = &self.facility;
+        let servo = if f.servo_frequency > 0.0 {
+            2.0 * f.servo_damping / (2.0 * std::f64::consts::PI * f.servo_frequency)
+        } else {
+            0.0
+        };
+        self.robot_delay() + servo
     }
 
     /// The robot delay τ_r, s (whole ticks).

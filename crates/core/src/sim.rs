@@ -2,14 +2,16 @@
 //! recorded time series and the metrics. Allocates its records up front; the per-tick code
 //! (facility, compensator, dynamics) does not allocate.
 
-use nalgebra::Vector3;
+use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::config::{ContactModelKind, Scenario};
 use crate::error::Result;
 use crate::facility::FacilityModel;
 pub use crate::hil::HilRecord;
 use crate::hil::HilStep;
-use crate::metrics::{self, EnergySummary, Metrics, Stop};
+use crate::frames::FrameWrench;
+use crate::metrics::{self, EnergySummary, Metrics, Stop, TraceSample};
+pub use crate::metrics::Trace;
 use crate::plan::Plan;
 
 /// Named columns of equal length.
@@ -65,65 +67,36 @@ impl Table {
     }
 }
 
-/// What the metrics read of a run, one value per tick: the compact record a sweep keeps.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Trace {
-    /// Time, s.
-    pub time: Vec<f64>,
-    /// Magnitude of the physical contact force on the rod, N.
-    pub force: Vec<f64>,
-    /// Speed of the (virtual) rod tip relative to the target, m/s.
-    pub speed: Vec<f64>,
-    /// Kinetic energy of the (virtual) relative motion, J.
-    pub energy: Vec<f64>,
-    /// Identified stiffness, N/m (NaN when not identified; empty for the reference).
-    pub stiffness_estimate: Vec<f64>,
-    /// Identified damping, N·s/m (NaN when not identified; empty for the reference).
-    pub damping_estimate: Vec<f64>,
+/// The trace of HIL records (with estimates if `estimates_contact`), for the metrics.
+pub fn hil_trace(plan: &Plan, rows: &[HilRecord], estimates_contact: bool) -> Trace {
+    let mut trace = Trace::with_capacity(rows.len(), estimates_contact);
+    let q = plan.facility.sensor_orientation;
+    for row in rows {
+        push_record(&mut trace, row, &q, estimates_contact);
+    }
+    trace
 }
 
-impl Trace {
-    fn with_capacity(n: usize, estimates: bool) -> Self {
-        let v = || Vec::with_capacity(n);
-        let e = || {
-            if estimates {
-                Vec::with_capacity(n)
-            } else {
-                Vec::new()
-            }
-        };
-        Trace {
-            time: v(),
-            force: v(),
-            speed: v(),
-            energy: v(),
-            stiffness_estimate: e(),
-            damping_estimate: e(),
-        }
-    }
-
-    /// The trace of HIL records (with estimates if `estimates_contact`).
-    pub fn of_records(rows: &[HilRecord], estimates_contact: bool) -> Self {
-        let mut trace = Trace::with_capacity(rows.len(), estimates_contact);
-        for row in rows {
-            trace.push_record(row, estimates_contact);
-        }
-        trace
-    }
-
-    fn push_record(&mut self, row: &HilRecord, estimates_contact: bool) {
-        self.push(row.time, &row.contact_force, &row.tip_velocity, row.energy);
-        if estimates_contact {
-            self.stiffness_estimate.push(row.stiffness_estimate);
-            self.damping_estimate.push(row.damping_estimate);
-        }
-    }
-
-    fn push(&mut self, time: f64, force: &Vector3<f64>, velocity: &Vector3<f64>, energy: f64) {
-        self.time.push(time);
-        self.force.push(force.norm());
-        self.speed.push(velocity.norm());
-        self.energy.push(energy);
+/// Appends a HIL record to a trace; `sensor_to_t`: the sensor's attitude in `t`.
+fn push_record(
+    trace: &mut Trace,
+    row: &HilRecord,
+    sensor_to_t: &UnitQuaternion<f64>,
+    estimates_contact: bool,
+) {
+    trace.push(&TraceSample {
+        time: row.time,
+        contact_force: row.contact_force,
+        velocity: row.tip_velocity,
+        angular_velocity: row.angular_velocity,
+        wrench: FrameWrench {
+            force: sensor_to_t * row.applied_force,
+            moment: sensor_to_t * row.applied_moment,
+        },
+        energy: row.energy,
+    });
+    if estimates_contact {
+        trace.push_estimates(row.stiffness_estimate, row.damping_estimate);
     }
 }
 
@@ -136,8 +109,12 @@ pub struct ReferenceRecord {
     pub tip_position: Vector3<f64>,
     /// Rod tip velocity relative to the target, `t` frame, m/s.
     pub tip_velocity: Vector3<f64>,
+    /// Servicer angular velocity relative to the target, `t` frame, rad/s.
+    pub angular_velocity: Vector3<f64>,
     /// Contact force on the rod, `t` frame, N.
     pub contact_force: Vector3<f64>,
+    /// Moment of the contact force on the frame about the sensor origin, `t` frame, N·m.
+    pub contact_moment: Vector3<f64>,
     /// Kinetic energy of the relative motion, J.
     pub energy: f64,
 }
@@ -165,14 +142,24 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
     for k in 0..=n {
         let rel = system.relative_motion(&x);
         let (contact_force, tip) = system.contact_force_at(&rel);
+        let wrench = FrameWrench::from_rod_force(&contact_force, &tip, &system.sensor_origin);
         let row = ReferenceRecord {
             time: k as f64 * period,
             tip_position: tip,
             tip_velocity: rel.point_velocity(&system.rod_tip),
+            angular_velocity: rel.angular_velocity,
             contact_force,
+            contact_moment: wrench.moment,
             energy: system.energy(&x),
         };
-        trace.push(row.time, &row.contact_force, &row.tip_velocity, row.energy);
+        trace.push(&TraceSample {
+            time: row.time,
+            contact_force,
+            velocity: row.tip_velocity,
+            angular_velocity: row.angular_velocity,
+            wrench,
+            energy: row.energy,
+        });
         if keep_rows {
             rows.push(row);
         }
@@ -211,7 +198,7 @@ pub fn run_hil(plan: &Plan, energy_bound: f64, keep_rows: bool) -> HilRun {
     let stop = loop {
         let m = facility.measure();
         let (row, stop) = step.observe(k, &m, Some(facility.contact_force()));
-        trace.push_record(&row, estimates);
+        push_record(&mut trace, &row, &plan.facility.sensor_orientation, estimates);
         if keep_rows {
             rows.push(row);
         }
@@ -271,9 +258,10 @@ pub fn simulate_plan(plan: &Plan) -> SimulationOutput {
 /// `observed_energy` if `observes_energy` (one definition for simulations and real-time runs).
 pub fn hil_table(rows: &[HilRecord], estimates_contact: bool, observes_energy: bool) -> Table {
     type V = Vector3<f64>;
-    let vectors: [(&str, fn(&HilRecord) -> V); 9] = [
+    let vectors: [(&str, fn(&HilRecord) -> V); 10] = [
         ("tip_position", |r| r.tip_position),
         ("tip_velocity", |r| r.tip_velocity),
+        ("angular_velocity", |r| r.angular_velocity),
         ("actual_tip_position", |r| r.actual_tip_position),
         ("actual_tip_velocity", |r| r.actual_tip_velocity),
         ("contact_force", |r| r.contact_force),
@@ -306,7 +294,9 @@ pub fn reference_table(reference: &[ReferenceRecord]) -> Table {
         &[
             ("tip_position", |r| r.tip_position),
             ("tip_velocity", |r| r.tip_velocity),
+            ("angular_velocity", |r| r.angular_velocity),
             ("contact_force", |r| r.contact_force),
+            ("contact_moment", |r| r.contact_moment),
         ],
     )
     .with(Table::from_rows(
@@ -353,36 +343,48 @@ pub fn trace_metrics(
 ) -> Metrics {
     let s = &plan.scenario;
     let threshold = plan.contact_threshold;
-    let status = stop.kind.status();
-    let r = reference;
-    let ref_collisions = metrics::collisions(&r.time, &r.force, &r.speed, threshold);
-    let t = hil;
-    let hil_collisions = metrics::collisions(&t.time, &t.force, &t.speed, threshold);
-    let identification = match (estimates_contact, s.contact.model, hil_collisions.first()) {
-        (true, ContactModelKind::Linear, Some(first)) => metrics::identification_error(
-            &t.time,
-            &t.force,
+    let comparison = metrics::compare(
+        hil,
+        reference,
+        threshold,
+        &plan.tolerances,
+        plan.facility_lag(),
+        plan.facility_lag() + plan.sensor_delay() + 5.0 * plan.period,
+    );
+    let first_end = comparison.collisions.first().map(|c| c.collision.end);
+    let identification = match (estimates_contact, s.contact.model, first_end) {
+        (true, ContactModelKind::Linear, Some(first_end)) => metrics::identification_error(
+            hil,
             threshold,
-            first.end,
-            &t.stiffness_estimate,
-            &t.damping_estimate,
+            first_end,
             s.contact.stiffness,
             s.contact.damping,
         ),
         _ => None,
     };
-    let collisions = metrics::compare_with_reference(&hil_collisions, &ref_collisions);
+    let status = Metrics::verdict(&stop, &comparison.violations);
+    let reason = match (stop.reason(), comparison.violations.as_slice()) {
+        (Some(reason), _) => Some(reason),
+        (None, []) => None,
+        (None, [first]) => Some(format!("unfaithful: {first}")),
+        (None, [first, rest @ ..]) => Some(format!("unfaithful: {first} (and {} more)", rest.len())),
+    };
+    let (t, r) = (hil, reference);
     Metrics {
         scenario: s.name.clone(),
         compensator: s.compensator.kind().to_string(),
         status,
         diverged_at: (status == metrics::Status::Diverged)
             .then(|| t.time.last().copied().unwrap_or(0.0)),
-        reason: stop.reason(),
+        reason,
         stop,
-        summary: metrics::Summary::of(&collisions),
-        collisions,
-        reference_collisions: ref_collisions,
+        summary: metrics::Summary::of(&comparison.collisions),
+        collisions: comparison.collisions,
+        reference_collisions: comparison.reference_collisions,
+        lost_collisions: comparison.lost_collisions,
+        extra_collisions: comparison.extra_collisions,
+        violations: comparison.violations,
+        tolerances: plan.tolerances,
         identification,
         energy: EnergySummary {
             initial: t.energy.first().copied().unwrap_or(f64::NAN),

@@ -5,7 +5,7 @@ mod common;
 
 use common::{preset, table1};
 use hilcontact_core::compensator::{CompensatorConfig, DelayMode, ModelParams, TdpaParams};
-use hilcontact_core::metrics::Status;
+use hilcontact_core::metrics::StopKind;
 use hilcontact_core::{simulate, Scenario, SimulationOutput};
 use proptest::prelude::*;
 
@@ -147,7 +147,7 @@ fn noisy(mode: DelayMode) -> SimulationOutput {
 #[test]
 fn pida_with_noise_and_sensor_delay_aligns_instead_of_differentiating() {
     let out = noisy(DelayMode::Align);
-    assert_eq!(out.metrics.status, Status::Ok);
+    assert_eq!(out.metrics.stop.kind, StopKind::Completed); // ran to its end
     assert!(
         stiffness_error(&out) < 0.01,
         "stiffness error {}",
@@ -199,7 +199,7 @@ fn nothing_diverges_up_to_60_ms() {
         for delay in [0.030, 0.045, 0.060] {
             let name = kind.kind();
             let out = run(table1(delay, 0.0), kind.clone());
-            assert_eq!(out.metrics.status, Status::Ok, "{name} at {delay}");
+            assert_eq!(out.metrics.stop.kind, StopKind::Completed, "{name} at {delay}");
             assert!(
                 covs(&out).iter().all(|c| (c - 1.0).abs() < 0.05),
                 "{name} at {delay}: CoV {:?}",
@@ -266,7 +266,7 @@ proptest! {
         s.servicer.mass = servicer_mass;
         let kind = if pida { CompensatorConfig::Pida(ModelParams::default()) } else { CompensatorConfig::Dac(ModelParams::default()) };
         let out = run(s, kind);
-        prop_assert_eq!(out.metrics.status, Status::Ok);
+        prop_assert_eq!(out.metrics.stop.kind, StopKind::Completed);
         for (name, values) in &out.timeseries.columns {
             prop_assert!(values.iter().all(|v| v.is_finite()) || name.ends_with("_estimate") || name == "observed_energy", "{} has NaN", name);
         }

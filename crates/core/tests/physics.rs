@@ -29,16 +29,11 @@ struct Measured {
 /// First collision of the ideal reference.
 fn first_collision(s: &Scenario) -> Measured {
     let (trace, _) = run_reference(&s.resolve().unwrap(), false);
-    let c = &collisions(
-        &trace.time,
-        &trace.force,
-        &trace.speed,
-        s.metrics.contact_threshold,
-    )[0];
+    let c = &collisions(&trace, s.metrics.contact_threshold)[0];
     Measured {
         contact_time: c.end - c.start,
         peak_force: c.peak_force,
-        restitution: c.rebound_speed.unwrap() / trace.speed[0],
+        restitution: c.rebound_speed.unwrap() / trace.velocity[0].norm(),
     }
 }
 
@@ -164,12 +159,7 @@ fn reference_collisions(s: &Scenario, substeps: u32) -> Vec<(f64, f64)> {
     let mut s = s.clone();
     s.simulation.reference_substeps = substeps;
     let (trace, _) = run_reference(&s.resolve().unwrap(), false);
-    collisions(
-        &trace.time,
-        &trace.force,
-        &trace.speed,
-        s.metrics.contact_threshold,
-    )
+    collisions(&trace, s.metrics.contact_threshold)
     .iter()
     .map(|c| (c.rebound_speed.unwrap_or(f64::NAN), c.peak_force))
     .collect()

@@ -335,10 +335,8 @@ fn simulate<'py>(py: Python<'py>, scenario_json: &str) -> PyResult<Bound<'py, Py
 /// pool (default: rayon's global pool, one thread per core).
 ///
 /// Returns columns, one value per scenario in the given order: `status` (list of "ok" /
-/// "diverged"), and arrays `diverged_at` (s, NaN if ok), `collisions`, `reference_collisions`,
-/// `mean_cov`, `worst_cov`, `mean_cof`, `worst_cof`, `stiffness_error` (fraction),
-/// `damping_error` (N·s/m), `energy_ratio` (final energy / the reference's), `wall_time` (s)
-/// (NaN where a run has no such value).
+/// "unfaithful" / "diverged"), then one array per column of [`summary_columns`] (the core's
+/// `RunSummary::COLUMNS` and `wall_time`, s; NaN where a run has no such value).
 #[pyfunction]
 #[pyo3(signature = (scenarios, threads=None))]
 fn simulate_batch<'py>(
@@ -371,57 +369,43 @@ fn simulate_batch<'py>(
                 .map_err(|e| PyValueError::new_err(format!("thread pool: {e}"))),
         }
     })?;
+    use hilcontact_core::metrics::RunSummary;
     let n = results.len();
     let mut status = Vec::with_capacity(n);
-    let mut columns: Vec<(&str, Vec<f64>)> = [
-        "diverged_at",
-        "collisions",
-        "reference_collisions",
-        "mean_cov",
-        "worst_cov",
-        "mean_cof",
-        "worst_cof",
-        "stiffness_error",
-        "damping_error",
-        "energy_ratio",
-        "wall_time",
-    ]
-    .iter()
-    .map(|name| (*name, Vec::with_capacity(n)))
-    .collect();
+    let mut columns: Vec<Vec<f64>> = vec![Vec::with_capacity(n); RunSummary::COLUMNS.len() + 1];
     for (metrics, wall_time) in results {
-        let m = metrics;
+        let row = RunSummary::of(&metrics);
         status.push(
-            serde_json::to_value(m.status)
+            serde_json::to_value(row.status)
                 .map_err(|e| PyValueError::new_err(e.to_string()))?
                 .as_str()
                 .unwrap_or("")
                 .to_string(),
         );
-        let id = m.identification.as_ref();
-        let values = [
-            m.diverged_at.unwrap_or(f64::NAN),
-            m.summary.collisions as f64,
-            m.reference_collisions.len() as f64,
-            m.summary.mean_cov,
-            m.summary.worst_cov,
-            m.summary.mean_cof,
-            m.summary.worst_cof,
-            id.map_or(f64::NAN, |i| i.stiffness_error),
-            id.map_or(f64::NAN, |i| i.damping_error),
-            m.energy.r#final / m.energy.reference_final,
-            wall_time,
-        ];
-        for ((_, column), value) in columns.iter_mut().zip(values) {
-            column.push(value);
+        for (column, value) in columns.iter_mut().zip(row.values.iter().chain([&wall_time])) {
+            column.push(*value);
         }
     }
     let result = PyDict::new(py);
     result.set_item("status", status)?;
-    for (name, values) in columns {
+    let names = RunSummary::COLUMNS.iter().map(|c| c.name).chain(["wall_time"]);
+    for (name, values) in names.zip(columns) {
         result.set_item(name, values.into_pyarray(py))?;
     }
     Ok(result)
+}
+
+/// The columns of a run's summary row (what `simulate_batch` returns after `status`), in
+/// order: a list of `(name, unit, meaning)`; the core's `RunSummary::COLUMNS`, then
+/// `wall_time` (s).
+#[pyfunction]
+fn summary_columns() -> Vec<(&'static str, &'static str, &'static str)> {
+    use hilcontact_core::metrics::RunSummary;
+    RunSummary::COLUMNS
+        .iter()
+        .map(|c| (c.name, c.unit, c.doc))
+        .chain([("wall_time", "s", "wall-clock time of the run")])
+        .collect()
 }
 
 /// The compensator registry, as JSON: a list, in the registry's order, of
@@ -455,6 +439,7 @@ fn version() -> &'static str {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(simulate_batch, m)?)?;
+    m.add_function(wrap_pyfunction!(summary_columns, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(compensator_registry, m)?)?;
     m.add_function(wrap_pyfunction!(start_hil, m)?)?;

@@ -12,7 +12,7 @@ use serde_json::{json, Value};
 use hilcontact_core::hil::VirtualDynamics;
 use hilcontact_core::metrics::Metrics;
 use hilcontact_core::sim::{
-    hil_table, reference_table, run_reference, trace_metrics, HilRecord, Table, Trace,
+    hil_table, hil_trace, reference_table, run_reference, trace_metrics, HilRecord, Table,
 };
 use hilcontact_core::Plan;
 
@@ -129,11 +129,14 @@ pub fn build_output(
     }
 
     let (reference_trace, reference) = run_reference(plan, true);
-    let trace = Trace::of_records(&records, estimates);
+    let trace = hil_trace(plan, &records, estimates);
     let stop = &outcome.stop;
     let mut core = trace_metrics(plan, &reference_trace, &trace, estimates, *stop);
-    // the reason names the links' protocols ("no valid RDT record")
-    core.reason = stop.reason_naming(outcome.sensor_name, outcome.robot_name);
+    // a stop's reason names the links' protocols ("no valid RDT record"); a run that ran to
+    // its end keeps the verdict's reason (none, or why it is unfaithful)
+    if let Some(reason) = stop.reason_naming(outcome.sensor_name, outcome.robot_name) {
+        core.reason = Some(reason);
+    }
     let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
     let reason = core.reason.clone();
     let mut realtime = json!({
