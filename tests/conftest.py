@@ -62,8 +62,10 @@ def synthetic_run(estimates: bool = False, lateral: float = 0.0) -> hc.Run:
         "diverged_at": None,
         "reason": None,
         "collisions": [
-            {"index": 1, "start": 0.1, "end": 0.2, "peak_force": 120.0, "rebound_speed": 0.025, "cov": 1.25, "cof": 1.2},
-            {"index": 2, "start": 0.6, "end": 0.7, "peak_force": 150.0, "rebound_speed": 0.03, "cov": None, "cof": None},
+            {"index": 1, "start": 0.1, "end": 0.2, "peak_force": 120.0, "complete": True, "rebound_speed": 0.025,
+             "reference": 1, "cov": 1.25, "cof": 1.2, "velocity_error": 0.25},
+            {"index": 2, "start": 0.6, "end": 0.7, "peak_force": 150.0, "complete": True, "rebound_speed": 0.03,
+             "reference": None, "cov": None, "cof": None},
         ],
         "reference_collisions": [
             {"index": 1, "start": 0.1, "end": 0.2, "peak_force": 100.0, "rebound_speed": 0.02},

@@ -99,10 +99,13 @@ def test_collision_table(fake_run):
     assert list(table.index) == [1, 2]
     assert table.index.name == "collision"
     assert list(table.columns) == [
-        "start", "end", "peak_force", "rebound_speed", "cov", "cof",
+        "complete", "start", "end", "peak_force", "rebound_speed", "cov", "cof", "velocity_error",
+        "angular_velocity_error", "impulse_ratio", "angular_impulse_ratio", "reference",
         "reference_peak_force", "reference_rebound_speed",
     ]
     assert table.loc[1, "cov"] == 1.25 and table.loc[1, "reference_rebound_speed"] == 0.02
+    assert table.loc[1, "reference"] == 1 and table.loc[1, "velocity_error"] == 0.25
+    assert math.isnan(table.loc[2, "reference"])
     assert math.isnan(table.loc[2, "cof"]) and math.isnan(table.loc[2, "reference_peak_force"])
 
 
@@ -345,9 +348,13 @@ def test_every_preset_simulates_consistently(core, name):
     assert set(REFERENCE_COLUMNS) <= set(run.reference.columns)
     m = run.metrics
     assert m["scenario"] == name and m["compensator"] == run.scenario.compensator.kind
-    assert m["status"] in ("ok", "diverged")
+    assert m["status"] in ("ok", "unfaithful", "diverged")
     if m["status"] == "ok":
-        assert m["diverged_at"] is None and m["reason"] is None
+        assert m["diverged_at"] is None and m["reason"] is None and m["violations"] == []
+        assert len(run.timeseries) == len(run.reference)
+    elif m["status"] == "unfaithful":
+        assert m["diverged_at"] is None and m["violations"]
+        assert m["reason"].startswith("unfaithful: " + m["violations"][0])
         assert len(run.timeseries) == len(run.reference)
     else:
         assert m["diverged_at"] > 0 and isinstance(m["reason"], str) and m["reason"]

@@ -148,16 +148,17 @@ def _report(console: Console, result: Run, folder: Path) -> None:
     table = Table(
         title=f"{result.scenario.name}: compensator {result.compensator}, robot delay {delay_ms:g} ms",
     )
-    for header in ("#", "start (s)", "end (s)", "CoV", "CoF", "peak force (N)",
+    for header in ("#", "start (s)", "end (s)", "CoV", "CoF", "velocity error (%)", "peak force (N)",
                    "rebound speed (mm/s)", "reference rebound (mm/s)"):
         table.add_column(header, justify="right")
     for number, row in result.collision_table().iterrows():
         table.add_row(
-            str(number),
+            str(number) if row["complete"] else f"{number} (cut off)",
             _number(row["start"], ".3f"),
             _number(row["end"], ".3f"),
             _number(row["cov"], ".3f"),
             _number(row["cof"], ".3f"),
+            _number(row["velocity_error"], ".1f", 1e2),
             _number(row["peak_force"], ".1f"),
             _number(row["rebound_speed"], ".2f", 1e3),
             _number(row["reference_rebound_speed"], ".2f", 1e3),
@@ -168,6 +169,11 @@ def _report(console: Console, result: Run, folder: Path) -> None:
         console.print("no collisions")
     if result.status == "ok":
         console.print("status: [green]ok[/green]")
+    elif result.status == "unfaithful":
+        violations = result.metrics.get("violations") or []
+        console.print("[bold yellow]status: unfaithful[/bold yellow] (tolerances in the scenario's [metrics])")
+        for line in violations:
+            console.print(f"  [yellow]{escape(str(line))}[/yellow]", soft_wrap=True)
     else:
         at = result.metrics.get("diverged_at")
         when = f" at {at:.3f} s" if isinstance(at, (int, float)) else ""
@@ -244,6 +250,8 @@ def _report_comparison(console: Console, result: Comparison, folder: Path) -> No
     for kind, row in result.summary.iterrows():
         if row["status"] == "ok":
             status = "[green]ok[/green]"
+        elif row["status"] == "unfaithful":
+            status = "[yellow]unfaithful[/yellow]"
         else:
             at = row["diverged_at"]
             when = f" {at:.2f} s" if math.isfinite(at) else ""
@@ -375,21 +383,28 @@ def _report_sweep(console: Console, rows: Any, out: str) -> None:
     from .stability import faithful
 
     table = Table(title=f"sweep: {len(rows)} runs")
-    for header in ("compensator", "runs", "ok", "diverged", "faithful", "median wall time (ms)"):
+    for header in ("compensator", "runs", "ok", "unfaithful", "diverged", "faithful", "median wall time (ms)"):
         table.add_column(header, justify="right" if header != "compensator" else "left")
     marks = faithful(rows)
     for kind, group in rows.groupby("compensator", sort=False):
         ok = int((group["status"] == "ok").sum())
+        unfaithful = int((group["status"] == "unfaithful").sum())
         table.add_row(
             escape(str(kind)),
             str(len(group)),
             str(ok),
-            str(len(group) - ok),
+            str(unfaithful),
+            str(len(group) - ok - unfaithful),
             f"{int(marks[group.index].sum())}",
             _number(group["wall_time"].median(), ".2f", 1e3),
         )
     console.print(table)
-    console.print("faithful: ok, |CoV-1| <= 5 %, CoF <= 1.2 (see hilcontact stability-map)", soft_wrap=True)
+    console.print(
+        "ok: faithful within the scenario's [metrics] tolerances (default |CoV-1| <= 5 %, CoF <= 1.2, "
+        "rebound velocity error <= 5 %, no lost or extra collision); faithful: ok with a compared "
+        "collision (see hilcontact stability-map)",
+        soft_wrap=True,
+    )
     console.print(f"saved to {escape(out)}/results.parquet", soft_wrap=True)
 
 

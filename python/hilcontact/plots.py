@@ -37,6 +37,12 @@ __all__ = ["comparison_figures", "make_figures"]
 _COLORS = {"x": "tab:blue", "y": "tab:orange", "z": "tab:green"}
 
 
+#: Statuses of runs that ran to their end (their values set the axes' limits).
+_RAN_THROUGH = ("ok", "unfaithful")
+#: Title colour of a panel per run status (others: red).
+_STATUS_COLOURS = {"ok": "black", "unfaithful": "darkorange"}
+
+
 def save_figures(figures: Mapping[str, Figure], directory: str | os.PathLike[str], dpi: int) -> None:
     """Save each figure as ``<name>.png`` in ``directory`` (created if needed)."""
     folder = Path(directory)
@@ -275,7 +281,7 @@ def _clip_to_ok_runs(
 ) -> None:
     """Share y limits fitted to the runs that stayed ok (and their references) when a diverged
     run would otherwise flatten every panel; its panel's title then says it is clipped."""
-    ok = [r for (kind, run), r in zip(runs.items(), ranges) if run.status == "ok" and math.isfinite(r[0])]
+    ok = [r for (kind, run), r in zip(runs.items(), ranges) if run.status in _RAN_THROUGH and math.isfinite(r[0])]
     if not ok:
         return
     lo, hi = min(r[0] for r in ok), max(r[1] for r in ok)
@@ -322,7 +328,7 @@ def _time_panels(
         ranges.append(_series_range(values, ideal, more))
         _shade_collisions(ax, run)
         _mark_divergence(ax, run)
-        ax.set_title(_panel_title(kind, run), fontsize=11, color="tab:red" if run.status != "ok" else "black")
+        ax.set_title(_panel_title(kind, run), fontsize=11, color=_STATUS_COLOURS.get(run.status, "tab:red"))
         ax.grid(True, alpha=0.4)
         ax.set_ylabel(ylabel)
         ax.set_xlabel("time (s)")
@@ -387,7 +393,7 @@ def compare_identification_figure(runs: Mapping[str, Run]) -> Figure | None:
             _mark_divergence(ax, run)
             ax.grid(True, alpha=0.4)
             ax.legend(loc="best", fontsize=8)
-        ax_k.set_title(_panel_title(kind, run), fontsize=11, color="tab:red" if run.status != "ok" else "black")
+        ax_k.set_title(_panel_title(kind, run), fontsize=11, color=_STATUS_COLOURS.get(run.status, "tab:red"))
         ax_k.set_ylabel("stiffness (N/mm)")
         ax_c.set_ylabel("damping (N·s/mm)")
     _tidy_labels(panels)
@@ -432,7 +438,7 @@ def compare_cov_cof_figure(runs: Mapping[str, Run]) -> Figure:
                 if _finite_number(c.get(key)):
                     row[i] = float(c[key])
             values[kind] = row
-        ok_values = [v for kind, v in values.items() if runs[kind].status == "ok"]
+        ok_values = [v for kind, v in values.items() if runs[kind].status in _RAN_THROUGH]
         finite_ok = np.concatenate([v[np.isfinite(v)] for v in ok_values]) if ok_values else np.array([])
         finite_all = np.concatenate([v[np.isfinite(v)] for v in values.values()]) if values else np.array([])
         top = float(finite_all.max()) if finite_all.size else 1.0

@@ -55,7 +55,7 @@ EXIT_INTERRUPTED = 130
 
 #: Extra time-series columns of a real-time run (s): the tick's wake-up latency, the age of the
 #: sensor record used and of the newest robot feedback.
-REALTIME_COLUMNS: list[str] = ["wake_latency", "sensor_age", "robot_age"]
+REALTIME_COLUMNS: list[str] = [name for name, _, _ in _core().table_columns()["realtime"]]
 
 
 def realtime_defaults() -> dict[str, Any]:

@@ -21,56 +21,9 @@ from .scenario import Scenario, load_scenario
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["OPTIONAL_TIMESERIES_COLUMNS", "REFERENCE_COLUMNS", "TIMESERIES_COLUMNS", "Run", "simulate"]
-
-_XYZ = ("x", "y", "z")
-
-
-def _vector(name: str) -> list[str]:
-    return [f"{name}_{axis}" for axis in _XYZ]
-
-
-#: Columns of ``Run.timeseries`` (the HIL loop) that every run has, in this order; the
-#: optional ones (:data:`OPTIONAL_TIMESERIES_COLUMNS`) follow.
-TIMESERIES_COLUMNS: list[str] = [
-    "time",
-    *_vector("tip_position"),
-    *_vector("tip_velocity"),
-    *_vector("actual_tip_position"),
-    *_vector("actual_tip_velocity"),
-    *_vector("contact_force"),
-    *_vector("measured_force"),
-    *_vector("measured_moment"),
-    *_vector("applied_force"),
-    *_vector("applied_moment"),
-    "energy",
-]
-
-#: Columns of ``Run.timeseries`` that only some compensators produce: ``stiffness_estimate``
-#: (N/m) and ``damping_estimate`` (N s/m) for those that identify the contact (pic, dac,
-#: pida; NaN before the first estimate), ``observed_energy`` (J) for those with an energy
-#: observer (NaN where it does not observe). Code reading a run must not assume them.
-OPTIONAL_TIMESERIES_COLUMNS: list[str] = ["stiffness_estimate", "damping_estimate", "observed_energy"]
-
-#: Columns of ``Run.reference`` (the ideal reference: true contact law, no delay).
-REFERENCE_COLUMNS: list[str] = [
-    "time",
-    *_vector("tip_position"),
-    *_vector("tip_velocity"),
-    *_vector("contact_force"),
-    "energy",
-]
-
-#: Files written by :meth:`Run.save` (plots excluded).
-DATA_FILES = ("timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml")
-#: Plot files written by :meth:`Run.save` (``identification.png`` too when estimates exist).
-PLOT_FILES = ("contact_velocity.png", "contact_force.png", "energy.png")
-
-
-def _frame(columns: dict[str, Any], order: list[str]) -> pd.DataFrame:
-    data = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
-    names = [c for c in order if c in data] + sorted(c for c in data if c not in order)
-    return pd.DataFrame({name: data[name] for name in names})
+__all__ = [
+    "COLUMN_UNITS",
+    "OPTIONAL_TIMESERIES_COLUMNS", "REFERENCE_COLUMNS", "TIMESERIES_COLUMNS", "Run", "simulate"]
 
 
 def _core() -> Any:
@@ -82,6 +35,44 @@ def _core() -> Any:
             f"`pip install .` or `maturin develop --release` ({exc})"
         ) from None
     return core
+
+
+def _table_columns() -> dict[str, list[tuple[str, str, str]]]:
+    return _core().table_columns()
+
+
+#: Every table column's unit (SI), from the core: ``{"tip_velocity_x": "m/s", ...}``.
+COLUMN_UNITS: dict[str, str] = {
+    name: unit for columns in _table_columns().values() for name, unit, _ in columns
+}
+
+#: Columns of ``Run.timeseries`` (the HIL loop) that every run has, in this order (from the
+#: core); the optional ones (:data:`OPTIONAL_TIMESERIES_COLUMNS`) follow.
+TIMESERIES_COLUMNS: list[str] = [
+    name for name, _, only in _table_columns()["timeseries"] if only == "always"
+]
+
+#: Columns of ``Run.timeseries`` that only some compensators produce: ``stiffness_estimate``
+#: (N/m) and ``damping_estimate`` (N s/m) for those that identify the contact (pic, dac,
+#: pida; NaN before the first estimate), ``observed_energy`` (J) for those with an energy
+#: observer (NaN where it does not observe). Code reading a run must not assume them.
+OPTIONAL_TIMESERIES_COLUMNS: list[str] = [
+    name for name, _, only in _table_columns()["timeseries"] if only != "always"
+]
+
+#: Columns of ``Run.reference`` (the ideal reference: true contact law, no delay).
+REFERENCE_COLUMNS: list[str] = [name for name, _, _ in _table_columns()["reference"]]
+
+#: Files written by :meth:`Run.save` (plots excluded).
+DATA_FILES = ("timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml")
+#: Plot files written by :meth:`Run.save` (``identification.png`` too when estimates exist).
+PLOT_FILES = ("contact_velocity.png", "contact_force.png", "energy.png")
+
+
+def _frame(columns: dict[str, Any], order: list[str]) -> pd.DataFrame:
+    data = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
+    names = [c for c in order if c in data] + sorted(c for c in data if c not in order)
+    return pd.DataFrame({name: data[name] for name in names})
 
 
 def core_version() -> str | None:
@@ -120,31 +111,29 @@ class Run:
 
     def collision_table(self) -> pd.DataFrame:
         """One row per HIL collision (index: collision number, from 1), with the ideal
-        reference's matching collision: start, end (s), peak_force (N), rebound_speed (m/s),
-        cov, cof, reference_peak_force (N), reference_rebound_speed (m/s)."""
+        reference's collision it is matched to (see docs/model.md, "Metrics"): start, end
+        (s), complete, peak_force (N), rebound_speed (m/s), cov, cof, velocity_error,
+        angular_velocity_error (fractions), impulse_ratio, angular_impulse_ratio, reference
+        (the matched reference collision's number, NaN if none), reference_peak_force (N),
+        reference_rebound_speed (m/s)."""
         reference = {c.get("index"): c for c in self.metrics.get("reference_collisions") or []}
+        numbers = [
+            "start", "end", "peak_force", "rebound_speed", "cov", "cof", "velocity_error",
+            "angular_velocity_error", "impulse_ratio", "angular_impulse_ratio",
+        ]
         rows = []
         for collision in self.metrics.get("collisions") or []:
-            ref = reference.get(collision.get("index"), {})
-            rows.append(
-                {
-                    "collision": collision.get("index"),
-                    "start": collision.get("start"),
-                    "end": collision.get("end"),
-                    "peak_force": collision.get("peak_force"),
-                    "rebound_speed": collision.get("rebound_speed"),
-                    "cov": collision.get("cov"),
-                    "cof": collision.get("cof"),
-                    "reference_peak_force": ref.get("peak_force"),
-                    "reference_rebound_speed": ref.get("rebound_speed"),
-                }
-            )
-        columns = [
-            "collision", "start", "end", "peak_force", "rebound_speed", "cov", "cof",
-            "reference_peak_force", "reference_rebound_speed",
-        ]
+            ref = reference.get(collision.get("reference"), {})
+            row = {"collision": collision.get("index"), "complete": bool(collision.get("complete", True))}
+            row.update({key: collision.get(key) for key in numbers})
+            row["reference"] = collision.get("reference")
+            row["reference_peak_force"] = ref.get("peak_force")
+            row["reference_rebound_speed"] = ref.get("rebound_speed")
+            rows.append(row)
+        floats = [*numbers, "reference", "reference_peak_force", "reference_rebound_speed"]
+        columns = ["collision", "complete", *floats]
         table = pd.DataFrame(rows, columns=columns)
-        table[columns[1:]] = table[columns[1:]].astype(np.float64)
+        table[floats] = table[floats].astype(np.float64)
         return table.set_index("collision")
 
     def plot(self, directory: str | os.PathLike[str] | None = None) -> dict[str, Figure]:

@@ -1,9 +1,11 @@
 """Stability maps of a sweep: where, in (contact frequency, robot delay), each compensator
 keeps the loop faithful.
 
-A run is *faithful* when it ran to the end (status ok), had at least one compared collision,
-its worst CoV is within ``cov_tolerance`` of 1 and its worst CoF is at most ``cof_limit``
-(defaults: |CoV − 1| ≤ 5 %, CoF ≤ 1.2). A cell (compensator, contact frequency, robot delay)
+A run is *faithful* when the core's verdict says so (status ``ok``: it ran to the end and
+every collision kept the scenario's ``[metrics]`` tolerances: |CoV − 1|, CoF, rebound
+velocity error, no lost or extra collision; docs/model.md, "Metrics") and it had at least
+one compared collision; the map may be stricter still in CoV and CoF (``cov_tolerance``,
+``cof_limit``; by default the scenario's, which are |CoV − 1| ≤ 5 %, CoF ≤ 1.2). A cell (compensator, contact frequency, robot delay)
 is faithful when every run in it is: every seed and every value of any other swept key.
 The *maximal faithful delay* of a compensator at a frequency is the largest swept delay up to
 which every cell, from the smallest delay on, is faithful (NaN if the smallest is not).
@@ -171,7 +173,7 @@ def stability_map(
     usable = usable.assign(
         faithful=faithful(usable, cov_tolerance, cof_limit),
         cov_error=(usable["worst_cov"].astype(float) - 1.0).abs(),
-        diverged=usable["status"] != "ok",
+        diverged=usable["status"] == "diverged",
     )
     keys = ["compensator", "contact_frequency", "robot_delay"]
     grouped = usable.groupby(keys, sort=False)

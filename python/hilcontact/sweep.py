@@ -53,14 +53,13 @@ RESULTS_FILE = "results.parquet"
 SPEC_FILE = "sweep.json"
 PARTS_DIR = "parts"
 
-#: Summary columns of a result row, after the swept keys (one column per ``--grid`` key,
-#: named by the key), in this order. ``run_key`` identifies the run (grid values, compensator,
-#: seed) for ``--resume``; ``point`` numbers the grid point (from 0); ``robot_delay`` (s) and
+#: Columns of a result row, after the swept keys (one column per ``--grid`` key, named by the
+#: key), in this order. ``run_key`` identifies the run (grid values, compensator, seed) for
+#: ``--resume``; ``point`` numbers the grid point (from 0); ``robot_delay`` (s) and
 #: ``contact_frequency`` (Hz, ``sqrt(k/μ)/2π`` of a linear contact, NaN for Hunt-Crossley) are
-#: there even when not swept. The rest is the core's summary (``_core.simulate_batch``):
-#: status ("ok"/"diverged"), diverged_at (s), collisions, reference_collisions, mean_cov,
-#: worst_cov and worst_cof (the values farthest from 1), mean_cof, stiffness_error
-#: (fraction), damping_error (N s/m), energy_ratio (final / reference final) and wall_time (s).
+#: there even when not swept. Then ``status`` ("ok", "unfaithful" or "diverged": the core's
+#: verdict with the scenario's ``[metrics]`` tolerances) and the core's summary columns
+#: (``_core.summary_columns()``: name, unit, meaning; see docs/model.md, "Metrics").
 RESULT_COLUMNS = [
     "run_key",
     "point",
@@ -69,18 +68,11 @@ RESULT_COLUMNS = [
     "robot_delay",
     "contact_frequency",
     "status",
-    "diverged_at",
-    "collisions",
-    "reference_collisions",
-    "mean_cov",
-    "worst_cov",
-    "mean_cof",
-    "worst_cof",
-    "stiffness_error",
-    "damping_error",
-    "energy_ratio",
-    "wall_time",
+    *(name for name, _, _ in _core().summary_columns()),
 ]
+
+#: Columns that count (stored as integers).
+_COUNT_COLUMNS = ("collisions", "reference_collisions", "lost_collisions", "extra_collisions")
 
 _CORE_COLUMNS = RESULT_COLUMNS[6:]
 
@@ -371,7 +363,7 @@ def _rows(plan: SweepPlan, chunk: list[tuple[str, int, str, int]], columns: Mapp
         values = columns[name]
         data[name] = list(values) if name == "status" else np.asarray(values, dtype=np.float64)
     frame = pd.DataFrame(data)
-    for name in ("collisions", "reference_collisions"):
+    for name in _COUNT_COLUMNS:
         frame[name] = frame[name].astype(np.int64)
     return frame
 

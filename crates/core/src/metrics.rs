@@ -6,11 +6,11 @@
 //!   A collision still under way at the last sample is *incomplete*: it is listed, but has no
 //!   rebound and counts in no ratio, no worst value and no verdict.
 //! - **Matching**: HIL collisions are matched to reference collisions in order, by the
-//!   alignment of least cost: leaving a collision unmatched costs 1, matching two costs the
-//!   difference of their starts (the HIL's less the facility's lag: robot delay and servo lag)
-//!   in units of the reference's median time between collisions (at most 3), plus
-//!   `2 (1 − cos θ)` for the angle θ between their contact forces at the peak, so that
-//!   collisions on different walls never match. A complete reference collision without a match that
+//!   alignment of least cost: leaving a collision unmatched costs 1, matching two costs
+//!   `2 (1 − cos θ)` for the angle θ between their contact forces at the peak (collisions on
+//!   different walls never match) plus at most 0.5 for the difference of their starts (the
+//!   HIL's less the facility's lag, robot delay and servo lag, in units of the reference's
+//!   median time between collisions), which only chooses among collisions on the same wall. A complete reference collision without a match that
 //!   ended at least the loop's lag before the HIL run's last sample is *lost*; a complete HIL
 //!   collision without a match is *extra*.
 //! - **Rebound sample** of a matched pair: the middle of the common part of the two free
@@ -398,10 +398,12 @@ pub fn compare(
 
 /// Matches HIL collisions to reference collisions: the order-keeping alignment of least
 /// cost (Needleman–Wunsch), where leaving a collision unmatched costs 1 and matching two costs
-/// `min(|Δt| / gap, 3) + 2 (1 − cos θ)`: `Δt` the difference of their starts after the lag,
-/// `gap` the reference's median time between collision starts, `θ` the angle between their
-/// contact forces at the peak (collisions on different walls do not match). Returns, for
-/// each reference collision, the index of its HIL collision.
+/// `0.5 min(|Δt| / gap, 1) + 2 (1 − cos θ)`: `Δt` the difference of their starts after the
+/// lag, `gap` the reference's median time between collision starts, `θ` the angle between
+/// their contact forces at the peak. Collisions on different walls (θ large) do not match;
+/// on the same wall the k-th matches the k-th, however far a diverging run has drifted in
+/// time, unless another one is nearer in time (a collision split in two by a rebound within
+/// it). Returns, for each reference collision, the index of its HIL collision.
 fn align(hil: &Trace, hs: &[Span], reference: &Trace, rs: &[Span], lag: f64) -> Vec<Option<usize>> {
     let (n, m) = (rs.len(), hs.len());
     let mut gaps: Vec<f64> = rs
@@ -421,7 +423,7 @@ fn align(hil: &Trace, hs: &[Span], reference: &Trace, rs: &[Span], lag: f64) -> 
     );
     let cost = |i: usize, j: usize| {
         let dt = (hil.time[hs[j].start] - lag - reference.time[rs[i].start]).abs();
-        (dt / gap).min(3.0) + 2.0 * (1.0 - dr[i].dot(&dh[j]))
+        0.5 * (dt / gap).min(1.0) + 2.0 * (1.0 - dr[i].dot(&dh[j]))
     };
     // d[i][j]: least cost of aligning the first i reference and the first j HIL collisions
     let mut d = vec![vec![0.0f64; m + 1]; n + 1];

@@ -23,11 +23,6 @@ pub struct Table {
 
 impl Table {
     /// This table with the columns of `other` appended.
-    fn with(mut self, other: Table) -> Table {
-        self.columns.extend(other.columns);
-        self
-    }
-
     /// The column called `name`.
     pub fn column(&self, name: &str) -> Option<&[f64]> {
         self.columns
@@ -44,26 +39,6 @@ impl Table {
     /// Whether there are no rows.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
-    }
-
-    fn from_rows<R>(
-        rows: &[R],
-        scalars: &[(&str, fn(&R) -> f64)],
-        vectors: &[(&str, fn(&R) -> Vector3<f64>)],
-    ) -> Table {
-        let mut columns = Vec::new();
-        for (name, get) in scalars {
-            columns.push((name.to_string(), rows.iter().map(get).collect()));
-        }
-        for (name, get) in vectors {
-            for (axis, label) in ["x", "y", "z"].iter().enumerate() {
-                columns.push((
-                    format!("{name}_{label}"),
-                    rows.iter().map(|r| get(r)[axis]).collect(),
-                ));
-            }
-        }
-        Table { columns }
     }
 }
 
@@ -251,59 +226,131 @@ pub fn simulate_plan(plan: &Plan) -> SimulationOutput {
     }
 }
 
-/// The HIL loop's table, one row per record: `time`, the vectors `tip_position`,
-/// `tip_velocity`, `actual_tip_position`, `actual_tip_velocity`, `contact_force`,
-/// `measured_force`, `measured_moment`, `applied_force`, `applied_moment` (`_x`, `_y`, `_z`),
-/// `energy`, and `stiffness_estimate`, `damping_estimate` if `estimates_contact`,
-/// `observed_energy` if `observes_energy` (one definition for simulations and real-time runs).
-pub fn hil_table(rows: &[HilRecord], estimates_contact: bool, observes_energy: bool) -> Table {
-    type V = Vector3<f64>;
-    let vectors: [(&str, fn(&HilRecord) -> V); 10] = [
-        ("tip_position", |r| r.tip_position),
-        ("tip_velocity", |r| r.tip_velocity),
-        ("angular_velocity", |r| r.angular_velocity),
-        ("actual_tip_position", |r| r.actual_tip_position),
-        ("actual_tip_velocity", |r| r.actual_tip_velocity),
-        ("contact_force", |r| r.contact_force),
-        ("measured_force", |r| r.measured_force),
-        ("measured_moment", |r| r.measured_moment),
-        ("applied_force", |r| r.applied_force),
-        ("applied_moment", |r| r.applied_moment),
-    ];
-    let mut scalars: Vec<(&str, fn(&HilRecord) -> f64)> = vec![("energy", |r| r.energy)];
-    if estimates_contact {
-        scalars.push(("stiffness_estimate", |r| r.stiffness_estimate));
-        scalars.push(("damping_estimate", |r| r.damping_estimate));
-    }
-    if observes_energy {
-        scalars.push(("observed_energy", |r| r.observed_energy));
-    }
-    Table::from_rows(rows, &[("time", |r: &HilRecord| r.time)], &vectors).with(Table::from_rows(
-        rows,
-        &scalars,
-        &[],
-    ))
+/// How a table's field reads a record: one value, or a vector (three columns `_x`, `_y`, `_z`).
+pub enum Get<R> {
+    /// One column.
+    Scalar(fn(&R) -> f64),
+    /// Three columns, `t` frame (or the sensor frame, as the field says).
+    Vector(fn(&R) -> Vector3<f64>),
 }
 
-/// The reference's table: `time`, `tip_position_*`, `tip_velocity_*`, `contact_force_*`,
-/// `energy` (one definition for simulations and real-time runs).
+/// Which runs have a field.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Only {
+    /// Every run.
+    Always,
+    /// Runs whose compensator identifies the contact (`stiffness_estimate`, ...).
+    Estimates,
+    /// Runs whose compensator observes the port energy.
+    ObservedEnergy,
+}
+
+/// A field of a table: its name, unit and how it reads a record (the one definition of the
+/// tables' columns, exported to Python with their units).
+pub struct Field<R> {
+    /// Column name (a vector's columns add `_x`, `_y`, `_z`).
+    pub name: &'static str,
+    /// SI unit.
+    pub unit: &'static str,
+    /// How it reads a record.
+    pub get: Get<R>,
+    /// Which runs have it.
+    pub only: Only,
+}
+
+/// A one-column field read by `get`, in every run.
+pub const fn scalar<R>(name: &'static str, unit: &'static str, get: fn(&R) -> f64) -> Field<R> {
+    Field { name, unit, get: Get::Scalar(get), only: Only::Always }
+}
+
+/// A three-column field read by `get`, in every run.
+pub const fn vector<R>(name: &'static str, unit: &'static str, get: fn(&R) -> Vector3<f64>) -> Field<R> {
+    Field { name, unit, get: Get::Vector(get), only: Only::Always }
+}
+
+/// The HIL loop's table (one definition for simulations and real-time runs): desired
+/// (virtual) and actual (robot) rod tip in `t`, the physical contact force on the rod (`t`),
+/// the sensor's wrench and the applied wrench (sensor frame and convention), the energy, and
+/// the estimates of the compensators that make them.
+pub const HIL_FIELDS: [Field<HilRecord>; 15] = [
+    scalar("time", "s", |r| r.time),
+    vector("tip_position", "m", |r| r.tip_position),
+    vector("tip_velocity", "m/s", |r| r.tip_velocity),
+    vector("angular_velocity", "rad/s", |r| r.angular_velocity),
+    vector("actual_tip_position", "m", |r| r.actual_tip_position),
+    vector("actual_tip_velocity", "m/s", |r| r.actual_tip_velocity),
+    vector("contact_force", "N", |r| r.contact_force),
+    vector("measured_force", "N", |r| r.measured_force),
+    vector("measured_moment", "N m", |r| r.measured_moment),
+    vector("applied_force", "N", |r| r.applied_force),
+    vector("applied_moment", "N m", |r| r.applied_moment),
+    scalar("energy", "J", |r| r.energy),
+    Field { only: Only::Estimates, ..scalar("stiffness_estimate", "N/m", |r| r.stiffness_estimate) },
+    Field { only: Only::Estimates, ..scalar("damping_estimate", "N s/m", |r| r.damping_estimate) },
+    Field { only: Only::ObservedEnergy, ..scalar("observed_energy", "J", |r| r.observed_energy) },
+];
+
+/// The reference's table: rod tip (`t`), the servicer's angular velocity relative to the
+/// target (`t`), the contact force on the rod and its moment on the frame about the sensor
+/// origin (`t`), the energy.
+pub const REFERENCE_FIELDS: [Field<ReferenceRecord>; 7] = [
+    scalar("time", "s", |r| r.time),
+    vector("tip_position", "m", |r| r.tip_position),
+    vector("tip_velocity", "m/s", |r| r.tip_velocity),
+    vector("angular_velocity", "rad/s", |r| r.angular_velocity),
+    vector("contact_force", "N", |r| r.contact_force),
+    vector("contact_moment", "N m", |r| r.contact_moment),
+    scalar("energy", "J", |r| r.energy),
+];
+
+/// The columns of a table's fields: `(name, unit, only)`, a vector's as three columns.
+pub fn columns<R>(fields: &[Field<R>]) -> Vec<(String, &'static str, Only)> {
+    let mut out = Vec::new();
+    for f in fields {
+        match f.get {
+            Get::Scalar(_) => out.push((f.name.to_string(), f.unit, f.only)),
+            Get::Vector(_) => {
+                for axis in ["x", "y", "z"] {
+                    out.push((format!("{}_{axis}", f.name), f.unit, f.only));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The table of `rows` with the `fields` for which `has(field.only)`.
+pub fn table<R>(rows: &[R], fields: &[Field<R>], has: impl Fn(Only) -> bool) -> Table {
+    let mut columns = Vec::new();
+    for f in fields.iter().filter(|f| has(f.only)) {
+        match f.get {
+            Get::Scalar(get) => columns.push((f.name.to_string(), rows.iter().map(get).collect())),
+            Get::Vector(get) => {
+                for (axis, label) in ["x", "y", "z"].iter().enumerate() {
+                    columns.push((
+                        format!("{}_{label}", f.name),
+                        rows.iter().map(|r| get(r)[axis]).collect(),
+                    ));
+                }
+            }
+        }
+    }
+    Table { columns }
+}
+
+/// The HIL loop's table ([`HIL_FIELDS`]), one row per record, with the estimates if
+/// `estimates_contact` and the observed energy if `observes_energy`.
+pub fn hil_table(rows: &[HilRecord], estimates_contact: bool, observes_energy: bool) -> Table {
+    table(rows, &HIL_FIELDS, |only| match only {
+        Only::Always => true,
+        Only::Estimates => estimates_contact,
+        Only::ObservedEnergy => observes_energy,
+    })
+}
+
+/// The reference's table ([`REFERENCE_FIELDS`]), one row per record.
 pub fn reference_table(reference: &[ReferenceRecord]) -> Table {
-    Table::from_rows(
-        reference,
-        &[("time", |r: &ReferenceRecord| r.time)],
-        &[
-            ("tip_position", |r| r.tip_position),
-            ("tip_velocity", |r| r.tip_velocity),
-            ("angular_velocity", |r| r.angular_velocity),
-            ("contact_force", |r| r.contact_force),
-            ("contact_moment", |r| r.contact_moment),
-        ],
-    )
-    .with(Table::from_rows(
-        reference,
-        &[("energy", |r: &ReferenceRecord| r.energy)],
-        &[],
-    ))
+    table(reference, &REFERENCE_FIELDS, |_| true)
 }
 
 /// The records and metrics of a run.

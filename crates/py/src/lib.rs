@@ -395,6 +395,35 @@ fn simulate_batch<'py>(
     Ok(result)
 }
 
+/// The columns of the tables a run produces, with their units: a dict with `timeseries` (the
+/// HIL loop), `reference` and `realtime` (what a real-time run adds to `timeseries`), each a
+/// list of `(name, unit, only)` in order, `only` being "always", "estimates" (compensators
+/// that identify the contact) or "observed_energy" (compensators with an energy observer).
+#[pyfunction]
+fn table_columns(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    use hilcontact_core::sim::{columns, Only, HIL_FIELDS, REFERENCE_FIELDS};
+    let list = |cols: Vec<(String, &'static str, Only)>| {
+        cols.into_iter()
+            .map(|(name, unit, only)| {
+                let only = match only {
+                    Only::Always => "always",
+                    Only::Estimates => "estimates",
+                    Only::ObservedEnergy => "observed_energy",
+                };
+                (name, unit, only)
+            })
+            .collect::<Vec<_>>()
+    };
+    let result = PyDict::new(py);
+    result.set_item("timeseries", list(columns(&HIL_FIELDS)))?;
+    result.set_item("reference", list(columns(&REFERENCE_FIELDS)))?;
+    result.set_item(
+        "realtime",
+        list(columns(&hilcontact_rt::report::REALTIME_FIELDS)),
+    )?;
+    Ok(result)
+}
+
 /// The columns of a run's summary row (what `simulate_batch` returns after `status`), in
 /// order: a list of `(name, unit, meaning)`; the core's `RunSummary::COLUMNS`, then
 /// `wall_time` (s).
@@ -440,6 +469,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(simulate_batch, m)?)?;
     m.add_function(wrap_pyfunction!(summary_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(table_columns, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(compensator_registry, m)?)?;
     m.add_function(wrap_pyfunction!(start_hil, m)?)?;

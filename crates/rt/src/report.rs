@@ -12,7 +12,8 @@ use serde_json::{json, Value};
 use hilcontact_core::hil::VirtualDynamics;
 use hilcontact_core::metrics::Metrics;
 use hilcontact_core::sim::{
-    hil_table, hil_trace, reference_table, run_reference, trace_metrics, HilRecord, Table,
+    hil_table, hil_trace, reference_table, run_reference, scalar, table, trace_metrics, Field,
+    HilRecord, Table,
 };
 use hilcontact_core::Plan;
 
@@ -106,6 +107,14 @@ pub struct RealtimeMetrics {
     pub realtime: Value,
 }
 
+/// The time-series columns a real-time run adds to the HIL loop's: the tick's wake-up latency,
+/// and the age of the sensor record and of the robot feedback it used.
+pub const REALTIME_FIELDS: [Field<Sample>; 3] = [
+    scalar("wake_latency", "s", |s| s.wake_latency),
+    scalar("sensor_age", "s", |s| s.sensor_age),
+    scalar("robot_age", "s", |s| s.robot_age),
+];
+
 /// Builds the output of a run from its samples.
 pub fn build_output(
     plan: &Plan,
@@ -117,16 +126,9 @@ pub fn build_output(
     let (estimates, observes) = (virt.estimates_contact(), virt.observes_energy());
     let records: Vec<HilRecord> = samples.iter().map(|s| s.record).collect();
     let mut timeseries = hil_table(&records, estimates, observes);
-    let timing: [(&str, fn(&Sample) -> f64); 3] = [
-        ("wake_latency", |s| s.wake_latency),
-        ("sensor_age", |s| s.sensor_age),
-        ("robot_age", |s| s.robot_age),
-    ];
-    for (name, get) in timing {
-        timeseries
-            .columns
-            .push((name.to_string(), samples.iter().map(get).collect()));
-    }
+    timeseries
+        .columns
+        .extend(table(samples, &REALTIME_FIELDS, |_| true).columns);
 
     let (reference_trace, reference) = run_reference(plan, true);
     let trace = hil_trace(plan, &records, estimates);
