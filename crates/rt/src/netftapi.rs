@@ -80,12 +80,12 @@ pub fn parse_counts(xml: &str) -> Result<CountsPerUnit> {
 /// Reads `http://host:port/netftapi2.xml` (plain HTTP/1.0 GET) and returns its counts.
 pub fn fetch_counts(host: &str, port: u16, timeout: Duration) -> Result<CountsPerUnit> {
     let what = format!("http://{host}:{port}{NETFTAPI_PATH}");
-    let fail = |e: std::io::Error| RtError::Io(format!("{what}: {e}"));
+    let fail = |e: std::io::Error| RtError::io(what.as_str(), &e);
     let addr: SocketAddr = (host, port)
         .to_socket_addrs()
         .map_err(fail)?
         .next()
-        .ok_or_else(|| RtError::Io(format!("{what}: no address")))?;
+        .ok_or_else(|| RtError::io_other(what.as_str(), "no address"))?;
     let mut stream = TcpStream::connect_timeout(&addr, timeout).map_err(fail)?;
     stream.set_read_timeout(Some(timeout)).map_err(fail)?;
     stream.set_write_timeout(Some(timeout)).map_err(fail)?;
@@ -123,7 +123,7 @@ impl NetFtApiServer {
     /// Serves `xml` on `bind` (e.g. `127.0.0.1:80`); other paths get 404.
     pub fn start(bind: SocketAddr, xml: String) -> Result<Self> {
         let server = tiny_http::Server::http(bind)
-            .map_err(|e| RtError::Io(format!("HTTP server on {bind}: {e}")))?;
+            .map_err(|e| RtError::io_dyn(format!("HTTP server on {bind}"), e.as_ref()))?;
         let address = server.server_addr().to_ip().unwrap_or(bind);
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
@@ -149,7 +149,7 @@ impl NetFtApiServer {
                     let _ = request.respond(response); // a client that went away is not our error
                 }
             })
-            .map_err(|e| RtError::Io(format!("HTTP server thread: {e}")))?;
+            .map_err(|e| RtError::io("HTTP server thread", &e))?;
         Ok(NetFtApiServer {
             stop,
             thread: Some(thread),
