@@ -62,7 +62,9 @@ fn error_classes(py: Python<'_>) -> PyResult<&ErrorClasses> {
             "RealtimeError",
             &[base.bind(py), &py.get_type::<PyOSError>()],
             "The real-time runtime or the emulated facility could not start or finish: a port \
-             in use, a peer that does not answer, a bad /netftapi2.xml. Also an OSError.",
+             in use, a peer that does not answer, a bad /netftapi2.xml. Also an OSError: for an \
+             error of the OS, `errno` (e.g. errno.EADDRINUSE) and `strerror` are set and `kind` \
+             names the Rust std::io::ErrorKind (e.g. 'AddrInUse'); otherwise `errno` is None.",
         )?;
         let option = exception_class(
             py,

@@ -40,12 +40,13 @@ use crate::links::{
     EndpointContext, LinkStats, RobotEndpoint, SensorEndpoint, Wrench,
 };
 
-/// Options of the emulated facility (defaults in [`Default`]), grouped per device like
+/// Options of the emulated facility (defaults: RDT sensor and EGM robot with their defaults, no
+/// fault injection), grouped per device like
 /// [`crate::runtime::RuntimeOptions`].
 ///
 /// As TOML: `[sensor] kind = "rdt"`, `port = 49152`, ...; `[robot] kind = "egm"`, `port =
 /// 6510`, ...; the fault injection at the top level.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct EmulatorOptions {
     /// The emulated sensor: its protocol (`kind`) and that protocol's options.
@@ -56,17 +57,6 @@ pub struct EmulatorOptions {
     pub silence_sensor_after: Option<f64>,
     /// Fault injection: the robot stops sending after this many seconds (None = never).
     pub silence_robot_after: Option<f64>,
-}
-
-impl Default for EmulatorOptions {
-    fn default() -> Self {
-        EmulatorOptions {
-            sensor: EmulatedSensorOptions::default(),
-            robot: EmulatedRobotOptions::default(),
-            silence_sensor_after: None,
-            silence_robot_after: None,
-        }
-    }
 }
 
 /// [`LinkStats`] as atomics: the emulator thread stores its endpoints' counters after each
