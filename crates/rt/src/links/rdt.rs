@@ -340,6 +340,12 @@ impl SensorEndpoint for RdtEndpoint {
     }
 
     fn serve(&mut self) {
+        // the HTTP server's socket errors (its own thread) count as the sensor's
+        if let Some(http) = &self.http {
+            let (receive, send) = http.take_errors();
+            self.stats.send_errors += send;
+            self.stats.io_errors += receive + send;
+        }
         while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
             self.stats.received += 1;
             let Ok(request) = RdtRequest::decode(&self.buf[..n]) else {
