@@ -61,7 +61,7 @@ REALTIME_COLUMNS: list[str] = ["wake_latency", "sensor_age", "robot_age"]
 
 def realtime_defaults() -> dict[str, Any]:
     """The default options: ``{"runtime": {...}, "facility": {...}, "protocols": {...}}``
-    (``protocols``: the sensor and robot kinds the runtime implements)."""
+    (``protocols``: the sensor and robot kinds, each implemented by the runtime and the emulator)."""
     return json.loads(_core().realtime_defaults())
 
 
