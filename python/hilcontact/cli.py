@@ -530,11 +530,25 @@ def _hil_line(s: dict[str, Any]) -> str:
 
 
 def _facility_line(s: dict[str, Any]) -> str:
+    sensor, robot = s.get("sensor_protocol", "RDT"), s.get("robot_protocol", "EGM")
     return (
-        f"facility  t {s['time']:8.3f} s | contact {s['contact_force']:7.1f} N | RDT sent {s['rdt_sent']} | "
-        f"EGM sent {s['egm_sent']}, corrections {s['corrections']} (dropped {s['corrections_dropped']}) | "
-        f"overruns {s['overruns']}"
+        f"facility  t {s['time']:8.3f} s | contact {s['contact_force']:7.1f} N | {sensor} sent {s['rdt_sent']} | "
+        f"{robot} sent {s['egm_sent']}, corrections {s['corrections']} (dropped {s['corrections_dropped']}) | "
+        f"io errors {s.get('io_errors', 0)} | overruns {s['overruns']}"
     )
+
+
+def _facility_errors(s: dict[str, Any]) -> str:
+    """The emulator's socket errors per endpoint, for the summary after it stops."""
+    parts = []
+    for link in ("sensor", "robot"):
+        stats = s.get(link) or {}
+        parts.append(
+            f"{link} ({s.get(link + '_protocol', '?')}): sent {stats.get('sent')}, send errors {stats.get('send_errors')}, "
+            f"io errors {stats.get('io_errors')}, received {stats.get('received')}, dropped "
+            f"{sum(stats.get(k, 0) for k in ('malformed', 'invalid', 'foreign', 'stale'))}"
+        )
+    return "; ".join(parts)
 
 
 def _report_realtime(console: Console, run: Run) -> None:
@@ -588,11 +602,12 @@ _MAPPING_OPTIONS = [
 @cli.command(name="facility", short_help="Run the emulated facility (Net F/T sensor + ABB EGM robot) in real time.")
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
-@_with(_FACILITY_OPTIONS + _MAPPING_OPTIONS)
+@_with([_protocol_option("sensor", "facility"), _protocol_option("robot", "facility")] + _FACILITY_OPTIONS + _MAPPING_OPTIONS)
 @click.option("--silence-sensor-after", type=float, default=None, metavar="S", help="Fault injection: the sensor stops sending after S seconds.")
 @click.option("--silence-robot-after", type=float, default=None, metavar="S", help="Fault injection: the robot stops sending after S seconds.")
 @click.option("--duration", type=float, default=None, metavar="S", help="Stop after S seconds [default: run until Ctrl-C].")
-def facility_command(scenario: str, sets: tuple[str, ...], bind_host: str | None, sensor_port: int | None,
+def facility_command(scenario: str, sets: tuple[str, ...], sensor_protocol: str | None, robot_protocol: str | None,
+                     bind_host: str | None, sensor_port: int | None,
                      http_port: int | None, egm_host: str | None, egm_port: int | None, egm_local_port: int | None,
                      counts_per_force: float | None, counts_per_torque: float | None, egm_offset: str | None,
                      egm_rotation: str | None, silence_sensor_after: float | None, silence_robot_after: float | None,
@@ -610,7 +625,10 @@ def facility_command(scenario: str, sets: tuple[str, ...], bind_host: str | None
 
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
+        # the flags keep their flat keys; hilcontact.realtime.LEGACY_KEYS moves them into the devices
         options = {
+            "sensor": {"kind": sensor_protocol} if sensor_protocol else None,
+            "robot": {"kind": robot_protocol} if robot_protocol else None,
             "bind_host": bind_host, "sensor_port": sensor_port, "http_port": http_port, "egm_host": egm_host,
             "egm_port": egm_port, "egm_local_port": egm_local_port, "counts_per_force": counts_per_force,
             "counts_per_torque": counts_per_torque, "egm_offset_mm": _numbers(egm_offset, 3, "--egm-offset"),
@@ -622,9 +640,9 @@ def facility_command(scenario: str, sets: tuple[str, ...], bind_host: str | None
     a = facility.addresses
     f = resolved.facility
     click.echo(
-        f"ready: facility {resolved.name}: sensor RDT udp://{a['sensor']}, "
+        f"ready: facility {resolved.name}: sensor {facility.status()['sensor_protocol']} udp://{a['sensor']}, "
         f"netftapi2.xml {'http://' + str(a['http']) + '/netftapi2.xml' if a['http'] else 'off'}, "
-        f"robot EGM udp://{a['robot']} -> udp://{a['egm_peer']}; robot delay {f.robot_delay * 1e3:g} ms, "
+        f"robot {facility.status()['robot_protocol']} udp://{a['robot']} -> udp://{a['robot_peer']}; robot delay {f.robot_delay * 1e3:g} ms, "
         f"sensor delay {f.sensor_delay * 1e3:g} ms, noise {f.sensor_noise:g} N; Ctrl-C stops",
         nl=True,
     )
@@ -641,6 +659,7 @@ def facility_command(scenario: str, sets: tuple[str, ...], bind_host: str | None
         pass
     final = facility.stop()
     click.echo("stopped: " + _facility_line(final))
+    click.echo("endpoints: " + _facility_errors(final))
 
 
 _HIL_OPTIONS = [
@@ -736,14 +755,32 @@ def _free_port(kind: int) -> int:
         return int(s.getsockname()[1])
 
 
+def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Emulator and runtime options that meet on loopback on free ports, grouped per device
+    (every protocol's options have a ``port``; RDT also an HTTP port for /netftapi2.xml)."""
+    defaults = _RT_DEFAULTS.get("facility", {})
+    sensor_kind = sensor_protocol or defaults.get("sensor", {}).get("kind", "rdt")
+    robot_kind = robot_protocol or defaults.get("robot", {}).get("kind", "egm")
+    sensor = {"kind": sensor_kind, "port": _free_port(socket.SOCK_DGRAM)}
+    robot = {"kind": robot_kind, "port": _free_port(socket.SOCK_DGRAM)}
+    if sensor_kind == "rdt":
+        sensor["http_port"] = _free_port(socket.SOCK_STREAM)
+    facility = {"sensor": dict(sensor), "robot": dict(robot)}
+    runtime = {"sensor": dict(sensor), "robot": {**robot, "bind_host": "127.0.0.1"}}
+    return facility, runtime
+
+
 @cli.command(name="demo-rt", short_help="Emulated facility and real-time HIL loop together, in one command.")
 @click.argument("scenario", default="paper-table1")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @click.option("--compensator", default="pida", show_default=True, help="Compensator kind of the loop (none shows the safety stop).")
 @click.option("--robot-delay", type=float, default=0.02, show_default=True, help="The emulated robot's response delay, s.")
+@_protocol_option("sensor", "facility")
+@_protocol_option("robot", "facility")
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-demo-rt].")
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
-def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay: float, out: str | None, no_plots: bool) -> None:
+def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay: float, sensor_protocol: str | None,
+            robot_protocol: str | None, out: str | None, no_plots: bool) -> None:
     """Run the emulated facility and the real-time HIL loop on loopback in one process (free
     ports, HTTP included): `hilcontact facility` and `hilcontact hil` together.
 
@@ -760,16 +797,20 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
         overrides["compensator.kind"] = compensator
         resolved = load_scenario(scenario, overrides)
         folder = Path(out) if out is not None else Path("runs") / f"{resolved.name}-demo-rt"
-        sensor_port, egm_port, http_port = _free_port(socket.SOCK_DGRAM), _free_port(socket.SOCK_DGRAM), _free_port(socket.SOCK_STREAM)
-        facility_options = {"sensor_port": sensor_port, "http_port": http_port, "egm_port": egm_port}
-        runtime_options = {"sensor_port": sensor_port, "http_port": http_port, "egm_port": egm_port, "egm_bind_host": "127.0.0.1"}
+        facility_options, runtime_options = _demo_options(sensor_protocol, robot_protocol)
         with start_facility(resolved, facility_options) as facility:
+            a = facility.addresses
             Console(stderr=True).print(
-                f"facility: sensor udp://{facility.addresses['sensor']}, http://{facility.addresses['http']}/netftapi2.xml, "
-                f"robot udp://{facility.addresses['robot']} -> udp://{facility.addresses['egm_peer']}",
+                f"facility: sensor udp://{a['sensor']}{', http://' + str(a['http']) + '/netftapi2.xml' if a['http'] else ''}, "
+                f"robot udp://{a['robot']} -> udp://{a['robot_peer']}",
                 soft_wrap=True,
             )
-            _run_realtime(resolved, runtime_options, folder, no_plots)
+            try:
+                _run_realtime(resolved, runtime_options, folder, no_plots)
+            finally:
+                final = facility.stop()
+                if final.get("io_errors"):
+                    Console(stderr=True).print("facility " + escape(_facility_errors(final)), soft_wrap=True)
 
 
 def main(argv: Sequence[str] | None = None) -> None:

@@ -10,7 +10,9 @@ directly; this module is their public home:
   set) lists every problem as ``(key, message)``;
 - :class:`RealtimeError` (also an ``OSError``): the real-time runtime or the emulated
   facility could not start or finish (a port in use, a peer that does not answer, a bad
-  ``/netftapi2.xml``);
+  ``/netftapi2.xml``); for an error of the OS, ``errno`` (e.g. ``errno.EADDRINUSE``) and
+  ``strerror`` are set and ``kind`` names the Rust ``std::io::ErrorKind`` (``"AddrInUse"``),
+  otherwise ``errno`` is None;
 - :class:`RealtimeOptionError` (a ``RealtimeError`` and a ``ValueError``): a real-time
   option (limit, port, mapping) is invalid; the message names it.
 """

@@ -11,10 +11,11 @@ facility that speaks them.
 
 Options are plain dicts with the keys of the Rust ``RuntimeOptions`` / ``EmulatorOptions``
 (see :func:`realtime_defaults`, the one place the defaults live); keys left out take their
-defaults. The devices are grouped per link, each with its protocol: ``{"sensor": {"kind":
-"rdt", "port": 49152, ...}, "robot": {"kind": "egm", "port": 6510, ...}, "limits": {...}}``;
-the flat keys of earlier versions (``sensor_port``, ``egm_port``, ...) still work and are
-moved into their link by :data:`LEGACY_KEYS`. Units: SI, except where the key says otherwise
+defaults. In both, the devices are grouped per link, each with its protocol: ``{"sensor":
+{"kind": "rdt", "port": 49152, ...}, "robot": {"kind": "egm", "port": 6510, ...}, "limits":
+{...}}``; a ``kind`` must be one of ``realtime_defaults()["protocols"]``. The flat keys of
+earlier versions (``sensor_port``, ``egm_port``, ...) still work and are moved into their link
+by :data:`LEGACY_KEYS`. Units: SI, except where the key says otherwise
 (``watchdog_ms``, ``offset_mm``).
 
 Ctrl-C: :func:`run_hil` polls the loop with the GIL released and, on ``KeyboardInterrupt``,
@@ -60,7 +61,7 @@ REALTIME_COLUMNS: list[str] = [name for name, _, _ in _core().table_columns()["r
 
 def realtime_defaults() -> dict[str, Any]:
     """The default options: ``{"runtime": {...}, "facility": {...}, "protocols": {...}}``
-    (``protocols``: the sensor and robot kinds the runtime implements)."""
+    (``protocols``: the sensor and robot kinds, each implemented by the runtime and the emulator)."""
     return json.loads(_core().realtime_defaults())
 
 
@@ -82,7 +83,19 @@ LEGACY_KEYS: dict[str, dict[str, tuple[str, str, str]]] = {
         "egm_offset_mm": ("robot", "egm", "offset_mm"),
         "egm_rotation": ("robot", "egm", "rotation"),
     },
-    "facility": {},
+    "facility": {
+        "bind_host": ("sensor", "rdt", "bind_host"),
+        "sensor_port": ("sensor", "rdt", "port"),
+        "http_port": ("sensor", "rdt", "http_port"),
+        "counts_per_force": ("sensor", "rdt", "counts_per_force"),
+        "counts_per_torque": ("sensor", "rdt", "counts_per_torque"),
+        "egm_host": ("robot", "egm", "host"),
+        "egm_port": ("robot", "egm", "port"),
+        "egm_local_port": ("robot", "egm", "local_port"),
+        "egm_period": ("robot", "egm", "period"),
+        "egm_offset_mm": ("robot", "egm", "offset_mm"),
+        "egm_rotation": ("robot", "egm", "rotation"),
+    },
 }
 
 #: The link groups of the options (each a dict with a ``kind``).
@@ -93,7 +106,8 @@ def _options(options: Mapping[str, Any] | None, section: str) -> str:
     """Options as the Rust side takes them: grouped links (``sensor``/``robot`` with a
     ``kind``), flat legacy keys moved into their link (see :data:`LEGACY_KEYS`), ``None`` values
     left out (defaults)."""
-    known = realtime_defaults()[section]
+    defaults = realtime_defaults()
+    known, protocols = defaults[section], defaults.get("protocols", {})
     legacy = LEGACY_KEYS.get(section, {})
     clean: dict[str, Any] = {}
     links: dict[str, dict[str, Any]] = {}
@@ -120,6 +134,11 @@ def _options(options: Mapping[str, Any] | None, section: str) -> str:
         if link in implied and implied[link][0] != kind:
             raise RealtimeOptionError(
                 f"{section} option {implied[link][1]!r} belongs to {link} kind {implied[link][0]!r}, not {kind!r}"
+            )
+        allowed_kinds = protocols.get(link)
+        if allowed_kinds and kind not in allowed_kinds:
+            raise RealtimeOptionError(
+                f"{section} option {link}.kind: unknown {link} protocol {kind!r}; allowed: {', '.join(allowed_kinds)}"
             )
         clean[link] = group
     return json.dumps(clean)
@@ -178,7 +197,10 @@ class Facility:
         self.final_status: dict[str, Any] | None = None
 
     def status(self) -> dict[str, Any]:
-        """Counters: time (s), contact_force (N), rdt_sent, egm_sent, corrections, ..."""
+        """Counters: time (s), contact_force (N), ``sensor`` and ``robot`` (each: received,
+        accepted, malformed, invalid, foreign, stale, lost, sent, send_errors, io_errors),
+        io_errors (both), overruns, and the names of earlier versions (rdt_sent, egm_sent,
+        corrections, corrections_dropped, ...)."""
         if self.final_status is not None:
             return self.final_status
         return dict(self._handle.status())
@@ -198,11 +220,16 @@ class Facility:
 
 def start_facility(scenario: Scenario | str, options: Mapping[str, Any] | None = None) -> Facility:
     """Start the emulated facility of ``scenario`` (its robot delay, servo lag, contact, sensor
-    delay and noise) with ``options`` (ports, hosts, counts per unit, EGM mapping).
+    delay and noise) with ``options``, grouped per device like :func:`run_hil`'s: ``{"sensor":
+    {"kind": "rdt", "bind_host", "port", "http_port", "counts_per_force", ...}, "robot":
+    {"kind": "egm", "host", "port", "local_port", "period", "offset_mm", "rotation"},
+    "silence_sensor_after", "silence_robot_after"}`` (the flat keys ``sensor_port``,
+    ``egm_port``, ... still work, see :data:`LEGACY_KEYS`).
 
-    The sensor answers RDT requests on ``bind_host:sensor_port`` and serves
-    ``/netftapi2.xml`` on ``http_port`` (0 = no HTTP); the robot sends EGM feedback to
-    ``egm_host:egm_port`` every 4 ms and follows the corrections it gets back.
+    RDT: the sensor answers requests on ``bind_host:port`` and serves ``/netftapi2.xml`` on
+    ``http_port`` (0 = no HTTP). EGM: the robot sends feedback to ``host:port`` every 4 ms and
+    follows the corrections it gets back. Raises :class:`~hilcontact.errors.RealtimeError` (with
+    ``errno``, e.g. ``EADDRINUSE``) if a port cannot be bound.
     """
     scenario = _scenario(scenario)
     return Facility(_core().start_facility(scenario.to_json(), _options(options, "facility")))

@@ -62,7 +62,9 @@ fn error_classes(py: Python<'_>) -> PyResult<&ErrorClasses> {
             "RealtimeError",
             &[base.bind(py), &py.get_type::<PyOSError>()],
             "The real-time runtime or the emulated facility could not start or finish: a port \
-             in use, a peer that does not answer, a bad /netftapi2.xml. Also an OSError.",
+             in use, a peer that does not answer, a bad /netftapi2.xml. Also an OSError: for an \
+             error of the OS, `errno` (e.g. errno.EADDRINUSE) and `strerror` are set and `kind` \
+             names the Rust std::io::ErrorKind (e.g. 'AddrInUse'); otherwise `errno` is None.",
         )?;
         let option = exception_class(
             py,
@@ -87,6 +89,21 @@ fn raise(py: Python<'_>, class: fn(&ErrorClasses) -> &Py<PyType>, message: Strin
     }
 }
 
+/// A `RealtimeError` from the OS: constructed with `(errno, strerror)` as `OSError` is, so
+/// `exc.errno` and `exc.strerror` are set (and `str(exc)` is `[Errno N] strerror`); `kind` is
+/// the Rust `std::io::ErrorKind` (e.g. `"AddrInUse"`).
+fn raise_os(py: Python<'_>, errno: i32, kind: std::io::ErrorKind, strerror: String) -> PyErr {
+    match error_classes(py) {
+        Ok(classes) => {
+            let err = PyErr::from_type(classes.realtime.bind(py).clone(), (errno, strerror));
+            // best effort: the errno and the message are set already
+            let _ = err.value(py).setattr("kind", format!("{kind:?}"));
+            err
+        }
+        Err(e) => e,
+    }
+}
+
 /// The one conversion from core errors: `ScenarioError`, with every problem in `issues`.
 fn to_py_err(py: Python<'_>, error: CoreError) -> PyErr {
     let issues: Vec<(String, String)> = error
@@ -102,13 +119,20 @@ fn to_py_err(py: Python<'_>, error: CoreError) -> PyErr {
     err
 }
 
-/// The one conversion from real-time errors: scenario errors are `ScenarioError`, option
-/// errors `RealtimeOptionError`, the others (sockets, protocol, connection) `RealtimeError`.
+/// The one conversion from real-time errors (exhaustive: a new variant must be placed here):
+/// scenario errors are `ScenarioError`, option errors `RealtimeOptionError`, OS errors
+/// `RealtimeError` with `errno`, `strerror` and `kind` set, the others (an I/O error that did
+/// not come from the OS, protocol, connection) `RealtimeError` with `errno` None.
 fn rt_err(py: Python<'_>, error: RtError) -> PyErr {
     match error {
         RtError::Scenario(e) => to_py_err(py, e),
         RtError::Option { .. } => raise(py, |c| &c.option, error.to_string()),
-        RtError::Io(_) | RtError::Protocol(_) | RtError::Connect(_) => {
+        RtError::Io {
+            errno: Some(errno),
+            kind,
+            ..
+        } => raise_os(py, errno, kind, error.to_string()),
+        RtError::Io { errno: None, .. } | RtError::Protocol(_) | RtError::Connect(_) => {
             raise(py, |c| &c.realtime, error.to_string())
         }
     }
@@ -131,7 +155,8 @@ fn parse_options<T: serde::de::DeserializeOwned>(
     py: Python<'_>,
     options_json: &str,
 ) -> PyResult<T> {
-    serde_json::from_str(options_json).map_err(|e| raise(py, |c| &c.option, format!("options: {e}")))
+    serde_json::from_str(options_json)
+        .map_err(|e| raise(py, |c| &c.option, format!("options: {e}")))
 }
 
 /// JSON text to a Python object (through the json module: the values are plain data).
@@ -234,20 +259,26 @@ impl PyFacilityHandle {
 
 #[pymethods]
 impl PyFacilityHandle {
-    /// Counters: finished, tick, time (s), contact_force (N), rdt_sent, rdt_requests,
-    /// rdt_bad_requests, egm_sent, corrections, corrections_dropped, overruns, max_latency_us.
+    /// Counters: finished, tick, time (s), contact_force (N), sensor_protocol, robot_protocol,
+    /// sensor and robot (each a dict of packet counters: received, accepted, malformed,
+    /// invalid, foreign, stale, lost, late, sent, send_errors, io_errors), io_errors (both
+    /// endpoints), overruns, max_latency_us (µs), and the names of earlier versions: rdt_sent,
+    /// rdt_requests, rdt_bad_requests, egm_sent, corrections, corrections_dropped.
     fn status<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         json_to_py(py, &self.handle()?.status())
     }
 
-    /// `{"sensor": "host:port", "http": "host:port" | None, "robot": ..., "egm_peer": ...}`.
+    /// `{"sensor": "host:port", "http": "host:port" | None, "robot": ..., "robot_peer": ...,
+    /// "egm_peer": ...}` (`robot_peer`: where the robot's feedback goes; `egm_peer` is its name
+    /// of earlier versions).
     fn addresses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let a = self.handle()?.addresses();
         let d = PyDict::new(py);
         d.set_item("sensor", a.sensor.to_string())?;
         d.set_item("http", a.http.map(|h| h.to_string()))?;
         d.set_item("robot", a.robot.to_string())?;
-        d.set_item("egm_peer", a.egm_peer.to_string())?;
+        d.set_item("robot_peer", a.robot_peer.to_string())?;
+        d.set_item("egm_peer", a.robot_peer.to_string())?;
         Ok(d)
     }
 
@@ -274,7 +305,8 @@ impl PyFacilityHandle {
 }
 
 /// Starts the emulated facility of a scenario (JSON) with options (JSON, keys of
-/// `EmulatorOptions`). Raises RealtimeError if a port cannot be bound.
+/// `EmulatorOptions`: `sensor` and `robot` grouped with their `kind`, defaults for the missing
+/// ones). Raises RealtimeError (with `errno`) if a port cannot be bound.
 #[pyfunction]
 fn start_facility(
     py: Python<'_>,

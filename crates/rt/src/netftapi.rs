@@ -10,7 +10,7 @@
 
 use std::io::{Read, Write};
 use std::net::{SocketAddr, TcpStream, ToSocketAddrs};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
@@ -80,12 +80,12 @@ pub fn parse_counts(xml: &str) -> Result<CountsPerUnit> {
 /// Reads `http://host:port/netftapi2.xml` (plain HTTP/1.0 GET) and returns its counts.
 pub fn fetch_counts(host: &str, port: u16, timeout: Duration) -> Result<CountsPerUnit> {
     let what = format!("http://{host}:{port}{NETFTAPI_PATH}");
-    let fail = |e: std::io::Error| RtError::Io(format!("{what}: {e}"));
+    let fail = |e: std::io::Error| RtError::io(what.as_str(), &e);
     let addr: SocketAddr = (host, port)
         .to_socket_addrs()
         .map_err(fail)?
         .next()
-        .ok_or_else(|| RtError::Io(format!("{what}: no address")))?;
+        .ok_or_else(|| RtError::io_other(what.as_str(), "no address"))?;
     let mut stream = TcpStream::connect_timeout(&addr, timeout).map_err(fail)?;
     stream.set_read_timeout(Some(timeout)).map_err(fail)?;
     stream.set_write_timeout(Some(timeout)).map_err(fail)?;
@@ -112,29 +112,47 @@ pub fn fetch_counts(host: &str, port: u16, timeout: Duration) -> Result<CountsPe
     parse_counts(body)
 }
 
-/// An HTTP server answering `GET /netftapi2.xml` on its own thread.
+/// An HTTP server answering `GET /netftapi2.xml` on its own thread. Its socket errors are
+/// counted, not dropped ([`NetFtApiServer::take_errors`]).
 pub struct NetFtApiServer {
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
     address: SocketAddr,
+    errors: Arc<HttpErrors>,
+}
+
+/// Socket errors of the HTTP server since they were last taken.
+#[derive(Debug, Default)]
+struct HttpErrors {
+    /// Accepting or reading a request failed.
+    receive: AtomicU64,
+    /// Writing a response failed (e.g. the client went away).
+    send: AtomicU64,
 }
 
 impl NetFtApiServer {
     /// Serves `xml` on `bind` (e.g. `127.0.0.1:80`); other paths get 404.
     pub fn start(bind: SocketAddr, xml: String) -> Result<Self> {
         let server = tiny_http::Server::http(bind)
-            .map_err(|e| RtError::Io(format!("HTTP server on {bind}: {e}")))?;
+            .map_err(|e| RtError::io_dyn(format!("HTTP server on {bind}"), e.as_ref()))?;
         let address = server.server_addr().to_ip().unwrap_or(bind);
         let stop = Arc::new(AtomicBool::new(false));
         let flag = stop.clone();
+        let errors = Arc::new(HttpErrors::default());
+        let counted = errors.clone();
         let thread = std::thread::Builder::new()
             .name("hil-netftapi".into())
             .spawn(move || {
                 let header =
                     tiny_http::Header::from_bytes(&b"Content-Type"[..], &b"text/xml"[..]).ok();
                 while !flag.load(Ordering::Relaxed) {
-                    let Ok(Some(request)) = server.recv_timeout(Duration::from_millis(100)) else {
-                        continue;
+                    let request = match server.recv_timeout(Duration::from_millis(100)) {
+                        Ok(Some(request)) => request,
+                        Ok(None) => continue,
+                        Err(_) => {
+                            counted.receive.fetch_add(1, Ordering::Relaxed);
+                            continue;
+                        }
                     };
                     let path = request.url().split('?').next().unwrap_or("");
                     let response = if path == NETFTAPI_PATH {
@@ -146,20 +164,32 @@ impl NetFtApiServer {
                     } else {
                         tiny_http::Response::from_string("not found").with_status_code(404)
                     };
-                    let _ = request.respond(response); // a client that went away is not our error
+                    if request.respond(response).is_err() {
+                        counted.send.fetch_add(1, Ordering::Relaxed);
+                    }
                 }
             })
-            .map_err(|e| RtError::Io(format!("HTTP server thread: {e}")))?;
+            .map_err(|e| RtError::io("HTTP server thread", &e))?;
         Ok(NetFtApiServer {
             stop,
             thread: Some(thread),
             address,
+            errors,
         })
     }
 
     /// The address the server listens on.
     pub fn address(&self) -> SocketAddr {
         self.address
+    }
+
+    /// The socket errors since the last call: `(receive, send)` (accepting or reading a
+    /// request; writing a response). Never allocates.
+    pub fn take_errors(&self) -> (u64, u64) {
+        (
+            self.errors.receive.swap(0, Ordering::Relaxed),
+            self.errors.send.swap(0, Ordering::Relaxed),
+        )
     }
 }
 

@@ -177,7 +177,7 @@ pub fn build_output(
         }
     }
     let metrics = serde_json::to_value(RealtimeMetrics { core, realtime })
-        .map_err(|e| RtError::Io(format!("metrics: {e}")))?;
+        .map_err(|e| RtError::io_other("metrics", e.to_string()))?;
     Ok(HilOutput {
         timeseries,
         reference: reference_table(&reference),

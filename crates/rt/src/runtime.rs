@@ -47,8 +47,8 @@ use crate::links::{
     open_robot, open_sensor, LinkContext, Pacing, RobotLink, RobotOptions, SensorLink,
     SensorOptions, Wrench,
 };
-pub use crate::report::{RunOutcome, Sample};
 use crate::report::{build_output, HilOutput};
+pub use crate::report::{RunOutcome, Sample};
 use crate::safety::{check_workspace, check_wrench, SafetyLimits, StopEvent, StopKind};
 
 /// Options of the real-time runtime (defaults in [`Default`]; the CLI documents each).
@@ -88,7 +88,6 @@ impl Default for RuntimeOptions {
         }
     }
 }
-
 
 #[derive(Debug, Default)]
 struct SharedStatus {
@@ -142,7 +141,6 @@ pub struct StatusSnapshot {
     /// Why it stopped, once it has.
     pub stop: Option<StopKind>,
 }
-
 
 /// A running HIL loop.
 pub struct HilHandle {
@@ -222,11 +220,13 @@ impl HilHandle {
         if !(feedback_period.is_finite() && feedback_period > 0.0) {
             return Err(RtError::option(
                 "robot",
-                format!("the {} link reports a feedback period of {feedback_period} s", robot.name()),
+                format!(
+                    "the {} link reports a feedback period of {feedback_period} s",
+                    robot.name()
+                ),
             ));
         }
-        if pacing == Pacing::Robot
-            && (feedback_period - plan.period).abs() > 1e-6 * feedback_period
+        if pacing == Pacing::Robot && (feedback_period - plan.period).abs() > 1e-6 * feedback_period
         {
             return Err(RtError::option(
                 "simulation.period",
@@ -267,7 +267,7 @@ impl HilHandle {
                 }
                 samples
             })
-            .map_err(|e| RtError::Io(format!("writer thread: {e}")))?;
+            .map_err(|e| RtError::io("writer thread", &e))?;
 
         let rod = plan.system.rod_tip;
         let initial = step.command();
@@ -316,7 +316,7 @@ impl HilHandle {
                 flag.finished.store(true, Ordering::Release);
                 outcome
             })
-            .map_err(|e| RtError::Io(format!("loop thread: {e}")))?;
+            .map_err(|e| RtError::io("loop thread", &e))?;
         Ok(HilHandle {
             shared,
             thread: Some(thread),
@@ -376,18 +376,13 @@ impl HilHandle {
     pub fn finish(mut self) -> Result<HilOutput> {
         let outcome = match self.thread.take().map(|t| t.join()) {
             Some(Ok(outcome)) => outcome,
-            _ => Err(RtError::Io("the loop thread panicked".into())),
+            _ => Err(RtError::io_other("loop thread", "panicked")),
         };
         let samples = match self.writer.take().map(|t| t.join()) {
             Some(Ok(samples)) => samples,
-            _ => return Err(RtError::Io("the writer thread panicked".into())),
+            _ => return Err(RtError::io_other("writer thread", "panicked")),
         };
-        build_output(
-            &self.plan,
-            &self.options,
-            &samples,
-            &outcome?,
-        )
+        build_output(&self.plan, &self.options, &samples, &outcome?)
     }
 }
 
@@ -610,8 +605,7 @@ impl Loop {
                 }
             }
             self.poll_links(now_ns());
-            self.robot
-                .hold(&pose, now_ns().saturating_sub(self.t0_ns));
+            self.robot.hold(&pose, now_ns().saturating_sub(self.t0_ns));
         }
     }
 

@@ -10,11 +10,11 @@ use std::time::{Duration, Instant};
 
 use common::{free_udp_port, preset};
 use hilcontact_rt::egm::{CorrectionDecoder, FeedbackEncoder};
+use hilcontact_rt::links::egm::EgmOptions;
+use hilcontact_rt::links::rdt::RdtOptions;
 use hilcontact_rt::mapping::EgmPoseMm;
 use hilcontact_rt::rdt::{RdtCommand, RdtRecord, RdtRequest};
 use hilcontact_rt::safety::SafetyLimits;
-use hilcontact_rt::links::egm::EgmOptions;
-use hilcontact_rt::links::rdt::RdtOptions;
 use hilcontact_rt::{HilHandle, RobotOptions, RuntimeOptions, SensorOptions};
 
 fn pose(x: f64, w: f64) -> EgmPoseMm {

@@ -2,8 +2,9 @@
 #![allow(dead_code)]
 
 use hilcontact_core::Scenario;
-use hilcontact_rt::links::egm::EgmOptions;
-use hilcontact_rt::links::rdt::RdtOptions;
+use hilcontact_rt::links::egm::{EgmEndpointOptions, EgmOptions};
+use hilcontact_rt::links::rdt::{RdtEndpointOptions, RdtOptions};
+use hilcontact_rt::links::{EmulatedRobotOptions, EmulatedSensorOptions};
 use hilcontact_rt::{EmulatorOptions, RobotOptions, RuntimeOptions, SensorOptions};
 
 /// A preset scenario from `python/hilcontact/scenarios/<name>.toml`.
@@ -29,22 +30,29 @@ pub fn free_udp_port() -> u16 {
 pub fn loopback_options() -> (EmulatorOptions, RuntimeOptions) {
     let sensor_port = free_udp_port();
     let egm_port = free_udp_port();
-    let emulator = EmulatorOptions {
-        sensor_port,
+    let sensor = RdtEndpointOptions {
+        port: sensor_port,
         http_port: 0,
-        egm_port,
         ..Default::default()
     };
     let runtime = RuntimeOptions {
         sensor: SensorOptions::Rdt(RdtOptions {
             port: sensor_port,
-            counts_per_force: Some(emulator.counts_per_force),
-            counts_per_torque: Some(emulator.counts_per_torque),
+            counts_per_force: Some(sensor.counts_per_force),
+            counts_per_torque: Some(sensor.counts_per_torque),
             ..Default::default()
         }),
         robot: RobotOptions::Egm(EgmOptions {
             port: egm_port,
             bind_host: "127.0.0.1".into(),
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let emulator = EmulatorOptions {
+        sensor: EmulatedSensorOptions::Rdt(sensor),
+        robot: EmulatedRobotOptions::Egm(EgmEndpointOptions {
+            port: egm_port,
             ..Default::default()
         }),
         ..Default::default()

@@ -228,7 +228,11 @@ fn robot_paced_loop_runs_one_tick_per_robot_packet_and_answers_each() {
     let (sent, running_from, echoed, unanswered) = robot_thread.join().unwrap();
     let out = hil.finish().unwrap();
     let rt = &out.metrics["realtime"];
-    assert_eq!(rt["stop"]["kind"], "robot-watchdog", "{}", out.metrics["reason"]);
+    assert_eq!(
+        rt["stop"]["kind"], "robot-watchdog",
+        "{}",
+        out.metrics["reason"]
+    );
     assert!(
         out.metrics["reason"]
             .as_str()
@@ -341,7 +345,10 @@ fn options_are_grouped_per_device_kind() {
     let o: RuntimeOptions = toml::from_str(text).unwrap();
     let SensorOptions::Rdt(sensor) = &o.sensor;
     let RobotOptions::Egm(robot) = &o.robot;
-    assert_eq!((sensor.host.as_str(), sensor.port, sensor.http_port), ("192.168.1.1", 49153, 80));
+    assert_eq!(
+        (sensor.host.as_str(), sensor.port, sensor.http_port),
+        ("192.168.1.1", 49153, 80)
+    );
     assert_eq!((robot.port, robot.bind_host.as_str()), (6511, "0.0.0.0"));
     assert_eq!(robot.offset_mm, [1.0, 2.0, 3.0]);
     assert_eq!(o.connect_timeout, 2.0);

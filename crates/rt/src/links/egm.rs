@@ -1,5 +1,7 @@
-//! [`RobotLink`] for an ABB robot controller over Externally Guided Motion (EGM): `EgmRobot`
-//! feedback in, `EgmSensor` corrections out, protobuf over UDP (codec in [`crate::egm`]).
+//! ABB Externally Guided Motion (EGM), both sides: [`EgmRobot`] is the [`RobotLink`] of the
+//! loop (`EgmRobot` feedback in, `EgmSensor` corrections out, protobuf over UDP, codec in
+//! [`crate::egm`]), [`EgmEndpoint`] the emulated controller's [`RobotEndpoint`] (feedback out,
+//! corrections in).
 //!
 //! The controller sends feedback every 4 ms ([`EGM_PERIOD`]) to the PC's EGM port; the loop
 //! runs on the PC's clock ([`Pacing::Clock`]) and answers each tick with a correction to the
@@ -16,12 +18,17 @@ use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
 
-use super::{recv_counted, LinkContext, LinkStats, Pacing, RobotLink};
-use crate::egm::{CorrectionEncoder, EgmError, RobotDecoder, EGM_PERIOD, EGM_PORT};
-use crate::emulator::{bind_udp, resolve};
-use crate::error::Result;
+use super::{
+    bind_udp, local_addr, recv_counted, resolve, EndpointContext, LinkContext, LinkStats, Pacing,
+    RobotEndpoint, RobotLink,
+};
+use crate::egm::{
+    CorrectionDecoder, CorrectionEncoder, EgmError, FeedbackEncoder, RobotDecoder, EGM_PERIOD,
+    EGM_PORT,
+};
+use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
-use crate::mapping::PoseMapping;
+use crate::mapping::{EgmPoseMm, PoseMapping};
 use crate::rdt::{SequenceTracker, SequenceVerdict};
 
 /// Options of an EGM robot link (`[robot] kind = "egm"`).
@@ -72,7 +79,10 @@ impl EgmRobot {
     /// Validates the mapping and binds the EGM endpoint.
     pub fn open(o: &EgmOptions, _context: &LinkContext) -> Result<Self> {
         let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
-        let socket = bind_udp("EGM endpoint", resolve("egm_bind_host", &o.bind_host, o.port)?)?;
+        let socket = bind_udp(
+            "EGM endpoint",
+            resolve("egm_bind_host", &o.bind_host, o.port)?,
+        )?;
         let robot_ip = match &o.robot_host {
             Some(h) => Some(resolve("robot_host", h, 0)?.ip()),
             None => None,
@@ -125,12 +135,7 @@ impl RobotLink for EgmRobot {
             }
             let feedback = match self.decoder.decode(&self.buf[..n]) {
                 Ok(f) => f,
-                Err(
-                    EgmError::WrongSize(_)
-                    | EgmError::Decode
-                    | EgmError::MissingHeader
-                    | EgmError::WrongType(_),
-                ) => {
+                Err(e) if is_malformed(&e) => {
                     self.stats.malformed += 1;
                     continue;
                 }
@@ -178,5 +183,177 @@ impl RobotLink for EgmRobot {
 
     fn stats_mut(&mut self) -> &mut LinkStats {
         &mut self.stats
+    }
+}
+
+/// Whether an EGM decoding error means a malformed datagram (else: invalid values).
+fn is_malformed(e: &EgmError) -> bool {
+    matches!(
+        e,
+        EgmError::WrongSize(_)
+            | EgmError::Decode
+            | EgmError::MissingHeader
+            | EgmError::WrongType(_)
+    )
+}
+
+/// Options of the emulated EGM robot controller (`[robot] kind = "egm"` of the emulator's
+/// options).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EgmEndpointOptions {
+    /// Host the robot sends its feedback to: the PC running the loop (CLI `--egm-host`).
+    pub host: String,
+    /// UDP port the robot sends its feedback to: the PC side's port (6510) (CLI `--egm-port`).
+    pub port: u16,
+    /// The robot's own UDP port (0 = any free port) (CLI `--egm-local-port`).
+    pub local_port: u16,
+    /// Feedback period, s (0.004 = 250 Hz), rounded to whole control periods.
+    pub period: f64,
+    /// Origin of the target frame `t` in the EGM frame, mm (CLI `--egm-offset`; see
+    /// [`crate::mapping`]).
+    pub offset_mm: [f64; 3],
+    /// Rotation from `t` to the EGM frame, quaternion `[w, x, y, z]` (CLI `--egm-rotation`).
+    pub rotation: [f64; 4],
+}
+
+impl Default for EgmEndpointOptions {
+    fn default() -> Self {
+        EgmEndpointOptions {
+            host: "127.0.0.1".into(),
+            port: EGM_PORT,
+            local_port: 0,
+            period: EGM_PERIOD,
+            offset_mm: [0.0; 3],
+            rotation: [1.0, 0.0, 0.0, 0.0],
+        }
+    }
+}
+
+/// The emulated ABB controller's EGM side. Every feedback period an `EgmRobot` message with
+/// the actual pose (feedback) and the last commanded one (planned) goes to the PC's
+/// `host:port`; `EgmSensor` corrections are accepted from that address only, and the newest
+/// (by sequence number; gaps are counted as `lost`, older ones as `stale`) becomes the command
+/// the robot follows.
+pub struct EgmEndpoint {
+    socket: UdpSocket,
+    address: SocketAddr,
+    peer: SocketAddr,
+    mapping: PoseMapping,
+    /// Feedback every this many control periods (≥ 1).
+    every: u64,
+    /// Control period, ns.
+    period_ns: u64,
+    /// The newest commanded pose, mm (`planned` in the feedback).
+    planned: EgmPoseMm,
+    seqno: u32,
+    sequence: SequenceTracker,
+    decoder: CorrectionDecoder,
+    encoder: FeedbackEncoder,
+    stats: LinkStats,
+    buf: [u8; 2048],
+}
+
+impl EgmEndpoint {
+    /// Validates the period and the mapping, resolves the PC's address and binds the robot's
+    /// socket (on loopback when the PC is).
+    pub fn open(o: &EgmEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        if !(o.period.is_finite() && o.period > 0.0) {
+            return Err(RtError::option(
+                "egm_period",
+                format!("must be a positive number, got {}", o.period),
+            ));
+        }
+        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
+        let peer = resolve("egm_host", &o.host, o.port)?;
+        let bind: SocketAddr = match peer.ip() {
+            IpAddr::V4(ip) if ip.is_loopback() => SocketAddr::from(([127, 0, 0, 1], o.local_port)),
+            IpAddr::V4(_) => SocketAddr::from(([0, 0, 0, 0], o.local_port)),
+            IpAddr::V6(_) => SocketAddr::from(([0u16; 8], o.local_port)),
+        };
+        let socket = bind_udp("robot (EGM)", bind)?;
+        let address = local_addr("robot (EGM)", &socket)?;
+        Ok(EgmEndpoint {
+            socket,
+            address,
+            peer,
+            mapping,
+            every: ((o.period / context.period).round() as u64).max(1),
+            period_ns: (context.period * 1e9).round() as u64,
+            planned: mapping.to_egm(&context.initial).pose,
+            seqno: 0,
+            sequence: SequenceTracker::new(),
+            decoder: CorrectionDecoder::new(),
+            encoder: FeedbackEncoder::new(),
+            stats: LinkStats::default(),
+            buf: [0u8; 2048],
+        })
+    }
+}
+
+impl RobotEndpoint for EgmEndpoint {
+    fn name(&self) -> &'static str {
+        "EGM"
+    }
+
+    fn address(&self) -> SocketAddr {
+        self.address
+    }
+
+    fn peer(&self) -> SocketAddr {
+        self.peer
+    }
+
+    fn receive(&mut self) -> Option<RelativeMotion> {
+        let mut newest = None;
+        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
+            self.stats.received += 1;
+            if from != self.peer {
+                self.stats.foreign += 1;
+                continue;
+            }
+            let correction = match self.decoder.decode(&self.buf[..n]) {
+                Ok(c) => c,
+                Err(e) if is_malformed(&e) => {
+                    self.stats.malformed += 1;
+                    continue;
+                }
+                Err(_) => {
+                    self.stats.invalid += 1;
+                    continue;
+                }
+            };
+            match self.sequence.check(correction.seqno) {
+                SequenceVerdict::Stale => {
+                    self.stats.stale += 1;
+                    continue;
+                }
+                SequenceVerdict::Gap(n) => self.stats.lost += n as u64,
+                SequenceVerdict::First | SequenceVerdict::Next => {}
+            }
+            self.stats.accepted += 1;
+            newest = Some(correction);
+        }
+        let c = newest?;
+        self.planned = c.target.pose;
+        Some(self.mapping.motion_from_egm(&c.target))
+    }
+
+    fn feedback(&mut self, k: u64, actual: &RelativeMotion, send: bool) {
+        if !send || !k.is_multiple_of(self.every) {
+            return;
+        }
+        let actual = self.mapping.to_egm(actual).pose;
+        let time_us = k * self.period_ns / 1000;
+        self.seqno = self.seqno.wrapping_add(1);
+        let bytes = self
+            .encoder
+            .encode(self.seqno, time_us, &actual, &self.planned);
+        let sent = self.socket.send_to(bytes, self.peer);
+        self.stats.count_send(sent);
+    }
+
+    fn stats(&self) -> &LinkStats {
+        &self.stats
     }
 }

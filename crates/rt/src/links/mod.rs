@@ -1,4 +1,5 @@
-//! Device links: the seam between the real-time loop and the devices' protocols.
+//! Device links: the seam between the real-time loop and the devices' protocols, on both
+//! sides of the wire.
 //!
 //! The loop ([`crate::runtime`]) talks to one [`SensorLink`] (a force/torque sensor) and one
 //! [`RobotLink`] (a robot controller's external-motion interface) and names neither device:
@@ -8,19 +9,28 @@
 //! or one tick per robot packet ([`Pacing::Robot`], e.g. KUKA RSI, whose 4 ms packet must be
 //! answered).
 //!
-//! Implementations: [`rdt::RdtSensor`] (ATI Net F/T, RDT over UDP) and [`egm::EgmRobot`] (ABB
-//! EGM, protobuf over UDP). A new protocol is one file implementing the trait plus one line in
-//! [`open_sensor`] / [`open_robot`] and one variant in [`SensorOptions`] / [`RobotOptions`].
+//! The emulated facility ([`crate::emulator`]) is the devices' side of the same protocols: a
+//! [`SensorEndpoint`] serves the sensor's protocol given the physical wrench, a
+//! [`RobotEndpoint`] takes the commands and sends the robot's feedback; it names no device
+//! either.
 //!
-//! Every datagram a link receives is counted in its [`LinkStats`], and so is every socket
-//! error, on receive and on send ([`LinkStats::io_errors`]): nothing is dropped uncounted.
-//! Polling, sending and holding never allocate.
+//! Implementations, one file per protocol with both sides: `rdt.rs` ([`rdt::RdtSensor`] and the
+//! emulated [`rdt::RdtEndpoint`], ATI Net F/T, RDT over UDP) and `egm.rs` ([`egm::EgmRobot`]
+//! and the emulated [`egm::EgmEndpoint`], ABB EGM, protobuf over UDP). A new protocol is one
+//! file implementing the link and the endpoint, one variant in [`SensorOptions`] /
+//! [`RobotOptions`] and in [`EmulatedSensorOptions`] / [`EmulatedRobotOptions`], one arm in
+//! [`open_sensor`] / [`open_robot`] and [`open_sensor_endpoint`] / [`open_robot_endpoint`], and
+//! its kind in [`SENSOR_KINDS`] / [`ROBOT_KINDS`].
+//!
+//! Every datagram a link or an endpoint receives is counted in its [`LinkStats`], and so is
+//! every socket error, on receive and on send ([`LinkStats::io_errors`]): nothing is dropped
+//! uncounted. Polling, serving, sending and holding never allocate.
 
 pub mod egm;
 pub mod rdt;
 
 use std::io::ErrorKind;
-use std::net::{SocketAddr, UdpSocket};
+use std::net::{SocketAddr, ToSocketAddrs, UdpSocket};
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -28,12 +38,15 @@ use serde::{Deserialize, Serialize};
 use hilcontact_core::world::RelativeMotion;
 
 use crate::clock::now_ns;
-use crate::error::Result;
+use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
 
-/// Sensor protocols, as `[sensor] kind` / `--sensor-protocol` accept them (the one list).
+/// Sensor protocols, as `[sensor] kind` / `--sensor-protocol` accept them, in the runtime's
+/// options and the emulator's alike (the one list; a test checks both option types take
+/// exactly these kinds).
 pub const SENSOR_KINDS: &[&str] = &["rdt"];
-/// Robot protocols, as `[robot] kind` / `--robot-protocol` accept them (the one list).
+/// Robot protocols, as `[robot] kind` / `--robot-protocol` accept them, in the runtime's
+/// options and the emulator's alike (the one list).
 pub const ROBOT_KINDS: &[&str] = &["egm"];
 
 /// Packet counters of one link.
@@ -245,6 +258,147 @@ pub fn open_robot(options: &RobotOptions, context: &LinkContext) -> Result<Box<d
     Ok(match options {
         RobotOptions::Egm(o) => Box::new(egm::EgmRobot::open(o, context)?),
     })
+}
+
+/// An emulated force/torque sensor: the device's side of a sensor protocol. The emulator
+/// calls [`serve`](SensorEndpoint::serve) then [`sample`](SensorEndpoint::sample) once per
+/// control period, on its real-time thread.
+pub trait SensorEndpoint: Send {
+    /// Short protocol name for messages and the status, e.g. `"RDT"`.
+    fn name(&self) -> &'static str;
+
+    /// The local address the sensor serves its protocol on.
+    fn address(&self) -> SocketAddr;
+
+    /// The address of the sensor's HTTP configuration server, if it has one (Net F/T:
+    /// `/netftapi2.xml`).
+    fn http_address(&self) -> Option<SocketAddr> {
+        None
+    }
+
+    /// Reads and answers the requests that arrived (non-blocking, never allocates); every
+    /// datagram and socket error is counted in [`stats`](SensorEndpoint::stats).
+    fn serve(&mut self);
+
+    /// Takes one sample of the physical wrench (sensor frame: force N, moment N·m about the
+    /// sensor's origin) and sends it to the streaming client, if any; `send = false` takes the
+    /// sample without sending it (fault injection: a silent sensor). Never allocates.
+    fn sample(&mut self, wrench: &Wrench, send: bool);
+
+    /// The endpoint's counters (`sent`: samples sent; `accepted`: valid requests).
+    fn stats(&self) -> &LinkStats;
+}
+
+/// An emulated robot controller: the device's side of a robot protocol. The emulator calls
+/// [`receive`](RobotEndpoint::receive) before and [`feedback`](RobotEndpoint::feedback) after
+/// each control period's physics step, on its real-time thread.
+pub trait RobotEndpoint: Send {
+    /// Short protocol name for messages and the status, e.g. `"EGM"`.
+    fn name(&self) -> &'static str;
+
+    /// The robot's own local address.
+    fn address(&self) -> SocketAddr;
+
+    /// Where the robot's feedback goes (the PC running the loop).
+    fn peer(&self) -> SocketAddr;
+
+    /// Reads the commands that arrived (non-blocking, never allocates) and returns the newest
+    /// valid one as the pose and velocity to follow, in the target frame `t` (m, m/s, rad/s),
+    /// or None if none arrived; every datagram and socket error is counted.
+    fn receive(&mut self) -> Option<RelativeMotion>;
+
+    /// Called after control period `k` (time `k·T` since the start): sends the robot's
+    /// feedback of its `actual` motion (`t` frame, m) when the protocol's own period is due;
+    /// `send = false` sends nothing (fault injection: a silent robot). Never allocates.
+    fn feedback(&mut self, k: u64, actual: &RelativeMotion, send: bool);
+
+    /// The endpoint's counters (`sent`: feedback messages; `accepted`: commands taken).
+    fn stats(&self) -> &LinkStats;
+}
+
+/// Options of the emulated sensor, one variant per protocol (`kind`, the same kinds as
+/// [`SensorOptions`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum EmulatedSensorOptions {
+    /// ATI Net F/T over RDT, with `/netftapi2.xml` over HTTP.
+    Rdt(rdt::RdtEndpointOptions),
+}
+
+impl Default for EmulatedSensorOptions {
+    fn default() -> Self {
+        EmulatedSensorOptions::Rdt(rdt::RdtEndpointOptions::default())
+    }
+}
+
+/// Options of the emulated robot, one variant per protocol (`kind`, the same kinds as
+/// [`RobotOptions`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum EmulatedRobotOptions {
+    /// ABB Externally Guided Motion.
+    Egm(egm::EgmEndpointOptions),
+}
+
+impl Default for EmulatedRobotOptions {
+    fn default() -> Self {
+        EmulatedRobotOptions::Egm(egm::EgmEndpointOptions::default())
+    }
+}
+
+/// What an emulated device needs to know of the run when it is opened.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EndpointContext {
+    /// The emulator's control period (the scenario's), s.
+    pub period: f64,
+    /// The robot's initial pose (at rest), target frame `t` (m): the first command the robot
+    /// holds and reports as planned.
+    pub initial: RelativeMotion,
+}
+
+/// Opens the emulated sensor of `options` (binds its sockets and servers).
+pub fn open_sensor_endpoint(
+    options: &EmulatedSensorOptions,
+    context: &EndpointContext,
+) -> Result<Box<dyn SensorEndpoint>> {
+    Ok(match options {
+        EmulatedSensorOptions::Rdt(o) => Box::new(rdt::RdtEndpoint::open(o, context)?),
+    })
+}
+
+/// Opens the emulated robot of `options` (binds its socket, resolves where feedback goes).
+pub fn open_robot_endpoint(
+    options: &EmulatedRobotOptions,
+    context: &EndpointContext,
+) -> Result<Box<dyn RobotEndpoint>> {
+    Ok(match options {
+        EmulatedRobotOptions::Egm(o) => Box::new(egm::EgmEndpoint::open(o, context)?),
+    })
+}
+
+/// Resolves `host:port` to one socket address; `key` names the option for the message.
+pub(crate) fn resolve(key: &str, host: &str, port: u16) -> Result<SocketAddr> {
+    (host, port)
+        .to_socket_addrs()
+        .map_err(|e| RtError::option(key, format!("cannot resolve {host:?}: {e}")))?
+        .next()
+        .ok_or_else(|| RtError::option(key, format!("{host:?} has no address")))
+}
+
+/// Binds a non-blocking UDP socket; `what` names it for the message (an error keeps its
+/// kind and errno, e.g. `EADDRINUSE`).
+pub(crate) fn bind_udp(what: &str, addr: SocketAddr) -> Result<UdpSocket> {
+    let socket = UdpSocket::bind(addr)
+        .map_err(|e| RtError::io(format!("{what}: cannot bind UDP {addr}"), &e))?;
+    socket
+        .set_nonblocking(true)
+        .map_err(|e| RtError::io(what, &e))?;
+    Ok(socket)
+}
+
+/// The local address of a bound socket; `what` names it for the message.
+pub(crate) fn local_addr(what: &str, socket: &UdpSocket) -> Result<SocketAddr> {
+    socket.local_addr().map_err(|e| RtError::io(what, &e))
 }
 
 /// Receives one datagram from a non-blocking socket: `Some((len, from))`, or None when

@@ -1,5 +1,7 @@
-//! [`SensorLink`] for an ATI Net F/T sensor: RDT over UDP (codec in [`crate::rdt`]), counts per
-//! unit from `/netftapi2.xml` over HTTP ([`crate::netftapi`]) unless given.
+//! ATI Net F/T over RDT, both sides: [`RdtSensor`] is the [`SensorLink`] of the loop (RDT over
+//! UDP, codec in [`crate::rdt`]; counts per unit from `/netftapi2.xml` over HTTP,
+//! [`crate::netftapi`], unless given), [`RdtEndpoint`] the emulated sensor's
+//! [`SensorEndpoint`].
 //!
 //! A record is accepted when it comes from the sensor's address, is 36 bytes, has a sequence
 //! number newer than the last accepted one (gaps are counted as `lost`) and status 0; its
@@ -11,10 +13,12 @@ use std::time::Duration;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use super::{recv_counted, LinkContext, LinkStats, SensorLink, Wrench};
-use crate::emulator::{bind_udp, resolve};
+use super::{
+    bind_udp, local_addr, recv_counted, resolve, EndpointContext, LinkContext, LinkStats,
+    SensorEndpoint, SensorLink, Wrench,
+};
 use crate::error::{Result, RtError};
-use crate::netftapi::fetch_counts;
+use crate::netftapi::{fetch_counts, netftapi_xml, NetFtApiServer};
 use crate::rdt::{
     CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, SequenceTracker, SequenceVerdict, RDT_PORT,
 };
@@ -186,5 +190,192 @@ impl SensorLink for RdtSensor {
         m.insert("counts_per_force".into(), self.counts.force.into());
         m.insert("counts_per_torque".into(), self.counts.torque.into());
         m
+    }
+}
+
+/// Options of the emulated RDT sensor (`[sensor] kind = "rdt"` of the emulator's options).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RdtEndpointOptions {
+    /// Address the sensor's RDT and HTTP servers bind to (CLI `--bind-host`).
+    pub bind_host: String,
+    /// RDT (UDP) port (49152 on a real sensor) (CLI `--sensor-port`).
+    pub port: u16,
+    /// HTTP port of `/netftapi2.xml` (80 on a real sensor; 0 = no HTTP server) (CLI
+    /// `--http-port`).
+    pub http_port: u16,
+    /// Counts per N of the records (`cfgcpf`, > 0) (CLI `--counts-per-force`).
+    pub counts_per_force: f64,
+    /// Counts per N·m of the records (`cfgcpt`, > 0) (CLI `--counts-per-torque`).
+    pub counts_per_torque: f64,
+}
+
+impl Default for RdtEndpointOptions {
+    fn default() -> Self {
+        RdtEndpointOptions {
+            bind_host: "127.0.0.1".into(),
+            port: RDT_PORT,
+            http_port: 80,
+            counts_per_force: CountsPerUnit::default().force,
+            counts_per_torque: CountsPerUnit::default().torque,
+        }
+    }
+}
+
+/// The emulated Net F/T sensor. A start request (0x0002, or 0x0003 answered the same way)
+/// makes it stream one 36-byte record per sample to the requesting address, `sample_count`
+/// records or until a stop (0x0000); 0x0042 biases the output by the current reading.
+/// `rdt_sequence` counts the records sent, `ft_sequence` the samples taken (one per control
+/// period, streaming or not), as the real sensor keeps them. `/netftapi2.xml` gives the counts
+/// per unit. A count beyond the `i32` range saturates and sets status `0x80010000`.
+pub struct RdtEndpoint {
+    socket: UdpSocket,
+    address: SocketAddr,
+    http: Option<NetFtApiServer>,
+    counts: CountsPerUnit,
+    /// Streaming destination.
+    client: Option<SocketAddr>,
+    /// Records left to send (None = until stopped).
+    remaining: Option<u32>,
+    rdt_sequence: u32,
+    ft_sequence: u32,
+    /// The bias subtracted from every reading: force N, moment N·m.
+    bias: ([f64; 3], [f64; 3]),
+    /// The newest sample: force N, moment N·m.
+    last_reading: ([f64; 3], [f64; 3]),
+    stats: LinkStats,
+    buf: [u8; 2048],
+}
+
+impl RdtEndpoint {
+    /// Validates the counts per unit, binds the RDT socket and starts the HTTP server (unless
+    /// `http_port` is 0).
+    pub fn open(o: &RdtEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        for (key, v) in [
+            ("counts_per_force", o.counts_per_force),
+            ("counts_per_torque", o.counts_per_torque),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(RtError::option(
+                    key,
+                    format!("must be a positive number, got {v}"),
+                ));
+            }
+        }
+        let counts = CountsPerUnit {
+            force: o.counts_per_force,
+            torque: o.counts_per_torque,
+        };
+        let socket = bind_udp("sensor (RDT)", resolve("bind_host", &o.bind_host, o.port)?)?;
+        let address = local_addr("sensor (RDT)", &socket)?;
+        let http = if o.http_port == 0 {
+            None
+        } else {
+            let addr = resolve("bind_host", &o.bind_host, o.http_port)?;
+            let xml = netftapi_xml(&counts, 1.0 / context.period);
+            Some(NetFtApiServer::start(addr, xml).map_err(|e| match e {
+                RtError::Io { context, kind, errno, message } => RtError::Io {
+                    context,
+                    kind,
+                    errno,
+                    message: format!("{message} (a real sensor serves port 80; choose another with --http-port and give the runtime the same)"),
+                },
+                other => other,
+            })?)
+        };
+        Ok(RdtEndpoint {
+            socket,
+            address,
+            http,
+            counts,
+            client: None,
+            remaining: None,
+            rdt_sequence: 0,
+            ft_sequence: 0,
+            bias: ([0.0; 3], [0.0; 3]),
+            last_reading: ([0.0; 3], [0.0; 3]),
+            stats: LinkStats::default(),
+            buf: [0u8; 2048],
+        })
+    }
+
+    fn send_record(&mut self) {
+        let Some(client) = self.client else { return };
+        if self.remaining == Some(0) {
+            self.client = None;
+            return;
+        }
+        let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+        let (reading, bias) = (self.last_reading, self.bias);
+        let (counts, saturated) = self
+            .counts
+            .to_counts(&sub(reading.0, bias.0), &sub(reading.1, bias.1));
+        self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
+        let record = RdtRecord {
+            rdt_sequence: self.rdt_sequence,
+            ft_sequence: self.ft_sequence,
+            // bit 31 (error) and bit 16 (saturation) when a gauge is out of range
+            status: if saturated { 0x8001_0000 } else { 0 },
+            counts,
+        };
+        let sent = self.socket.send_to(&record.encode(), client);
+        self.stats.count_send(sent);
+        if let Some(n) = self.remaining.as_mut() {
+            *n -= 1;
+        }
+    }
+}
+
+impl SensorEndpoint for RdtEndpoint {
+    fn name(&self) -> &'static str {
+        "RDT"
+    }
+
+    fn address(&self) -> SocketAddr {
+        self.address
+    }
+
+    fn http_address(&self) -> Option<SocketAddr> {
+        self.http.as_ref().map(|h| h.address())
+    }
+
+    fn serve(&mut self) {
+        // the HTTP server's socket errors (its own thread) count as the sensor's
+        if let Some(http) = &self.http {
+            let (receive, send) = http.take_errors();
+            self.stats.send_errors += send;
+            self.stats.io_errors += receive + send;
+        }
+        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
+            self.stats.received += 1;
+            let Ok(request) = RdtRequest::decode(&self.buf[..n]) else {
+                self.stats.malformed += 1;
+                continue;
+            };
+            self.stats.accepted += 1;
+            match request.command {
+                RdtCommand::StartRealtime | RdtCommand::StartBuffered => {
+                    self.client = Some(from);
+                    self.remaining = (request.sample_count > 0).then_some(request.sample_count);
+                }
+                RdtCommand::Stop => {
+                    self.client = None;
+                    self.remaining = None;
+                }
+                RdtCommand::SetBias => self.bias = self.last_reading,
+            }
+        }
+    }
+
+    fn sample(&mut self, wrench: &Wrench, send: bool) {
+        self.last_reading = (wrench.force.into(), wrench.moment.into());
+        self.ft_sequence = self.ft_sequence.wrapping_add(1);
+        if send {
+            self.send_record();
+        }
+    }
+
+    fn stats(&self) -> &LinkStats {
+        &self.stats
     }
 }
