@@ -46,6 +46,25 @@ def compensator_registry() -> str:
     parameter: default, ...}}``."""
 
 
+def scenario_schema() -> str:
+    """The JSON Schema of a scenario file (draft 2020-12), as JSON text: every key with its
+    description (units), default, allowed values and range (``minimum``,
+    ``exclusiveMinimum``, ``maximum``, ``exclusiveMaximum``); ``[compensator]`` is a
+    ``oneOf`` tagged by ``kind``; vectors, quaternions and inertias carry ``x-value``
+    (``"vec3"``, ``"quaternion"``, ``"inertia"``). ``hilcontact.scenario`` builds its models
+    from it."""
+
+
+def resolve_scenario(scenario_json: str) -> str:
+    """Check and resolve a scenario (JSON) as a run does; return the resolved scenario as JSON
+    (defaults filled in, quaternions and wall normals normalised, inertia as a symmetric 3x3
+    tensor, wall names set, delays rounded with ``facility.round_delays``).
+
+    Raises ``hilcontact.errors.ScenarioError`` whose ``issues`` lists every problem as
+    ``(key, message)``.
+    """
+
+
 class HilContactError(Exception):
     """Base class of every error raised on purpose by hilcontact."""
 

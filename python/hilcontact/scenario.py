@@ -9,13 +9,24 @@ Conventions (the same as the core's, see the spec ``hil-loop.md`` section 2):
   velocities). Quaternions are ``[w, x, y, z]``.
 - A wall is a point and a unit normal pointing from the wall into free space.
 
-Validation is done with pydantic v2 (``extra="forbid"`` and strict types everywhere), and every
-problem is reported as a :class:`~hilcontact.errors.ScenarioError` with a single line that
-names the key as a dotted path (``servicer.mass``, ``walls[0].normal``) and says what is
-allowed. The validated :class:`Scenario` is *resolved*: defaults filled in, inertia as a 3x3
-matrix, quaternions and wall normals normalised, wall names set and (with
-``facility.round_delays``) delays rounded to whole periods. ``Scenario.to_toml()`` writes
-that resolved form, and loading it again gives an identical scenario.
+The schema is the core's (``_core.scenario_schema()``, from ``crates/core/src/config.rs`` and
+the compensators' parameters): the pydantic models here (:class:`Scenario`, ``Body``,
+``Facility``, one per compensator kind in :data:`COMPENSATOR_MODELS`, ...) are built from it
+at import, with its names, defaults, descriptions (units), allowed values and ranges. Nothing
+of the schema is written again in Python.
+
+Validation is done in two steps, and every problem is reported as a
+:class:`~hilcontact.errors.ScenarioError` with a single line that names the key as a dotted
+path (``servicer.mass``, ``walls[0].normal``) and says what is allowed; its ``issues`` lists
+every problem as ``(key, message)``. First pydantic (``extra="forbid"``, strict types) checks
+the file's shape, types and ranges, with messages that name unknown keys and suggest close
+ones; then the core resolves the scenario (``_core.resolve_scenario``) and reports its other
+problems (non-zero normals and quaternions, positive-definite inertia, whole-period delays,
+duplicate wall names, ...). The validated :class:`Scenario` is the core's *resolved*
+scenario: defaults filled in, inertia as a 3x3 matrix, quaternions and wall normals
+normalised, wall names set and (with ``facility.round_delays``) delays rounded to whole
+periods. ``Scenario.to_toml()`` writes that resolved form, and loading it again gives an
+identical scenario.
 """
 
 from __future__ import annotations
@@ -40,29 +51,19 @@ from pydantic import (
     Field,
     Tag,
     ValidationError,
-    field_validator,
-    model_validator,
+    create_model,
 )
 
+from . import _core
 from .errors import ScenarioError
 from .registry import KINDS
 
+# the table and compensator models (Simulation, Body, ..., PicCompensator, ...) are added below,
+# as they are built from the core's schema
 __all__ = [
     "COMPENSATOR_MODELS",
-    "Body",
-    "Contact",
-    "DacCompensator",
-    "Facility",
-    "Metrics",
-    "NoneCompensator",
-    "PicCompensator",
-    "PidaCompensator",
-    "Rod",
+    "SCHEMA",
     "Scenario",
-    "Simulation",
-    "TdpaAdmittanceCompensator",
-    "TdpaImpedanceCompensator",
-    "Wall",
     "apply_overrides",
     "load_scenario",
     "preset_names",
@@ -125,28 +126,8 @@ def _vec3(value: Any) -> list[float]:
     return _numbers(value, 3, "3 numbers [x, y, z]")
 
 
-def _normalised(vector: list[float], norm: float) -> list[float]:
-    # Idempotent: an already (numerically) unit vector is kept bit for bit, so that writing
-    # the resolved scenario and loading it again gives an identical scenario.
-    if abs(norm - 1.0) <= 1e-12:
-        return vector
-    return [v / norm for v in vector]
-
-
-def _unit_vec3(value: Any) -> list[float]:
-    vector = _vec3(value)
-    norm = math.sqrt(sum(v * v for v in vector))
-    if norm < 1e-12:
-        raise ValueError(f"must be a nonzero vector (it is normalised), got {_show(vector)}")
-    return _normalised(vector, norm)
-
-
 def _quaternion(value: Any) -> list[float]:
-    q = _numbers(value, 4, "a quaternion [w, x, y, z] (4 numbers)")
-    norm = math.sqrt(sum(v * v for v in q))
-    if norm < 1e-12:
-        raise ValueError(f"must be a nonzero quaternion [w, x, y, z] (it is normalised), got {_show(q)}")
-    return _normalised(q, norm)
+    return _numbers(value, 4, "a quaternion [w, x, y, z] (4 numbers)")
 
 
 _INERTIA_ALLOWED = (
@@ -154,54 +135,30 @@ _INERTIA_ALLOWED = (
 )
 
 
-def _inertia(value: Any) -> list[list[float]]:
+def _inertia(value: Any) -> list[float] | list[list[float]]:
+    """The shape of an inertia (its values are checked by the core)."""
     value = _plain(value)
     if isinstance(value, list) and len(value) == 3 and all(_is_number(v) for v in value):
-        moments = _vec3(value)
-        if not all(m > 0 for m in moments):
-            raise ValueError(f"principal moments must all be > 0, got {_show(value)}")
-        return [[moments[i] if i == j else 0.0 for j in range(3)] for i in range(3)]
+        return _vec3(value)
     if isinstance(value, list) and len(value) == 3 and all(isinstance(r, list) for r in value):
         try:
-            rows = [_vec3(row) for row in value]
+            return [_vec3(row) for row in value]
         except ValueError:
             raise ValueError(f"expected {_INERTIA_ALLOWED}, got {_show(value)}") from None
-        scale = max(abs(v) for row in rows for v in row)
-        for i in range(3):
-            for j in range(i + 1, 3):
-                if abs(rows[i][j] - rows[j][i]) > 1e-9 * scale:
-                    raise ValueError(f"the 3x3 matrix must be symmetric, got {_show(value)}")
-        # exact symmetrisation (idempotent for a symmetric matrix)
-        m = [[rows[i][j] if i == j else 0.5 * (rows[i][j] + rows[j][i]) for j in range(3)] for i in range(3)]
-        minors = (
-            m[0][0],
-            m[0][0] * m[1][1] - m[0][1] * m[1][0],
-            m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-            - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-            + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]),
-        )
-        if not all(d > 0 for d in minors):
-            raise ValueError(f"the 3x3 matrix must be positive definite, got {_show(value)}")
-        return m
     raise ValueError(f"expected {_INERTIA_ALLOWED}, got {_show(value)}")
 
 
-Vec3 = Annotated[list[float], BeforeValidator(_vec3)]
-UnitVec3 = Annotated[list[float], BeforeValidator(_unit_vec3)]
-Quaternion = Annotated[list[float], BeforeValidator(_quaternion)]
-Inertia = Annotated[list[list[float]], BeforeValidator(_inertia)]
-
-
-def _zeros() -> list[float]:
-    return [0.0, 0.0, 0.0]
-
-
-def _identity_quaternion() -> list[float]:
-    return [1.0, 0.0, 0.0, 0.0]
+# The values of the schema's `x-value` marker: the shape check of each (the core checks the
+# rest: non-zero normals and quaternions, symmetric positive-definite inertia).
+_VALUE_TYPES: dict[str, Any] = {
+    "vec3": Annotated[list[float], BeforeValidator(_vec3)],
+    "quaternion": Annotated[list[float], BeforeValidator(_quaternion)],
+    "inertia": Annotated[Any, BeforeValidator(_inertia)],
+}
 
 
 # --------------------------------------------------------------------------------------
-# Schema
+# Schema: built from the core's (`_core.scenario_schema()`), nothing written again here
 # --------------------------------------------------------------------------------------
 
 
@@ -211,186 +168,139 @@ class _Table(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True)
 
 
-class Simulation(_Table):
-    """``[simulation]``: time base and numerical settings."""
+SCHEMA: dict[str, Any] = json.loads(_core.scenario_schema())
+"""The core's JSON Schema of a scenario file (names, defaults, units, allowed values, ranges)."""
 
-    duration: float = Field(gt=0, allow_inf_nan=False, description="s, > 0")
-    period: float = Field(gt=0, allow_inf_nan=False, description="control period T in s, > 0")
-    plant_substeps: int = Field(10, ge=1, description="facility sub-steps per period, integer >= 1")
-    reference_substeps: int = Field(
-        2, ge=1, description="RK4 steps per period for the ideal reference in contact, integer >= 1"
-    )
-    divergence_energy_ratio: float = Field(
-        100.0, gt=1, allow_inf_nan=False, description="energy / initial energy that counts as diverged, > 1"
-    )
+_DEFS: dict[str, Any] = SCHEMA.get("$defs", {})
 
 
-class Body(_Table):
-    """``[servicer]`` / ``[target]``: one free-floating satellite and its state at t = 0.
-
-    The target's body frame is the mockup frame ``t``."""
-
-    mass: float = Field(gt=0, allow_inf_nan=False, description="kg, > 0")
-    inertia: Inertia = Field(description=_INERTIA_ALLOWED)
-    position: Vec3 = Field(default_factory=_zeros, description="centre of mass at t = 0, world frame, m, 3 numbers")
-    orientation: Quaternion = Field(
-        default_factory=_identity_quaternion, description="unit quaternion [w, x, y, z], body to world"
-    )
-    velocity: Vec3 = Field(default_factory=_zeros, description="centre-of-mass velocity, world frame, m/s, 3 numbers")
-    angular_velocity: Vec3 = Field(default_factory=_zeros, description="rad/s in the body frame, 3 numbers")
+def _deref(prop: Mapping[str, Any]) -> tuple[str | None, dict[str, Any]]:
+    """A property's schema with its `$ref` merged in (the property's own keys win)."""
+    ref = prop.get("$ref")
+    if not ref:
+        return None, dict(prop)
+    name = ref.rsplit("/", 1)[-1]
+    return name, {**_DEFS[name], **{k: v for k, v in prop.items() if k != "$ref"}}
 
 
-class Rod(_Table):
-    """``[rod]``: the docking rod carried by the servicer."""
-
-    tip: Vec3 = Field(description="rod tip in the servicer body frame, m, 3 numbers [x, y, z]")
-
-
-class Wall(_Table):
-    """``[[walls]]``: a plane of the collision frame on the target (frame t)."""
-
-    name: str = Field("", description="a name; defaults to wall<i>")
-    point: Vec3 = Field(description="a point of the wall in m, 3 numbers [x, y, z]")
-    normal: UnitVec3 = Field(description="nonzero vector pointing into free space, 3 numbers [x, y, z]")
+def _description(schema: Mapping[str, Any]) -> str | None:
+    text = schema.get("description")
+    return " ".join(text.split()) if text else None
 
 
-class Contact(_Table):
-    """``[contact]``: the true (physical) contact law."""
-
-    model: Literal["linear", "hunt-crossley"] = Field("linear", description="'linear' or 'hunt-crossley'")
-    stiffness: float = Field(
-        gt=0, allow_inf_nan=False, description="N/m (linear) or N/m^n (hunt-crossley), > 0"
-    )
-    damping: float = Field(
-        0.0, ge=0, allow_inf_nan=False, description="N s/m (linear) or N s/m^(n+1) (hunt-crossley), >= 0"
-    )
-    exponent: float = Field(1.5, gt=0, allow_inf_nan=False, description="hunt-crossley exponent n, > 0")
+def _choices(schema: Mapping[str, Any]) -> list[str] | None:
+    """The allowed strings of an enum (`enum`, or `oneOf` of `const`s)."""
+    if "enum" in schema:
+        return list(schema["enum"])
+    variants = schema.get("oneOf")
+    if variants and all("const" in v and v.get("type") == "string" for v in variants):
+        return [v["const"] for v in variants]
+    return None
 
 
-class Facility(_Table):
-    """``[facility]``: the model of the ground facility (robot, sensor)."""
-
-    robot_delay: float = Field(0.0, ge=0, allow_inf_nan=False, description="s, >= 0, whole number of periods")
-    sensor_delay: float = Field(0.0, ge=0, allow_inf_nan=False, description="s, >= 0, whole number of periods")
-    servo_frequency: float = Field(0.0, ge=0, allow_inf_nan=False, description="Hz, >= 0 (0 = no servo lag)")
-    servo_damping: float = Field(0.7, gt=0, allow_inf_nan=False, description="damping ratio, > 0")
-    sensor_noise: float = Field(0.0, ge=0, allow_inf_nan=False, description="N std per axis, >= 0")
-    torque_noise: float = Field(0.0, ge=0, allow_inf_nan=False, description="N m std per axis, >= 0")
-    force_resolution: float = Field(0.0, ge=0, allow_inf_nan=False, description="N, >= 0 (0 = none)")
-    torque_resolution: float = Field(0.0, ge=0, allow_inf_nan=False, description="N m, >= 0 (0 = none)")
-    sensor_position: Vec3 = Field(default_factory=_zeros, description="sensor origin in frame t, m")
-    sensor_orientation: Quaternion = Field(
-        default_factory=_identity_quaternion, description="unit quaternion [w, x, y, z], t from s"
-    )
-    seed: int = Field(0, ge=0, description="random seed, integer >= 0")
-    round_delays: bool = Field(False, description="true or false")
+def _is_tagged_union(schema: Mapping[str, Any]) -> bool:
+    variants = schema.get("oneOf") or []
+    return bool(variants) and all("const" in v.get("properties", {}).get("kind", {}) for v in variants)
 
 
-class NoneCompensator(_Table):
-    """``kind = "none"``: the measured wrench goes straight into the virtual dynamics."""
-
-    kind: Literal["none"] = "none"
+def _camel(text: str) -> str:
+    return "".join(part[:1].upper() + part[1:] for part in re.split(r"[-_]", text))
 
 
-class _ModelParams(_Table):
-    """Parameters of the identification-based compensators ``pic``, ``dac``, ``pida``
-    (the core's ``ModelParams``): adaptive Kalman identification of the contact stiffness
-    and damping, measurement-delay compensation, energy observer and controller."""
-
-    kind: str = Field("", description="set by each compensator class")  # first in the TOML
-    delay_mode: Literal["align", "lead"] = Field(
-        "align",
-        description="measurement-delay compensation: 'align' (identify against the kinematics "
-        "from tau_p earlier, robust to noise) or 'lead' (the paper's eq. (6))",
-    )
-    contact_force: float = Field(3.0, gt=0, allow_inf_nan=False, description="N, > 0: in contact above this force")
-    stiffness_initial: float = Field(1.0e5, gt=0, allow_inf_nan=False, description="initial k estimate, N/m, > 0")
-    damping_initial: float = Field(0.0, ge=0, allow_inf_nan=False, description="initial c estimate, N s/m, >= 0")
-    stiffness_std: float = Field(1.0e5, gt=0, allow_inf_nan=False, description="initial std of k, N/m, > 0")
-    damping_std: float = Field(300.0, gt=0, allow_inf_nan=False, description="initial std of c, N s/m, > 0")
-    stiffness_walk: float = Field(10.0, ge=0, allow_inf_nan=False, description="random walk of k per update, N/m, >= 0")
-    damping_walk: float = Field(0.1, ge=0, allow_inf_nan=False, description="random walk of c per update, N s/m, >= 0")
-    noise_std: float = Field(0.1, gt=0, allow_inf_nan=False, description="initial force-increment noise std, N, > 0")
-    forgetting: float = Field(0.98, allow_inf_nan=False, description="Sage-Husa forgetting factor b, 0 < b < 1")
-    alpha_max: float = Field(100000.0, gt=0, allow_inf_nan=False, description="largest amendment damping, N s/m, > 0")
-    observer: Literal["work", "paper"] = Field(
-        "work",
-        description="energy observer: 'work' (work of the wrench held over each step, exact) or "
-        "'paper' (eqs. (15), (16) as printed)",
-    )
-
-    @field_validator("forgetting")
-    @classmethod
-    def _check_forgetting(cls, value: float) -> float:
-        if not 0.0 < value < 1.0:
-            raise ValueError(f"must be between 0 and 1 (exclusive), got {_show(value)}")
-        return value
-
-
-class PicCompensator(_ModelParams):
-    """``kind = "pic"``: parameter identification control (the paper's Algorithm 1)."""
-
-    kind: Literal["pic"] = "pic"
-
-
-class DacCompensator(_ModelParams):
-    """``kind = "dac"``: damping amendment control (Algorithm 2)."""
-
-    kind: Literal["dac"] = "dac"
-
-
-class PidaCompensator(_ModelParams):
-    """``kind = "pida"``: identification and damping amendment (Algorithm 3)."""
-
-    kind: Literal["pida"] = "pida"
+def _field(prop: Mapping[str, Any], required: bool) -> tuple[Any, Any]:
+    """The annotation and Field of one property of the core's schema."""
+    ref, schema = _deref(prop)
+    kwargs: dict[str, Any] = {"description": _description(schema)}
+    marker = schema.get("x-value")
+    choices = _choices(schema)
+    factory: Any = None
+    if marker is not None:
+        annotation = _VALUE_TYPES[marker]
+    elif choices is not None:
+        annotation = Literal[tuple(choices)]  # type: ignore[valid-type]
+    elif _is_tagged_union(schema):
+        annotation = Compensator
+        if "default" in schema:
+            factory = lambda d=schema["default"]: _compensator_model(d).model_validate(copy.deepcopy(d))  # noqa: E731
+    elif schema.get("type") == "object" and ref is not None:
+        annotation = _table_model(ref)
+        if "default" in schema:
+            factory = lambda m=annotation, d=schema["default"]: m.model_validate(copy.deepcopy(d))  # noqa: E731
+    elif schema.get("type") == "array":
+        _, item = _deref(schema["items"])
+        item_ref = schema["items"].get("$ref")
+        annotation = list[_table_model(item_ref.rsplit("/", 1)[-1])] if item_ref else list[Any]  # type: ignore[misc]
+        if "minItems" in schema:
+            kwargs["min_length"] = schema["minItems"]
+    elif schema.get("type") in ("number", "integer"):
+        annotation = float if schema["type"] == "number" else int
+        if annotation is float:
+            kwargs["allow_inf_nan"] = False
+        for key, name in (("minimum", "ge"), ("exclusiveMinimum", "gt"), ("maximum", "le"), ("exclusiveMaximum", "lt")):
+            if key in schema:
+                kwargs[name] = schema[key]
+    elif schema.get("type") == "boolean":
+        annotation = bool
+    elif schema.get("type") == "string":
+        annotation = str
+    else:  # pragma: no cover - a schema shape this module does not know
+        raise ImportError(f"hilcontact.scenario cannot read the core's schema {schema!r}")
+    if factory is not None:
+        return annotation, Field(default_factory=factory, **kwargs)
+    if "default" in schema:
+        default = schema["default"]
+        if isinstance(default, (list, dict)):
+            return annotation, Field(default_factory=lambda d=default: copy.deepcopy(d), **kwargs)
+        return annotation, Field(default, **kwargs)
+    if not required:  # pragma: no cover - the core gives every optional key a default
+        raise ImportError(f"the core's schema gives no default for {prop!r}")
+    return annotation, Field(**kwargs)
 
 
-class _TdpaParams(_Table):
-    """Parameters of the time-domain passivity baselines (the core's ``TdpaParams``)."""
-
-    kind: str = Field("", description="set by each compensator class")  # first in the TOML
-    contact_force: float = Field(
-        3.0, gt=0, allow_inf_nan=False, description="N, > 0: in contact above this force (the observer restarts)"
-    )
-    alpha_max: float = Field(100000.0, gt=0, allow_inf_nan=False, description="largest damping (impedance type), N s/m, > 0")
-    beta_max: float = Field(1e-4, gt=0, allow_inf_nan=False, description="largest admittance (admittance type), m/(N s), > 0")
-    velocity_floor: float = Field(1e-3, gt=0, allow_inf_nan=False, description="floor on |v| in a division, m/s, > 0")
-    force_floor: float = Field(1.0, gt=0, allow_inf_nan=False, description="floor on |f| in a division, N, > 0")
+def _fields(schema: Mapping[str, Any]) -> dict[str, tuple[Any, Any]]:
+    required = set(schema.get("required", ()))
+    return {name: _field(prop, name in required) for name, prop in schema.get("properties", {}).items()}
 
 
-class TdpaImpedanceCompensator(_TdpaParams):
-    """``kind = "tdpa-impedance"``: time-domain passivity, impedance type (a series damper)."""
-
-    kind: Literal["tdpa-impedance"] = "tdpa-impedance"
+_TABLE_MODELS: dict[str, type[_Table]] = {}
 
 
-class TdpaAdmittanceCompensator(_TdpaParams):
-    """``kind = "tdpa-admittance"``: time-domain passivity, admittance type (a damper on the
-    velocity command)."""
+def _table_model(def_name: str) -> type[_Table]:
+    """The model of a table of the core's schema (`BodyConfig` -> `Body`)."""
+    if def_name not in _TABLE_MODELS:
+        schema = _DEFS[def_name]
+        name = def_name.removesuffix("Config")
+        model = create_model(name, __base__=_Table, __module__=__name__, **_fields(schema))  # type: ignore[call-overload]
+        model.__doc__ = _description(schema)
+        _TABLE_MODELS[def_name] = model
+    return _TABLE_MODELS[def_name]
 
-    kind: Literal["tdpa-admittance"] = "tdpa-admittance"
+
+def _compensator_models() -> dict[str, type[_Table]]:
+    """One model per compensator kind, from the core's tagged union, in the registry's order."""
+    union = next(_deref(p)[1] for p in SCHEMA["properties"].values() if _is_tagged_union(_deref(p)[1]))
+    models: dict[str, type[_Table]] = {}
+    for variant in union["oneOf"]:
+        kind = variant["properties"]["kind"]["const"]
+        fields: dict[str, Any] = {"kind": (Literal[kind], Field(kind, description="the compensator kind"))}
+        fields.update({k: v for k, v in _fields(variant).items() if k != "kind"})
+        model = create_model(  # type: ignore[call-overload]
+            f"{_camel(kind)}Compensator", __base__=_Table, __module__=__name__, **fields
+        )
+        model.__doc__ = f"``kind = {kind!r}``: {_description(variant) or ''}"
+        models[kind] = model
+    return models
 
 
-# To add a compensator: define a _Table subclass with `kind: Literal["<kind>"] = "<kind>"` and
-# its own parameters, and append it here. Everything else (the tagged union, error messages
-# listing the allowed kinds and keys, the kind switch of overrides) derives from this tuple.
-_COMPENSATOR_CLASSES: tuple[type[_Table], ...] = (
-    NoneCompensator,
-    PicCompensator,
-    DacCompensator,
-    PidaCompensator,
-    TdpaImpedanceCompensator,
-    TdpaAdmittanceCompensator,
-)
-
-_MODELS_BY_KIND = {cls.model_fields["kind"].default: cls for cls in _COMPENSATOR_CLASSES}
-if set(_MODELS_BY_KIND) != set(KINDS):  # pragma: no cover - a registry change without its schema
-    raise ImportError(
-        f"the scenario schema's compensator kinds {sorted(_MODELS_BY_KIND)} differ from the "
-        f"core's registry {sorted(KINDS)}"
-    )
-COMPENSATOR_MODELS: dict[str, type[_Table]] = {kind: _MODELS_BY_KIND[kind] for kind in KINDS}
+COMPENSATOR_MODELS: dict[str, type[_Table]] = _compensator_models()
 """The schema of each compensator kind's table, in the core registry's order."""
+
+if list(COMPENSATOR_MODELS) != list(KINDS):  # pragma: no cover - the core contradicts itself
+    raise ImportError(f"the core's schema lists kinds {list(COMPENSATOR_MODELS)}, its registry {list(KINDS)}")
+
+
+def _compensator_model(value: Any) -> type[_Table]:
+    return COMPENSATOR_MODELS[_compensator_kind(value)]
 
 
 def _compensator_kind(value: Any) -> Any:
@@ -409,89 +319,47 @@ Compensator = Annotated[
 ]
 
 
-class Metrics(_Table):
-    """``[metrics]``: how collisions are detected for the metrics."""
-
-    contact_threshold: float = Field(0.5, gt=0, allow_inf_nan=False, description="N, > 0")
-
-
-_TABLES: dict[str, Any] = {
-    "simulation": Simulation,
-    "servicer": Body,
-    "target": Body,
-    "rod": Rod,
-    "walls": Wall,
-    "contact": Contact,
-    "facility": Facility,
-    "compensator": COMPENSATOR_MODELS,  # tagged: the member depends on `kind`
-    "metrics": Metrics,
-}
+def _issue_line(key: str, message: str) -> str:
+    """One problem found by the core as a line: ``key: message``, or ``key = value s ...``
+    when the message starts with the key's value (``facility.robot_delay = 0.0125 s is not a
+    whole number of periods ...``)."""
+    if re.match(r"^-?[0-9][0-9.e+-]* s ", message):
+        return f"{key} = {message}"
+    return f"{key}: {message}"
 
 
-class Scenario(_Table):
+def _summary(lines: list[str]) -> str:
+    """The first line, and the keys of the others: ``... (and 2 more: target.mass, x)``."""
+    message = lines[0]
+    if len(lines) > 1:
+        others = [line.split(":", 1)[0].split(" = ", 1)[0] for line in lines[1:]]
+        message += f" (and {len(lines) - 1} more: {', '.join(others)})"
+    return message
+
+
+class _ScenarioBase(_Table):
     """A fully resolved scenario. Build it with :func:`load_scenario` or :meth:`from_dict`."""
-
-    name: str = Field(description="the scenario's name, a string")
-    description: str = Field("", description="a string")
-    simulation: Simulation
-    servicer: Body
-    target: Body
-    rod: Rod
-    walls: list[Wall] = Field(min_length=1)
-    contact: Contact
-    facility: Facility = Field(default_factory=Facility)
-    compensator: Compensator = Field(default_factory=NoneCompensator)  # type: ignore[valid-type]
-    metrics: Metrics = Field(default_factory=Metrics)
-
-    @field_validator("name")
-    @classmethod
-    def _check_name(cls, name: str) -> str:
-        if not name.strip() or name.strip() in (".", "..") or "/" in name or "\\" in name:
-            raise ValueError(f"must be a non-empty name without '/' or '\\' (it names the output folder), got {name!r}")
-        return name
-
-    @model_validator(mode="after")
-    def _resolve(self) -> Scenario:
-        seen: dict[str, int] = {}
-        for i, wall in enumerate(self.walls):
-            if not wall.name:
-                wall.name = f"wall{i}"
-            if wall.name in seen:
-                raise ValueError(
-                    f"walls[{i}].name: duplicate wall name {wall.name!r} (also walls[{seen[wall.name]}])"
-                )
-            seen[wall.name] = i
-
-        period = self.simulation.period
-        if self.simulation.duration < period:
-            raise ValueError(
-                f"simulation.duration = {_fmt(self.simulation.duration)} s is shorter than one period "
-                f"(simulation.period = {_fmt(period)} s)"
-            )
-        for key in ("robot_delay", "sensor_delay"):
-            delay = getattr(self.facility, key)
-            ratio = delay / period
-            n = math.floor(ratio + 0.5)
-            if self.facility.round_delays:
-                setattr(self.facility, key, float(_fmt(n * period)))
-            elif abs(ratio - n) > 1e-9 * max(1.0, ratio):
-                lo = math.floor(ratio)
-                raise ValueError(
-                    f"facility.{key} = {_fmt(delay)} s is not a whole number of periods "
-                    f"(simulation.period = {_fmt(period)} s): use {_fmt(lo * period)} or "
-                    f"{_fmt((lo + 1) * period)}, or set facility.round_delays = true"
-                )
-        return self
 
     # ---- construction ------------------------------------------------------------------
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Scenario:
-        """Validate a raw (TOML-shaped) dict; raise ScenarioError with a one-line message."""
+        """Validate a raw (TOML-shaped) dict and resolve it with the core; raise ScenarioError
+        with a one-line message (every problem's key is named, ``issues`` lists them)."""
         try:
-            return cls.model_validate(_plain(data))
+            checked = cls.model_validate(_plain(data))
         except ValidationError as exc:
-            raise ScenarioError(_format_validation_error(exc)) from None
+            raise _scenario_error(exc) from None
+        try:
+            resolved = _core.resolve_scenario(checked.to_json())
+        except ScenarioError as exc:
+            issues = list(getattr(exc, "issues", None) or [])
+            if not issues:
+                raise
+            error = ScenarioError(_summary([_issue_line(key, message) for key, message in issues]))
+            error.issues = issues
+            raise error from None
+        return cls.model_validate(json.loads(resolved))
 
     @classmethod
     def from_toml(cls, text: str, source: str = "<string>") -> Scenario:
@@ -513,10 +381,34 @@ class Scenario(_Table):
         from . import __version__
 
         header = (
-            f"# Resolved scenario {self.name!r}, written by hilcontact {__version__}.\n"
+            f"# Resolved scenario {self.name!r}, written by hilcontact {__version__}.\n"  # type: ignore[attr-defined]
             "# Every value is explicit (defaults filled in); SI units, frames as in the docs.\n"
         )
         return header + _compact_arrays(tomli_w.dumps(self.to_dict()))
+
+
+Scenario = create_model(  # type: ignore[call-overload]
+    "Scenario", __base__=_ScenarioBase, __module__=__name__, **_fields(SCHEMA)
+)
+Scenario.__doc__ = _ScenarioBase.__doc__
+
+_TABLES: dict[str, Any] = {}
+"""Each top-level table's model (the compensator's: the models by kind)."""
+for _name, _prop in SCHEMA["properties"].items():
+    _ref, _schema = _deref(_prop)
+    if _is_tagged_union(_schema):
+        _TABLES[_name] = COMPENSATOR_MODELS
+    elif _schema.get("type") == "object" and _ref is not None:
+        _TABLES[_name] = _table_model(_ref)
+    elif _schema.get("type") == "array" and "$ref" in _schema.get("items", {}):
+        _TABLES[_name] = _table_model(_schema["items"]["$ref"].rsplit("/", 1)[-1])
+
+# the public names of the tables (Simulation, Body, ...) and compensators (PicCompensator, ...)
+for _model in [*_TABLE_MODELS.values(), *COMPENSATOR_MODELS.values()]:
+    globals()[_model.__name__] = _model
+    if _model.__name__ not in __all__:
+        __all__.append(_model.__name__)
+__all__.sort()
 
 
 _MULTILINE_ARRAY = re.compile(r"\[\n((?:[ \t]*[^\[\]\n]*,\n)+)[ \t]*\]")
@@ -612,7 +504,7 @@ def _error_line(err: Mapping[str, Any]) -> str:
             if key == "walls":
                 return "walls: missing; at least one [[walls]] table is required"
             return f"{key}: missing required table [{key}]"
-        hint = f" ({field.description})" if field is not None and field.description else ""
+        hint = f" ({_hint(field.description)})" if field is not None and field.description else ""
         return at(f"missing required value{hint}")
     if kind == "extra_forbidden":
         allowed = list(getattr(owner, "model_fields", {}))
@@ -642,13 +534,8 @@ def _error_line(err: Mapping[str, Any]) -> str:
         return at(f"expected a string, got {_show(value)}")
     if kind == "finite_number":
         return at(f"must be a finite number, got {_show(value)}")
-    bounds = {"greater_than": ("gt", ">"), "greater_than_equal": ("ge", ">="),
-              "less_than": ("lt", "<"), "less_than_equal": ("le", "<=")}
-    if kind in bounds:
-        name, op = bounds[kind]
-        bound = ctx.get(name)
-        shown = _fmt(bound) if _is_number(bound) else _show(bound)
-        return at(f"must be {op} {shown}, got {_show(value)}")
+    if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
+        return at(f"must be {_range_words(field)}, got {_show(value)}")
     if kind == "literal_error":
         return at(f"must be one of {ctx.get('expected')}, got {_show(value)}")
     if kind in ("model_type", "dict_type", "model_attributes_type"):
@@ -666,19 +553,43 @@ def _error_line(err: Mapping[str, Any]) -> str:
     return at(str(err.get("msg", kind)))
 
 
-def _format_validation_error(exc: ValidationError) -> str:
+def _hint(description: str) -> str:
+    """A field's description as a hint: its first sentence, without the final period
+    (``Control period T in s, > 0.`` -> ``control period T in s, > 0``)."""
+    first = re.split(r"(?<=\.)\s", description, maxsplit=1)[0].rstrip(".")
+    if len(first) > 1 and first[0].isupper() and first[1].islower():
+        first = first[0].lower() + first[1:]
+    return first
+
+
+def _range_words(field: Any) -> str:
+    """The range of a field in the core's words: ``> 0``, ``>= 1``, ``between 0 and 1
+    (exclusive)``."""
+    bounds: dict[str, Any] = {}
+    for item in getattr(field, "metadata", ()):
+        for name in ("ge", "gt", "le", "lt"):
+            if getattr(item, name, None) is not None:
+                bounds[name] = getattr(item, name)
+    if "gt" in bounds and "lt" in bounds and len(bounds) == 2:
+        return f"between {_fmt(bounds['gt'])} and {_fmt(bounds['lt'])} (exclusive)"
+    if "ge" in bounds and "le" in bounds and len(bounds) == 2:
+        return f"between {_fmt(bounds['ge'])} and {_fmt(bounds['le'])}"
+    ops = {"ge": ">=", "gt": ">", "le": "<=", "lt": "<"}
+    return " and ".join(f"{ops[name]} {_fmt(bound)}" for name, bound in bounds.items())
+
+
+def _scenario_error(exc: ValidationError) -> ScenarioError:
+    """One ScenarioError for every problem pydantic found (one line, ``issues`` lists them)."""
     lines: list[str] = []
     for err in exc.errors(include_url=False):
         line = _error_line(err)
         if line not in lines:
             lines.append(line)
     if not lines:  # pragma: no cover - pydantic always reports something
-        return "invalid scenario"
-    message = lines[0]
-    if len(lines) > 1:
-        others = [line.split(":", 1)[0] for line in lines[1:]]
-        message += f" (and {len(lines) - 1} more: {', '.join(others)})"
-    return message
+        lines = ["invalid scenario"]
+    error = ScenarioError(_summary(lines))
+    error.issues = [tuple(line.split(": ", 1)) if ": " in line else ("", line) for line in lines]
+    return error
 
 
 # --------------------------------------------------------------------------------------

@@ -4,6 +4,7 @@
 //!
 //! Field names are the scenario file's keys (`docs/scenario.md`); all values are SI.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::compensator::CompensatorConfig;
@@ -11,7 +12,7 @@ use crate::metrics::Tolerances;
 
 /// A complete scenario: two satellites, the collision geometry, the contact, the facility,
 /// the compensator and the metric settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Scenario {
     /// Short name (used for the output folder).
@@ -28,6 +29,7 @@ pub struct Scenario {
     /// The rod on the servicer.
     pub rod: RodConfig,
     /// Planar walls fixed in the target frame.
+    #[schemars(length(min = 1))]
     pub walls: Vec<WallConfig>,
     /// Contact law between the rod tip and the walls.
     pub contact: ContactConfig,
@@ -43,23 +45,28 @@ pub struct Scenario {
 }
 
 /// Time stepping of the loop.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SimulationConfig {
     /// Simulated duration, s (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub duration: f64,
-    /// Control period T, s (> 0).
+    /// Control period T in s, > 0.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub period: f64,
     /// Facility sub-steps per control period (>= 1).
     #[serde(default = "default_substeps")]
+    #[schemars(range(min = 1))]
     pub plant_substeps: u32,
     /// RK4 steps per control period for the ideal reference while in contact (>= 1); free
     /// flight takes one step per period.
     #[serde(default = "default_reference_substeps")]
+    #[schemars(range(min = 1))]
     pub reference_substeps: u32,
     /// The run is `diverged` once its energy exceeds this many times the larger of the
     /// initial energy and the reference's largest energy (> 1).
     #[serde(default = "default_divergence_ratio")]
+    #[schemars(extend("exclusiveMinimum" = 1.0))]
     pub divergence_energy_ratio: f64,
 }
 
@@ -74,31 +81,37 @@ fn default_divergence_ratio() -> f64 {
 }
 
 /// A free-floating rigid body: mass properties and initial state (world frame).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BodyConfig {
-    /// Mass, kg (> 0).
+    /// kg, > 0.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub mass: f64,
     /// Inertia about the centre of mass in the body frame, kg·m²: principal moments or a
     /// symmetric positive-definite tensor.
     pub inertia: Inertia,
     /// Initial centre-of-mass position, m (world frame).
     #[serde(default)]
+    #[schemars(extend("x-value" = "vec3"))]
     pub position: [f64; 3],
     /// Initial attitude, unit quaternion [w, x, y, z], body to world.
     #[serde(default = "identity_quaternion")]
+    #[schemars(extend("x-value" = "quaternion"))]
     pub orientation: [f64; 4],
     /// Initial centre-of-mass velocity, m/s (world frame).
     #[serde(default)]
+    #[schemars(extend("x-value" = "vec3"))]
     pub velocity: [f64; 3],
     /// Initial angular velocity, rad/s (body frame).
     #[serde(default)]
+    #[schemars(extend("x-value" = "vec3"))]
     pub angular_velocity: [f64; 3],
 }
 
 /// An inertia given as principal moments `[Ixx, Iyy, Izz]` or as a full 3×3 tensor, kg·m².
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(untagged)]
+#[schemars(extend("x-value" = "inertia"))]
 pub enum Inertia {
     /// Principal moments (a diagonal tensor).
     Principal([f64; 3]),
@@ -111,28 +124,31 @@ fn identity_quaternion() -> [f64; 4] {
 }
 
 /// The rod carried by the servicer.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RodConfig {
     /// Rod tip (the contact point) in the servicer body frame, m.
+    #[schemars(extend("x-value" = "vec3"))]
     pub tip: [f64; 3],
 }
 
 /// A planar wall of the collision frame, fixed in the target frame.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WallConfig {
     /// Name for reports.
     #[serde(default)]
     pub name: String,
     /// A point of the wall, m (target frame).
+    #[schemars(extend("x-value" = "vec3"))]
     pub point: [f64; 3],
     /// Normal from the wall into free space (non-zero; normalised by the core).
+    #[schemars(extend("x-value" = "vec3"))]
     pub normal: [f64; 3],
 }
 
 /// Which contact law.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum ContactModelKind {
     /// Linear spring-damper, eq. (5).
@@ -143,19 +159,22 @@ pub enum ContactModelKind {
 }
 
 /// Contact law parameters.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ContactConfig {
     /// Contact law.
     #[serde(default)]
     pub model: ContactModelKind,
     /// Stiffness k: N/m (linear) or N/m^n (Hunt-Crossley), > 0.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub stiffness: f64,
     /// Damping c: N·s/m (linear) or N·s/m^(n+1) (Hunt-Crossley), >= 0.
     #[serde(default)]
+    #[schemars(range(min = 0.0))]
     pub damping: f64,
     /// Hunt-Crossley exponent n (> 0); unused by the linear law.
     #[serde(default = "default_exponent")]
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub exponent: f64,
 }
 
@@ -164,38 +183,48 @@ fn default_exponent() -> f64 {
 }
 
 /// The facility model: robot response and F/T sensor.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FacilityConfig {
     /// Pure delay of the robot's response, s (a whole number of periods).
     #[serde(default)]
+    #[schemars(range(min = 0.0))]
     pub robot_delay: f64,
     /// Pure delay of the sensor, s (a whole number of periods).
     #[serde(default)]
+    #[schemars(range(min = 0.0))]
     pub sensor_delay: f64,
     /// Natural frequency of the robot's second-order servo lag, Hz (0 = no lag).
     #[serde(default)]
+    #[schemars(range(min = 0.0))]
     pub servo_frequency: f64,
     /// Damping ratio of the servo lag (> 0).
     #[serde(default = "default_servo_damping")]
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub servo_damping: f64,
     /// Gaussian noise on each force axis, N (standard deviation).
     #[serde(default)]
+    #[schemars(range(min = 0.0))]
     pub sensor_noise: f64,
     /// Gaussian noise on each moment axis, N·m (standard deviation).
     #[serde(default)]
+    #[schemars(range(min = 0.0))]
     pub torque_noise: f64,
     /// Force quantisation step, N (0 = none).
     #[serde(default)]
+    #[schemars(range(min = 0.0))]
     pub force_resolution: f64,
     /// Moment quantisation step, N·m (0 = none).
     #[serde(default)]
+    #[schemars(range(min = 0.0))]
     pub torque_resolution: f64,
     /// Sensor origin in the target frame, m.
     #[serde(default)]
+    #[schemars(extend("x-value" = "vec3"))]
     pub sensor_position: [f64; 3],
     /// Sensor attitude in the target frame, unit quaternion [w, x, y, z] (sensor to target).
     #[serde(default = "identity_quaternion")]
+    #[schemars(extend("x-value" = "quaternion"))]
     pub sensor_orientation: [f64; 4],
     /// Seed of the sensor-noise generator.
     #[serde(default)]
@@ -229,21 +258,25 @@ impl Default for FacilityConfig {
 }
 
 /// Metric settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MetricsConfig {
     /// A collision is an interval where the physical contact force exceeds this, N (> 0).
     #[serde(default = "default_contact_threshold")]
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub contact_threshold: f64,
     /// Largest `|CoV − 1|` of a faithful collision (fraction, >= 0).
     #[serde(default = "default_cov_tolerance")]
+    #[schemars(range(min = 0.0))]
     pub cov_tolerance: f64,
     /// Largest CoF of a faithful collision (> 0).
     #[serde(default = "default_max_cof")]
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub max_cof: f64,
     /// Largest rebound velocity error `|v − v_ref| / |v_ref|` of a faithful collision
     /// (fraction, >= 0).
     #[serde(default = "default_max_velocity_error")]
+    #[schemars(range(min = 0.0))]
     pub max_velocity_error: f64,
     /// How many reference collisions a faithful run may lose (integer >= 0).
     #[serde(default)]

@@ -74,20 +74,6 @@ impl Issues {
         });
     }
 
-    /// Records a problem of `key` unless `value` is finite and `ok`; `allowed` says what is
-    /// allowed (`"> 0"`). Returns whether the value passed.
-    pub fn check_range(&mut self, key: &str, value: f64, ok: bool, allowed: &str) -> bool {
-        if !value.is_finite() {
-            self.push(key, format!("must be a finite number, got {value}"));
-            false
-        } else if !ok {
-            self.push(key, format!("must be {allowed}, got {value}"));
-            false
-        } else {
-            true
-        }
-    }
-
     /// Whether no problem was recorded.
     pub fn is_empty(&self) -> bool {
         self.0.is_empty()

@@ -24,6 +24,7 @@ pub mod frames;
 pub mod hil;
 pub mod metrics;
 pub mod plan;
+pub mod schema;
 pub mod sim;
 pub mod world;
 

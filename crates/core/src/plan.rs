@@ -19,6 +19,7 @@ use crate::config::{BodyConfig, ContactModelKind, Inertia, Scenario};
 use crate::contact::{ContactGeometry, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
 use crate::error::{CoreError, Issues, Result};
 use crate::metrics::Tolerances;
+use crate::schema::check_ranges;
 use crate::world::{TwoBodyState, TwoBodySystem};
 
 /// The facility model's settings, checked; delays in whole control ticks.
@@ -84,18 +85,12 @@ impl Plan {
         let r = &mut resolved;
 
         check_name(&mut issues, &r.name);
+        // every number against the range of the schema (`crate::schema`)
+        let out_of_range = check_ranges(scenario, &mut issues);
+        let in_range = |key: &str| !out_of_range.contains(key);
         let sim = &r.simulation;
-        positive(&mut issues, "simulation.duration", sim.duration);
-        let period_ok = positive(&mut issues, "simulation.period", sim.period);
-        at_least_one(&mut issues, "simulation.plant_substeps", sim.plant_substeps);
-        at_least_one(&mut issues, "simulation.reference_substeps", sim.reference_substeps);
-        greater(
-            &mut issues,
-            "simulation.divergence_energy_ratio",
-            sim.divergence_energy_ratio,
-            1.0,
-        );
-        if period_ok && sim.duration.is_finite() && sim.duration < sim.period {
+        let period_ok = in_range("simulation.period");
+        if period_ok && in_range("simulation.duration") && sim.duration < sim.period {
             issues.push(
                 "simulation.duration",
                 format!(
@@ -137,9 +132,6 @@ impl Plan {
         }
 
         let c = &r.contact;
-        positive(&mut issues, "contact.stiffness", c.stiffness);
-        non_negative(&mut issues, "contact.damping", c.damping);
-        positive(&mut issues, "contact.exponent", c.exponent);
         let law = match c.model {
             ContactModelKind::Linear => ContactModel::Linear(LinearSpringDamper {
                 stiffness: c.stiffness,
@@ -155,27 +147,19 @@ impl Plan {
         let period = r.simulation.period;
         let round = r.facility.round_delays;
         let f = &mut r.facility;
-        let robot_delay_ticks = delay(&mut issues, "robot_delay", &mut f.robot_delay, period, round);
-        let sensor_delay_ticks =
-            delay(&mut issues, "sensor_delay", &mut f.sensor_delay, period, round);
-        non_negative(&mut issues, "facility.servo_frequency", f.servo_frequency);
-        positive(&mut issues, "facility.servo_damping", f.servo_damping);
-        non_negative(&mut issues, "facility.sensor_noise", f.sensor_noise);
-        non_negative(&mut issues, "facility.torque_noise", f.torque_noise);
-        non_negative(&mut issues, "facility.force_resolution", f.force_resolution);
-        non_negative(&mut issues, "facility.torque_resolution", f.torque_resolution);
+        let mut delay_of = |name: &str, value: &mut f64| {
+            let key = format!("facility.{name}");
+            let ok = period_ok && in_range(&key);
+            delay(&mut issues, &key, value, ok.then_some(period), round)
+        };
+        let robot_delay_ticks = delay_of("robot_delay", &mut f.robot_delay);
+        let sensor_delay_ticks = delay_of("sensor_delay", &mut f.sensor_delay);
         finite(&mut issues, "facility.sensor_position", &f.sensor_position);
         let sensor_orientation =
             unit_quaternion(&mut issues, "facility.sensor_orientation", f.sensor_orientation);
         if let Some(q) = sensor_orientation {
             f.sensor_orientation = q;
         }
-        let m = &r.metrics;
-        positive(&mut issues, "metrics.contact_threshold", m.contact_threshold);
-        non_negative(&mut issues, "metrics.cov_tolerance", m.cov_tolerance);
-        positive(&mut issues, "metrics.max_cof", m.max_cof);
-        non_negative(&mut issues, "metrics.max_velocity_error", m.max_velocity_error);
-        r.compensator.check(&mut issues);
 
         issues.finish()?;
         // every check passed, so every part is there
@@ -282,24 +266,6 @@ fn check_name(issues: &mut Issues, name: &str) {
     }
 }
 
-fn positive(issues: &mut Issues, key: &str, value: f64) -> bool {
-    issues.check_range(key, value, value > 0.0, "> 0")
-}
-
-fn non_negative(issues: &mut Issues, key: &str, value: f64) -> bool {
-    issues.check_range(key, value, value >= 0.0, ">= 0")
-}
-
-fn greater(issues: &mut Issues, key: &str, value: f64, bound: f64) -> bool {
-    issues.check_range(key, value, value > bound, &format!("> {bound}"))
-}
-
-fn at_least_one(issues: &mut Issues, key: &str, value: u32) {
-    if value < 1 {
-        issues.push(key, format!("must be >= 1, got {value}"));
-    }
-}
-
 fn finite(issues: &mut Issues, key: &str, v: &[f64]) -> bool {
     let ok = v.iter().all(|x| x.is_finite());
     if !ok {
@@ -399,7 +365,6 @@ fn inertia(issues: &mut Issues, key: &str, inertia: &Inertia) -> Option<Matrix3<
 /// The mass properties and initial state of a body; normalises its orientation and
 /// symmetrises its inertia in `config`.
 fn body(issues: &mut Issues, key: &str, config: &mut BodyConfig) -> Option<(MassProperties, BodyState)> {
-    let mass_ok = positive(issues, &format!("{key}.mass"), config.mass);
     let tensor = inertia(issues, &format!("{key}.inertia"), &config.inertia);
     let q = unit_quaternion(issues, &format!("{key}.orientation"), config.orientation);
     let vectors_ok = [
@@ -409,12 +374,11 @@ fn body(issues: &mut Issues, key: &str, config: &mut BodyConfig) -> Option<(Mass
     ]
     .iter()
     .fold(true, |ok, (name, v)| finite(issues, &format!("{key}.{name}"), v) && ok);
-    let (Some(tensor), Some(q), true, true) = (tensor, q, mass_ok, vectors_ok) else {
+    let (Some(tensor), Some(q), true) = (tensor, q, vectors_ok) else {
         return None;
     };
-    if let Inertia::Tensor(_) = config.inertia {
-        config.inertia = Inertia::Tensor([0, 1, 2].map(|i| [0, 1, 2].map(|j| tensor[(i, j)])));
-    }
+    // the resolved inertia is always the full tensor (principal moments on its diagonal)
+    config.inertia = Inertia::Tensor([0, 1, 2].map(|i| [0, 1, 2].map(|j| tensor[(i, j)])));
     config.orientation = q;
     Some((
         MassProperties::new(config.mass, tensor),
@@ -427,19 +391,17 @@ fn body(issues: &mut Issues, key: &str, config: &mut BodyConfig) -> Option<(Mass
     ))
 }
 
-/// A delay in whole periods: `facility.<name>` (s) rounded to the nearest period if `round`
-/// (and written back rounded), else rejected unless it is a whole number of periods.
+/// A delay in whole periods: `key` (s, in its range) rounded to the nearest period if `round`
+/// (and written back rounded), else rejected unless it is a whole number of periods; nothing
+/// without a valid `period`.
 fn delay(
     issues: &mut Issues,
-    name: &str,
+    key: &str,
     delay: &mut f64,
-    period: f64,
+    period: Option<f64>,
     round: bool,
 ) -> Option<usize> {
-    let key = format!("facility.{name}");
-    if !non_negative(issues, &key, *delay) || !(period.is_finite() && period > 0.0) {
-        return None;
-    }
+    let period = period?;
     let ratio = *delay / period;
     let n = (ratio + 0.5).floor();
     if round {

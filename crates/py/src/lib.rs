@@ -490,6 +490,26 @@ fn compensator_registry() -> PyResult<String> {
     Ok(serde_json::Value::Array(entries).to_string())
 }
 
+/// The JSON Schema of a scenario file (draft 2020-12), as JSON text: every key with its
+/// description (units), default, allowed values and range, the compensator as a union
+/// tagged by `kind`, and `x-value` (`vec3`, `quaternion`, `inertia`) on vectors. The one
+/// schema: Python builds its scenario models from it.
+#[pyfunction]
+fn scenario_schema() -> PyResult<String> {
+    serde_json::to_string(&hilcontact_core::schema::scenario_schema())
+        .map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
+/// Resolves a scenario (JSON) as a run would: returns the resolved scenario as JSON (defaults
+/// filled in, quaternions and normals normalised, inertia as a symmetric tensor, wall names
+/// set, delays rounded with `facility.round_delays`). Raises ScenarioError listing every
+/// problem in `issues`.
+#[pyfunction]
+fn resolve_scenario(py: Python<'_>, scenario_json: &str) -> PyResult<String> {
+    let plan = parse_scenario(py, scenario_json)?;
+    serde_json::to_string(&plan.scenario).map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
 /// Version of the native core.
 #[pyfunction]
 fn version() -> &'static str {
@@ -504,6 +524,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(table_columns, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(compensator_registry, m)?)?;
+    m.add_function(wrap_pyfunction!(scenario_schema, m)?)?;
+    m.add_function(wrap_pyfunction!(resolve_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(start_hil, m)?)?;
     m.add_function(wrap_pyfunction!(start_facility, m)?)?;
     m.add_function(wrap_pyfunction!(realtime_defaults, m)?)?;

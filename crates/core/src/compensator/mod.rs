@@ -27,9 +27,9 @@ pub use pida::Pida;
 pub use tdpa::{TdpaAdmittance, TdpaImpedance};
 
 use nalgebra::Vector3;
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::error::Issues;
 use crate::frames::FrameWrench;
 
 /// What a compensator sees at a tick. All vectors in the target frame `t`.
@@ -135,13 +135,14 @@ pub struct KindInfo {
 
 /// Builds the registry from one line per compensator: `Variant = "kind", Params, Type,
 /// "colour";` with the variant's doc comment. `Params` implements `Default`, serde and
-/// `check(&self, &mut Issues)`; `Type::new(&Params, &CompensatorContext)` implements
-/// [`Compensator`].
+/// `JsonSchema` (its doc comments give units, its `#[schemars(...)]` attributes the ranges
+/// that [`crate::schema::check_ranges`] checks); `Type::new(&Params, &CompensatorContext)`
+/// implements [`Compensator`].
 macro_rules! registry {
     ($( $(#[doc = $doc:literal])+ $variant:ident = $kind:literal, $params:ty, $imp:ty, $colour:literal; )+) => {
         /// Which compensator, with its parameters (`[compensator]` in a scenario, tagged by
         /// `kind`).
-        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
         #[serde(tag = "kind", deny_unknown_fields)]
         pub enum CompensatorConfig {
             $( $(#[doc = $doc])+ #[serde(rename = $kind)] $variant($params), )+
@@ -161,11 +162,6 @@ macro_rules! registry {
             /// The `kind` string.
             pub fn kind(&self) -> &'static str {
                 match self { $( CompensatorConfig::$variant(_) => $kind, )+ }
-            }
-
-            /// Records every parameter out of its range.
-            pub fn check(&self, issues: &mut Issues) {
-                match self { $( CompensatorConfig::$variant(p) => p.check(issues), )+ }
             }
 
             /// Builds the compensator (allocates once, here).

@@ -2,20 +2,15 @@
 //! With any delay in the loop the simulation diverges; it is the baseline that shows why
 //! compensation is needed.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
-use crate::error::Issues;
 
 /// The pass-through compensator has no parameters (`kind = "none"` and nothing else).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NoParams;
-
-impl NoParams {
-    /// Nothing to check.
-    pub fn check(&self, _issues: &mut Issues) {}
-}
 
 /// The pass-through compensator (`kind = "none"`).
 #[derive(Debug, Clone, Copy, Default)]

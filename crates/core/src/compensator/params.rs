@@ -1,12 +1,11 @@
 //! Parameters of the compensators (`[compensator]` in a scenario), with units, defaults that
 //! work for every preset, and valid ranges.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::error::Issues;
-
 /// How the measurement delay `τ_p` is compensated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum DelayMode {
     /// Identify against the kinematics from `τ_p` earlier and predict the present force from
@@ -18,7 +17,7 @@ pub enum DelayMode {
 }
 
 /// How the energy observer sums the port's energy (see the energy module).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum ObserverMode {
     /// The work of the wrench held over each step (exact for the virtual dynamics; default).
@@ -29,30 +28,40 @@ pub enum ObserverMode {
 }
 
 /// Parameters of the identification-based compensators `pic`, `dac`, `pida`.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct ModelParams {
     /// Measurement-delay compensation: `align` or `lead`.
     pub delay_mode: DelayMode,
     /// In contact while the force magnitude exceeds this, N (> 0; above the noise).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub contact_force: f64,
     /// Initial stiffness estimate k̂₀, N/m (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub stiffness_initial: f64,
     /// Initial damping estimate ĉ₀, N·s/m (>= 0).
+    #[schemars(range(min = 0.0))]
     pub damping_initial: f64,
     /// Initial standard deviation of k̂ (√P₀₀), N/m (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub stiffness_std: f64,
     /// Initial standard deviation of ĉ (√P₁₁), N·s/m (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub damping_std: f64,
     /// Random walk of k per update (√Q₀₀), N/m (>= 0).
+    #[schemars(range(min = 0.0))]
     pub stiffness_walk: f64,
     /// Random walk of c per update (√Q₁₁), N·s/m (>= 0).
+    #[schemars(range(min = 0.0))]
     pub damping_walk: f64,
     /// Initial measurement noise of a force increment (√R₀), N (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub noise_std: f64,
     /// Forgetting factor b of the Sage-Husa noise estimate (0 < b < 1).
+    #[schemars(extend("exclusiveMinimum" = 0.0, "exclusiveMaximum" = 1.0))]
     pub forgetting: f64,
     /// Largest amendment damping α of the energy controller, N·s/m (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub alpha_max: f64,
     /// Energy observer: `work` or `paper`.
     pub observer: ObserverMode,
@@ -77,42 +86,25 @@ impl Default for ModelParams {
     }
 }
 
-impl ModelParams {
-    /// Records every parameter out of its range.
-    pub fn check(&self, issues: &mut Issues) {
-        let p = self;
-        // every key is `compensator.<name>`
-        let mut check = |key: &str, value: f64, ok: bool, allowed: &str| {
-            issues.check_range(&format!("compensator.{key}"), value, ok, allowed);
-        };
-        check("contact_force", p.contact_force, p.contact_force > 0.0, "> 0");
-        check("stiffness_initial", p.stiffness_initial, p.stiffness_initial > 0.0, "> 0");
-        check("damping_initial", p.damping_initial, p.damping_initial >= 0.0, ">= 0");
-        check("stiffness_std", p.stiffness_std, p.stiffness_std > 0.0, "> 0");
-        check("damping_std", p.damping_std, p.damping_std > 0.0, "> 0");
-        check("stiffness_walk", p.stiffness_walk, p.stiffness_walk >= 0.0, ">= 0");
-        check("damping_walk", p.damping_walk, p.damping_walk >= 0.0, ">= 0");
-        check("noise_std", p.noise_std, p.noise_std > 0.0, "> 0");
-        let b = p.forgetting;
-        check("forgetting", b, b > 0.0 && b < 1.0, "between 0 and 1 (exclusive)");
-        check("alpha_max", p.alpha_max, p.alpha_max > 0.0, "> 0");
-    }
-}
-
 /// Parameters of the TDPA baselines.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TdpaParams {
     /// In contact while the force magnitude exceeds this, N (> 0); the observer restarts at
     /// each contact (a windowed observer).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub contact_force: f64,
     /// Largest damping α of the impedance-type controller, N·s/m (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub alpha_max: f64,
     /// Largest admittance β of the admittance-type controller, m/(N·s) (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub beta_max: f64,
     /// Floor on |v| in the impedance controller's division, m/s (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub velocity_floor: f64,
     /// Floor on |f| in the admittance controller's division, N (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub force_floor: f64,
 }
 
@@ -125,21 +117,5 @@ impl Default for TdpaParams {
             velocity_floor: 1e-3,
             force_floor: 1.0,
         }
-    }
-}
-
-impl TdpaParams {
-    /// Records every parameter out of its range.
-    pub fn check(&self, issues: &mut Issues) {
-        let p = self;
-        // every key is `compensator.<name>`
-        let mut check = |key: &str, value: f64, ok: bool, allowed: &str| {
-            issues.check_range(&format!("compensator.{key}"), value, ok, allowed);
-        };
-        check("contact_force", p.contact_force, p.contact_force > 0.0, "> 0");
-        check("alpha_max", p.alpha_max, p.alpha_max > 0.0, "> 0");
-        check("beta_max", p.beta_max, p.beta_max > 0.0, "> 0");
-        check("velocity_floor", p.velocity_floor, p.velocity_floor > 0.0, "> 0");
-        check("force_floor", p.force_floor, p.force_floor > 0.0, "> 0");
     }
 }
