@@ -27,6 +27,10 @@ def simulate_batch(scenarios: list[str], threads: int | None = None) -> dict[str
     has no such value). Raises ScenarioError for an invalid scenario.
     """
 
+def contact_frequency(scenario_json: str) -> float:
+    """Undamped contact frequency of a linear contact, Hz (``sqrt(k/μ)/2π``, μ the reduced
+    mass); NaN for Hunt-Crossley. Raises ScenarioError for an invalid scenario."""
+
 def summary_columns() -> list[tuple[str, str, str]]:
     """The numeric columns of a run's summary row (after ``status``), in order, as
     ``(name, unit, meaning)``."""

@@ -178,12 +178,8 @@ def _axes(grid: Mapping[str, Any] | Iterable[str | GridAxis] | None) -> list[Gri
 
 def contact_frequency(scenario: Scenario) -> float:
     """Undamped contact frequency of a linear contact, Hz: ``sqrt(k/μ) / 2π`` with the reduced
-    mass ``μ = m_s m_t / (m_s + m_t)``; NaN for a Hunt-Crossley contact."""
-    if scenario.contact.model != "linear":
-        return math.nan
-    ms, mt = scenario.servicer.mass, scenario.target.mass
-    mu = ms * mt / (ms + mt)
-    return math.sqrt(scenario.contact.stiffness / mu) / (2.0 * math.pi)
+    mass ``μ = m_s m_t / (m_s + m_t)``; NaN for a Hunt-Crossley contact (from the core)."""
+    return float(_core().contact_frequency(scenario.to_json()))
 
 
 # ---- the plan -----------------------------------------------------------------------------

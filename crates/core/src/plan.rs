@@ -227,6 +227,17 @@ impl Plan {
         self.robot_delay() + servo
     }
 
+    /// The undamped contact frequency of a linear contact, Hz: `√(k/μ) / 2π` with the reduced
+    /// mass `μ = m_s m_t / (m_s + m_t)`; `None` for a Hunt-Crossley contact.
+    pub fn contact_frequency(&self) -> Option<f64> {
+        match self.system.contact.law {
+            ContactModel::Linear(l) => Some(
+                (l.stiffness / self.system.reduced_mass()).sqrt() / (2.0 * std::f64::consts::PI),
+            ),
+            ContactModel::HuntCrossley(_) => None,
+        }
+    }
+
     /// The robot delay τ_r, s (whole ticks).
     pub fn robot_delay(&self) -> f64 {
         self.facility.robot_delay_ticks as f64 * self.period

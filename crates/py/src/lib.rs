@@ -427,6 +427,15 @@ fn simulate_batch<'py>(
     Ok(result)
 }
 
+/// The undamped contact frequency of a scenario's linear contact, Hz (`√(k/μ) / 2π`, μ the
+/// reduced mass), NaN for a Hunt-Crossley contact. Raises ScenarioError for an invalid one.
+#[pyfunction]
+fn contact_frequency(py: Python<'_>, scenario_json: &str) -> PyResult<f64> {
+    Ok(parse_scenario(py, scenario_json)?
+        .contact_frequency()
+        .unwrap_or(f64::NAN))
+}
+
 /// The columns of the tables a run produces, with their units: a dict with `timeseries` (the
 /// HIL loop), `reference` and `realtime` (what a real-time run adds to `timeseries`), each a
 /// list of `(name, unit, only)` in order, `only` being "always", "estimates" (compensators
@@ -522,6 +531,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate_batch, m)?)?;
     m.add_function(wrap_pyfunction!(summary_columns, m)?)?;
     m.add_function(wrap_pyfunction!(table_columns, m)?)?;
+    m.add_function(wrap_pyfunction!(contact_frequency, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(compensator_registry, m)?)?;
     m.add_function(wrap_pyfunction!(scenario_schema, m)?)?;
