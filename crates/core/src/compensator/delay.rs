@@ -16,6 +16,7 @@
 use nalgebra::{Matrix2, Vector2, Vector3};
 
 use super::akf::SageHusaFilter;
+use super::detect::ContactDetector;
 use super::params::{DelayMode, ModelParams};
 use super::{CompensatorContext, CompensatorInput};
 use crate::delay_line::DelayLine;
@@ -23,7 +24,8 @@ use crate::delay_line::DelayLine;
 /// What the identification front end makes of a tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ContactView {
-    /// Whether `|F_act|` exceeds the contact threshold.
+    /// Whether the tick is in contact: the identification sample's force passed the
+    /// noise-aware detector ([`super::detect`]) and `|F_act|` is above its level.
     pub in_contact: bool,
     /// Contact direction e = F_act/|F_act| (into the wall); zero out of contact.
     pub direction: Vector3<f64>,
@@ -50,7 +52,8 @@ struct Sample {
 #[derive(Debug, Clone)]
 pub struct ContactEstimator {
     mode: DelayMode,
-    threshold: f64,
+    /// Contact detection on the identification sample's force (noise-aware, hysteresis).
+    detector: ContactDetector,
     period: f64,
     sensor_delay: f64,
     delay_ticks: usize,
@@ -82,7 +85,7 @@ impl ContactEstimator {
         );
         ContactEstimator {
             mode: p.delay_mode,
-            threshold: p.contact_force,
+            detector: ContactDetector::new(p.contact_force, context.period),
             period: context.period,
             sensor_delay: context.sensor_delay(),
             delay_ticks,
@@ -99,6 +102,7 @@ impl ContactEstimator {
         self.kinematics.fill((Vector3::zeros(), Vector3::zeros()));
         self.previous_measured = (Vector3::zeros(), Vector3::zeros());
         self.previous_sample = None;
+        self.detector.reset();
         self.filter.reset();
     }
 
@@ -126,7 +130,7 @@ impl ContactEstimator {
             force,
             position,
             velocity,
-            in_contact: force.norm() > self.threshold,
+            in_contact: self.detector.update(&force),
         };
         if let (true, Some(prev)) = (
             sample.in_contact,
@@ -162,7 +166,8 @@ impl ContactEstimator {
             DelayMode::Align => (f_mea, m_mea),
         };
         self.previous_measured = (f_mea, m_mea);
-        let in_contact = force.norm() > self.threshold;
+        // F_act against the detector's present level (without noise, the fixed threshold)
+        let in_contact = sample.in_contact && force.norm() > self.detector.off_threshold();
         ContactView {
             in_contact,
             direction: if in_contact {

@@ -7,6 +7,7 @@
 mod akf;
 mod dac;
 mod delay;
+pub mod detect;
 mod energy;
 mod force;
 mod none;

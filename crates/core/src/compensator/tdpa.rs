@@ -20,6 +20,7 @@
 
 use nalgebra::Vector3;
 
+use super::detect::ContactDetector;
 use super::params::TdpaParams;
 use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
 
@@ -27,7 +28,8 @@ use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct PassivityObserver {
     period: f64,
-    threshold: f64,
+    /// Contact detection (noise-aware, with hysteresis).
+    detector: ContactDetector,
     energy: f64,
     /// Force applied and velocity at the previous tick, and the energy the controller removed.
     previous: Option<(Vector3<f64>, Vector3<f64>, f64)>,
@@ -37,7 +39,7 @@ impl PassivityObserver {
     fn new(period: f64, threshold: f64) -> Self {
         PassivityObserver {
             period,
-            threshold,
+            detector: ContactDetector::new(threshold, period),
             energy: 0.0,
             previous: None,
         }
@@ -50,7 +52,7 @@ impl PassivityObserver {
 
     /// Adds the last step's port energy; returns whether the port is in contact.
     fn observe(&mut self, force: &Vector3<f64>, velocity: &Vector3<f64>) -> bool {
-        if force.norm() <= self.threshold {
+        if !self.detector.update(force) {
             self.reset();
             return false;
         }
