@@ -148,7 +148,7 @@ def _report(console: Console, result: Run, folder: Path) -> None:
     table = Table(
         title=f"{result.scenario.name}: compensator {result.compensator}, robot delay {delay_ms:g} ms",
     )
-    for header in ("#", "start (s)", "end (s)", "CoV", "CoF", "velocity error (%)", "peak force (N)",
+    for header in ("#", "start (s)", "end (s)", "CoV", "CoF", "v error (%)", "peak force (N)",
                    "rebound speed (mm/s)", "reference rebound (mm/s)"):
         table.add_column(header, justify="right")
     for number, row in result.collision_table().iterrows():
@@ -243,7 +243,7 @@ def _report_comparison(console: Console, result: Comparison, folder: Path) -> No
         f"sensor delay {s.facility.sensor_delay * 1e3:g} ms",
     )
     table.add_column("compensator", no_wrap=True)
-    table.add_column("status")
+    table.add_column("status", no_wrap=True)
     table.add_column("CoV per collision")
     for header in ("worst CoF", "k error (%)", "c error (N·s/mm)"):
         table.add_column(header, justify="right")
