@@ -1,10 +1,12 @@
 //! Runs a preset scenario file and prints its collisions:
 //! `cargo run --release --example run_preset -- python/hilcontact/scenarios/paper-table1.toml [key=value ...]`
 //! with keys `robot_delay`, `sensor_delay`, `round_delays` (true|false), `noise` (N), `seed`, `kind` (compensator), `mode` (align|lead),
-//! `observer` (work|paper), `repeat` (more runs, metrics only as a sweep runs them, for profiling: `perf record -g`
+//! `observer` (work|paper), `controller` (normal|paper), `ratio` (force_ratio_max), `repeat` (more runs, metrics only as a sweep runs them, for profiling: `perf record -g`
 //! on this example).
 
-use hilcontact_core::compensator::{CompensatorConfig, DelayMode, ModelParams, ObserverMode};
+use hilcontact_core::compensator::{
+    CompensatorConfig, ControllerMode, DelayMode, ModelParams, ObserverMode,
+};
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -17,6 +19,8 @@ fn main() {
     let (mut kind, mut mode, mut observer) =
         ("none".to_string(), DelayMode::Align, ObserverMode::Work);
     let mut repeat = 1usize;
+    let mut ratio = ModelParams::default().force_ratio_max;
+    let mut controller = ControllerMode::Normal;
     for arg in &args[2.min(args.len())..] {
         let (key, value) = arg.split_once('=').expect("key=value");
         match key {
@@ -27,6 +31,14 @@ fn main() {
             "round_delays" => s.facility.round_delays = value.parse().expect("true or false"),
             "kind" => kind = value.to_string(),
             "repeat" => repeat = value.parse().expect("integer"),
+            "ratio" => ratio = value.parse().expect("force_ratio_max"),
+            "controller" => {
+                controller = if value == "paper" {
+                    ControllerMode::Paper
+                } else {
+                    ControllerMode::Normal
+                }
+            }
             "mode" => {
                 mode = if value == "lead" {
                     DelayMode::Lead
@@ -47,6 +59,8 @@ fn main() {
     let model = ModelParams {
         delay_mode: mode,
         observer,
+        controller,
+        force_ratio_max: ratio,
         ..ModelParams::default()
     };
     s.compensator = match CompensatorConfig::from_kind(&kind) {

@@ -157,10 +157,11 @@ fn pida_with_noise_and_sensor_delay_aligns_instead_of_differentiating() {
     assert_eq!(cov.len(), 5);
     assert!(cov.iter().all(|c| (0.95..=1.05).contains(c)), "CoV {cov:?}");
     assert!(cof.iter().all(|c| *c <= 1.30), "CoF {cof:?}");
-    // the paper's lead filter differentiates the noise: identification is far off
+    // the paper's lead filter differentiates the noise: identification is far off (9x with
+    // the noise-aware contact detection, which keeps the noisiest samples out)
     let lead = noisy(DelayMode::Lead);
     assert!(
-        stiffness_error(&lead) > 10.0 * stiffness_error(&out),
+        stiffness_error(&lead) > 5.0 * stiffness_error(&out),
         "lead {} vs align {}",
         stiffness_error(&lead),
         stiffness_error(&out)

@@ -30,7 +30,7 @@
 use nalgebra::Vector3;
 
 use super::delay::ContactView;
-use super::params::{ModelParams, ObserverMode};
+use super::params::{ControllerMode, ModelParams, ObserverMode};
 use super::{CompensatorContext, CompensatorInput};
 use crate::frames::FrameWrench;
 
@@ -140,47 +140,77 @@ impl EnergyObserver {
 pub struct EnergyController {
     period: f64,
     alpha_max: f64,
+    mode: ControllerMode,
+    force_ratio_max: f64,
+    contact_force: f64,
 }
 
 impl EnergyController {
-    /// A controller for period `period` (s) with α capped at `alpha_max` (N·s/m).
-    pub fn new(period: f64, alpha_max: f64) -> Self {
-        EnergyController { period, alpha_max }
+    /// A controller for period `period` (s) with α capped at `alpha_max` (N·s/m), in `mode`;
+    /// the `normal` mode's force is capped at `force_ratio_max · max(|F_comp|, contact_force)`.
+    pub fn new(p: &ModelParams, period: f64) -> Self {
+        EnergyController {
+            period,
+            alpha_max: p.alpha_max,
+            mode: p.controller,
+            force_ratio_max: p.force_ratio_max,
+            contact_force: p.contact_force,
+        }
     }
 
     /// The amendment damping α (diagonal, N·s/m) and force F_α (N) for observed energy
-    /// `energy` (J), elastic force `f_ek` (N), contact direction `direction` and desired
-    /// velocity (m/s).
+    /// `energy` (J), elastic force `f_ek` (N), contact direction `direction`, desired
+    /// velocity (m/s) and the compensated contact force `f_comp` (N).
     ///
-    /// Eqs. (17)-(19) depend on F_ek only through its direction ê: `proj·F_ek = (v·ê)·ê`. So
-    /// where F_ek vanishes (the virtual tip has left the wall while the robot has not) the
-    /// contact direction stands in for ê, and a deficit found late in the rebound can still
-    /// be dissipated.
+    /// Both modes act along ê = F_ek/|F_ek| (where F_ek vanishes, the virtual tip has left
+    /// the wall while the robot has not, the contact direction stands in, so that a deficit
+    /// found late in the rebound can still be dissipated) and only ever dissipate.
+    /// - `normal`: one damping α along ê, `F_α = α (v·ê) ê`, whose power `α (v·ê)²` is the
+    ///   deficit `−E/T`, so `α = −E / (T (v·ê)²)`, capped at `alpha_max` and the force at
+    ///   `force_ratio_max · max(|F_comp|, contact_force)`. The same in every direction: on
+    ///   a contact along an axis it is the paper's controller exactly.
+    /// - `paper`: eqs. (17)-(19) as printed, one α per axis (see [`ControllerMode::Paper`]).
     pub fn step(
         &self,
         energy: f64,
         f_ek: &Vector3<f64>,
         direction: &Vector3<f64>,
         velocity: &Vector3<f64>,
+        f_comp: &Vector3<f64>,
     ) -> (Vector3<f64>, Vector3<f64>) {
         let norm = f_ek.norm();
         let e_hat = if norm > 1e-9 { f_ek / norm } else { *direction };
         if energy >= 0.0 || e_hat.norm_squared() < 0.5 {
             return (Vector3::zeros(), Vector3::zeros());
         }
-        // proj·F_ek,i = (v·ê)·ê_i with proj = vᵀF_ek/|F_ek|²
         let v_along = velocity.dot(&e_hat);
-        let mut alpha = Vector3::zeros();
-        for i in 0..3 {
-            let e_i = energy * e_hat[i].abs(); // (18)
-            let denominator = v_along * e_hat[i] * velocity[i] * self.period;
-            // (19), guarded: only where this axis can dissipate, never negative, capped
-            if e_i < 0.0 && denominator > 0.0 {
-                alpha[i] = (-e_i / denominator).min(self.alpha_max);
+        match self.mode {
+            ControllerMode::Normal => {
+                if v_along == 0.0 {
+                    return (Vector3::zeros(), Vector3::zeros());
+                }
+                let alpha = (-energy / (self.period * v_along * v_along)).min(self.alpha_max);
+                let bound = self.force_ratio_max * f_comp.norm().max(self.contact_force);
+                let magnitude = (alpha * v_along.abs()).min(bound);
+                let f_alpha = e_hat * (magnitude * v_along.signum()); // F_α·v = magnitude |v·ê| ≥ 0
+                let alpha = magnitude / v_along.abs();
+                (Vector3::repeat(alpha), f_alpha)
+            }
+            ControllerMode::Paper => {
+                // proj·F_ek,i = (v·ê)·ê_i with proj = vᵀF_ek/|F_ek|²
+                let mut alpha = Vector3::zeros();
+                for i in 0..3 {
+                    let e_i = energy * e_hat[i].abs(); // (18)
+                    let denominator = v_along * e_hat[i] * velocity[i] * self.period;
+                    // (19), guarded: only where this axis can dissipate, never negative, capped
+                    if e_i < 0.0 && denominator > 0.0 {
+                        alpha[i] = (-e_i / denominator).min(self.alpha_max);
+                    }
+                }
+                let f_alpha = alpha.component_mul(&e_hat) * v_along; // (17)
+                (alpha, f_alpha)
             }
         }
-        let f_alpha = alpha.component_mul(&e_hat) * v_along; // (17)
-        (alpha, f_alpha)
     }
 }
 
@@ -198,7 +228,7 @@ impl DampingAmendment {
     pub fn new(p: &ModelParams, context: &CompensatorContext) -> Self {
         DampingAmendment {
             observer: EnergyObserver::new(context.period, p.observer),
-            controller: EnergyController::new(context.period, p.alpha_max),
+            controller: EnergyController::new(p, context.period),
             sensor_origin: context.sensor_origin,
         }
     }
@@ -227,7 +257,7 @@ impl DampingAmendment {
             .step(view.in_contact, force, &view.direction, view.damping, &v);
         let (_, f_alpha) = self
             .controller
-            .step(self.observer.energy(), &f_ek, &view.direction, &v);
+            .step(self.observer.energy(), &f_ek, &view.direction, &v, force);
         self.observer.record_alpha_force(&f_alpha);
         FrameWrench {
             force: f_alpha,
@@ -285,7 +315,9 @@ mod tests {
 
     #[test]
     fn controller_only_dissipates_and_alpha_is_never_negative() {
-        let ctl = EnergyController::new(1e-3, 1e5);
+        for mode in [ControllerMode::Normal, ControllerMode::Paper] {
+        let p = ModelParams { controller: mode, ..ModelParams::default() };
+        let ctl = EnergyController::new(&p, 1e-3);
         let cases = [
             (
                 Vector3::new(50.0, 3.0, -1.0),
@@ -300,7 +332,7 @@ mod tests {
         ];
         for (f, v) in cases {
             for energy in [-1e-2, -1e-5, 0.0, 1e-3] {
-                let (alpha, f_alpha) = ctl.step(energy, &f, &f.normalize(), &v);
+                let (alpha, f_alpha) = ctl.step(energy, &f, &f.normalize(), &v, &f);
                 assert!(alpha.iter().all(|a| *a >= 0.0 && *a <= 1e5), "{alpha:?}");
                 assert!(
                     f_alpha.dot(&v) >= -1e-15,
@@ -314,7 +346,29 @@ mod tests {
         }
         // a small deficit on a clean 1-D rebound is removed in exactly one tick
         let (f, v) = (Vector3::new(50.0, 0.0, 0.0), Vector3::new(-0.02, 0.0, 0.0));
-        let (_, f_alpha) = ctl.step(-1e-7, &f, &f.normalize(), &v);
+        let (_, f_alpha) = ctl.step(-1e-7, &f, &f.normalize(), &v, &f);
         assert!((f_alpha.dot(&v) * 1e-3 - 1e-7).abs() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn normal_controller_dissipates_exactly_the_deficit_in_any_direction_and_bounds_its_force() {
+        let p = ModelParams::default();
+        let ctl = EnergyController::new(&p, 1e-3);
+        // an oblique contact, rebounding: the paper's split dissipates Σ|ê_i| ≈ 1.48 times
+        // the deficit; the normal controller exactly the deficit
+        let e = Vector3::new(0.8924, 0.4161, -0.1736).normalize();
+        let f = e * 50.0;
+        let v = Vector3::new(-0.02, -0.004, 0.003);
+        let deficit = -1e-6;
+        let (_, f_alpha) = ctl.step(deficit, &f, &e, &v, &f);
+        assert!((f_alpha.dot(&v) * 1e-3 + deficit).abs() < 1e-15, "{}", f_alpha.dot(&v) * 1e-3);
+        let paper = EnergyController::new(&ModelParams { controller: ControllerMode::Paper, ..p.clone() }, 1e-3);
+        let (_, f_paper) = paper.step(deficit, &f, &e, &v, &f);
+        assert!(f_paper.dot(&v) * 1e-3 > 1.2 * -deficit, "{}", f_paper.dot(&v) * 1e-3);
+        // a large deficit: the force stays within force_ratio_max·|F_comp|, the rest is left
+        let (_, f_big) = ctl.step(-10.0, &f, &e, &v, &f);
+        assert!((f_big.norm() - p.force_ratio_max * 50.0).abs() < 1e-9, "{}", f_big.norm());
+        assert!(f_big.dot(&v) > 0.0);
     }
 }

@@ -22,7 +22,7 @@ pub use delay::{ContactEstimator, ContactView};
 pub use energy::{DampingAmendment, EnergyController, EnergyObserver};
 pub use force::{compensate_force, CompensatedWrench};
 pub use none::{NoParams, PassThrough};
-pub use params::{DelayMode, ModelParams, ObserverMode, TdpaParams};
+pub use params::{ControllerMode, DelayMode, ModelParams, ObserverMode, TdpaParams};
 pub use pic::Pic;
 pub use pida::Pida;
 pub use tdpa::{TdpaAdmittance, TdpaImpedance};

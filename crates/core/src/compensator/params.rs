@@ -27,6 +27,20 @@ pub enum ObserverMode {
     Paper,
 }
 
+/// How the energy controller spreads the dissipation over the axes (see the energy module).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum ControllerMode {
+    /// One damping along the contact direction, dissipating exactly the deficit, its force
+    /// bounded by `force_ratio_max` times the contact force (sound in 6-DOF; default).
+    #[default]
+    Normal,
+    /// Eqs. (18), (19) as printed: the deficit split per axis by `|F_ek,i| / |F_ek|` and one
+    /// damping per axis (dissipates up to √3 times the deficit on oblique contacts, and an
+    /// axis with little velocity calls for a huge force).
+    Paper,
+}
+
 /// Parameters of the identification-based compensators `pic`, `dac`, `pida`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
@@ -65,6 +79,13 @@ pub struct ModelParams {
     pub alpha_max: f64,
     /// Energy observer: `work` or `paper`.
     pub observer: ObserverMode,
+    /// Energy controller: `normal` or `paper`.
+    pub controller: ControllerMode,
+    /// Largest amendment force of the `normal` controller, as a multiple of the compensated
+    /// contact force `|F_comp|` (and at least of `contact_force`) (> 0); what it cannot
+    /// dissipate in one tick is carried to the next.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    pub force_ratio_max: f64,
 }
 
 impl Default for ModelParams {
@@ -82,6 +103,8 @@ impl Default for ModelParams {
             forgetting: 0.98,
             alpha_max: 100000.0,
             observer: ObserverMode::Work,
+            controller: ControllerMode::Normal,
+            force_ratio_max: 2.0,
         }
     }
 }
