@@ -311,3 +311,92 @@ fn pida_at_20ms_with_up_to_1n_of_noise_keeps_every_collision_and_applies_only_th
         assert!(free_ticks > 1000);
     }
 }
+
+/// `oblique-6dof` or a general 6-DOF case (both bodies moving and spinning about every axis)
+/// with a robot delay, clean or with 0.2 N noise and 3 ms sensor delay.
+fn six_dof(general: bool, robot_delay: f64, noisy: bool) -> Scenario {
+    let mut s = preset("oblique-6dof");
+    if general {
+        s.target.angular_velocity = [0.01, 0.02, -0.015];
+        s.servicer.angular_velocity = [0.005, -0.01, 0.02];
+        s.target.velocity = [0.001, -0.002, 0.0005];
+    }
+    s.facility.robot_delay = robot_delay;
+    if noisy {
+        s.facility.sensor_noise = 0.2;
+        s.facility.sensor_delay = 0.003;
+        s.facility.seed = 4;
+    }
+    s
+}
+
+/// pida in 6-DOF (issue 10's targets): every reference collision present, rebound velocity
+/// error ≤ 5 % (8 % at 40 ms), |CoV − 1| ≤ 0.03, and CoF ≤ 1.25 at 20 ms (1.28 with the
+/// 3 ms sensor delay, which adds to the robot's: measured 1.249–1.256). (Before the
+/// normal energy controller, pida rebounded the wrong way on `oblique-6dof` at 20 ms and lost
+/// its second collision.)
+#[test]
+fn pida_is_faithful_in_6dof_at_10_20_and_40_ms() {
+    for general in [false, true] {
+        for noisy in [false, true] {
+            for delay in [0.010, 0.020, 0.040] {
+                let label = format!("general {general}, noisy {noisy}, {} ms", delay * 1e3);
+                let out = run(six_dof(general, delay, noisy), CompensatorConfig::Pida(ModelParams::default()));
+                let m = &out.metrics;
+                assert_eq!(m.stop.kind, StopKind::Completed, "{label}");
+                assert!(m.lost_collisions.is_empty() && m.extra_collisions.is_empty(), "{label}: {:?}", m.violations);
+                assert!(m.summary.compared >= 2, "{label}");
+                let max_error = if delay > 0.03 { 0.08 } else { 0.05 };
+                for c in &m.collisions {
+                    let (v, cov, cof) = (c.velocity_error.unwrap(), c.cov.unwrap(), c.cof.unwrap());
+                    assert!(v <= max_error, "{label}: velocity error {v}");
+                    assert!((cov - 1.0).abs() <= 0.03, "{label}: CoV {cov}");
+                    eprintln!("{label}: CoV {cov:.4} CoF {cof:.3} velocity error {v:.4}");
+                    if delay <= 0.02 {
+                        let max_cof = if noisy { 1.28 } else { 1.25 };
+                        assert!(cof <= max_cof, "{label}: CoF {cof}");
+                    }
+                }
+            }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(32))]
+    /// Random 6-DOF geometry (wall tilt, rod offset, spins, target motion), robot delays
+    /// 0–40 ms, noise 0–0.5 N: pida keeps every reference collision and the rebound velocity
+    /// within 5 % (8 % above 30 ms).
+    #[test]
+    fn pida_keeps_every_collision_over_random_6dof_cases(
+        ts in proptest::array::uniform3(-0.02f64..0.02),
+        ss in proptest::array::uniform3(-0.02f64..0.02),
+        tv in proptest::array::uniform3(-0.002f64..0.002),
+        tilt in proptest::array::uniform2(-0.45f64..0.45),
+        offset in proptest::array::uniform2(-0.2f64..0.2),
+        robot_ticks in 0usize..=40,
+        noise in 0.0f64..0.5,
+        seed in 0u64..1000,
+    ) {
+        let mut s = preset("oblique-6dof");
+        s.target.angular_velocity = ts;
+        s.servicer.angular_velocity = ss;
+        s.target.velocity = tv;
+        s.walls[0].normal = [-tilt[0].cos() * tilt[1].cos(), -tilt[0].sin(), tilt[1].sin()];
+        s.rod.tip = [1.0, offset[0], offset[1]];
+        s.walls[0].point = [0.010, offset[0] - 0.05, offset[1]];
+        s.facility.robot_delay = robot_ticks as f64 * 1e-3;
+        s.facility.sensor_noise = noise;
+        s.facility.seed = seed;
+        let out = run(s, CompensatorConfig::Pida(ModelParams::default()));
+        let m = &out.metrics;
+        prop_assert_eq!(m.stop.kind, StopKind::Completed);
+        prop_assert!(m.lost_collisions.is_empty(), "lost {:?}: {:?}", m.lost_collisions, m.violations);
+        let max_error = if robot_ticks > 30 { 0.08 } else { 0.05 };
+        for c in &m.collisions {
+            if let Some(v) = c.velocity_error {
+                prop_assert!(v <= max_error, "collision {}: velocity error {}", c.collision.index, v);
+            }
+        }
+    }
+}
