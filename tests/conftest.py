@@ -37,8 +37,10 @@ def paper_run(core) -> hc.Run:
     return hc.simulate(hc.load_scenario("paper-table1"))
 
 
-def synthetic_run(estimates: bool = False, lateral: float = 0.0) -> hc.Run:
-    """A Run with made-up data (no core): for save/plot/table tests only, no physics."""
+def synthetic_run(estimates: bool = False, lateral: float = 0.0, spin: float = 0.0) -> hc.Run:
+    """A Run with made-up data (no core): for save/plot/table tests only, no physics.
+    ``lateral``: the HIL tip's y velocity, a share of its x velocity; ``spin``: a relative
+    angular velocity about z (rad/s) in both the HIL and the reference (a 6-DOF run)."""
     scenario = hc.load_scenario("paper-table1")
     t = np.arange(0, 1001) * 1e-3
     v = 0.02 * np.cos(2 * np.pi * t)
@@ -55,6 +57,8 @@ def synthetic_run(estimates: bool = False, lateral: float = 0.0) -> hc.Run:
     ref["time"] = t
     ref["tip_velocity_x"] = 0.9 * v
     ref["energy"] = 0.5 * 279.07 * (0.9 * v) ** 2
+    ts["angular_velocity_z"] = np.full_like(t, spin)
+    ref["angular_velocity_z"] = np.full_like(t, spin)
     metrics = {
         "scenario": scenario.name,
         "compensator": "none",

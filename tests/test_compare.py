@@ -472,3 +472,42 @@ def test_cli_help_lists_compare():
     result = invoke("compare", "--help")
     assert result.exit_code == 0
     assert "--compensators" in result.stdout and "none,pic,dac,pida,tdpa-impedance" in result.stdout
+
+
+# ---- 6-DOF comparisons -----------------------------------------------------------------------
+
+
+def test_velocity_error_figure_only_for_6dof_comparisons():
+    assert "compare_velocity_error" not in fake_comparison().plot()  # 1-D: unchanged
+    comparison = fake_comparison(("none", "pic", "pida"))
+    errors = {"none": (0.5, 0.4), "pic": (0.02, 0.03), "pida": (0.04, None)}
+    for kind, run in comparison.runs.items():
+        run.reference["angular_velocity_z"] = 1e-3  # the reference rotates: 6-DOF
+        run.metrics["collisions"][0]["velocity_error"], run.metrics["collisions"][0]["angular_velocity_error"] = errors[kind]
+        run.metrics["collisions"][1]["velocity_error"] = None
+    figures = comparison.plot()
+    assert list(figures)[-1] == "compare_velocity_error"
+    v_ax, w_ax = figures["compare_velocity_error"].axes[:2]
+    assert v_ax.get_ylabel().startswith("velocity error (%)") and w_ax.get_ylabel().startswith("angular velocity error (%)")
+    # collision 1 only (the last with a value), one bar per compensator, in %
+    heights = [bar.get_height() for bar in v_ax.patches]
+    assert len(heights) == 3 and heights[1] == pytest.approx(2.0) and heights[2] == pytest.approx(4.0)
+    assert heights[0] < 50.0 and "(cut" in v_ax.get_ylabel()  # the diverged run's bar is cut
+    w_heights = [bar.get_height() for bar in w_ax.patches]
+    assert w_heights[1] == pytest.approx(3.0) and math.isnan(w_heights[2])
+    assert any(list(line.get_ydata()) == [5.0, 5.0] for line in v_ax.get_lines())  # max_velocity_error
+    legend = [text.get_text() for text in v_ax.get_legend().get_texts()]
+    assert legend == ["none", "pic", "pida"]
+
+
+def test_compare_oblique_6dof_through_the_core(core, tmp_path):
+    comparison = hc.compare("oblique-6dof", "none,pic", {"simulation.duration": 1.0})
+    out = comparison.save(tmp_path / "oblique")
+    assert {p.name for p in out.iterdir()} >= COMPARE_PLOTS | {"compare_velocity_error.png"}
+    for kind in ("none", "pic"):
+        files = {p.name for p in (out / kind).iterdir()}
+        assert RUN_PLOTS | {"contact_rotation.png", "tip_tracking.png"} <= files
+    v_ax = comparison.plot()["compare_velocity_error"].axes[0]
+    expected = [100 * run.metrics["collisions"][0]["velocity_error"] for run in comparison.runs.values()]
+    assert [bar.get_height() for bar in v_ax.patches[:2]] == pytest.approx(expected)
+    assert "(compare_velocity_error.png)" in (out / "comparison.md").read_text()

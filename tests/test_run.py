@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -16,7 +17,10 @@ from conftest import synthetic_run
 
 import hilcontact as hc
 from hilcontact.cli import cli
-from hilcontact.run import OPTIONAL_TIMESERIES_COLUMNS, REFERENCE_COLUMNS, TIMESERIES_COLUMNS
+from hilcontact.plots import MAX_POINTS, moves_in_1d, thin
+from hilcontact.run import (
+    OPTIONAL_TIMESERIES_COLUMNS, PLOT_FILES, PLOT_FILES_6DOF, REFERENCE_COLUMNS, TIMESERIES_COLUMNS,
+)
 
 DATA_FILES = {"timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml"}
 PLOTS = {"contact_velocity.png", "contact_force.png", "energy.png"}
@@ -366,3 +370,151 @@ def test_every_preset_simulates_consistently(core, name):
     assert m["collisions"] and m["reference_collisions"]
     assert set(m["energy"]) == {"initial", "final", "reference_final", "max"}
     json.dumps(m, allow_nan=False)  # plain JSON: no NaN or infinity
+
+
+# ---- 6-DOF figures ---------------------------------------------------------------------------
+
+SIX_DOF_PLOTS = {"contact_rotation.png", "tip_tracking.png"}
+
+
+def _labelled(ax):
+    return {line.get_label(): line for line in ax.get_lines() if not line.get_label().startswith("_")}
+
+
+def test_plot_files_constants():
+    assert set(PLOT_FILES) == PLOTS and set(PLOT_FILES_6DOF) == SIX_DOF_PLOTS
+
+
+def test_moves_in_1d_from_the_reference():
+    assert moves_in_1d(synthetic_run())
+    assert moves_in_1d(synthetic_run(lateral=0.5))  # only the HIL leaves the line: still 1-D
+    assert not moves_in_1d(synthetic_run(spin=1e-3))
+    run = synthetic_run()
+    run.reference["tip_velocity_y"] = 0.5 * run.reference["tip_velocity_x"] + 0.001
+    assert not moves_in_1d(run)
+    run.reference["tip_velocity_y"] = 0.005 * run.reference["tip_velocity_x"]  # below 1 %
+    assert moves_in_1d(run)
+
+
+def test_thin_keeps_samples_and_peaks():
+    t = np.arange(100_000) * 1e-4
+    y = np.sin(t)
+    y[12_345], y[67_890] = 5.0, -7.0
+    tt, yy = thin(t, y, limit=1000)
+    assert len(yy) <= 1002 and tt[0] == t[0] and tt[-1] == t[-1]
+    assert np.all(np.diff(tt) > 0)
+    index = np.round(tt / 1e-4).astype(int)
+    assert np.array_equal(yy, y[index])  # samples of the series, nothing interpolated
+    assert yy.max() == 5.0 and yy.min() == -7.0
+    short_t, short_y = thin(t[:500], y[:500], limit=1000)
+    assert np.array_equal(short_y, y[:500])
+    y[3] = np.nan  # not thinned: NaN gaps must stay where they are
+    assert len(thin(t, y, limit=1000)[1]) == len(y)
+
+
+def test_synthetic_6dof_run_gets_the_figures(tmp_path):
+    run = synthetic_run(spin=2e-3)
+    figures = run.plot()
+    assert list(figures) == ["contact_velocity", "contact_force", "energy", "contact_rotation", "tip_tracking"]
+    ax_w, ax_m = figures["contact_rotation"].axes
+    assert "paper-table1" in ax_w.get_title() and "10 ms" in ax_w.get_title()
+    assert ax_w.get_ylabel() == "angular velocity (mrad/s)" and ax_m.get_ylabel() == "moment (N\u00b7m)"
+    assert ax_m.get_xlabel() == "time (s)" and ax_w.get_legend() is not None and ax_m.get_legend() is not None
+    omega = _labelled(ax_w)
+    assert np.allclose(omega["\u03c9z HIL"].get_ydata(), 2.0) and omega["\u03c9z ideal reference"].get_linestyle() == "--"
+    assert len(ax_w.patches) == len(ax_m.patches) == 2  # collisions shaded
+    run.save(tmp_path / "six")
+    assert {p.name for p in (tmp_path / "six").iterdir()} == DATA_FILES | PLOTS | SIX_DOF_PLOTS
+    long = synthetic_run(spin=2e-3)  # a long run is drawn thinned
+    t = np.arange(20_001) * 1e-3
+    long.timeseries = pd.DataFrame({c: np.interp(t, long.timeseries["time"], long.timeseries[c]) for c in long.timeseries})
+    long.timeseries["time"] = t
+    long.timeseries["applied_moment_y"] = np.sin(t)
+    moment = _labelled(long.plot()["contact_rotation"].axes[1])["My HIL (applied)"]
+    assert len(moment.get_xdata()) <= 2402 and np.max(moment.get_ydata()) == np.max(np.sin(t))
+
+
+@pytest.fixture(scope="session")
+def oblique_run(core) -> hc.Run:
+    """oblique-6dof (10 ms robot delay, `none`), cut after its first collision."""
+    return hc.simulate(hc.load_scenario("oblique-6dof", {"simulation.duration": 1.0}))
+
+
+def test_paper_table1_is_1d_and_keeps_its_figures(paper_run):
+    assert moves_in_1d(paper_run)
+    assert list(paper_run.plot()) == ["contact_velocity", "contact_force", "energy"]
+
+
+def test_oblique_6dof_rotation_figure(oblique_run):
+    run = oblique_run
+    assert not moves_in_1d(run) and len(run.timeseries) <= MAX_POINTS  # drawn whole
+    figures = run.plot()
+    assert list(figures) == ["contact_velocity", "contact_force", "energy", "contact_rotation", "tip_tracking"]
+    ax_w, ax_m = figures["contact_rotation"].axes
+    assert "oblique-6dof" in ax_w.get_title()
+    ts, ref = run.timeseries, run.reference
+    omega, moment = _labelled(ax_w), _labelled(ax_m)
+    for axis in "xyz":  # every axis rotates and carries a moment in this case
+        assert np.array_equal(omega[f"\u03c9{axis} HIL"].get_xdata(), ts["time"])
+        assert np.array_equal(omega[f"\u03c9{axis} HIL"].get_ydata(), ts[f"angular_velocity_{axis}"] * 1e3)
+        assert np.array_equal(omega[f"\u03c9{axis} ideal reference"].get_ydata(), ref[f"angular_velocity_{axis}"] * 1e3)
+        # identity sensor orientation: the applied moment is already in t
+        assert np.allclose(moment[f"M{axis} HIL (applied)"].get_ydata(), ts[f"applied_moment_{axis}"], rtol=0, atol=1e-12)
+        assert np.array_equal(moment[f"M{axis} ideal reference"].get_ydata(), ref[f"contact_moment_{axis}"])
+    assert len(ax_w.patches) == len(ax_m.patches) == len(run.metrics["collisions"]) >= 1
+
+
+def test_rotation_figure_turns_the_applied_moment_into_t(oblique_run):
+    # the sensor turned 90 deg about z: sensor x is t's y, sensor y is t's -x
+    turned = dataclasses.replace(
+        oblique_run, scenario=hc.load_scenario("oblique-6dof", {"facility.sensor_orientation": [0.5**0.5, 0, 0, 0.5**0.5]})
+    )
+    moment = _labelled(turned.plot()["contact_rotation"].axes[1])
+    ts = oblique_run.timeseries
+    assert np.allclose(moment["Mx HIL (applied)"].get_ydata(), -ts["applied_moment_y"], atol=1e-9)
+    assert np.allclose(moment["My HIL (applied)"].get_ydata(), ts["applied_moment_x"], atol=1e-9)
+    assert np.allclose(moment["Mz HIL (applied)"].get_ydata(), ts["applied_moment_z"], atol=1e-9)
+
+
+def test_without_delay_the_hil_moment_follows_the_reference(core):
+    run = hc.simulate(hc.load_scenario("oblique-6dof", {"simulation.duration": 0.6, "facility.robot_delay": 0.0}))
+    moment = _labelled(run.plot()["contact_rotation"].axes[1])
+    for axis in "xyz":  # same sign convention and frame as the reference's contact moment
+        hil = moment[f"M{axis} HIL (applied)"].get_ydata()
+        ideal = moment[f"M{axis} ideal reference"].get_ydata()
+        peak = np.abs(ideal).max()
+        assert peak > 0.5  # N m: a real moment about every axis
+        assert np.abs(hil - ideal).max() < 0.1 * peak
+
+
+def test_oblique_6dof_tip_tracking_shows_the_delay(oblique_run, tmp_path):
+    run = oblique_run
+    ax_run, ax_zoom = run.plot()["tip_tracking"].axes
+    assert "front-oblique" in ax_run.get_title() and "oblique-6dof" in ax_run.get_title()
+    assert ax_run.get_ylabel() == ax_zoom.get_ylabel() == "distance to wall (mm)"
+    wall = run.scenario.walls[0]
+    normal = np.asarray(wall.normal) / np.linalg.norm(wall.normal)
+    ts = run.timeseries
+    commanded = (ts[["tip_position_x", "tip_position_y", "tip_position_z"]].to_numpy() - wall.point) @ normal
+    actual = (ts[["actual_tip_position_x", "actual_tip_position_y", "actual_tip_position_z"]].to_numpy() - wall.point) @ normal
+    lines = _labelled(ax_run)
+    assert set(lines) == {"commanded (virtual)", "actual (robot)", "wall surface"}
+    assert np.allclose(lines["commanded (virtual)"].get_ydata(), commanded * 1e3, rtol=0, atol=1e-9)
+    assert np.allclose(lines["actual (robot)"].get_ydata(), actual * 1e3, rtol=0, atol=1e-9)
+    # the zoom frames the first collision, and the actual tip reaches the wall one robot delay
+    # (10 ms) after the command
+    first = run.metrics["collisions"][0]
+    lo, hi = ax_zoom.get_xlim()
+    assert lo < first["start"] - 0.010 and hi > first["end"]
+    zoom = _labelled(ax_zoom)
+    assert set(zoom) == {"commanded (virtual)", "actual (robot)", "commanded, 10 ms later", "wall surface"}
+    t_zoom = zoom["commanded (virtual)"].get_xdata()
+    assert lo <= t_zoom[0] and t_zoom[-1] <= hi + 1e-9
+    time = ts["time"].to_numpy()
+    crossing = lambda d: time[np.argmax(d < 0)]  # noqa: E731
+    assert crossing(actual) - crossing(commanded) == pytest.approx(0.010, abs=2e-3)
+    assert crossing(actual) == pytest.approx(first["start"], abs=2e-3)
+    out = run.save(tmp_path / "oblique")
+    assert {p.name for p in out.iterdir()} == DATA_FILES | PLOTS | SIX_DOF_PLOTS
+    for name in SIX_DOF_PLOTS:
+        assert (out / name).read_bytes()[:8] == PNG_MAGIC

@@ -8,9 +8,21 @@
 - identification (only when the compensator estimates them): stiffness (N/mm) and damping
   (N s/mm) estimates vs the scenario's true values.
 
+Runs whose motion is not 1-D (:func:`moves_in_1d`: the ideal reference rotates, or its rod tip
+moves off one line) also get:
+
+- contact_rotation: the servicer's angular velocity relative to the target (mrad/s, t frame)
+  above the moment on the frame about the sensor origin (N m, t frame; HIL: the applied
+  moment, reference: the true contact's), HIL solid vs reference dashed, per axis.
+- tip_tracking: the rod tip's distance to the wall of the first collision along its normal
+  (mm): commanded (virtual) vs actual (robot), over the run and zoomed on the first
+  collision, where the robot's delay shows.
+
 Comparison figures (several compensators on one scenario, one panel each, shared axes):
 compare_velocity, compare_force, compare_energy, compare_identification (the compensators
-that identify the contact) and compare_cov_cof (grouped bars, like the paper's Fig. 8d).
+that identify the contact), compare_cov_cof (grouped bars, like the paper's Fig. 8d) and, when
+the motion is not 1-D, compare_velocity_error (velocity and angular velocity errors per
+collision, grouped bars).
 """
 
 from __future__ import annotations
@@ -32,7 +44,7 @@ from .registry import COMPENSATORS
 if TYPE_CHECKING:
     from .run import Run
 
-__all__ = ["comparison_figures", "make_figures"]
+__all__ = ["comparison_figures", "make_figures", "moves_in_1d"]
 
 _COLORS = {"x": "tab:blue", "y": "tab:orange", "z": "tab:green"}
 
@@ -193,8 +205,240 @@ def identification_figure(run: Run) -> Figure:
     return figure
 
 
+# --------------------------------------------------------------------------------------
+# 6-DOF figures of a run
+# --------------------------------------------------------------------------------------
+
+#: Points per line above which the 6-DOF figures draw a min/max envelope of the samples
+#: instead (an axis is well under 1200 pixels wide at the saved resolution).
+MAX_POINTS = 2400
+#: Reference angular velocity (rad/s) above which a run rotates (the metrics' threshold).
+_ROTATION_THRESHOLD = 1e-6
+#: Off-axis share of the reference tip velocity above which a run is not 1-D.
+_OFF_AXIS_FRACTION = 0.01
+
+
+def thin(time: np.ndarray, values: np.ndarray, limit: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """At most about ``limit`` (default :data:`MAX_POINTS`) samples of a series for drawing:
+    the first and last samples and the smallest and largest of each of ``limit // 2`` equal
+    slices, in time order, so peaks survive. Every point returned is a sample of the series.
+    Series with non-finite values and short ones are returned whole."""
+    limit = MAX_POINTS if limit is None else limit
+    time, values = np.asarray(time), np.asarray(values)
+    n = values.size
+    if n <= limit or not np.isfinite(values).all():
+        return time, values
+    buckets = max(limit // 2, 1)
+    size = math.ceil(n / buckets)
+    padded = np.concatenate([values, np.full(buckets * size - n, values[-1])]).reshape(buckets, size)
+    base = np.arange(buckets) * size
+    keep = np.concatenate([[0, n - 1], base + padded.argmin(axis=1), base + padded.argmax(axis=1)])
+    keep = np.unique(np.minimum(keep, n - 1))
+    return time[keep], values[keep]
+
+
+def _plot(ax: Axes, time: np.ndarray, values: np.ndarray, **style: object) -> None:
+    t, y = thin(np.asarray(time), np.asarray(values))
+    ax.plot(t, y, **style)
+
+
+def moves_in_1d(run: Run) -> bool:
+    """Whether the run's motion is 1-D, decided from its ideal reference (the same for every
+    compensator): no relative angular velocity above 1e-6 rad/s and a rod-tip velocity along
+    one line (its second singular value below 1 % of the first). A run without a reference
+    counts as 1-D."""
+    ref = run.reference
+    omega = _magnitude(ref, "angular_velocity")
+    if omega is not None and _peak(omega) > _ROTATION_THRESHOLD:
+        return False
+    parts = [_column(ref, f"tip_velocity_{axis}") for axis in "xyz"]
+    if any(p is None for p in parts) or len(ref) == 0:
+        return True
+    velocity = np.column_stack(parts)  # type: ignore[arg-type]
+    velocity = velocity[np.isfinite(velocity).all(axis=1)]
+    if velocity.size == 0:
+        return True
+    singular = np.linalg.svd(velocity, compute_uv=False)
+    return bool(singular[0] == 0.0 or singular[1] <= _OFF_AXIS_FRACTION * singular[0])
+
+
+def _rotation(quaternion: object) -> np.ndarray:
+    """Rotation matrix of a quaternion ``[w, x, y, z]`` (normalised here)."""
+    w, x, y, z = np.asarray(quaternion, dtype=np.float64) / np.linalg.norm(np.asarray(quaternion, dtype=np.float64))
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def applied_moment_in_t(run: Run) -> np.ndarray | None:
+    """The moment applied to the virtual dynamics (on the frame, about the sensor origin),
+    turned from the sensor frame into ``t``: rows of (x, y, z), N m; None without the columns."""
+    parts = [_column(run.timeseries, f"applied_moment_{axis}") for axis in "xyz"]
+    if any(p is None for p in parts):
+        return None
+    moment = np.column_stack(parts)  # type: ignore[arg-type]
+    return moment @ _rotation(run.scenario.facility.sensor_orientation).T
+
+
+def _vector_panel(
+    ax: Axes,
+    time: np.ndarray,
+    hil: np.ndarray | None,
+    ref_time: np.ndarray,
+    ideal: np.ndarray | None,
+    symbol: str,
+    hil_label: str = "HIL",
+) -> None:
+    """Per axis: HIL solid, reference dashed, for the axes whose peak passes 1 % of the largest
+    (x always). ``hil``/``ideal``: rows of (x, y, z)."""
+    peaks = {
+        axis: max(_peak(None if hil is None else hil[:, i]), _peak(None if ideal is None else ideal[:, i]))
+        for i, axis in enumerate("xyz")
+    }
+    largest = max(peaks.values())
+    for i, axis in enumerate("xyz"):
+        if axis != "x" and not peaks[axis] > 0.01 * largest:
+            continue
+        if hil is not None:
+            _plot(ax, time, hil[:, i], color=_COLORS[axis], lw=1.4, label=f"{symbol}{axis} {hil_label}")
+        if ideal is not None:
+            _plot(ax, ref_time, ideal[:, i], color=_COLORS[axis], lw=1.2, ls="--", label=f"{symbol}{axis} ideal reference")
+
+
+def _vectors(frame: pd.DataFrame, name: str) -> np.ndarray | None:
+    parts = [_column(frame, f"{name}_{axis}") for axis in "xyz"]
+    return None if any(p is None for p in parts) else np.column_stack(parts)  # type: ignore[arg-type]
+
+
+def rotation_figure(run: Run) -> Figure:
+    """Relative angular velocity (mrad/s) above the moment on the frame (N m), t frame, per axis."""
+    figure, (ax_w, ax_m) = _figure(rows=2)
+    ax_m.sharex(ax_w)
+    ts, ref = run.timeseries, run.reference
+    omega, omega_ref = _vectors(ts, "angular_velocity"), _vectors(ref, "angular_velocity")
+    _vector_panel(
+        ax_w, ts["time"].to_numpy(), None if omega is None else omega * 1e3,
+        ref["time"].to_numpy(), None if omega_ref is None else omega_ref * 1e3, "ω",
+    )
+    _vector_panel(
+        ax_m, ts["time"].to_numpy(), applied_moment_in_t(run), ref["time"].to_numpy(),
+        _vectors(ref, "contact_moment"), "M", hil_label="HIL (applied)",
+    )
+    for ax in (ax_w, ax_m):
+        _shade_collisions(ax, run)
+        _mark_divergence(ax, run)
+    _finish(ax_w, "Servicer angular velocity relative to the target (t frame)", run, "angular velocity (mrad/s)")
+    _finish(ax_m, "Contact moment on the frame about the sensor origin (t frame)", run, "moment (N·m)")
+    ax_m.set_title(ax_m.get_title().split("\n")[0], fontsize=11)
+    ax_w.set_xlabel("")
+    ax_w.tick_params(axis="x", labelbottom=False)
+    return figure
+
+
+def _tracked_wall(run: Run) -> tuple[int, np.ndarray, np.ndarray]:
+    """The wall of the first HIL collision (the one whose normal is closest to the contact
+    force at its peak), else the nearest to the rod tip at the start: (index, point, unit
+    normal), ``t`` frame."""
+    walls = run.scenario.walls
+    normals = np.array([np.asarray(w.normal, dtype=np.float64) / np.linalg.norm(w.normal) for w in walls])
+    points = np.array([np.asarray(w.point, dtype=np.float64) for w in walls])
+    ts = run.timeseries
+    force = _vectors(ts, "contact_force")
+    collision = _first_collision(run)
+    index = None
+    if collision is not None and force is not None:
+        time = ts["time"].to_numpy()
+        inside = (time >= collision[0]) & (time <= collision[1])
+        if inside.any():
+            during = force[inside]
+            peak = during[np.argmax(np.linalg.norm(during, axis=1))]
+            if np.linalg.norm(peak) > 0:
+                index = int(np.argmax(normals @ (peak / np.linalg.norm(peak))))
+    if index is None:
+        tip = _vectors(ts, "tip_position")
+        start = tip[0] if tip is not None and len(tip) else np.zeros(3)
+        index = int(np.argmin(np.einsum("ij,ij->i", start - points, normals)))
+    return index, points[index], normals[index]
+
+
+def _first_collision(run: Run) -> tuple[float, float] | None:
+    """(start, end) of the first HIL collision (end of run if it does not end), or None."""
+    for collision in run.metrics.get("collisions") or []:
+        start = collision.get("start")
+        if start is None:
+            continue
+        end = collision.get("end")
+        if end is None:
+            end = float(run.timeseries["time"].iloc[-1]) if len(run.timeseries) else start
+        return float(start), float(end)
+    return None
+
+
+def wall_distance(run: Run, column: str) -> np.ndarray | None:
+    """The rod tip's signed distance to the tracked wall along its normal (m; < 0: inside),
+    from ``<column>_x/y/z`` of the timeseries (tip_position or actual_tip_position)."""
+    tip = _vectors(run.timeseries, column)
+    if tip is None:
+        return None
+    _, point, normal = _tracked_wall(run)
+    return (tip - point) @ normal
+
+
+def tracking_figure(run: Run) -> Figure:
+    """Commanded vs actual rod tip, distance to the wall of the first collision (mm): the
+    whole run, then a zoom on the first collision with the command shifted by the robot delay."""
+    collision = _first_collision(run)
+    figure, axes = _figure(rows=2 if collision is not None else 1)
+    ts = run.timeseries
+    time = ts["time"].to_numpy()
+    index, _, _ = _tracked_wall(run)
+    wall = run.scenario.walls[index]
+    name = getattr(wall, "name", None) or f"walls[{index}]"
+    commanded, actual = wall_distance(run, "tip_position"), wall_distance(run, "actual_tip_position")
+    delay = run.scenario.facility.robot_delay
+
+    def draw(ax: Axes, window: slice, zoom: bool) -> None:
+        if commanded is not None:
+            _plot(ax, time[window], commanded[window] * 1e3, color="tab:blue", lw=1.4, label="commanded (virtual)")
+        if actual is not None:
+            _plot(ax, time[window], actual[window] * 1e3, color="tab:red", lw=1.4, label="actual (robot)")
+        if zoom and commanded is not None and delay > 0:
+            _plot(
+                ax, time[window] + delay, commanded[window] * 1e3, color="black", lw=1.2, ls=":", zorder=3,
+                label=f"commanded, {delay * 1e3:g} ms later",
+            )
+        ax.axhline(0.0, color="black", lw=1.0, ls="--", label="wall surface")
+        _shade_collisions(ax, run)
+        _mark_divergence(ax, run)
+
+    ylabel = "distance to wall (mm)"
+    draw(axes[0], slice(None), zoom=False)
+    _finish(axes[0], f"Rod tip, commanded vs actual: distance to wall '{name}' along its normal", run, ylabel)
+    if collision is not None:
+        start, end = collision
+        pad = max(0.3 * (end - start), 2.0 * delay, 5.0 * run.scenario.simulation.period)
+        lo, hi = start - pad - delay, end + pad
+        window = slice(int(np.searchsorted(time, lo)), int(np.searchsorted(time, hi, side="right")))
+        ax = axes[1]
+        draw(ax, window, zoom=True)
+        ax.set_xlim(lo, hi)
+        shown = [s[window] for s in (commanded, actual) if s is not None]
+        if shown and all(s.size for s in shown):
+            bottom = min(float(s.min()) for s in shown) * 1e3
+            top = max(float(s.max()) for s in shown) * 1e3
+            margin = 0.1 * max(top - bottom, 1e-6)
+            ax.set_ylim(bottom - margin, top + margin)
+        _finish(ax, "First collision (zoom)", run, ylabel)
+        ax.set_title("First collision (zoom); dotted: the command shifted by the robot delay", fontsize=11)
+    return figure
+
+
 def make_figures(run: Run) -> dict[str, Figure]:
-    """All figures of a run, by file stem."""
+    """All figures of a run, by file stem: contact_velocity, contact_force, energy, then
+    identification (when the compensator estimates the contact) and, when the motion is not
+    1-D, contact_rotation and tip_tracking."""
     figures = {
         "contact_velocity": velocity_figure(run),
         "contact_force": force_figure(run),
@@ -202,6 +446,9 @@ def make_figures(run: Run) -> dict[str, Figure]:
     }
     if "stiffness_estimate" in run.timeseries or "damping_estimate" in run.timeseries:
         figures["identification"] = identification_figure(run)
+    if not moves_in_1d(run):
+        figures["contact_rotation"] = rotation_figure(run)
+        figures["tip_tracking"] = tracking_figure(run)
     return figures
 
 
@@ -410,72 +657,112 @@ def _finite_number(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
-def compare_cov_cof_figure(runs: Mapping[str, Run]) -> Figure:
-    """Grouped bars of CoV and CoF per collision, one colour per compensator, a line at 1.
-    When a diverged run's bars dwarf the others, the axis is cut and those bars are
-    labelled with their value."""
-    figure = Figure(figsize=(11.0, 7.0), layout="constrained")
-    FigureCanvasAgg(figure)
-    axes = figure.subplots(2, 1, sharex=True)
-    kinds = list(runs)
-    # collisions up to the last one with a CoV or CoF (later ones have no ideal counterpart)
-    count = max(
+def _collision_count(runs: Mapping[str, Run], keys: tuple[str, ...]) -> int:
+    """Collisions up to the last one with a value for one of ``keys`` (later ones have no
+    ideal counterpart); at least 1."""
+    return max(
         (
             i + 1
             for run in runs.values()
             for i, c in enumerate(run.metrics.get("collisions") or [])
-            if _finite_number(c.get("cov")) or _finite_number(c.get("cof"))
+            if any(_finite_number(c.get(key)) for key in keys)
         ),
         default=1,
     )
+
+
+def _collision_bars(
+    ax: Axes, runs: Mapping[str, Run], key: str, label: str, count: int, line: float | None, scale: float = 1.0
+) -> None:
+    """Grouped bars of ``metrics["collisions"][i][key] * scale`` per collision, one colour per
+    compensator, a dashed line at ``line``. When a diverged run's bars dwarf the others, the
+    axis is cut and those bars are labelled with their value."""
+    kinds = list(runs)
     numbers = np.arange(1, count + 1)
     width = 0.8 / max(len(kinds), 1)
-    for ax, key, label in ((axes[0], "cov", "CoV"), (axes[1], "cof", "CoF")):
-        values = {}
-        for kind, run in runs.items():
-            row = np.full(count, np.nan)
-            for i, c in enumerate((run.metrics.get("collisions") or [])[:count]):
-                if _finite_number(c.get(key)):
-                    row[i] = float(c[key])
-            values[kind] = row
-        ok_values = [v for kind, v in values.items() if runs[kind].status in _RAN_THROUGH]
-        finite_ok = np.concatenate([v[np.isfinite(v)] for v in ok_values]) if ok_values else np.array([])
-        finite_all = np.concatenate([v[np.isfinite(v)] for v in values.values()]) if values else np.array([])
-        top = float(finite_all.max()) if finite_all.size else 1.0
-        cap = None
-        if finite_ok.size and top > 2.0 * max(float(finite_ok.max()), 1.0):
-            cap = max(1.5, 1.25 * float(finite_ok.max()))
-        for i, kind in enumerate(kinds):
-            heights = values[kind]
-            x = numbers - 0.4 + width * (i + 0.5)
-            shown = heights if cap is None else np.minimum(heights, cap)
-            ax.bar(x, shown, width=width * 0.95, color=_kind_color(kind, i), label=kind)
-            if cap is not None:
-                for xi, h in zip(x, heights):
-                    if np.isfinite(h) and h > cap:
-                        ax.text(xi, cap, f"{h:.2f}", ha="center", va="bottom", fontsize=7, rotation=90)
-        ax.axhline(1.0, color="black", lw=1.0, ls="--")
+    values = {}
+    for kind, run in runs.items():
+        row = np.full(count, np.nan)
+        for i, c in enumerate((run.metrics.get("collisions") or [])[:count]):
+            if _finite_number(c.get(key)):
+                row[i] = float(c[key]) * scale
+        values[kind] = row
+    ok_values = [v for kind, v in values.items() if runs[kind].status in _RAN_THROUGH]
+    finite_ok = np.concatenate([v[np.isfinite(v)] for v in ok_values]) if ok_values else np.array([])
+    finite_all = np.concatenate([v[np.isfinite(v)] for v in values.values()]) if values else np.array([])
+    top = float(finite_all.max()) if finite_all.size else 1.0
+    floor = 1.0 if line is None else line
+    cap = None
+    if finite_ok.size and top > 2.0 * max(float(finite_ok.max()), floor):
+        cap = max(1.5 * floor, 1.25 * float(finite_ok.max()))
+    for i, kind in enumerate(kinds):
+        heights = values[kind]
+        x = numbers - 0.4 + width * (i + 0.5)
+        shown = heights if cap is None else np.minimum(heights, cap)
+        ax.bar(x, shown, width=width * 0.95, color=_kind_color(kind, i), label=kind)
         if cap is not None:
-            ax.set_ylim(0.0, cap * 1.15)
-            label += " (cut; bars above labelled)"
-        ax.set_ylabel(label)
-        ax.grid(True, axis="y", alpha=0.4)
+            for xi, h in zip(x, heights):
+                if np.isfinite(h) and h > cap:
+                    ax.text(xi, cap, f"{h:.2f}", ha="center", va="bottom", fontsize=7, rotation=90)
+    if line is not None:
+        ax.axhline(line, color="black", lw=1.0, ls="--")
+    if cap is not None:
+        ax.set_ylim(0.0, cap * 1.15)
+        label += " (cut; bars above labelled)"
+    ax.set_ylabel(label)
+    ax.grid(True, axis="y", alpha=0.4)
+
+
+def _bars_figure(
+    runs: Mapping[str, Run], rows: list[tuple[str, str, float | None, float]], title: str
+) -> Figure:
+    """One axis of grouped bars per ``(key, label, line, scale)``, collisions across."""
+    figure = Figure(figsize=(11.0, 7.0), layout="constrained")
+    FigureCanvasAgg(figure)
+    axes = figure.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
+    count = _collision_count(runs, tuple(key for key, _, _, _ in rows))
+    for ax, (key, label, line, scale) in zip(axes, rows):
+        _collision_bars(ax, runs, key, label, count, line, scale)
     axes[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False, title="compensator")
-    axes[1].set_xlabel("collision")
-    axes[1].set_xticks(numbers)
+    axes[-1].set_xlabel("collision")
+    axes[-1].set_xticks(np.arange(1, count + 1))
     run = next(iter(runs.values())) if runs else None
     if run is not None:
         figure.suptitle(
-            f"CoV and CoF per collision (1 = ideal)\n{run.scenario.name} | robot delay "
-            f"{run.scenario.facility.robot_delay * 1e3:g} ms",
+            f"{title}\n{run.scenario.name} | robot delay {run.scenario.facility.robot_delay * 1e3:g} ms",
             fontsize=12,
         )
     return figure
 
 
+def compare_cov_cof_figure(runs: Mapping[str, Run]) -> Figure:
+    """Grouped bars of CoV and CoF per collision, one colour per compensator, a line at 1.
+    When a diverged run's bars dwarf the others, the axis is cut and those bars are
+    labelled with their value."""
+    return _bars_figure(
+        runs, [("cov", "CoV", 1.0, 1.0), ("cof", "CoF", 1.0, 1.0)], "CoV and CoF per collision (1 = ideal)"
+    )
+
+
+def compare_velocity_error_figure(runs: Mapping[str, Run]) -> Figure:
+    """Grouped bars of the rebound velocity error and angular velocity error per collision
+    (%), one colour per compensator; a dashed line at the scenario's velocity tolerance."""
+    run = next(iter(runs.values()))
+    tolerance = 100.0 * float(run.scenario.metrics.max_velocity_error)
+    return _bars_figure(
+        runs,
+        [
+            ("velocity_error", "velocity error (%)", tolerance, 100.0),
+            ("angular_velocity_error", "angular velocity error (%)", None, 100.0),
+        ],
+        "Rebound velocity errors per collision: |v − v_ref|/|v_ref|, |ω − ω_ref|/|ω_ref| "
+        f"(0 = ideal; dashed: tolerance {tolerance:g} %)",
+    )
+
+
 def comparison_figures(runs: Mapping[str, Run]) -> dict[str, Figure]:
     """The comparison figures by file stem (compare_identification only if a compensator
-    identifies the contact)."""
+    identifies the contact, compare_velocity_error only if the motion is not 1-D)."""
     figures: dict[str, Figure] = {
         "compare_velocity": compare_velocity_figure(runs),
         "compare_force": compare_force_figure(runs),
@@ -485,4 +772,6 @@ def comparison_figures(runs: Mapping[str, Run]) -> dict[str, Figure]:
     if identification is not None:
         figures["compare_identification"] = identification
     figures["compare_cov_cof"] = compare_cov_cof_figure(runs)
+    if not all(moves_in_1d(run) for run in runs.values()):
+        figures["compare_velocity_error"] = compare_velocity_error_figure(runs)
     return figures

@@ -65,8 +65,12 @@ REFERENCE_COLUMNS: list[str] = [name for name, _, _ in _table_columns()["referen
 
 #: Files written by :meth:`Run.save` (plots excluded).
 DATA_FILES = ("timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml")
-#: Plot files written by :meth:`Run.save` (``identification.png`` too when estimates exist).
+#: Plot files written by :meth:`Run.save` (``identification.png`` too when estimates exist,
+#: and :data:`PLOT_FILES_6DOF` when the motion is not 1-D).
 PLOT_FILES = ("contact_velocity.png", "contact_force.png", "energy.png")
+#: Plot files that :meth:`Run.save` adds for a run whose motion is not 1-D (the reference
+#: rotates or its rod tip leaves a line: :func:`hilcontact.plots.moves_in_1d`).
+PLOT_FILES_6DOF = ("contact_rotation.png", "tip_tracking.png")
 
 
 def _frame(columns: dict[str, Any], order: list[str]) -> pd.DataFrame:
@@ -138,8 +142,9 @@ class Run:
 
     def plot(self, directory: str | os.PathLike[str] | None = None) -> dict[str, Figure]:
         """Make the figures (name -> matplotlib Figure); save them as ``<name>.png`` in
-        ``directory`` if given. Names: contact_velocity, contact_force, energy, and
-        identification when the compensator estimates the contact stiffness or damping."""
+        ``directory`` if given. Names: contact_velocity, contact_force, energy,
+        identification when the compensator estimates the contact stiffness or damping, and
+        contact_rotation and tip_tracking when the motion is not 1-D."""
         from .plots import make_figures, save_figures
 
         figures = make_figures(self)
