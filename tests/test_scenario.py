@@ -445,6 +445,8 @@ MODEL_DEFAULTS = {
     "forgetting": 0.98,
     "alpha_max": 100000.0,
     "observer": "work",
+    "controller": "normal",
+    "force_ratio_max": 2.0,
 }
 TDPA_DEFAULTS = {
     "contact_force": 3.0,
