@@ -1,7 +1,7 @@
 //! Runs a preset scenario file and prints its collisions:
 //! `cargo run --release --example run_preset -- python/hilcontact/scenarios/paper-table1.toml [key=value ...]`
 //! with keys `robot_delay`, `sensor_delay`, `round_delays` (true|false), `noise` (N), `seed`, `kind` (compensator), `mode` (align|lead),
-//! `observer` (work|paper), `controller` (normal|paper), `ratio` (force_ratio_max), `repeat` (more runs, metrics only as a sweep runs them, for profiling: `perf record -g`
+//! `observer` (work|paper), `controller` (normal|paper), `ratio` (force_ratio_max), `duration` (s), `repeat` (more runs, metrics only as a sweep runs them, for profiling: `perf record -g`
 //! on this example).
 
 use hilcontact_core::compensator::{
@@ -32,6 +32,7 @@ fn main() {
             "kind" => kind = value.to_string(),
             "repeat" => repeat = value.parse().expect("integer"),
             "ratio" => ratio = value.parse().expect("force_ratio_max"),
+            "duration" => s.simulation.duration = value.parse().expect("s"),
             "controller" => {
                 controller = if value == "paper" {
                     ControllerMode::Paper
@@ -108,6 +109,16 @@ fn main() {
         m.lost_collisions,
         m.extra_collisions,
     );
+    let covs: Vec<f64> = m.collisions.iter().filter_map(|c| c.cov).collect();
+    if covs.len() > 20 {
+        let last = &covs[covs.len() - 20..];
+        println!(
+            "  {} collisions; mean CoV of the last 20: {:.4}; energy final / reference final {:.4}",
+            covs.len(),
+            last.iter().sum::<f64>() / 20.0,
+            m.energy.r#final / m.energy.reference_final
+        );
+    }
     if let Some(reason) = &m.reason {
         println!("  {reason}");
     }
