@@ -245,7 +245,7 @@ def _report_comparison(console: Console, result: Comparison, folder: Path) -> No
     table.add_column("compensator", no_wrap=True)
     table.add_column("status", no_wrap=True)
     table.add_column("CoV per collision")
-    for header in ("worst CoF", "k error (%)", "c error (N·s/mm)"):
+    for header in ("worst CoF", "v error (%)", "k error (%)", "c error (N·s/mm)"):
         table.add_column(header, justify="right")
     for kind, row in result.summary.iterrows():
         if row["status"] == "ok":
@@ -261,6 +261,7 @@ def _report_comparison(console: Console, result: Comparison, folder: Path) -> No
             status,
             " ".join(_number(v, ".2f") for v in row["cov"]) or "-",
             _number(row["worst_cof"], ".3f"),
+            _number(row["worst_velocity_error_pct"], ".2f"),
             _number(row["stiffness_error_pct"], ".3g"),
             _number(row["damping_error_Ns_mm"], ".3g"),
         )

@@ -83,6 +83,9 @@ SUMMARY_COLUMNS = [
     "worst_cof",
     "stiffness_error_pct",
     "damping_error_Ns_mm",
+    "worst_velocity_error_pct",
+    "lost_collisions",
+    "extra_collisions",
 ]
 
 
@@ -193,6 +196,9 @@ class Comparison:
             "worst_cof": _nan(summary.get("worst_cof")),
             "stiffness_error_pct": _nan(identification.get("stiffness_error")) * 100.0,
             "damping_error_Ns_mm": _nan(identification.get("damping_error")) * 1e-3,
+            "worst_velocity_error_pct": _nan(summary.get("worst_velocity_error")) * 100.0,
+            "lost_collisions": len(run.metrics.get("lost_collisions") or []),
+            "extra_collisions": len(run.metrics.get("extra_collisions") or []),
         }
 
     @property
@@ -254,8 +260,8 @@ class Comparison:
             "## Summary",
             "",
             "| compensator | status | CoV per collision | mean CoV | worst \\|CoV − 1\\| | worst CoF "
-            "| k error (%) | c error (N·s/mm) |",
-            "|---|---|---|--:|--:|--:|--:|--:|",
+            "| worst velocity error (%) | lost, extra | k error (%) | c error (N·s/mm) |",
+            "|---|---|---|--:|--:|--:|--:|--:|--:|--:|",
         ]
         for kind, row in self.summary.iterrows():
             status = str(row["status"])
@@ -265,6 +271,8 @@ class Comparison:
             lines.append(
                 f"| `{kind}` | {status} | {covs} | {_cell(row['mean_cov'], '.3f')} "
                 f"| {_cell(row['worst_cov_error'], '.3f')} | {_cell(row['worst_cof'], '.3f')} "
+                f"| {_cell(row['worst_velocity_error_pct'], '.2f')} "
+                f"| {row['lost_collisions']}, {row['extra_collisions']} "
                 f"| {_cell(row['stiffness_error_pct'], '.3g')} | {_cell(row['damping_error_Ns_mm'], '.3g')} |"
             )
         lines += [
