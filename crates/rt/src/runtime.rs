@@ -519,13 +519,14 @@ impl Loop {
     }
 
     /// Start-up (not real-time): requests streaming, waits for the first record and feedback,
-    /// keeps the robot at the initial pose meanwhile, checks the start pose.
+    /// checks the start pose. Nothing that could move the robot is sent before the check has
+    /// passed: before the first feedback nothing at all, then only holds at the robot's own
+    /// fed-back pose (at rest), which keep a controller's session alive without moving it.
     fn connect(&mut self) -> Result<()> {
         self.sensor.start_streaming();
         let start = now_ns();
         let timeout_ns = (self.connect_timeout * 1e9) as u64;
         let mut last_request = start;
-        let hold = self.initial;
         loop {
             if self.shared.stop_requested.load(Ordering::Acquire) {
                 return Err(RtError::Connect(
@@ -534,7 +535,9 @@ impl Loop {
             }
             let now = now_ns();
             self.poll_links(now);
-            self.robot.send(&hold, now_ns().saturating_sub(self.t0_ns));
+            if let Some(pose) = self.estimator.last_pose() {
+                self.robot.hold(&pose, now_ns().saturating_sub(self.t0_ns));
+            }
             if self.sensor.stats().accepted > 0 && self.estimator.has_feedback() {
                 break;
             }

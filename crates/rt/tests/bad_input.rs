@@ -217,3 +217,79 @@ fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
     }
     assert!(stops >= 1, "no RDT stop request");
 }
+
+/// A robot outside `start_tolerance` is refused, and nothing that could move it is sent: before
+/// its first feedback nothing at all, then only holds at its own fed-back pose at rest (a
+/// correction toward the scenario's start would be executed by a real controller).
+#[test]
+fn a_refused_start_commands_no_motion() {
+    let mut s = preset("paper-table1");
+    s.simulation.duration = 2.0;
+    let sensor = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let robot = UdpSocket::bind("127.0.0.1:0").unwrap();
+    sensor
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    let egm_port = free_udp_port();
+    let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
+    let options = RuntimeOptions {
+        sensor: SensorOptions::Rdt(RdtOptions {
+            port: sensor.local_addr().unwrap().port(),
+            counts_per_force: Some(1e6),
+            counts_per_torque: Some(1e6),
+            ..Default::default()
+        }),
+        robot: RobotOptions::Egm(EgmOptions {
+            port: egm_port,
+            bind_host: "127.0.0.1".into(),
+            ..Default::default()
+        }),
+        connect_timeout: 5.0,
+        ..Default::default()
+    };
+    let hil = HilHandle::start(&s, &options).unwrap();
+    let mut buf = [0u8; 64];
+    let (_, client) = sensor.recv_from(&mut buf).unwrap();
+    // the robot is 50 mm short of the scenario's start (-995 mm)
+    let away = pose(-1045.0, 1.0);
+    let mut feedback = FeedbackEncoder::new();
+    robot.set_nonblocking(true).unwrap();
+    let mut decoder = CorrectionDecoder::new();
+    let mut corrections = Vec::new();
+    let mut big = [0u8; 2048];
+    let start = Instant::now();
+    let mut seq = 0u32;
+    while !hil.is_finished() && start.elapsed() < Duration::from_secs(10) {
+        seq += 1;
+        let record = RdtRecord {
+            rdt_sequence: seq,
+            ft_sequence: seq,
+            status: 0,
+            counts: [0; 6],
+        };
+        sensor.send_to(&record.encode(), client).unwrap();
+        if seq % 4 == 0 {
+            robot
+                .send_to(feedback.encode(seq / 4, seq as u64 * 1000, &away, &away), egm)
+                .unwrap();
+        }
+        while let Ok(n) = robot.recv(&mut big) {
+            corrections.push(decoder.decode(&big[..n]).unwrap().target);
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert!(hil.wait(Duration::from_secs(5)));
+    let error = hil.finish().err().expect("the start must be refused").to_string();
+    assert!(
+        error.contains("50.0 mm from the scenario's initial position"),
+        "{error}"
+    );
+    while let Ok(n) = robot.recv(&mut big) {
+        corrections.push(decoder.decode(&big[..n]).unwrap().target);
+    }
+    assert!(!corrections.is_empty(), "the refusal holds the robot where it is");
+    for c in &corrections {
+        assert_eq!(c.pose, away, "a correction toward another pose was sent");
+        assert_eq!(c.speed, [0.0; 6]);
+    }
+}
