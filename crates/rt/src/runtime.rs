@@ -49,7 +49,9 @@ use crate::links::{
 };
 use crate::report::{build_output, HilOutput};
 pub use crate::report::{RunOutcome, Sample};
-use crate::safety::{check_workspace, check_wrench, SafetyLimits, StopEvent, StopKind};
+use crate::safety::{
+    check_workspace, check_wrench, hold_target, SafetyLimits, StopEvent, StopKind,
+};
 
 /// Options of the real-time runtime (defaults in [`Default`]; the CLI documents each).
 ///
@@ -297,6 +299,7 @@ impl HilHandle {
             robot,
             last_robot_ns: 0,
             estimator: FeedbackEstimator::new(o.extrapolation),
+            last_command: None,
             producer,
             samples_dropped: 0,
             shared: shared.clone(),
@@ -423,6 +426,8 @@ struct Loop {
     robot: Box<dyn RobotLink>,
     last_robot_ns: u64,
     estimator: FeedbackEstimator,
+    /// The last command sent (it passed every check), m and rad in `t`.
+    last_command: Option<RelativeMotion>,
     // log and timing
     producer: rtrb::Producer<Sample>,
     samples_dropped: u64,
@@ -592,7 +597,13 @@ impl Loop {
     /// Streams the hold command (the last fed-back pose, at rest) for `hold_time`: one per
     /// period on the clock, or one per robot packet (waiting at most two periods for each).
     fn hold(&mut self) {
-        let Some(pose) = self.estimator.last_pose() else {
+        let Some(pose) = hold_target(
+            &self.limits,
+            self.estimator.last_pose(),
+            self.last_command,
+            &self.rod,
+            &self.start_tip,
+        ) else {
             return;
         };
         let periods = (self.hold_time / self.period).ceil() as u64;
@@ -654,6 +665,7 @@ impl Loop {
             Ok(command) => {
                 self.robot
                     .send(&command, now_ns().saturating_sub(self.t0_ns));
+                self.last_command = Some(command);
                 None
             }
             Err(stop) => Some(stop),

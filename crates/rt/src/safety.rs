@@ -5,15 +5,18 @@
 //! wrench (magnitudes, sensor frame); then, on the new command, that it is finite and that
 //! the commanded rod tip stays within `workspace` metres of where it started; and that the
 //! virtual energy stays below the scenario's divergence bound. Any of them stops the run:
-//! the robot is commanded to hold its last fed-back pose, sensor streaming is stopped, the
+//! the robot is commanded to hold its last fed-back pose if that pose is inside the
+//! workspace and within `hold_deviation` of the last command (else the last command, which
+//! passed every check; [`hold_target`]), sensor streaming is stopped, the
 //! sample log is drained, and the [`StopKind`] goes to `metrics.json` and the exit code.
 
+use hilcontact_core::frames::RelativeMotion;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, RtError};
 
-/// The limits, with units. Defaults: 500 N, 100 N·m, 50 ms, 0.1 m.
+/// The limits, with units. Defaults: 500 N, 100 N·m, 50 ms, 0.1 m, 20 mm.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SafetyLimits {
@@ -25,6 +28,11 @@ pub struct SafetyLimits {
     pub watchdog_ms: f64,
     /// Largest distance of the commanded rod tip from its initial position, m (> 0).
     pub workspace: f64,
+    /// Largest distance between the robot's fed-back rod tip and the last command's for a
+    /// stop to hold the robot where it reports to be, m (> 0); beyond it (or outside the
+    /// workspace) the feedback is not trusted and the last command, which passed every
+    /// check, is held instead.
+    pub hold_deviation: f64,
 }
 
 impl Default for SafetyLimits {
@@ -34,6 +42,7 @@ impl Default for SafetyLimits {
             moment_limit: 100.0,
             watchdog_ms: 50.0,
             workspace: 0.1,
+            hold_deviation: 0.02,
         }
     }
 }
@@ -46,6 +55,7 @@ impl SafetyLimits {
             ("moment_limit", self.moment_limit),
             ("watchdog_ms", self.watchdog_ms),
             ("workspace", self.workspace),
+            ("hold_deviation", self.hold_deviation),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(RtError::option(
@@ -92,6 +102,31 @@ pub fn check_wrench(
         });
     }
     None
+}
+
+/// The pose a stop holds the robot at (see the module doc): the fed-back pose `feedback` if
+/// its rod tip (`rod`, servicer body frame, m) is inside the workspace around `start` (m, `t`)
+/// and, once a command was sent, within `hold_deviation` of the last command's; else the last
+/// command; `None` (send nothing) when neither is known and trusted.
+pub fn hold_target(
+    limits: &SafetyLimits,
+    feedback: Option<RelativeMotion>,
+    last_command: Option<RelativeMotion>,
+    rod: &Vector3<f64>,
+    start: &Vector3<f64>,
+) -> Option<RelativeMotion> {
+    let trusted = |pose: &RelativeMotion| {
+        let tip = pose.point(rod);
+        let inside = (tip - start).norm() <= limits.workspace;
+        let tracking = last_command
+            .is_none_or(|c| (c.point(rod) - tip).norm() <= limits.hold_deviation);
+        inside && tracking
+    };
+    match (feedback, last_command) {
+        (Some(f), _) if trusted(&f) => Some(f),
+        (_, Some(c)) => Some(c),
+        _ => None,
+    }
 }
 
 /// Checks a commanded rod tip (m, `t`) against the workspace around `start` (m, `t`).
@@ -194,5 +229,34 @@ mod tests {
         .validate()
         .is_err());
         assert!(SafetyLimits::default().validate().is_ok());
+    }
+
+    #[test]
+    fn a_stop_holds_the_feedback_only_when_it_is_plausible() {
+        use nalgebra::UnitQuaternion;
+        let l = SafetyLimits::default();
+        let rod = Vector3::new(1.0, 0.0, 0.0);
+        let at = |x: f64| RelativeMotion {
+            position: Vector3::new(x, 0.0, 0.0),
+            orientation: UnitQuaternion::identity(),
+            velocity: Vector3::zeros(),
+            angular_velocity: Vector3::zeros(),
+        };
+        let start = at(-0.995).point(&rod);
+        // tracking: the robot 5 mm behind the command is held where it is
+        let held = hold_target(&l, Some(at(-0.990)), Some(at(-0.985)), &rod, &start).unwrap();
+        assert_eq!(held.position.x, -0.990);
+        // a feedback 300 mm off (inside a 100 m plausibility bound, outside the workspace):
+        // the last command is held, not the bogus pose
+        let held = hold_target(&l, Some(at(-0.695)), Some(at(-0.985)), &rod, &start).unwrap();
+        assert_eq!(held.position.x, -0.985);
+        // inside the workspace but 50 mm from the command: the command too
+        let held = hold_target(&l, Some(at(-0.935)), Some(at(-0.985)), &rod, &start).unwrap();
+        assert_eq!(held.position.x, -0.985);
+        // before any command (a refused start): the robot's own pose if inside the workspace,
+        // else nothing at all
+        assert_eq!(hold_target(&l, Some(at(-0.945)), None, &rod, &start).unwrap().position.x, -0.945);
+        assert!(hold_target(&l, Some(at(0.4)), None, &rod, &start).is_none());
+        assert!(hold_target(&l, None, None, &rod, &start).is_none());
     }
 }
