@@ -15,6 +15,17 @@ use hilcontact_core::world::RelativeMotion;
 /// Longest extrapolation, s.
 pub const MAX_EXTRAPOLATION: f64 = 0.012;
 
+/// Fastest rod-tip motion a fed-back pose may show against the previous one, m/s: far above
+/// what a robot reproducing a docking contact moves (mm/s to cm/s), far below a wrong frame
+/// or a corrupted message. A pose beyond it is rejected ([`FeedbackEstimator::push`]).
+pub const MAX_FEEDBACK_SPEED: f64 = 1.0;
+/// Fastest rotation a fed-back pose may show, rad/s.
+pub const MAX_FEEDBACK_ROTATION: f64 = 2.0;
+/// The shortest time the speed limits are applied over, s (one EGM cycle), and the
+/// measurement margins added to them, m and rad.
+pub const FEEDBACK_MIN_INTERVAL: f64 = 0.004;
+const FEEDBACK_MARGIN: (f64, f64) = (0.001, 0.01);
+
 /// How the actual motion between feedback messages is estimated.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -54,13 +65,29 @@ impl FeedbackEstimator {
 
     /// Adds a fed-back pose: controller time (s), local receive time (ns), position (m, `t`),
     /// orientation (servicer to `t`).
+    ///
+    /// Returns false, and keeps nothing, for a pose that moved farther from the previous one
+    /// than a robot can in the time between them (local time, at least
+    /// [`FEEDBACK_MIN_INTERVAL`]): [`MAX_FEEDBACK_SPEED`], [`MAX_FEEDBACK_ROTATION`]. The
+    /// caller counts it (`invalid`); a robot that really jumped is then silent to the loop,
+    /// and the watchdog stops the run.
     pub fn push(
         &mut self,
         robot_time: f64,
         local_ns: u64,
         position: Vector3<f64>,
         orientation: UnitQuaternion<f64>,
-    ) {
+    ) -> bool {
+        if let Some(p) = self.fed[0] {
+            let dt = (local_ns.saturating_sub(p.local_ns) as f64 * 1e-9).max(FEEDBACK_MIN_INTERVAL);
+            let moved = (position - p.position).norm();
+            let turned = p.orientation.angle_to(&orientation);
+            if moved > MAX_FEEDBACK_SPEED * dt + FEEDBACK_MARGIN.0
+                || turned > MAX_FEEDBACK_ROTATION * dt + FEEDBACK_MARGIN.1
+            {
+                return false;
+            }
+        }
         self.fed = [
             Some(Fed {
                 robot_time,
@@ -71,6 +98,7 @@ impl FeedbackEstimator {
             self.fed[0],
             self.fed[1],
         ];
+        true
     }
 
     /// Whether any feedback arrived.
@@ -198,5 +226,21 @@ mod tests {
                 .angle_to(&UnitQuaternion::from_scaled_axis(w * 0.008))
                 < 1e-12
         );
+    }
+
+    #[test]
+    fn a_jump_no_robot_makes_is_rejected_and_nothing_is_kept() {
+        let q = UnitQuaternion::identity();
+        let mut e = FeedbackEstimator::new(Extrapolation::Quadratic);
+        assert!(e.push(0.0, 0, Vector3::new(0.005, 0.0, 0.0), q));
+        // 0.1 mm in 4 ms (25 mm/s): a robot's motion
+        assert!(e.push(0.004, 4_000_000, Vector3::new(0.0051, 0.0, 0.0), q));
+        // 300 mm in the next 4 ms: rejected, the last pose kept
+        assert!(!e.push(0.008, 8_000_000, Vector3::new(0.3051, 0.0, 0.0), q));
+        assert_eq!(e.last_pose().unwrap().position.x, 0.0051);
+        // a 90° turn in 4 ms: rejected too
+        let turned = UnitQuaternion::from_euler_angles(0.0, 0.0, std::f64::consts::FRAC_PI_2);
+        assert!(!e.push(0.008, 8_000_000, Vector3::new(0.0052, 0.0, 0.0), turned));
+        assert!(e.push(0.008, 8_000_000, Vector3::new(0.0052, 0.0, 0.0), q));
     }
 }

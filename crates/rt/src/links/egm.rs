@@ -156,7 +156,10 @@ impl RobotLink for EgmRobot {
                 self.robot_addr = Some(from);
             }
             let (position, orientation) = self.mapping.from_egm(&feedback.actual);
-            estimator.push(feedback.robot_time(), now_ns, position, orientation);
+            if !estimator.push(feedback.robot_time(), now_ns, position, orientation) {
+                self.stats.invalid += 1; // a jump no robot makes in one cycle
+                continue;
+            }
             self.stats.accepted += 1;
             accepted += 1;
         }
