@@ -153,7 +153,7 @@ def _report(console: Console, result: Run, folder: Path) -> None:
         table.add_column(header, justify="right")
     for number, row in result.collision_table().iterrows():
         table.add_row(
-            str(number) if row["complete"] else f"{number} (cut off)",
+            str(number) if row["complete"] else f"{number}*",
             _number(row["start"], ".3f"),
             _number(row["end"], ".3f"),
             _number(row["cov"], ".3f"),
@@ -165,6 +165,8 @@ def _report(console: Console, result: Run, folder: Path) -> None:
         )
     if table.row_count:
         console.print(table)
+        if not result.collision_table()["complete"].all():
+            console.print("*: still under way at the end of the run (no rebound, not compared)")
     else:
         console.print("no collisions")
     if result.status == "ok":
