@@ -118,8 +118,8 @@ pub fn hold_target(
     let trusted = |pose: &RelativeMotion| {
         let tip = pose.point(rod);
         let inside = (tip - start).norm() <= limits.workspace;
-        let tracking = last_command
-            .is_none_or(|c| (c.point(rod) - tip).norm() <= limits.hold_deviation);
+        let tracking =
+            last_command.is_none_or(|c| (c.point(rod) - tip).norm() <= limits.hold_deviation);
         inside && tracking
     };
     match (feedback, last_command) {
@@ -255,7 +255,13 @@ mod tests {
         assert_eq!(held.position.x, -0.985);
         // before any command (a refused start): the robot's own pose if inside the workspace,
         // else nothing at all
-        assert_eq!(hold_target(&l, Some(at(-0.945)), None, &rod, &start).unwrap().position.x, -0.945);
+        assert_eq!(
+            hold_target(&l, Some(at(-0.945)), None, &rod, &start)
+                .unwrap()
+                .position
+                .x,
+            -0.945
+        );
         assert!(hold_target(&l, Some(at(0.4)), None, &rod, &start).is_none());
         assert!(hold_target(&l, None, None, &rod, &start).is_none());
     }

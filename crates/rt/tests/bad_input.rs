@@ -24,6 +24,25 @@ fn pose(x: f64, w: f64) -> EgmPoseMm {
     }
 }
 
+/// Runtime options for a scripted RDT sensor on `sensor` and a scripted EGM robot sending to
+/// `egm_port` (counts of 1e6 per unit: no HTTP query).
+fn scripted(sensor: &UdpSocket, egm_port: u16) -> RuntimeOptions {
+    RuntimeOptions {
+        sensor: SensorOptions::Rdt(RdtOptions {
+            port: sensor.local_addr().unwrap().port(),
+            counts_per_force: Some(1e6),
+            counts_per_torque: Some(1e6),
+            ..Default::default()
+        }),
+        robot: RobotOptions::Egm(EgmOptions {
+            port: egm_port,
+            bind_host: "127.0.0.1".into(),
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
 #[test]
 fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
     let mut s = preset("paper-table1");
@@ -37,22 +56,11 @@ fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
     let egm_port = free_udp_port();
     let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
     let options = RuntimeOptions {
-        sensor: SensorOptions::Rdt(RdtOptions {
-            port: sensor.local_addr().unwrap().port(),
-            counts_per_force: Some(1e6),
-            counts_per_torque: Some(1e6),
-            ..Default::default()
-        }),
-        robot: RobotOptions::Egm(EgmOptions {
-            port: egm_port,
-            bind_host: "127.0.0.1".into(),
-            ..Default::default()
-        }),
         limits: SafetyLimits {
             watchdog_ms: 200.0,
             ..Default::default()
         },
-        ..Default::default()
+        ..scripted(&sensor, egm_port)
     };
     let hil = HilHandle::start(&s, &options).unwrap();
 
@@ -233,19 +241,8 @@ fn a_refused_start_commands_no_motion() {
     let egm_port = free_udp_port();
     let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
     let options = RuntimeOptions {
-        sensor: SensorOptions::Rdt(RdtOptions {
-            port: sensor.local_addr().unwrap().port(),
-            counts_per_force: Some(1e6),
-            counts_per_torque: Some(1e6),
-            ..Default::default()
-        }),
-        robot: RobotOptions::Egm(EgmOptions {
-            port: egm_port,
-            bind_host: "127.0.0.1".into(),
-            ..Default::default()
-        }),
         connect_timeout: 5.0,
-        ..Default::default()
+        ..scripted(&sensor, egm_port)
     };
     let hil = HilHandle::start(&s, &options).unwrap();
     let mut buf = [0u8; 64];
@@ -270,7 +267,10 @@ fn a_refused_start_commands_no_motion() {
         sensor.send_to(&record.encode(), client).unwrap();
         if seq % 4 == 0 {
             robot
-                .send_to(feedback.encode(seq / 4, seq as u64 * 1000, &away, &away), egm)
+                .send_to(
+                    feedback.encode(seq / 4, seq as u64 * 1000, &away, &away),
+                    egm,
+                )
                 .unwrap();
         }
         while let Ok(n) = robot.recv(&mut big) {
@@ -279,7 +279,11 @@ fn a_refused_start_commands_no_motion() {
         std::thread::sleep(Duration::from_millis(1));
     }
     assert!(hil.wait(Duration::from_secs(5)));
-    let error = hil.finish().err().expect("the start must be refused").to_string();
+    let error = hil
+        .finish()
+        .err()
+        .expect("the start must be refused")
+        .to_string();
     assert!(
         error.contains("50.0 mm from the scenario's initial position"),
         "{error}"
@@ -287,7 +291,10 @@ fn a_refused_start_commands_no_motion() {
     while let Ok(n) = robot.recv(&mut big) {
         corrections.push(decoder.decode(&big[..n]).unwrap().target);
     }
-    assert!(!corrections.is_empty(), "the refusal holds the robot where it is");
+    assert!(
+        !corrections.is_empty(),
+        "the refusal holds the robot where it is"
+    );
     for c in &corrections {
         assert_eq!(c.pose, away, "a correction toward another pose was sent");
         assert_eq!(c.speed, [0.0; 6]);

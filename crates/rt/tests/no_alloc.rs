@@ -61,7 +61,11 @@ fn loop_writer_and_emulator_do_not_allocate() {
     let out = hil.finish().unwrap();
     drop(facility);
     // ran to its end (a busy machine's late ticks may make it `unfaithful`; not this test's subject)
-    assert_eq!(out.metrics["stop"]["kind"], "completed", "{}", out.metrics["reason"]);
+    assert_eq!(
+        out.metrics["stop"]["kind"], "completed",
+        "{}",
+        out.metrics["reason"]
+    );
     assert!(ticks > 1500, "the loop ran only {ticks} ticks");
     assert!(first <= 2, "armed only after tick {first}");
     assert!(!out.metrics["collisions"].as_array().unwrap().is_empty());

@@ -19,8 +19,8 @@ use serde::{Deserialize, Serialize};
 use hilcontact_core::world::RelativeMotion;
 
 use super::{
-    bind_udp, local_addr, recv_counted, resolve, EndpointContext, LinkContext, LinkStats, Pacing,
-    RobotEndpoint, RobotLink,
+    bind_udp, local_addr, recv_counted, resolve, sequence_counted, EndpointContext, LinkContext,
+    LinkStats, Pacing, RobotEndpoint, RobotLink,
 };
 use crate::egm::{
     CorrectionDecoder, CorrectionEncoder, EgmError, FeedbackEncoder, RobotDecoder, EGM_PERIOD,
@@ -29,7 +29,7 @@ use crate::egm::{
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
 use crate::mapping::{EgmPoseMm, PoseMapping};
-use crate::rdt::{SequenceTracker, SequenceVerdict};
+use crate::rdt::SequenceTracker;
 
 /// Options of an EGM robot link (`[robot] kind = "egm"`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -133,24 +133,13 @@ impl RobotLink for EgmRobot {
                 self.stats.foreign += 1;
                 continue;
             }
-            let feedback = match self.decoder.decode(&self.buf[..n]) {
-                Ok(f) => f,
-                Err(e) if is_malformed(&e) => {
-                    self.stats.malformed += 1;
-                    continue;
-                }
-                Err(_) => {
-                    self.stats.invalid += 1;
-                    continue;
-                }
+            let Some(feedback) =
+                decode_counted(self.decoder.decode(&self.buf[..n]), &mut self.stats)
+            else {
+                continue;
             };
-            match self.sequence.check(feedback.seqno) {
-                SequenceVerdict::Stale => {
-                    self.stats.stale += 1;
-                    continue;
-                }
-                SequenceVerdict::Gap(n) => self.stats.lost += n as u64,
-                SequenceVerdict::First | SequenceVerdict::Next => {}
+            if !sequence_counted(&mut self.sequence, feedback.seqno, &mut self.stats) {
+                continue;
             }
             if self.robot_addr.is_none() {
                 self.robot_addr = Some(from);
@@ -186,6 +175,25 @@ impl RobotLink for EgmRobot {
 
     fn stats_mut(&mut self) -> &mut LinkStats {
         &mut self.stats
+    }
+}
+
+/// A decoded message, or None with the error counted: `malformed` for a datagram that is not
+/// an EGM message, `invalid` for one whose values are not usable.
+fn decode_counted<T>(
+    decoded: std::result::Result<T, EgmError>,
+    stats: &mut LinkStats,
+) -> Option<T> {
+    match decoded {
+        Ok(message) => Some(message),
+        Err(e) if is_malformed(&e) => {
+            stats.malformed += 1;
+            None
+        }
+        Err(_) => {
+            stats.invalid += 1;
+            None
+        }
     }
 }
 
@@ -315,24 +323,13 @@ impl RobotEndpoint for EgmEndpoint {
                 self.stats.foreign += 1;
                 continue;
             }
-            let correction = match self.decoder.decode(&self.buf[..n]) {
-                Ok(c) => c,
-                Err(e) if is_malformed(&e) => {
-                    self.stats.malformed += 1;
-                    continue;
-                }
-                Err(_) => {
-                    self.stats.invalid += 1;
-                    continue;
-                }
+            let Some(correction) =
+                decode_counted(self.decoder.decode(&self.buf[..n]), &mut self.stats)
+            else {
+                continue;
             };
-            match self.sequence.check(correction.seqno) {
-                SequenceVerdict::Stale => {
-                    self.stats.stale += 1;
-                    continue;
-                }
-                SequenceVerdict::Gap(n) => self.stats.lost += n as u64,
-                SequenceVerdict::First | SequenceVerdict::Next => {}
+            if !sequence_counted(&mut self.sequence, correction.seqno, &mut self.stats) {
+                continue;
             }
             self.stats.accepted += 1;
             newest = Some(correction);

@@ -40,6 +40,7 @@ use hilcontact_core::world::RelativeMotion;
 use crate::clock::now_ns;
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
+use crate::rdt::{SequenceTracker, SequenceVerdict};
 
 /// Sensor protocols, as `[sensor] kind` / `--sensor-protocol` accept them, in the runtime's
 /// options and the emulator's alike (the one list; a test checks both option types take
@@ -399,6 +400,23 @@ pub(crate) fn bind_udp(what: &str, addr: SocketAddr) -> Result<UdpSocket> {
 /// The local address of a bound socket; `what` names it for the message.
 pub(crate) fn local_addr(what: &str, socket: &UdpSocket) -> Result<SocketAddr> {
     socket.local_addr().map_err(|e| RtError::io(what, &e))
+}
+
+/// Checks a packet's sequence number against `tracker`: a stale packet (a duplicate or
+/// reordered one) is counted and to be dropped (false); a gap counts the packets it says
+/// were lost. The one sequence rule of every link and endpoint.
+pub fn sequence_counted(tracker: &mut SequenceTracker, seq: u32, stats: &mut LinkStats) -> bool {
+    match tracker.check(seq) {
+        SequenceVerdict::Stale => {
+            stats.stale += 1;
+            false
+        }
+        SequenceVerdict::Gap(n) => {
+            stats.lost += n as u64;
+            true
+        }
+        SequenceVerdict::First | SequenceVerdict::Next => true,
+    }
 }
 
 /// Receives one datagram from a non-blocking socket: `Some((len, from))`, or None when

@@ -14,14 +14,12 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    bind_udp, local_addr, recv_counted, resolve, EndpointContext, LinkContext, LinkStats,
-    SensorEndpoint, SensorLink, Wrench,
+    bind_udp, local_addr, recv_counted, resolve, sequence_counted, EndpointContext, LinkContext,
+    LinkStats, SensorEndpoint, SensorLink, Wrench,
 };
 use crate::error::{Result, RtError};
 use crate::netftapi::{fetch_counts, netftapi_xml, NetFtApiServer};
-use crate::rdt::{
-    CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, SequenceTracker, SequenceVerdict, RDT_PORT,
-};
+use crate::rdt::{CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, SequenceTracker, RDT_PORT};
 
 /// Options of an RDT sensor link (`[sensor] kind = "rdt"`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -154,13 +152,8 @@ impl SensorLink for RdtSensor {
                 self.stats.malformed += 1;
                 continue;
             };
-            match self.sequence.check(record.rdt_sequence) {
-                SequenceVerdict::Stale => {
-                    self.stats.stale += 1;
-                    continue;
-                }
-                SequenceVerdict::Gap(n) => self.stats.lost += n as u64,
-                SequenceVerdict::First | SequenceVerdict::Next => {}
+            if !sequence_counted(&mut self.sequence, record.rdt_sequence, &mut self.stats) {
+                continue;
             }
             // a record with an error status arrived (not lost) but its values are not used
             if record.status != 0 {
