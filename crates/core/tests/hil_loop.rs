@@ -305,7 +305,12 @@ fn without_delay_the_loop_reproduces_the_reference_in_6dof_to_a_thousandth() {
 }
 
 proptest::proptest! {
-    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(24))]
+    // a fixed seed: the same 24 cases on every machine
+    #![proptest_config(proptest::prelude::ProptestConfig {
+        cases: 24,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(0x3d),
+        ..proptest::prelude::ProptestConfig::default()
+    })]
     /// Over random spins, target motion, wall tilt and rod offset, the delay-free loop keeps
     /// every reference collision, with the rebound velocity within 0.1 % at a 1 ms period.
     #[test]
