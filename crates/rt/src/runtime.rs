@@ -300,6 +300,7 @@ impl HilHandle {
             last_robot_ns: 0,
             estimator: FeedbackEstimator::new(o.extrapolation),
             last_command: None,
+            last_free: None,
             producer,
             samples_dropped: 0,
             shared: shared.clone(),
@@ -401,6 +402,10 @@ impl Drop for HilHandle {
     }
 }
 
+/// Below this measured force magnitude the rod is taken as free of contact (the retreat
+/// target of a force stop), N.
+pub const CONTACT_FREE_FORCE: f64 = 5.0;
+
 /// The loop thread's state: the virtual side, the two links and the timing statistics.
 struct Loop {
     /// The virtual side of a tick: the core's one HIL step.
@@ -428,6 +433,9 @@ struct Loop {
     estimator: FeedbackEstimator,
     /// The last command sent (it passed every check), m and rad in `t`.
     last_command: Option<RelativeMotion>,
+    /// The robot's fed-back pose at the last tick whose measured force was below
+    /// [`CONTACT_FREE_FORCE`] (the retreat target of a force stop).
+    last_free: Option<RelativeMotion>,
     // log and timing
     producer: rtrb::Producer<Sample>,
     samples_dropped: u64,
@@ -485,7 +493,11 @@ impl Loop {
             .stop_code
             .store(stop.kind.code(), Ordering::Release);
         self.shared.phase.store(2, Ordering::Release);
-        self.hold();
+        // a force or moment stop first backs away from the contact, then holds there
+        let retreated = matches!(stop.kind, StopKind::ForceLimit | StopKind::MomentLimit)
+            .then(|| self.retreat())
+            .flatten();
+        self.hold(retreated);
         self.sensor.stop_streaming();
         let robot = *self.robot.stats();
         Ok(RunOutcome {
@@ -581,7 +593,7 @@ impl Loop {
             .map_or(self.initial.position, |p| p.point(&self.rod));
         let distance = (actual - self.initial.point(&self.rod)).norm();
         if distance > self.start_tolerance {
-            self.hold();
+            self.hold(None);
             return Err(RtError::Connect(format!(
                 "the robot's rod tip is {:.1} mm from the scenario's initial position (start_tolerance {:.1} mm): move it there first",
                 distance * 1e3,
@@ -594,33 +606,95 @@ impl Loop {
         Ok(())
     }
 
-    /// Streams the hold command (the last fed-back pose, at rest) for `hold_time`: one per
-    /// period on the clock, or one per robot packet (waiting at most two periods for each).
-    fn hold(&mut self) {
-        let Some(pose) = hold_target(
-            &self.limits,
-            self.estimator.last_pose(),
-            self.last_command,
-            &self.rod,
-            &self.start_tip,
-        ) else {
+    /// Waits for the next period of a stop's stream: the clock's period `i` after `start`, or
+    /// the robot's next packet (at most two periods); then polls the links.
+    fn next_stop_period(&mut self, start: u64, i: u64) {
+        match self.pacing {
+            Pacing::Clock => sleep_until_ns(start + i * self.period_ns),
+            Pacing::Robot => {
+                let n = self
+                    .robot
+                    .wait(now_ns() + 2 * self.period_ns, &mut self.estimator);
+                self.robot_arrived(n, now_ns());
+            }
+        }
+        self.poll_links(now_ns());
+    }
+
+    /// Streams the hold command for `hold_time` (one per period on the clock, or one per robot
+    /// packet): `at` (the end of a retreat) if given, else the last fed-back pose at rest if it
+    /// is plausible, else the last command ([`hold_target`]).
+    fn hold(&mut self, at: Option<RelativeMotion>) {
+        let target = at.or_else(|| {
+            hold_target(
+                &self.limits,
+                self.estimator.last_pose(),
+                self.last_command,
+                &self.rod,
+                &self.start_tip,
+            )
+        });
+        let Some(pose) = target else {
             return;
         };
         let periods = (self.hold_time / self.period).ceil() as u64;
         let start = now_ns();
         for i in 0..periods.max(1) {
-            match self.pacing {
-                Pacing::Clock => sleep_until_ns(start + i * self.period_ns),
-                Pacing::Robot => {
-                    let n = self
-                        .robot
-                        .wait(now_ns() + 2 * self.period_ns, &mut self.estimator);
-                    self.robot_arrived(n, now_ns());
-                }
-            }
-            self.poll_links(now_ns());
+            self.next_stop_period(start, i);
             self.robot.hold(&pose, now_ns().saturating_sub(self.t0_ns));
         }
+    }
+
+    /// After a force or moment stop: backs the robot away, at `limits.retreat_speed`, from its
+    /// (checked) pose to the last pose where the measured force was below
+    /// [`CONTACT_FREE_FORCE`], at most `limits.retreat_distance` away, so that the stop releases
+    /// the contact instead of holding the rod pressed; returns where it ended (the hold that
+    /// follows holds there, not at the delayed feedback). Nothing is sent, and None returned,
+    /// when either pose is unknown or not plausible.
+    fn retreat(&mut self) -> Option<RelativeMotion> {
+        let (Some(from), Some(free)) = (
+            hold_target(
+                &self.limits,
+                self.estimator.last_pose(),
+                self.last_command,
+                &self.rod,
+                &self.start_tip,
+            ),
+            self.last_free,
+        ) else {
+            return None;
+        };
+        let (a, b) = (from.point(&self.rod), free.point(&self.rod));
+        let inside = (b - self.start_tip).norm() <= self.limits.workspace;
+        let distance = (b - a).norm();
+        if !inside || distance <= 1e-6 {
+            return None;
+        }
+        // never farther than retreat_distance: along the same line
+        let reach = (self.limits.retreat_distance / distance).min(1.0);
+        let speed = self.limits.retreat_speed;
+        let periods = (distance * reach / (speed * self.period)).ceil() as u64;
+        let velocity = (free.position - from.position) * (reach / (periods as f64 * self.period));
+        let start = now_ns();
+        let mut command = from;
+        for i in 1..=periods {
+            self.next_stop_period(start, i - 1);
+            let s = reach * i as f64 / periods as f64;
+            command = RelativeMotion {
+                position: from.position.lerp(&free.position, s),
+                orientation: from.orientation.slerp(&free.orientation, s),
+                velocity,
+                angular_velocity: Vector3::zeros(),
+            };
+            self.robot
+                .send(&command, now_ns().saturating_sub(self.t0_ns));
+        }
+        let end = RelativeMotion {
+            velocity: Vector3::zeros(),
+            ..command
+        };
+        self.last_command = Some(end);
+        Some(end)
     }
 
     /// Polls both links; returns whether a new sensor record arrived.
@@ -656,6 +730,9 @@ impl Loop {
             self.sensor.stats_mut().late += 1;
         }
         let actual = self.estimator.estimate(wake).unwrap_or(self.initial);
+        if self.force.norm() < CONTACT_FREE_FORCE {
+            self.last_free = self.estimator.last_pose();
+        }
         let m = Measurement {
             force: self.force,
             moment: self.moment,

@@ -33,6 +33,11 @@ pub struct SafetyLimits {
     /// workspace) the feedback is not trusted and the last command, which passed every
     /// check, is held instead.
     pub hold_deviation: f64,
+    /// Speed at which a force or moment stop backs the robot away to its last contact-free
+    /// pose, m/s (> 0).
+    pub retreat_speed: f64,
+    /// Longest retreat of a force or moment stop, m (> 0).
+    pub retreat_distance: f64,
 }
 
 impl Default for SafetyLimits {
@@ -43,6 +48,8 @@ impl Default for SafetyLimits {
             watchdog_ms: 50.0,
             workspace: 0.1,
             hold_deviation: 0.02,
+            retreat_speed: 0.02,
+            retreat_distance: 0.02,
         }
     }
 }
@@ -56,6 +63,8 @@ impl SafetyLimits {
             ("watchdog_ms", self.watchdog_ms),
             ("workspace", self.workspace),
             ("hold_deviation", self.hold_deviation),
+            ("retreat_speed", self.retreat_speed),
+            ("retreat_distance", self.retreat_distance),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(RtError::option(

@@ -8,8 +8,12 @@ use hilcontact_core::compensator::{CompensatorConfig, ModelParams};
 use hilcontact_rt::safety::StopKind;
 use hilcontact_rt::{FacilityHandle, HilHandle};
 use serde_json::Value;
+use std::time::{Duration, Instant};
 
-fn run(kind: CompensatorConfig, duration: f64) -> Value {
+/// Runs the loop against the emulator; returns the metrics and the emulator's physical contact
+/// force (N) sampled every millisecond for 0.6 s after the loop began its stop, with the time
+/// since then (s).
+fn run(kind: CompensatorConfig, duration: f64) -> (Value, Vec<(f64, f64)>) {
     let mut s = preset("paper-table1");
     s.facility.robot_delay = 0.02;
     s.simulation.duration = duration;
@@ -17,7 +21,23 @@ fn run(kind: CompensatorConfig, duration: f64) -> Value {
     let (emu, rt) = loopback_options();
     let facility = FacilityHandle::start(&s, &emu).unwrap();
     let hil = HilHandle::start(&s, &rt).unwrap();
-    assert!(hil.wait(std::time::Duration::from_secs_f64(duration + 10.0)));
+    let begun = Instant::now();
+    let mut stopping: Option<Instant> = None;
+    let mut after_stop = Vec::new();
+    while begun.elapsed().as_secs_f64() < duration + 10.0 {
+        if stopping.is_none() && matches!(hil.status().phase, "holding" | "finished") {
+            stopping = Some(Instant::now());
+        }
+        if let Some(at) = stopping {
+            let since = at.elapsed().as_secs_f64();
+            if since > 0.6 {
+                break;
+            }
+            after_stop.push((since, facility.status().contact_force));
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert!(hil.wait(Duration::from_secs(5)));
     let out = hil.finish().unwrap();
     let status = facility.join();
     assert!(status.rdt_sent > 0 && status.corrections > 0, "{status:?}");
@@ -29,12 +49,12 @@ fn run(kind: CompensatorConfig, duration: f64) -> Value {
         "{}",
         serde_json::to_string_pretty(&out.metrics["collisions"]).unwrap()
     );
-    out.metrics
+    (out.metrics, after_stop)
 }
 
 #[test]
 fn pida_at_20ms_keeps_the_rebound_speed_in_real_time() {
-    let m = run(CompensatorConfig::Pida(ModelParams::default()), 3.5);
+    let (m, _) = run(CompensatorConfig::Pida(ModelParams::default()), 3.5);
     // ran to its end; the verdict's tolerances (CoF 1.2) are not this test's subject, as a
     // busy machine's late ticks may cost some force fidelity: the CoV bounds below are
     assert!(
@@ -65,9 +85,34 @@ fn pida_at_20ms_keeps_the_rebound_speed_in_real_time() {
 
 #[test]
 fn uncompensated_loop_is_stopped_by_the_force_limit() {
-    let m = run(CompensatorConfig::default(), 6.0);
+    let (m, after_stop) = run(CompensatorConfig::default(), 6.0);
     assert_eq!(m["status"], "stopped");
     assert_eq!(m["realtime"]["stop"]["kind"], "force-limit");
+    // the stop releases the contact: the robot backs away to its last contact-free pose, and
+    // the physical force is below 5 N within 0.5 s and stays there
+    let released = after_stop.iter().position(|(_, f)| *f < 5.0);
+    let Some(i) = released else {
+        panic!("the force never fell below 5 N: {:?}", after_stop.last());
+    };
+    eprintln!(
+        "contact force below 5 N {:.3} s after the stop ({:.1} N at the stop)",
+        after_stop[i].0, after_stop[0].1
+    );
+    assert!(
+        after_stop[i].0 <= 0.5,
+        "below 5 N only {} s after the stop",
+        after_stop[i].0
+    );
+    assert!(
+        after_stop[i..].iter().all(|(_, f)| *f < 5.0),
+        "the force came back after the retreat: {:?}",
+        after_stop.iter().step_by(20).collect::<Vec<_>>()
+    );
+    assert!(
+        after_stop.last().unwrap().0 > 0.5,
+        "sampled only {:?}",
+        after_stop.last()
+    );
     assert_eq!(m["realtime"]["stop"]["exit_code"], 3);
     let covs: Vec<f64> = m["collisions"]
         .as_array()
