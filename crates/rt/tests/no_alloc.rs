@@ -67,7 +67,10 @@ fn loop_writer_and_emulator_do_not_allocate() {
         out.metrics["reason"]
     );
     assert!(ticks > 1500, "the loop ran only {ticks} ticks");
-    assert!(first <= 2, "armed only after tick {first}");
+    // armed as soon as this thread saw the loop running: within a few ticks on an idle
+    // machine; a busy one may wake this thread late, and 100 ticks still arm it well before
+    // the first collision (0.27 s) — a bound that cannot flake
+    assert!(first <= 100, "armed only after tick {first}");
     assert!(!out.metrics["collisions"].as_array().unwrap().is_empty());
     assert_eq!(counted, 0, "{counted} allocations while running");
 }
