@@ -621,20 +621,23 @@ impl Loop {
         self.poll_links(now_ns());
     }
 
+    /// The robot's pose as far as it can be trusted: its last fed-back pose if plausible, else
+    /// the last command ([`hold_target`]).
+    fn checked_pose(&self) -> Option<RelativeMotion> {
+        hold_target(
+            &self.limits,
+            self.estimator.last_pose(),
+            self.last_command,
+            &self.rod,
+            &self.start_tip,
+        )
+    }
+
     /// Streams the hold command for `hold_time` (one per period on the clock, or one per robot
     /// packet): `at` (the end of a retreat) if given, else the last fed-back pose at rest if it
     /// is plausible, else the last command ([`hold_target`]).
     fn hold(&mut self, at: Option<RelativeMotion>) {
-        let target = at.or_else(|| {
-            hold_target(
-                &self.limits,
-                self.estimator.last_pose(),
-                self.last_command,
-                &self.rod,
-                &self.start_tip,
-            )
-        });
-        let Some(pose) = target else {
+        let Some(pose) = at.or_else(|| self.checked_pose()) else {
             return;
         };
         let periods = (self.hold_time / self.period).ceil() as u64;
@@ -652,16 +655,7 @@ impl Loop {
     /// follows holds there, not at the delayed feedback). Nothing is sent, and None returned,
     /// when either pose is unknown or not plausible.
     fn retreat(&mut self) -> Option<RelativeMotion> {
-        let (Some(from), Some(free)) = (
-            hold_target(
-                &self.limits,
-                self.estimator.last_pose(),
-                self.last_command,
-                &self.rod,
-                &self.start_tip,
-            ),
-            self.last_free,
-        ) else {
+        let (Some(from), Some(free)) = (self.checked_pose(), self.last_free) else {
             return None;
         };
         let (a, b) = (from.point(&self.rod), free.point(&self.rod));
