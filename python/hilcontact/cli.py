@@ -686,6 +686,8 @@ _HIL_OPTIONS = [
     click.option("--hold-deviation", type=float, default=None, help="A stop holds the robot at its fed-back pose only within this distance of the last command (else at the last command)." + _dflt("runtime", "limits.hold_deviation", "m")),
     click.option("--retreat-speed", type=float, default=None, help="After a force or moment stop, back away to the last contact-free pose at this speed." + _dflt("runtime", "limits.retreat_speed", "m/s")),
     click.option("--retreat-distance", type=float, default=None, help="Longest retreat after a force or moment stop." + _dflt("runtime", "limits.retreat_distance", "m")),
+    click.option("--tracking-limit", type=float, default=None, help="Safety stop when the fed-back rod tip is this far from every command of the tracking window (frozen feedback, a robot that does not follow)." + _dflt("runtime", "limits.tracking_limit", "m")),
+    click.option("--tracking-window", type=float, default=None, help="How far back commands are compared with the feedback (longer than the robot's delay)." + _dflt("runtime", "limits.tracking_window", "s")),
     click.option("--connect-timeout", type=float, default=None, help="Longest wait for the sensor and the robot." + _dflt("runtime", "connect_timeout", "s")),
     click.option("--start-tolerance", type=float, default=None, help="Largest distance of the robot from the initial pose at start." + _dflt("runtime", "start_tolerance", "m")),
 ]
@@ -696,12 +698,14 @@ def _runtime_options(sensor_protocol: str | None, robot_protocol: str | None, se
                      bias: bool | None, egm_port: int | None, egm_bind_host: str | None, robot_host: str | None,
                      extrapolation: str | None, force_limit: float | None, moment_limit: float | None,
                      watchdog_ms: float | None, workspace: float | None, hold_deviation: float | None,
-                     retreat_speed: float | None, retreat_distance: float | None, connect_timeout: float | None, start_tolerance: float | None, egm_offset: str | None,
+                     retreat_speed: float | None, retreat_distance: float | None, tracking_limit: float | None,
+                     tracking_window: float | None, connect_timeout: float | None, start_tolerance: float | None, egm_offset: str | None,
                      egm_rotation: str | None) -> dict[str, Any]:
     limits = {k: v for k, v in (("force_limit", force_limit), ("moment_limit", moment_limit),
                                 ("watchdog_ms", watchdog_ms), ("workspace", workspace),
                                 ("hold_deviation", hold_deviation), ("retreat_speed", retreat_speed),
-                                ("retreat_distance", retreat_distance)) if v is not None}
+                                ("retreat_distance", retreat_distance), ("tracking_limit", tracking_limit),
+                                ("tracking_window", tracking_window)) if v is not None}
     # the flags keep their flat keys; hilcontact.realtime.LEGACY_KEYS moves them into the links
     return {
         "sensor": {"kind": sensor_protocol} if sensor_protocol else None,

@@ -103,9 +103,21 @@ fn main() {
     );
     println!(
         "  velocity error {}; impulse {}; angular impulse {}; lost {:?}; extra {:?}",
-        m.collisions.iter().map(|c| fmt(c.velocity_error)).collect::<Vec<_>>().join(" "),
-        m.collisions.iter().map(|c| fmt(c.impulse_ratio)).collect::<Vec<_>>().join(" "),
-        m.collisions.iter().map(|c| fmt(c.angular_impulse_ratio)).collect::<Vec<_>>().join(" "),
+        m.collisions
+            .iter()
+            .map(|c| fmt(c.velocity_error))
+            .collect::<Vec<_>>()
+            .join(" "),
+        m.collisions
+            .iter()
+            .map(|c| fmt(c.impulse_ratio))
+            .collect::<Vec<_>>()
+            .join(" "),
+        m.collisions
+            .iter()
+            .map(|c| fmt(c.angular_impulse_ratio))
+            .collect::<Vec<_>>()
+            .join(" "),
         m.lost_collisions,
         m.extra_collisions,
     );

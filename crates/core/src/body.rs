@@ -11,7 +11,6 @@
 
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 
-
 /// Mass properties of a rigid body.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MassProperties {

@@ -7,7 +7,6 @@
 
 use nalgebra::Vector3;
 
-
 /// A contact law: the normal force magnitude from penetration and penetration rate.
 pub trait ContactLaw {
     /// Normal force magnitude, N, for penetration `d` (m, > 0) and rate `d_dot` (m/s).

@@ -70,7 +70,7 @@ impl RobotModel {
         servo_damping: f64,
         initial: &RelativeMotion,
     ) -> Self {
-        let servo = (servo_frequency_hz > 0.0).then(|| ServoLag {
+        let servo = (servo_frequency_hz > 0.0).then_some(ServoLag {
             omega: 2.0 * std::f64::consts::PI * servo_frequency_hz,
             zeta: servo_damping,
         });

@@ -174,14 +174,24 @@ fn spans(trace: &Trace, threshold: f64) -> Vec<Span> {
         match (start, in_contact) {
             (None, true) => start = Some(i),
             (Some(s), false) => {
-                out.push(Span { start: s, end: i, next: n - 1, complete: true });
+                out.push(Span {
+                    start: s,
+                    end: i,
+                    next: n - 1,
+                    complete: true,
+                });
                 start = None;
             }
             _ => {}
         }
     }
     if let Some(s) = start {
-        out.push(Span { start: s, end: n - 1, next: n - 1, complete: false });
+        out.push(Span {
+            start: s,
+            end: n - 1,
+            next: n - 1,
+            complete: false,
+        });
     }
     for j in 1..out.len() {
         out[j - 1].next = out[j].start;
@@ -213,9 +223,14 @@ impl Collision {
             index: j + 1,
             start: trace.time[s.start],
             end: trace.time[s.end],
-            peak_force: trace.force[s.start..=s.end].iter().cloned().fold(0.0, f64::max),
+            peak_force: trace.force[s.start..=s.end]
+                .iter()
+                .cloned()
+                .fold(0.0, f64::max),
             complete: s.complete,
-            rebound_speed: s.complete.then(|| trace.velocity[(s.end + s.next) / 2].norm()),
+            rebound_speed: s
+                .complete
+                .then(|| trace.velocity[(s.end + s.next) / 2].norm()),
         }
     }
 }
@@ -350,9 +365,13 @@ pub fn compare(
             };
             let (v, v_ref) = (hil.velocity[hi_i], reference.velocity[ri]);
             let (w, w_ref) = (hil.angular_velocity[hi_i], reference.angular_velocity[ri]);
-            let peak = |t: &Trace, s: &Span| t.force[s.start..=s.end].iter().cloned().fold(0.0, f64::max);
+            let peak =
+                |t: &Trace, s: &Span| t.force[s.start..=s.end].iter().cloned().fold(0.0, f64::max);
             let impulse = |t: &Trace, s: &Span, to: usize| {
-                (t.integral(&t.wrench_force, s.start, to), t.integral(&t.wrench_moment, s.start, to))
+                (
+                    t.integral(&t.wrench_force, s.start, to),
+                    t.integral(&t.wrench_moment, s.start, to),
+                )
             };
             let (j_h, m_h) = impulse(hil, h, hi_i);
             let (j_r, m_r) = impulse(reference, r, ri);
@@ -411,11 +430,20 @@ fn align(hil: &Trace, hs: &[Span], reference: &Trace, rs: &[Span], lag: f64) -> 
         .map(|w| reference.time[w[1].start] - reference.time[w[0].start])
         .collect();
     gaps.sort_by(f64::total_cmp);
-    let span = |t: &Trace| t.time.last().copied().unwrap_or(0.0) - t.time.first().copied().unwrap_or(0.0);
-    let gap = gaps.get(gaps.len() / 2).copied().unwrap_or_else(|| span(reference)).max(1e-9);
+    let span =
+        |t: &Trace| t.time.last().copied().unwrap_or(0.0) - t.time.first().copied().unwrap_or(0.0);
+    let gap = gaps
+        .get(gaps.len() / 2)
+        .copied()
+        .unwrap_or_else(|| span(reference))
+        .max(1e-9);
     let direction = |t: &Trace, s: &Span| {
-        let peak = (s.start..=s.end).max_by(|&a, &b| t.force[a].total_cmp(&t.force[b])).unwrap_or(s.start);
-        t.contact_force[peak].try_normalize(1e-12).unwrap_or_else(Vector3::zeros)
+        let peak = (s.start..=s.end)
+            .max_by(|&a, &b| t.force[a].total_cmp(&t.force[b]))
+            .unwrap_or(s.start);
+        t.contact_force[peak]
+            .try_normalize(1e-12)
+            .unwrap_or_else(Vector3::zeros)
     };
     let (dr, dh): (Vec<_>, Vec<_>) = (
         rs.iter().map(|s| direction(reference, s)).collect(),
@@ -465,7 +493,11 @@ fn verdict(
     for c in collisions {
         let n = c.collision.index;
         if let Some(cov) = c.cov.filter(|v| (v - 1.0).abs() > tol.cov) {
-            out.push(format!("collision {n}: |CoV - 1| = {:.3} > {}", (cov - 1.0).abs(), tol.cov));
+            out.push(format!(
+                "collision {n}: |CoV - 1| = {:.3} > {}",
+                (cov - 1.0).abs(),
+                tol.cov
+            ));
         }
         if let Some(cof) = c.cof.filter(|v| *v > tol.cof) {
             out.push(format!("collision {n}: CoF = {cof:.3} > {}", tol.cof));
@@ -497,7 +529,11 @@ fn verdict(
 }
 
 fn list(indices: &[usize]) -> String {
-    indices.iter().map(|i| format!("#{i}")).collect::<Vec<_>>().join(", ")
+    indices
+        .iter()
+        .map(|i| format!("#{i}"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Identification error of the contact estimates.
@@ -649,6 +685,9 @@ pub enum StopKind {
     RobotWatchdog,
     /// Commanded rod tip outside the workspace.
     Workspace,
+    /// The robot's fed-back rod tip far from every command of the tracking window (frozen or
+    /// wrong feedback, a robot that does not follow).
+    Tracking,
     /// A state, force or command stopped being finite.
     NonFinite,
     /// The virtual energy passed the scenario's divergence bound.
@@ -657,7 +696,7 @@ pub enum StopKind {
 
 impl StopKind {
     /// Every kind, in the order of [`StopKind::code`].
-    pub const ALL: [StopKind; 9] = [
+    pub const ALL: [StopKind; 10] = [
         StopKind::Completed,
         StopKind::User,
         StopKind::ForceLimit,
@@ -665,6 +704,7 @@ impl StopKind {
         StopKind::SensorWatchdog,
         StopKind::RobotWatchdog,
         StopKind::Workspace,
+        StopKind::Tracking,
         StopKind::NonFinite,
         StopKind::Diverged,
     ];
@@ -701,9 +741,7 @@ impl StopKind {
 
     /// The kind of a [`StopKind::code`].
     pub fn from_code(code: u8) -> Option<Self> {
-        StopKind::ALL
-            .get((code as usize).checked_sub(1)?)
-            .copied()
+        StopKind::ALL.get((code as usize).checked_sub(1)?).copied()
     }
 }
 
@@ -758,6 +796,7 @@ impl Stop {
             StopKind::SensorWatchdog => format!("sensor watchdog: no valid {sensor} record for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
             StopKind::RobotWatchdog => format!("robot watchdog: no valid {robot} feedback for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
             StopKind::Workspace => format!("workspace limit: commanded rod tip {:.1} mm from its start > {:.1} mm (workspace) at {t:.3} s", v * 1e3, l * 1e3),
+            StopKind::Tracking => format!("tracking limit: the fed-back rod tip is {:.1} mm from every command of the tracking window > {:.1} mm (tracking_limit) at {t:.3} s: frozen or wrong feedback, or a robot that does not follow", v * 1e3, l * 1e3),
             StopKind::NonFinite => format!("a state, force or command stopped being finite at {t:.3} s"),
             StopKind::Diverged => format!("diverged: energy {v:.4} J passed the divergence bound {l:.4} J at {t:.3} s"),
         })
@@ -836,22 +875,86 @@ pub struct RunSummary {
 impl RunSummary {
     /// The numeric columns of a run's row, after `status`.
     pub const COLUMNS: [Column; 16] = [
-        Column { name: "diverged_at", unit: "s", doc: "time the run diverged (NaN if it did not)" },
-        Column { name: "collisions", unit: "", doc: "HIL collisions" },
-        Column { name: "reference_collisions", unit: "", doc: "reference collisions" },
-        Column { name: "lost_collisions", unit: "", doc: "reference collisions the run lost" },
-        Column { name: "extra_collisions", unit: "", doc: "HIL collisions without a reference collision" },
-        Column { name: "mean_cov", unit: "", doc: "mean CoV" },
-        Column { name: "worst_cov", unit: "", doc: "the CoV farthest from 1" },
-        Column { name: "mean_cof", unit: "", doc: "mean CoF" },
-        Column { name: "worst_cof", unit: "", doc: "the CoF farthest from 1" },
-        Column { name: "worst_velocity_error", unit: "1", doc: "largest rebound velocity error |v - v_ref| / |v_ref|" },
-        Column { name: "worst_angular_velocity_error", unit: "1", doc: "largest angular velocity error |w - w_ref| / |w_ref|" },
-        Column { name: "worst_impulse_ratio", unit: "", doc: "the impulse ratio farthest from 1" },
-        Column { name: "worst_angular_impulse_ratio", unit: "", doc: "the angular impulse ratio farthest from 1" },
-        Column { name: "stiffness_error", unit: "1", doc: "mean |k_hat / k - 1|" },
-        Column { name: "damping_error", unit: "N s/m", doc: "mean |c_hat - c|" },
-        Column { name: "energy_ratio", unit: "", doc: "final energy / the reference's" },
+        Column {
+            name: "diverged_at",
+            unit: "s",
+            doc: "time the run diverged (NaN if it did not)",
+        },
+        Column {
+            name: "collisions",
+            unit: "",
+            doc: "HIL collisions",
+        },
+        Column {
+            name: "reference_collisions",
+            unit: "",
+            doc: "reference collisions",
+        },
+        Column {
+            name: "lost_collisions",
+            unit: "",
+            doc: "reference collisions the run lost",
+        },
+        Column {
+            name: "extra_collisions",
+            unit: "",
+            doc: "HIL collisions without a reference collision",
+        },
+        Column {
+            name: "mean_cov",
+            unit: "",
+            doc: "mean CoV",
+        },
+        Column {
+            name: "worst_cov",
+            unit: "",
+            doc: "the CoV farthest from 1",
+        },
+        Column {
+            name: "mean_cof",
+            unit: "",
+            doc: "mean CoF",
+        },
+        Column {
+            name: "worst_cof",
+            unit: "",
+            doc: "the CoF farthest from 1",
+        },
+        Column {
+            name: "worst_velocity_error",
+            unit: "1",
+            doc: "largest rebound velocity error |v - v_ref| / |v_ref|",
+        },
+        Column {
+            name: "worst_angular_velocity_error",
+            unit: "1",
+            doc: "largest angular velocity error |w - w_ref| / |w_ref|",
+        },
+        Column {
+            name: "worst_impulse_ratio",
+            unit: "",
+            doc: "the impulse ratio farthest from 1",
+        },
+        Column {
+            name: "worst_angular_impulse_ratio",
+            unit: "",
+            doc: "the angular impulse ratio farthest from 1",
+        },
+        Column {
+            name: "stiffness_error",
+            unit: "1",
+            doc: "mean |k_hat / k - 1|",
+        },
+        Column {
+            name: "damping_error",
+            unit: "N s/m",
+            doc: "mean |c_hat - c|",
+        },
+        Column {
+            name: "energy_ratio",
+            unit: "",
+            doc: "final energy / the reference's",
+        },
     ];
 
     /// The row of a run's metrics.
@@ -918,13 +1021,20 @@ mod tests {
     /// Contact `peak` N on the sample ranges given, 0 elsewhere, over `n` samples.
     fn pulses(n: usize, spans: &[(usize, usize, f64)]) -> Vec<f64> {
         (0..n)
-            .map(|i| spans.iter().find(|s| (s.0..s.1).contains(&i)).map_or(0.0, |s| s.2))
+            .map(|i| {
+                spans
+                    .iter()
+                    .find(|s| (s.0..s.1).contains(&i))
+                    .map_or(0.0, |s| s.2)
+            })
             .collect()
     }
 
     /// Velocity +x before sample `a`, `after` from then on.
     fn velocities(n: usize, a: usize, after: Vector3<f64>) -> Vec<Vector3<f64>> {
-        (0..n).map(|i| if i < a { Vector3::x() } else { after }).collect()
+        (0..n)
+            .map(|i| if i < a { Vector3::x() } else { after })
+            .collect()
     }
 
     fn tol() -> Tolerances {
@@ -962,8 +1072,14 @@ mod tests {
 
     #[test]
     fn ratios_against_the_reference_and_the_impulse_over_the_collision() {
-        let r = trace(&pulses(60, &[(10, 20, 100.0)]), &velocities(60, 20, -0.02 * Vector3::x()));
-        let h = trace(&pulses(60, &[(10, 20, 120.0)]), &velocities(60, 20, -0.03 * Vector3::x()));
+        let r = trace(
+            &pulses(60, &[(10, 20, 100.0)]),
+            &velocities(60, 20, -0.02 * Vector3::x()),
+        );
+        let h = trace(
+            &pulses(60, &[(10, 20, 120.0)]),
+            &velocities(60, 20, -0.03 * Vector3::x()),
+        );
         let c = compare(&h, &r, 0.5, &tol(), 0.0, 0.0);
         let x = &c.collisions[0];
         assert!((x.cov.unwrap() - 1.5).abs() < 1e-12);
@@ -978,14 +1094,24 @@ mod tests {
 
     #[test]
     fn a_rebound_in_the_wrong_direction_is_unfaithful_though_its_speed_is_right() {
-        let r = trace(&pulses(60, &[(10, 20, 5.0)]), &velocities(60, 20, Vector3::new(-0.6, 0.8, 0.0)));
-        let h = trace(&pulses(60, &[(10, 20, 5.0)]), &velocities(60, 20, Vector3::new(0.6, 0.8, 0.0)));
+        let r = trace(
+            &pulses(60, &[(10, 20, 5.0)]),
+            &velocities(60, 20, Vector3::new(-0.6, 0.8, 0.0)),
+        );
+        let h = trace(
+            &pulses(60, &[(10, 20, 5.0)]),
+            &velocities(60, 20, Vector3::new(0.6, 0.8, 0.0)),
+        );
         let c = compare(&h, &r, 0.5, &tol(), 0.0, 0.0);
         let x = &c.collisions[0];
         assert!((x.cov.unwrap() - 1.0).abs() < 1e-12);
         assert!((x.velocity_error.unwrap() - 1.2).abs() < 1e-12);
         assert_eq!(c.violations.len(), 1);
-        assert!(c.violations[0].contains("velocity error"), "{:?}", c.violations);
+        assert!(
+            c.violations[0].contains("velocity error"),
+            "{:?}",
+            c.violations
+        );
         let stop = Stop::plain(StopKind::Completed, 6.0);
         assert_eq!(Metrics::verdict(&stop, &c.violations), Status::Unfaithful);
         assert_eq!(Metrics::verdict(&stop, &[]), Status::Ok);
@@ -1016,13 +1142,24 @@ mod tests {
         let h = trace(&pulses(80, &[(10, 20, 100.0)]), &v);
         let c = compare(&h, &r, 0.5, &tol(), 0.0, 0.5);
         assert_eq!(c.lost_collisions, vec![2]);
-        assert!(c.violations.iter().any(|v| v.contains("lost (#2)")), "{:?}", c.violations);
+        assert!(
+            c.violations.iter().any(|v| v.contains("lost (#2)")),
+            "{:?}",
+            c.violations
+        );
         // allowed by the tolerances, it is not a violation
-        let lenient = Tolerances { lost_collisions: 1, ..tol() };
-        assert!(compare(&h, &r, 0.5, &lenient, 0.0, 0.5).violations.is_empty());
+        let lenient = Tolerances {
+            lost_collisions: 1,
+            ..tol()
+        };
+        assert!(compare(&h, &r, 0.5, &lenient, 0.0, 0.5)
+            .violations
+            .is_empty());
         // one that ended too close to the end of the run to be judged is not lost
         let late = trace(&pulses(80, &[(10, 20, 100.0), (70, 75, 100.0)]), &v);
-        assert!(compare(&h, &late, 0.5, &tol(), 0.0, 0.6).lost_collisions.is_empty());
+        assert!(compare(&h, &late, 0.5, &tol(), 0.0, 0.6)
+            .lost_collisions
+            .is_empty());
     }
 
     #[test]
@@ -1030,14 +1167,21 @@ mod tests {
         let v = velocities(100, 20, -Vector3::x());
         let r = trace(&pulses(100, &[(10, 20, 100.0), (50, 60, 100.0)]), &v);
         // the HIL's collisions start 0.3 s later (the lag), and there is one more at the end
-        let h = trace(&pulses(100, &[(13, 23, 100.0), (53, 63, 100.0), (85, 90, 10.0)]), &v);
+        let h = trace(
+            &pulses(100, &[(13, 23, 100.0), (53, 63, 100.0), (85, 90, 10.0)]),
+            &v,
+        );
         let c = compare(&h, &r, 0.5, &tol(), 0.3, 0.5);
         assert_eq!(c.collisions[0].reference, Some(1));
         assert_eq!(c.collisions[1].reference, Some(2));
         assert_eq!(c.collisions[2].reference, None);
         assert_eq!(c.extra_collisions, vec![3]);
         assert!(c.lost_collisions.is_empty());
-        assert!(c.violations.iter().any(|v| v.contains("extra")), "{:?}", c.violations);
+        assert!(
+            c.violations.iter().any(|v| v.contains("extra")),
+            "{:?}",
+            c.violations
+        );
     }
 
     #[test]

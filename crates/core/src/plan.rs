@@ -116,7 +116,10 @@ impl Plan {
             if let Some(j) = r.walls[..i].iter().position(|w| w.name == r.walls[i].name) {
                 issues.push(
                     format!("walls[{i}].name"),
-                    format!("duplicate wall name '{}' (also walls[{j}])", r.walls[i].name),
+                    format!(
+                        "duplicate wall name '{}' (also walls[{j}])",
+                        r.walls[i].name
+                    ),
                 );
             }
             let wall = &mut r.walls[i];
@@ -155,8 +158,11 @@ impl Plan {
         let robot_delay_ticks = delay_of("robot_delay", &mut f.robot_delay);
         let sensor_delay_ticks = delay_of("sensor_delay", &mut f.sensor_delay);
         finite(&mut issues, "facility.sensor_position", &f.sensor_position);
-        let sensor_orientation =
-            unit_quaternion(&mut issues, "facility.sensor_orientation", f.sensor_orientation);
+        let sensor_orientation = unit_quaternion(
+            &mut issues,
+            "facility.sensor_orientation",
+            f.sensor_orientation,
+        );
         if let Some(q) = sensor_orientation {
             f.sensor_orientation = q;
         }
@@ -343,10 +349,7 @@ fn inertia(issues: &mut Issues, key: &str, inertia: &Inertia) -> Option<Matrix3<
                 return None;
             }
             if d.iter().any(|&m| m <= 0.0) {
-                issues.push(
-                    key,
-                    format!("principal moments must all be > 0, got {d:?}"),
-                );
+                issues.push(key, format!("principal moments must all be > 0, got {d:?}"));
                 return None;
             }
             [[d[0], 0.0, 0.0], [0.0, d[1], 0.0], [0.0, 0.0, d[2]]]
@@ -359,10 +362,19 @@ fn inertia(issues: &mut Issues, key: &str, inertia: &Inertia) -> Option<Matrix3<
     let m = Matrix3::from_fn(|i, j| rows[i][j]);
     let scale = m.abs().max();
     if (m - m.transpose()).abs().max() > 1e-9 * scale {
-        issues.push(key, format!("the 3x3 matrix must be symmetric, got {rows:?}"));
+        issues.push(
+            key,
+            format!("the 3x3 matrix must be symmetric, got {rows:?}"),
+        );
         return None;
     }
-    let symmetric = Matrix3::from_fn(|i, j| if i == j { m[(i, i)] } else { 0.5 * (m[(i, j)] + m[(j, i)]) });
+    let symmetric = Matrix3::from_fn(|i, j| {
+        if i == j {
+            m[(i, i)]
+        } else {
+            0.5 * (m[(i, j)] + m[(j, i)])
+        }
+    });
     if symmetric.cholesky().is_none() {
         issues.push(
             key,
@@ -375,7 +387,11 @@ fn inertia(issues: &mut Issues, key: &str, inertia: &Inertia) -> Option<Matrix3<
 
 /// The mass properties and initial state of a body; normalises its orientation and
 /// symmetrises its inertia in `config`.
-fn body(issues: &mut Issues, key: &str, config: &mut BodyConfig) -> Option<(MassProperties, BodyState)> {
+fn body(
+    issues: &mut Issues,
+    key: &str,
+    config: &mut BodyConfig,
+) -> Option<(MassProperties, BodyState)> {
     let tensor = inertia(issues, &format!("{key}.inertia"), &config.inertia);
     let q = unit_quaternion(issues, &format!("{key}.orientation"), config.orientation);
     let vectors_ok = [
@@ -384,7 +400,9 @@ fn body(issues: &mut Issues, key: &str, config: &mut BodyConfig) -> Option<(Mass
         ("angular_velocity", config.angular_velocity),
     ]
     .iter()
-    .fold(true, |ok, (name, v)| finite(issues, &format!("{key}.{name}"), v) && ok);
+    .fold(true, |ok, (name, v)| {
+        finite(issues, &format!("{key}.{name}"), v) && ok
+    });
     let (Some(tensor), Some(q), true) = (tensor, q, vectors_ok) else {
         return None;
     };

@@ -7,11 +7,11 @@ use nalgebra::{UnitQuaternion, Vector3};
 use crate::config::{ContactModelKind, Scenario};
 use crate::error::Result;
 use crate::facility::FacilityModel;
+use crate::frames::FrameWrench;
 pub use crate::hil::HilRecord;
 use crate::hil::HilStep;
-use crate::frames::FrameWrench;
-use crate::metrics::{self, EnergySummary, Metrics, Stop, TraceSample};
 pub use crate::metrics::Trace;
+use crate::metrics::{self, EnergySummary, Metrics, Stop, TraceSample};
 use crate::plan::Plan;
 
 /// Named columns of equal length.
@@ -173,7 +173,12 @@ pub fn run_hil(plan: &Plan, energy_bound: f64, keep_rows: bool) -> HilRun {
     let stop = loop {
         let m = facility.measure();
         let (row, stop) = step.observe(k, &m, Some(facility.contact_force()));
-        push_record(&mut trace, &row, &plan.facility.sensor_orientation, estimates);
+        push_record(
+            &mut trace,
+            &row,
+            &plan.facility.sensor_orientation,
+            estimates,
+        );
         if keep_rows {
             rows.push(row);
         }
@@ -260,12 +265,26 @@ pub struct Field<R> {
 
 /// A one-column field read by `get`, in every run.
 pub const fn scalar<R>(name: &'static str, unit: &'static str, get: fn(&R) -> f64) -> Field<R> {
-    Field { name, unit, get: Get::Scalar(get), only: Only::Always }
+    Field {
+        name,
+        unit,
+        get: Get::Scalar(get),
+        only: Only::Always,
+    }
 }
 
 /// A three-column field read by `get`, in every run.
-pub const fn vector<R>(name: &'static str, unit: &'static str, get: fn(&R) -> Vector3<f64>) -> Field<R> {
-    Field { name, unit, get: Get::Vector(get), only: Only::Always }
+pub const fn vector<R>(
+    name: &'static str,
+    unit: &'static str,
+    get: fn(&R) -> Vector3<f64>,
+) -> Field<R> {
+    Field {
+        name,
+        unit,
+        get: Get::Vector(get),
+        only: Only::Always,
+    }
 }
 
 /// The HIL loop's table (one definition for simulations and real-time runs): desired
@@ -285,9 +304,18 @@ pub const HIL_FIELDS: [Field<HilRecord>; 15] = [
     vector("applied_force", "N", |r| r.applied_force),
     vector("applied_moment", "N m", |r| r.applied_moment),
     scalar("energy", "J", |r| r.energy),
-    Field { only: Only::Estimates, ..scalar("stiffness_estimate", "N/m", |r| r.stiffness_estimate) },
-    Field { only: Only::Estimates, ..scalar("damping_estimate", "N s/m", |r| r.damping_estimate) },
-    Field { only: Only::ObservedEnergy, ..scalar("observed_energy", "J", |r| r.observed_energy) },
+    Field {
+        only: Only::Estimates,
+        ..scalar("stiffness_estimate", "N/m", |r| r.stiffness_estimate)
+    },
+    Field {
+        only: Only::Estimates,
+        ..scalar("damping_estimate", "N s/m", |r| r.damping_estimate)
+    },
+    Field {
+        only: Only::ObservedEnergy,
+        ..scalar("observed_energy", "J", |r| r.observed_energy)
+    },
 ];
 
 /// The reference's table: rod tip (`t`), the servicer's angular velocity relative to the
@@ -369,7 +397,13 @@ fn run(plan: &Plan, keep_rows: bool) -> Runs {
         reference_energy,
     );
     let hil = run_hil(plan, bound, keep_rows);
-    let metrics = trace_metrics(plan, &reference_trace, &hil.trace, hil.estimates_contact, hil.stop);
+    let metrics = trace_metrics(
+        plan,
+        &reference_trace,
+        &hil.trace,
+        hil.estimates_contact,
+        hil.stop,
+    );
     Runs {
         reference,
         hil,
@@ -414,7 +448,9 @@ pub fn trace_metrics(
         (Some(reason), _) => Some(reason),
         (None, []) => None,
         (None, [first]) => Some(format!("unfaithful: {first}")),
-        (None, [first, rest @ ..]) => Some(format!("unfaithful: {first} (and {} more)", rest.len())),
+        (None, [first, rest @ ..]) => {
+            Some(format!("unfaithful: {first} (and {} more)", rest.len()))
+        }
     };
     let (t, r) = (hil, reference);
     Metrics {

@@ -200,7 +200,11 @@ fn nothing_diverges_up_to_60_ms() {
         for delay in [0.030, 0.045, 0.060] {
             let name = kind.kind();
             let out = run(table1(delay, 0.0), kind.clone());
-            assert_eq!(out.metrics.stop.kind, StopKind::Completed, "{name} at {delay}");
+            assert_eq!(
+                out.metrics.stop.kind,
+                StopKind::Completed,
+                "{name} at {delay}"
+            );
             assert!(
                 covs(&out).iter().all(|c| (c - 1.0).abs() < 0.05),
                 "{name} at {delay}: CoV {:?}",
@@ -290,7 +294,11 @@ fn pida_at_20ms_with_up_to_1n_of_noise_keeps_every_collision_and_applies_only_th
         s.facility.seed = seed;
         let out = run(s, CompensatorConfig::Pida(ModelParams::default()));
         let m = &out.metrics;
-        assert!(m.lost_collisions.is_empty() && m.extra_collisions.is_empty(), "σ {noise} seed {seed}: {:?}", m.violations);
+        assert!(
+            m.lost_collisions.is_empty() && m.extra_collisions.is_empty(),
+            "σ {noise} seed {seed}: {:?}",
+            m.violations
+        );
         assert!(m.summary.compared >= 4, "σ {noise} seed {seed}");
         for c in m.collisions.iter().filter_map(|c| c.cov) {
             assert!((c - 1.0).abs() <= 0.05, "σ {noise} seed {seed}: CoV {c}");
@@ -298,14 +306,20 @@ fn pida_at_20ms_with_up_to_1n_of_noise_keeps_every_collision_and_applies_only_th
         // free flight: no physical contact over the last 60 ms (robot delay and a margin)
         let col = |name: &str| out.timeseries.column(name).unwrap();
         let norm = |p: &str, k: usize| {
-            (col(&format!("{p}_x"))[k].powi(2) + col(&format!("{p}_y"))[k].powi(2) + col(&format!("{p}_z"))[k].powi(2)).sqrt()
+            (col(&format!("{p}_x"))[k].powi(2)
+                + col(&format!("{p}_y"))[k].powi(2)
+                + col(&format!("{p}_z"))[k].powi(2))
+            .sqrt()
         };
         let mut free_ticks = 0usize;
         for k in 60..col("time").len() {
             if (k - 60..=k).all(|j| norm("contact_force", j) == 0.0) {
                 free_ticks += 1;
                 let applied = norm("applied_force", k);
-                assert!(applied <= 6.0 * noise, "σ {noise} seed {seed}: {applied} N applied in free flight at tick {k}");
+                assert!(
+                    applied <= 6.0 * noise,
+                    "σ {noise} seed {seed}: {applied} N applied in free flight at tick {k}"
+                );
             }
         }
         assert!(free_ticks > 1000);
@@ -341,10 +355,17 @@ fn pida_is_faithful_in_6dof_at_10_20_and_40_ms() {
         for noisy in [false, true] {
             for delay in [0.010, 0.020, 0.040] {
                 let label = format!("general {general}, noisy {noisy}, {} ms", delay * 1e3);
-                let out = run(six_dof(general, delay, noisy), CompensatorConfig::Pida(ModelParams::default()));
+                let out = run(
+                    six_dof(general, delay, noisy),
+                    CompensatorConfig::Pida(ModelParams::default()),
+                );
                 let m = &out.metrics;
                 assert_eq!(m.stop.kind, StopKind::Completed, "{label}");
-                assert!(m.lost_collisions.is_empty() && m.extra_collisions.is_empty(), "{label}: {:?}", m.violations);
+                assert!(
+                    m.lost_collisions.is_empty() && m.extra_collisions.is_empty(),
+                    "{label}: {:?}",
+                    m.violations
+                );
                 assert!(m.summary.compared >= 2, "{label}");
                 let max_error = if delay > 0.03 { 0.08 } else { 0.05 };
                 for c in &m.collisions {

@@ -276,7 +276,11 @@ fn invalid_scenarios_are_rejected_naming_the_key() {
 
 /// A general 6-DOF case of `oblique-6dof`: both bodies moving and spinning about every axis,
 /// the tilted wall, the offset rod; delays, noise and seed as given.
-fn general_6dof(target_spin: [f64; 3], servicer_spin: [f64; 3], target_velocity: [f64; 3]) -> hilcontact_core::Scenario {
+fn general_6dof(
+    target_spin: [f64; 3],
+    servicer_spin: [f64; 3],
+    target_velocity: [f64; 3],
+) -> hilcontact_core::Scenario {
     let mut s = preset("oblique-6dof");
     s.facility.robot_delay = 0.0;
     s.facility.sensor_delay = 0.0;
@@ -289,18 +293,33 @@ fn general_6dof(target_spin: [f64; 3], servicer_spin: [f64; 3], target_velocity:
 #[test]
 fn without_delay_the_loop_reproduces_the_reference_in_6dof_to_a_thousandth() {
     // second-order virtual dynamics (kick-drift): the first-order step left 0.5 % at 1 ms
-    let s = general_6dof([0.01, 0.02, -0.015], [0.005, -0.01, 0.02], [0.001, -0.002, 0.0005]);
+    let s = general_6dof(
+        [0.01, 0.02, -0.015],
+        [0.005, -0.01, 0.02],
+        [0.001, -0.002, 0.0005],
+    );
     let m = simulate(&s).unwrap().metrics;
     assert_eq!(m.status, Status::Ok, "{:?}", m.violations);
     assert!(m.reference_collisions.len() >= 2);
     assert!(m.lost_collisions.is_empty() && m.extra_collisions.is_empty());
     for c in &m.collisions {
         let e = c.velocity_error.unwrap();
-        assert!(e <= 1e-3, "collision {}: velocity error {e}", c.collision.index);
+        assert!(
+            e <= 1e-3,
+            "collision {}: velocity error {e}",
+            c.collision.index
+        );
         let w = c.angular_velocity_error.unwrap();
-        assert!(w <= 1e-3, "collision {}: angular velocity error {w}", c.collision.index);
+        assert!(
+            w <= 1e-3,
+            "collision {}: angular velocity error {w}",
+            c.collision.index
+        );
         let (j, h) = (c.impulse_ratio.unwrap(), c.angular_impulse_ratio.unwrap());
-        assert!((j - 1.0).abs() <= 1e-3 && (h - 1.0).abs() <= 1e-3, "impulses {j} {h}");
+        assert!(
+            (j - 1.0).abs() <= 1e-3 && (h - 1.0).abs() <= 1e-3,
+            "impulses {j} {h}"
+        );
     }
 }
 

@@ -19,7 +19,10 @@ fn module_graph(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
         }
     }
     let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
-    for file in files.iter().filter(|p| p.extension().is_some_and(|e| e == "rs")) {
+    for file in files
+        .iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "rs"))
+    {
         let relative = file.strip_prefix(src).expect("under src");
         let module = relative
             .components()
@@ -87,9 +90,14 @@ fn find_cycle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>>
 }
 
 fn assert_acyclic(crate_dir: &str) {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join(crate_dir).join("src");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(crate_dir)
+        .join("src");
     let graph = module_graph(&src);
-    assert!(graph.len() > 5, "read too few modules of {crate_dir}: {graph:?}");
+    assert!(
+        graph.len() > 5,
+        "read too few modules of {crate_dir}: {graph:?}"
+    );
     if let Some(cycle) = find_cycle(&graph) {
         panic!("circular imports in {crate_dir}: {}", cycle.join(" -> "));
     }

@@ -160,9 +160,9 @@ fn reference_collisions(s: &Scenario, substeps: u32) -> Vec<(f64, f64)> {
     s.simulation.reference_substeps = substeps;
     let (trace, _) = run_reference(&s.resolve().unwrap(), false);
     collisions(&trace, s.metrics.contact_threshold)
-    .iter()
-    .map(|c| (c.rebound_speed.unwrap_or(f64::NAN), c.peak_force))
-    .collect()
+        .iter()
+        .map(|c| (c.rebound_speed.unwrap_or(f64::NAN), c.peak_force))
+        .collect()
 }
 
 #[test]
@@ -201,10 +201,7 @@ fn reference_free_flight_step_matches_fine_rk4() {
     // one force-free step per period while clear of the walls: same motion as RK4 at 0.1 ms
     let s = tumbling();
     let system = s.resolve().unwrap().system;
-    let (mut x, mut y) = (
-        s.resolve().unwrap().initial,
-        s.resolve().unwrap().initial,
-    );
+    let (mut x, mut y) = (s.resolve().unwrap().initial, s.resolve().unwrap().initial);
     for _ in 0..5_000 {
         system.step_reference(&mut x, 1e-3, 1);
         for _ in 0..10 {

@@ -414,13 +414,19 @@ fn simulate_batch<'py>(
                 .unwrap_or("")
                 .to_string(),
         );
-        for (column, value) in columns.iter_mut().zip(row.values.iter().chain([&wall_time])) {
+        for (column, value) in columns
+            .iter_mut()
+            .zip(row.values.iter().chain([&wall_time]))
+        {
             column.push(*value);
         }
     }
     let result = PyDict::new(py);
     result.set_item("status", status)?;
-    let names = RunSummary::COLUMNS.iter().map(|c| c.name).chain(["wall_time"]);
+    let names = RunSummary::COLUMNS
+        .iter()
+        .map(|c| c.name)
+        .chain(["wall_time"]);
     for (name, values) in names.zip(columns) {
         result.set_item(name, values.into_pyarray(py))?;
     }

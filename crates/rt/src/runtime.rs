@@ -50,7 +50,7 @@ use crate::links::{
 use crate::report::{build_output, HilOutput};
 pub use crate::report::{RunOutcome, Sample};
 use crate::safety::{
-    check_workspace, check_wrench, hold_target, SafetyLimits, StopEvent, StopKind,
+    check_workspace, check_wrench, hold_target, SafetyLimits, StopEvent, StopKind, Tracking,
 };
 
 /// Options of the real-time runtime (defaults in [`Default`]; the CLI documents each).
@@ -301,6 +301,7 @@ impl HilHandle {
             estimator: FeedbackEstimator::new(o.extrapolation),
             last_command: None,
             last_free: None,
+            tracking: Tracking::new(&o.limits, period),
             producer,
             samples_dropped: 0,
             shared: shared.clone(),
@@ -436,6 +437,8 @@ struct Loop {
     /// The robot's fed-back pose at the last tick whose measured force was below
     /// [`CONTACT_FREE_FORCE`] (the retreat target of a force stop).
     last_free: Option<RelativeMotion>,
+    /// The commands of the tracking window, against which the feedback is checked.
+    tracking: Tracking,
     // log and timing
     producer: rtrb::Producer<Sample>,
     samples_dropped: u64,
@@ -628,6 +631,7 @@ impl Loop {
             &self.limits,
             self.estimator.last_pose(),
             self.last_command,
+            &self.tracking,
             &self.rod,
             &self.start_tip,
         )
@@ -798,6 +802,11 @@ impl Loop {
         if let Some(stop) = check_wrench(&self.limits, &m.force, &m.moment, time) {
             return Err(stop);
         }
+        if let Some(fed_back) = self.estimator.last_pose() {
+            if let Some(stop) = self.tracking.check(&fed_back.point(&self.rod), time) {
+                return Err(stop);
+            }
+        }
         // divergence, a non-finite record, or the end of the run
         if let Some(stop) = verdict {
             return Err(stop);
@@ -811,6 +820,7 @@ impl Loop {
         ) {
             return Err(stop);
         }
+        self.tracking.push(command.point(&self.rod));
         Ok(command)
     }
 

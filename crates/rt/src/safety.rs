@@ -2,13 +2,15 @@
 //!
 //! Every tick the loop checks, in this order: a user stop; the watchdogs (no valid sensor
 //! record / robot feedback for `watchdog_ms`); the force and moment limits on the measured
-//! wrench (magnitudes, sensor frame); then, on the new command, that it is finite and that
-//! the commanded rod tip stays within `workspace` metres of where it started; and that the
-//! virtual energy stays below the scenario's divergence bound. Any of them stops the run:
-//! the robot is commanded to hold its last fed-back pose if that pose is inside the
-//! workspace and within `hold_deviation` of the last command (else the last command, which
-//! passed every check; [`hold_target`]), sensor streaming is stopped, the
-//! sample log is drained, and the [`StopKind`] goes to `metrics.json` and the exit code.
+//! wrench (magnitudes, sensor frame); tracking: the robot's fed-back rod tip within
+//! `tracking_limit` of a command of the last `tracking_window` ([`Tracking`]); that the
+//! virtual energy stays below the scenario's divergence bound; then, on the new command, that
+//! it is finite and that the commanded rod tip stays within `workspace` metres of where it
+//! started. Any of them stops the run: the robot is commanded to hold its last fed-back pose
+//! if that pose is inside the workspace and within `hold_deviation` of a command of the
+//! tracking window (else the last command, which passed every check; [`hold_target`]), sensor
+//! streaming is stopped, the sample log is drained, and the [`StopKind`] goes to
+//! `metrics.json` and the exit code.
 
 use hilcontact_core::frames::RelativeMotion;
 use nalgebra::Vector3;
@@ -16,7 +18,8 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, RtError};
 
-/// The limits, with units. Defaults: 500 N, 100 N·m, 50 ms, 0.1 m, 20 mm.
+/// The limits, with units. Defaults: 500 N, 100 N·m, 50 ms, 0.1 m workspace, 20 mm hold
+/// deviation, 20 mm/s and 20 mm retreat, 10 mm tracking over a 0.5 s window.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SafetyLimits {
@@ -38,6 +41,14 @@ pub struct SafetyLimits {
     pub retreat_speed: f64,
     /// Longest retreat of a force or moment stop, m (> 0).
     pub retreat_distance: f64,
+    /// Largest distance between the robot's fed-back rod tip and the nearest commanded rod
+    /// tip of the last `tracking_window` seconds, m (> 0): beyond it the feedback is frozen or
+    /// wrong, or the robot does not follow ([`Tracking`]).
+    pub tracking_limit: f64,
+    /// How far back the commands are compared with the feedback, s (> 0): longer than the
+    /// robot's response delay (feedback shows a command that old), shorter than the time
+    /// the command needs to move `tracking_limit`.
+    pub tracking_window: f64,
 }
 
 impl Default for SafetyLimits {
@@ -50,6 +61,8 @@ impl Default for SafetyLimits {
             hold_deviation: 0.02,
             retreat_speed: 0.02,
             retreat_distance: 0.02,
+            tracking_limit: 0.01,
+            tracking_window: 0.5,
         }
     }
 }
@@ -65,6 +78,8 @@ impl SafetyLimits {
             ("hold_deviation", self.hold_deviation),
             ("retreat_speed", self.retreat_speed),
             ("retreat_distance", self.retreat_distance),
+            ("tracking_limit", self.tracking_limit),
+            ("tracking_window", self.tracking_window),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(RtError::option(
@@ -115,20 +130,23 @@ pub fn check_wrench(
 
 /// The pose a stop holds the robot at (see the module doc): the fed-back pose `feedback` if
 /// its rod tip (`rod`, servicer body frame, m) is inside the workspace around `start` (m, `t`)
-/// and, once a command was sent, within `hold_deviation` of the last command's; else the last
+/// and, once commands were sent, within `hold_deviation` of the nearest command of the
+/// tracking window (`tracking`: the robot shows a command one delay old); else the last
 /// command; `None` (send nothing) when neither is known and trusted.
 pub fn hold_target(
     limits: &SafetyLimits,
     feedback: Option<RelativeMotion>,
     last_command: Option<RelativeMotion>,
+    tracking: &Tracking,
     rod: &Vector3<f64>,
     start: &Vector3<f64>,
 ) -> Option<RelativeMotion> {
     let trusted = |pose: &RelativeMotion| {
         let tip = pose.point(rod);
         let inside = (tip - start).norm() <= limits.workspace;
-        let tracking =
-            last_command.is_none_or(|c| (c.point(rod) - tip).norm() <= limits.hold_deviation);
+        let tracking = tracking
+            .deviation(&tip)
+            .is_none_or(|d| d <= limits.hold_deviation);
         inside && tracking
     };
     match (feedback, last_command) {
@@ -155,6 +173,62 @@ pub fn check_workspace(
         value: distance,
         limit: limits.workspace,
     })
+}
+
+/// The tracking check: the commanded rod tips of the last `tracking_window` seconds in a
+/// ring (allocated once), and the distance of a fed-back rod tip to the nearest of them. The
+/// robot's feedback shows a command one response delay old, so the nearest command of the
+/// window is the one the robot is following, whatever the delay (up to the window).
+#[derive(Debug, Clone)]
+pub struct Tracking {
+    /// Commanded rod tips, m in `t` (a ring; `next` is the oldest once full).
+    tips: Vec<Vector3<f64>>,
+    next: usize,
+    limit: f64,
+}
+
+impl Tracking {
+    /// A check over `limits.tracking_window` at one command per `period` s.
+    pub fn new(limits: &SafetyLimits, period: f64) -> Self {
+        let n = (limits.tracking_window / period).ceil().max(1.0) as usize + 1;
+        Tracking {
+            tips: Vec::with_capacity(n),
+            next: 0,
+            limit: limits.tracking_limit,
+        }
+    }
+
+    /// Remembers a commanded rod tip (m, `t`); forgets the oldest once the window is full.
+    /// Never allocates.
+    pub fn push(&mut self, tip: Vector3<f64>) {
+        if self.tips.len() < self.tips.capacity() {
+            self.tips.push(tip);
+        } else {
+            self.tips[self.next] = tip;
+            self.next = (self.next + 1) % self.tips.len();
+        }
+    }
+
+    /// Distance from the fed-back rod tip `fed_back` (m, `t`) to the nearest command of the
+    /// window, m (None before the first command).
+    pub fn deviation(&self, fed_back: &Vector3<f64>) -> Option<f64> {
+        self.tips
+            .iter()
+            .map(|c| (c - fed_back).norm())
+            .min_by(|a, b| a.total_cmp(b))
+    }
+
+    /// The stop when the fed-back rod tip is farther than `tracking_limit` from every command
+    /// of the window (a non-finite tip is a stop too).
+    pub fn check(&self, fed_back: &Vector3<f64>, time: f64) -> Option<StopEvent> {
+        let d = self.deviation(fed_back)?;
+        (d.is_nan() || d > self.limit).then_some(StopEvent {
+            kind: StopKind::Tracking,
+            time,
+            value: d,
+            limit: self.limit,
+        })
+    }
 }
 
 #[cfg(test)]
@@ -213,6 +287,8 @@ mod tests {
             StopKind::ForceLimit,
             StopKind::Diverged,
             StopKind::RobotWatchdog,
+            StopKind::Tracking,
+            StopKind::NonFinite,
         ] {
             assert_eq!(StopKind::from_code(k.code()), Some(k));
         }
@@ -241,6 +317,40 @@ mod tests {
     }
 
     #[test]
+    fn tracking_allows_the_delay_and_catches_frozen_feedback() {
+        let limits = SafetyLimits::default(); // 10 mm over 0.5 s
+        let period = 0.004;
+        let mut tracking = Tracking::new(&limits, period);
+        assert!(tracking.check(&Vector3::zeros(), 0.0).is_none()); // no command yet
+        let speed = 0.05; // m/s, along x
+        let delay = 0.12; // s: a slow robot follows 6 mm behind
+        let mut frozen_stop = None;
+        for k in 0..500 {
+            let t = k as f64 * period;
+            tracking.push(Vector3::new(speed * t, 0.0, 0.0));
+            let following = Vector3::new(speed * (t - delay).max(0.0), 0.0, 0.0);
+            assert!(
+                tracking.check(&following, t).is_none(),
+                "a robot {delay} s behind is tracking"
+            );
+            if frozen_stop.is_none() {
+                frozen_stop = tracking.check(&Vector3::zeros(), t);
+            }
+        }
+        // frozen at the start: stopped once the window's oldest command is 10 mm away,
+        // i.e. 0.2 s + 0.5 s after the start
+        let stop = frozen_stop.expect("frozen feedback is a tracking stop");
+        assert_eq!(stop.kind, StopKind::Tracking);
+        assert!((stop.time - 0.7).abs() < 0.01, "stopped at {}", stop.time);
+        assert!(stop.reason().unwrap().contains("tracking_limit"));
+        // a feedback 300 mm off is a stop at once, and NaN too
+        assert!(tracking.check(&Vector3::new(0.3, 0.3, 0.0), 2.0).is_some());
+        assert!(tracking
+            .check(&Vector3::new(f64::NAN, 0.0, 0.0), 2.0)
+            .is_some());
+    }
+
+    #[test]
     fn a_stop_holds_the_feedback_only_when_it_is_plausible() {
         use nalgebra::UnitQuaternion;
         let l = SafetyLimits::default();
@@ -252,26 +362,86 @@ mod tests {
             angular_velocity: Vector3::zeros(),
         };
         let start = at(-0.995).point(&rod);
+        let period = 0.004;
+        let commanded = |x: f64| {
+            let mut t = Tracking::new(&l, period);
+            t.push(at(x).point(&rod));
+            t
+        };
         // tracking: the robot 5 mm behind the command is held where it is
-        let held = hold_target(&l, Some(at(-0.990)), Some(at(-0.985)), &rod, &start).unwrap();
+        let held = hold_target(
+            &l,
+            Some(at(-0.990)),
+            Some(at(-0.985)),
+            &commanded(-0.985),
+            &rod,
+            &start,
+        )
+        .unwrap();
         assert_eq!(held.position.x, -0.990);
         // a feedback 300 mm off (inside a 100 m plausibility bound, outside the workspace):
         // the last command is held, not the bogus pose
-        let held = hold_target(&l, Some(at(-0.695)), Some(at(-0.985)), &rod, &start).unwrap();
+        let held = hold_target(
+            &l,
+            Some(at(-0.695)),
+            Some(at(-0.985)),
+            &commanded(-0.985),
+            &rod,
+            &start,
+        )
+        .unwrap();
         assert_eq!(held.position.x, -0.985);
+        // a robot 15 mm behind the last command but on a command of the window (a slow
+        // robot): trusted
+        let mut window = Tracking::new(&l, period);
+        for x in [-0.990, -0.985, -0.980, -0.975] {
+            window.push(at(x).point(&rod));
+        }
+        let held = hold_target(
+            &l,
+            Some(at(-0.990)),
+            Some(at(-0.975)),
+            &window,
+            &rod,
+            &start,
+        );
+        assert_eq!(held.unwrap().position.x, -0.990);
         // inside the workspace but 50 mm from the command: the command too
-        let held = hold_target(&l, Some(at(-0.935)), Some(at(-0.985)), &rod, &start).unwrap();
+        let held = hold_target(
+            &l,
+            Some(at(-0.935)),
+            Some(at(-0.985)),
+            &commanded(-0.985),
+            &rod,
+            &start,
+        )
+        .unwrap();
         assert_eq!(held.position.x, -0.985);
         // before any command (a refused start): the robot's own pose if inside the workspace,
         // else nothing at all
         assert_eq!(
-            hold_target(&l, Some(at(-0.945)), None, &rod, &start)
-                .unwrap()
-                .position
-                .x,
+            hold_target(
+                &l,
+                Some(at(-0.945)),
+                None,
+                &Tracking::new(&l, period),
+                &rod,
+                &start
+            )
+            .unwrap()
+            .position
+            .x,
             -0.945
         );
-        assert!(hold_target(&l, Some(at(0.4)), None, &rod, &start).is_none());
-        assert!(hold_target(&l, None, None, &rod, &start).is_none());
+        assert!(hold_target(
+            &l,
+            Some(at(0.4)),
+            None,
+            &Tracking::new(&l, period),
+            &rod,
+            &start
+        )
+        .is_none());
+        assert!(hold_target(&l, None, None, &Tracking::new(&l, period), &rod, &start).is_none());
     }
 }

@@ -265,7 +265,7 @@ fn a_refused_start_commands_no_motion() {
             counts: [0; 6],
         };
         sensor.send_to(&record.encode(), client).unwrap();
-        if seq % 4 == 0 {
+        if seq.is_multiple_of(4) {
             robot
                 .send_to(
                     feedback.encode(seq / 4, seq as u64 * 1000, &away, &away),
@@ -279,11 +279,10 @@ fn a_refused_start_commands_no_motion() {
         std::thread::sleep(Duration::from_millis(1));
     }
     assert!(hil.wait(Duration::from_secs(5)));
-    let error = hil
-        .finish()
-        .err()
-        .expect("the start must be refused")
-        .to_string();
+    let Err(error) = hil.finish() else {
+        panic!("the start must be refused")
+    };
+    let error = error.to_string();
     assert!(
         error.contains("50.0 mm from the scenario's initial position"),
         "{error}"
@@ -298,5 +297,150 @@ fn a_refused_start_commands_no_motion() {
     for c in &corrections {
         assert_eq!(c.pose, away, "a correction toward another pose was sent");
         assert_eq!(c.speed, [0.0; 6]);
+    }
+}
+
+/// What a scripted run saw: the output (or the error) and every correction the robot got.
+struct Scripted {
+    output: hilcontact_rt::Result<hilcontact_rt::report::HilOutput>,
+    corrections: Vec<hilcontact_rt::egm::Correction>,
+}
+
+/// Runs `s` against a scripted sensor (zero wrench, a record per ms) and a scripted robot that
+/// sends `robot_pose(ms)` every 4 ms (None: nothing), until the run ends (at most 15 s).
+fn run_scripted(
+    s: &hilcontact_core::Scenario,
+    limits: SafetyLimits,
+    mut robot_pose: impl FnMut(u32) -> Option<EgmPoseMm>,
+) -> Scripted {
+    let sensor = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let robot = UdpSocket::bind("127.0.0.1:0").unwrap();
+    sensor
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    let egm_port = free_udp_port();
+    let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
+    let options = RuntimeOptions {
+        limits,
+        ..scripted(&sensor, egm_port)
+    };
+    let hil = HilHandle::start(s, &options).unwrap();
+    let mut buf = [0u8; 64];
+    let (_, client) = sensor.recv_from(&mut buf).unwrap();
+    let mut feedback = FeedbackEncoder::new();
+    robot.set_nonblocking(true).unwrap();
+    let mut decoder = CorrectionDecoder::new();
+    let mut corrections = Vec::new();
+    let mut big = [0u8; 2048];
+    let start = Instant::now();
+    let mut egm_seq = 0u32;
+    // the script runs on its own millisecond count: a busy machine slows it, never skips it
+    let mut ms = 0u32;
+    while !hil.is_finished() && start.elapsed() < Duration::from_secs(15) {
+        ms += 1;
+        let record = RdtRecord {
+            rdt_sequence: ms,
+            ft_sequence: ms,
+            status: 0,
+            counts: [0; 6],
+        };
+        sensor.send_to(&record.encode(), client).unwrap();
+        if ms.is_multiple_of(4) {
+            if let Some(p) = robot_pose(ms) {
+                egm_seq += 1;
+                robot
+                    .send_to(feedback.encode(egm_seq, ms as u64 * 1000, &p, &p), egm)
+                    .unwrap();
+            }
+        }
+        while let Ok(n) = robot.recv(&mut big) {
+            corrections.push(decoder.decode(&big[..n]).unwrap());
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert!(hil.wait(Duration::from_secs(5)), "the run did not end");
+    let output = hil.finish();
+    while let Ok(n) = robot.recv(&mut big) {
+        corrections.push(decoder.decode(&big[..n]).unwrap());
+    }
+    Scripted {
+        output,
+        corrections,
+    }
+}
+
+/// Feedback that stays at the start while the command moves (paper-table1: 20 mm/s, the
+/// sensor reads no contact) is a tracking stop once every command of the 0.5 s window is
+/// 10 mm away (at about 1.0 s), long before the workspace limit (100 mm, 5 s); the hold that
+/// follows targets a checked pose at rest.
+#[test]
+fn frozen_feedback_is_a_tracking_stop() {
+    let mut s = preset("paper-table1");
+    s.simulation.duration = 6.0;
+    let limits = SafetyLimits {
+        watchdog_ms: 500.0, // a busy machine must not trip the watchdog first
+        ..Default::default()
+    };
+    let frozen = pose(-995.0, 1.0);
+    let run = run_scripted(&s, limits, |_| Some(frozen));
+    let out = run.output.expect("the run starts");
+    let rt = &out.metrics["realtime"];
+    assert_eq!(rt["stop"]["kind"], "tracking", "{}", out.metrics["reason"]);
+    assert_eq!(out.exit_code, 3);
+    let time = rt["stop"]["time"].as_f64().unwrap();
+    assert!((0.9..1.3).contains(&time), "stopped at {time} s");
+    let value = rt["stop"]["value"].as_f64().unwrap();
+    assert!((0.010..0.012).contains(&value), "deviation {value} m");
+    let last = run.corrections.last().expect("a hold was sent").target;
+    assert_eq!(last.speed, [0.0; 6]);
+    // the hold is at the robot's own pose (10 mm from the last command: trusted) ...
+    assert_eq!(last.pose, frozen);
+    // ... and no command ever left the workspace
+    assert!(run
+        .corrections
+        .iter()
+        .all(|c| (c.target.pose.position_mm[0] + 995.0).abs() < 100.0));
+}
+
+/// A 300 mm feedback jump (inside any plausibility bound of the protocol) is counted and
+/// rejected, every message of it: the loop never sees the bogus pose, the robot watchdog stops
+/// the run, and the hold never targets the bogus pose.
+#[test]
+fn a_300_mm_feedback_jump_is_counted_and_never_held() {
+    let mut s = preset("paper-table1");
+    s.simulation.duration = 6.0;
+    let limits = SafetyLimits {
+        watchdog_ms: 200.0,
+        ..Default::default()
+    };
+    // the robot follows the command (20 mm/s from -995 mm), then reports 300 mm off from 0.3 s
+    let run = run_scripted(&s, limits, |ms| {
+        let t = ms as f64 * 1e-3;
+        let x = -995.0 + 20.0 * t.min(0.3);
+        Some(pose(if t < 0.3 { x } else { x + 300.0 }, 1.0))
+    });
+    let out = run.output.expect("the run starts");
+    let rt = &out.metrics["realtime"];
+    assert_eq!(
+        rt["stop"]["kind"], "robot-watchdog",
+        "{}",
+        out.metrics["reason"]
+    );
+    assert!(
+        rt["robot"]["invalid"].as_u64().unwrap() >= 20,
+        "{}",
+        rt["robot"]
+    );
+    let column = out.timeseries.column("actual_tip_position_x").unwrap();
+    assert!(
+        column.iter().all(|x| *x < 0.05),
+        "the bogus pose reached the loop"
+    );
+    for c in &run.corrections {
+        assert!(
+            (c.target.pose.position_mm[0] + 995.0).abs() < 50.0,
+            "a correction toward {:?}",
+            c.target.pose
+        );
     }
 }

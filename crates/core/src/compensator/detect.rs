@@ -149,9 +149,15 @@ mod tests {
         for sigma in [0.2, 0.5, 1.0, 2.0] {
             let mut rng = Pcg64Mcg::seed_from_u64(7);
             let mut d = ContactDetector::new(3.0, 1e-3);
-            let false_alarms = (0..100_000).filter(|_| d.update(&noise(&mut rng, sigma))).count();
+            let false_alarms = (0..100_000)
+                .filter(|_| d.update(&noise(&mut rng, sigma)))
+                .count();
             assert_eq!(false_alarms, 0, "σ = {sigma}");
-            assert!((d.noise() / sigma - 1.0).abs() < 0.15, "σ̂ {} for {sigma}", d.noise());
+            assert!(
+                (d.noise() / sigma - 1.0).abs() < 0.15,
+                "σ̂ {} for {sigma}",
+                d.noise()
+            );
             // a 100 N contact is detected, held through its noisy tail and released
             assert!(d.update(&(Vector3::new(100.0, 0.0, 0.0) + noise(&mut rng, sigma))));
             let hold = d.off_threshold() + 0.5;

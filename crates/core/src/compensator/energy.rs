@@ -255,9 +255,9 @@ impl DampingAmendment {
         let f_ek = self
             .observer
             .step(view.in_contact, force, &view.direction, view.damping, &v);
-        let (_, f_alpha) = self
-            .controller
-            .step(self.observer.energy(), &f_ek, &view.direction, &v, force);
+        let (_, f_alpha) =
+            self.controller
+                .step(self.observer.energy(), &f_ek, &view.direction, &v, force);
         self.observer.record_alpha_force(&f_alpha);
         FrameWrench {
             force: f_alpha,
@@ -316,38 +316,41 @@ mod tests {
     #[test]
     fn controller_only_dissipates_and_alpha_is_never_negative() {
         for mode in [ControllerMode::Normal, ControllerMode::Paper] {
-        let p = ModelParams { controller: mode, ..ModelParams::default() };
-        let ctl = EnergyController::new(&p, 1e-3);
-        let cases = [
-            (
-                Vector3::new(50.0, 3.0, -1.0),
-                Vector3::new(-0.02, 0.001, 0.0),
-            ),
-            (
-                Vector3::new(50.0, -30.0, 5.0),
-                Vector3::new(-0.01, 0.02, 0.003),
-            ),
-            (Vector3::new(1e-3, 0.0, 0.0), Vector3::new(-0.02, 0.0, 0.0)),
-            (Vector3::new(80.0, 0.0, 0.0), Vector3::new(-1e-7, 0.0, 0.0)),
-        ];
-        for (f, v) in cases {
-            for energy in [-1e-2, -1e-5, 0.0, 1e-3] {
-                let (alpha, f_alpha) = ctl.step(energy, &f, &f.normalize(), &v, &f);
-                assert!(alpha.iter().all(|a| *a >= 0.0 && *a <= 1e5), "{alpha:?}");
-                assert!(
-                    f_alpha.dot(&v) >= -1e-15,
-                    "F_α must dissipate: {}",
-                    f_alpha.dot(&v)
-                );
-                if energy >= 0.0 {
-                    assert_eq!(f_alpha, Vector3::zeros());
+            let p = ModelParams {
+                controller: mode,
+                ..ModelParams::default()
+            };
+            let ctl = EnergyController::new(&p, 1e-3);
+            let cases = [
+                (
+                    Vector3::new(50.0, 3.0, -1.0),
+                    Vector3::new(-0.02, 0.001, 0.0),
+                ),
+                (
+                    Vector3::new(50.0, -30.0, 5.0),
+                    Vector3::new(-0.01, 0.02, 0.003),
+                ),
+                (Vector3::new(1e-3, 0.0, 0.0), Vector3::new(-0.02, 0.0, 0.0)),
+                (Vector3::new(80.0, 0.0, 0.0), Vector3::new(-1e-7, 0.0, 0.0)),
+            ];
+            for (f, v) in cases {
+                for energy in [-1e-2, -1e-5, 0.0, 1e-3] {
+                    let (alpha, f_alpha) = ctl.step(energy, &f, &f.normalize(), &v, &f);
+                    assert!(alpha.iter().all(|a| *a >= 0.0 && *a <= 1e5), "{alpha:?}");
+                    assert!(
+                        f_alpha.dot(&v) >= -1e-15,
+                        "F_α must dissipate: {}",
+                        f_alpha.dot(&v)
+                    );
+                    if energy >= 0.0 {
+                        assert_eq!(f_alpha, Vector3::zeros());
+                    }
                 }
             }
-        }
-        // a small deficit on a clean 1-D rebound is removed in exactly one tick
-        let (f, v) = (Vector3::new(50.0, 0.0, 0.0), Vector3::new(-0.02, 0.0, 0.0));
-        let (_, f_alpha) = ctl.step(-1e-7, &f, &f.normalize(), &v, &f);
-        assert!((f_alpha.dot(&v) * 1e-3 - 1e-7).abs() < 1e-15);
+            // a small deficit on a clean 1-D rebound is removed in exactly one tick
+            let (f, v) = (Vector3::new(50.0, 0.0, 0.0), Vector3::new(-0.02, 0.0, 0.0));
+            let (_, f_alpha) = ctl.step(-1e-7, &f, &f.normalize(), &v, &f);
+            assert!((f_alpha.dot(&v) * 1e-3 - 1e-7).abs() < 1e-15);
         }
     }
 
@@ -362,13 +365,31 @@ mod tests {
         let v = Vector3::new(-0.02, -0.004, 0.003);
         let deficit = -1e-6;
         let (_, f_alpha) = ctl.step(deficit, &f, &e, &v, &f);
-        assert!((f_alpha.dot(&v) * 1e-3 + deficit).abs() < 1e-15, "{}", f_alpha.dot(&v) * 1e-3);
-        let paper = EnergyController::new(&ModelParams { controller: ControllerMode::Paper, ..p.clone() }, 1e-3);
+        assert!(
+            (f_alpha.dot(&v) * 1e-3 + deficit).abs() < 1e-15,
+            "{}",
+            f_alpha.dot(&v) * 1e-3
+        );
+        let paper = EnergyController::new(
+            &ModelParams {
+                controller: ControllerMode::Paper,
+                ..p.clone()
+            },
+            1e-3,
+        );
         let (_, f_paper) = paper.step(deficit, &f, &e, &v, &f);
-        assert!(f_paper.dot(&v) * 1e-3 > 1.2 * -deficit, "{}", f_paper.dot(&v) * 1e-3);
+        assert!(
+            f_paper.dot(&v) * 1e-3 > 1.2 * -deficit,
+            "{}",
+            f_paper.dot(&v) * 1e-3
+        );
         // a large deficit: the force stays within force_ratio_max·|F_comp|, the rest is left
         let (_, f_big) = ctl.step(-10.0, &f, &e, &v, &f);
-        assert!((f_big.norm() - p.force_ratio_max * 50.0).abs() < 1e-9, "{}", f_big.norm());
+        assert!(
+            (f_big.norm() - p.force_ratio_max * 50.0).abs() < 1e-9,
+            "{}",
+            f_big.norm()
+        );
         assert!(f_big.dot(&v) > 0.0);
     }
 }
