@@ -170,7 +170,7 @@ pub fn build_output(
         "robot_address": outcome.robot_address.map(|a| a.to_string()),
         "options": options,
     });
-    // the sensor link's own facts (RDT: counts_per_force, counts_per_torque)
+    // the sensor link's own facts (RDT: counts_per_force, counts_per_torque, sensor_units)
     if let Some(section) = realtime.as_object_mut() {
         for (key, value) in &outcome.sensor_report {
             section.insert(key.clone(), value.clone());

@@ -26,6 +26,7 @@ fn emulator_options_are_grouped_per_device_kind() {
         port = 49153
         http_port = 0
         counts_per_force = 2000000.0
+        force_unit = "lbf"
         [robot]
         kind = "egm"
         host = "192.168.1.10"
@@ -43,6 +44,10 @@ fn emulator_options_are_grouped_per_device_kind() {
     assert_eq!(
         (sensor.counts_per_force, sensor.counts_per_torque),
         (2e6, 1e6)
+    );
+    assert_eq!(
+        (sensor.force_unit.as_str(), sensor.torque_unit.as_str()),
+        ("lbf", "N-m")
     );
     assert_eq!(
         (robot.host.as_str(), robot.port, robot.local_port),
@@ -73,6 +78,7 @@ fn emulator_options_are_grouped_per_device_kind() {
         serde_json::json!({
             "kind": "rdt", "bind_host": "127.0.0.1", "port": 49152, "http_port": 80,
             "counts_per_force": 1e6, "counts_per_torque": 1e6,
+            "force_unit": "N", "torque_unit": "N-m",
         })
     );
     assert_eq!(

@@ -1,6 +1,7 @@
 //! The device-link seam: a robot-paced loop with a test-only robot link (one tick per robot
 //! packet, each answered with its packet counter echoed, as KUKA RSI needs), socket errors
-//! counted per link, and the grouped options (kinds) as TOML/JSON.
+//! counted per link, the grouped options (kinds) as TOML/JSON, and the RDT link reading a
+//! sensor configured in other units than N and N·m.
 
 mod common;
 
@@ -15,8 +16,12 @@ use hilcontact_core::world::RelativeMotion;
 use hilcontact_rt::clock::now_ns;
 use hilcontact_rt::feedback::FeedbackEstimator;
 use hilcontact_rt::links::egm::EgmOptions;
-use hilcontact_rt::links::rdt::{RdtOptions, RdtSensor};
-use hilcontact_rt::links::{wait_readable, LinkContext, LinkStats, Pacing, Wrench};
+use hilcontact_rt::links::rdt::{RdtEndpoint, RdtEndpointOptions, RdtOptions, RdtSensor};
+use hilcontact_rt::links::{
+    wait_readable, EndpointContext, LinkContext, LinkStats, Pacing, SensorEndpoint, Wrench,
+};
+use hilcontact_rt::netftapi::{ForceUnit, TorqueUnit};
+use hilcontact_rt::rdt::{RdtCommand, RdtRecord, RdtRequest};
 use hilcontact_rt::safety::SafetyLimits;
 use hilcontact_rt::{
     HilHandle, RobotLink, RobotOptions, RuntimeOptions, SensorLink, SensorOptions,
@@ -375,5 +380,161 @@ fn options_are_grouped_per_device_kind() {
             serde_json::from_str::<RuntimeOptions>(bad).is_err(),
             "{bad} was accepted"
         );
+    }
+}
+
+/// A TCP port that was free a moment ago.
+fn free_tcp_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+#[test]
+fn rdt_link_reads_a_sensor_configured_in_lbf_and_lbf_in_in_n_and_n_m() {
+    // the emulated sensor counts 1e6 per lbf and per lbf·in, and says so on its page
+    let mut endpoint = RdtEndpoint::open(
+        &RdtEndpointOptions {
+            port: free_udp_port(),
+            http_port: free_tcp_port(),
+            counts_per_force: 1e6,
+            counts_per_torque: 1e6,
+            force_unit: "lbf".into(),
+            torque_unit: "lbf-in".into(),
+            ..Default::default()
+        },
+        &EndpointContext {
+            period: 0.001,
+            initial: RelativeMotion {
+                position: Vector3::zeros(),
+                orientation: UnitQuaternion::identity(),
+                velocity: Vector3::zeros(),
+                angular_velocity: Vector3::zeros(),
+            },
+        },
+    )
+    .unwrap();
+    let wrench = Wrench {
+        force: Vector3::new(100.0, -250.0, 40.0),
+        moment: Vector3::new(10.0, -3.0, 0.5),
+    };
+
+    // the records count the wrench in lbf and lbf·in: 100 N = 22.48 lbf, 10 N·m = 88.5 lbf·in
+    let raw = UdpSocket::bind("127.0.0.1:0").unwrap();
+    raw.set_read_timeout(Some(Duration::from_millis(20)))
+        .unwrap();
+    let start = RdtRequest {
+        command: RdtCommand::StartRealtime,
+        sample_count: 1,
+    };
+    raw.send_to(&start.encode(), endpoint.address()).unwrap();
+    let mut buf = [0u8; 64];
+    let deadline = Instant::now() + Duration::from_secs(2);
+    let record = loop {
+        assert!(
+            Instant::now() < deadline,
+            "no record from the emulated sensor"
+        );
+        endpoint.serve();
+        endpoint.sample(&wrench, true);
+        if let Ok(n) = raw.recv(&mut buf) {
+            break RdtRecord::decode(&buf[..n]).unwrap();
+        }
+    };
+    let lbf = 4.448_221_615_260_5;
+    let lbf_in = 0.112_984_829_027_617;
+    assert_eq!(record.counts[0], (100.0 / lbf * 1e6_f64).round() as i32);
+    assert_eq!(record.counts[3], (10.0 / lbf_in * 1e6_f64).round() as i32);
+
+    // the RDT link reads the units from /netftapi2.xml and the wrench back in N and N·m
+    let mut sensor = RdtSensor::open(
+        &RdtOptions {
+            host: "127.0.0.1".into(),
+            port: endpoint.address().port(),
+            http_port: endpoint.http_address().unwrap().port(),
+            ..Default::default()
+        },
+        &LinkContext {
+            period: 0.001,
+            connect_timeout: 2.0,
+        },
+    )
+    .unwrap();
+    let calibration = sensor.calibration().unwrap();
+    assert_eq!(
+        (
+            calibration.force_unit,
+            calibration.torque_unit,
+            calibration.units_assumed
+        ),
+        (ForceUnit::Lbf, TorqueUnit::LbfIn, false)
+    );
+    let units = &sensor.report()["sensor_units"];
+    assert_eq!(
+        units,
+        &serde_json::json!({"force": "lbf", "torque": "lbf-in", "source": "netftapi2.xml"})
+    );
+    sensor.start_streaming();
+    let deadline = Instant::now() + Duration::from_secs(2);
+    let read = loop {
+        assert!(
+            Instant::now() < deadline,
+            "no wrench from the emulated sensor"
+        );
+        endpoint.serve();
+        endpoint.sample(&wrench, true);
+        std::thread::sleep(Duration::from_millis(1));
+        if let Some(w) = sensor.poll(now_ns()) {
+            break w;
+        }
+    };
+    sensor.stop_streaming();
+    let near = |got: f64, want: f64| (got - want).abs() <= 1e-3 * want.abs();
+    for i in 0..3 {
+        assert!(
+            near(read.force[i], wrench.force[i]),
+            "force {i}: read {} N, sent {} N",
+            read.force[i],
+            wrench.force[i]
+        );
+        assert!(
+            near(read.moment[i], wrench.moment[i]),
+            "moment {i}: read {} N·m, sent {} N·m",
+            read.moment[i],
+            wrench.moment[i]
+        );
+    }
+}
+
+#[test]
+fn emulated_sensor_rejects_unknown_units() {
+    for (force, torque, key) in [
+        ("stone", "N-m", "force_unit"),
+        ("N", "oz-in", "torque_unit"),
+    ] {
+        let err = RdtEndpoint::open(
+            &RdtEndpointOptions {
+                port: 0,
+                http_port: 0,
+                force_unit: force.into(),
+                torque_unit: torque.into(),
+                ..Default::default()
+            },
+            &EndpointContext {
+                period: 0.001,
+                initial: RelativeMotion {
+                    position: Vector3::zeros(),
+                    orientation: UnitQuaternion::identity(),
+                    velocity: Vector3::zeros(),
+                    angular_velocity: Vector3::zeros(),
+                },
+            },
+        )
+        .err()
+        .unwrap()
+        .to_string();
+        assert!(err.contains(key), "{err}");
     }
 }

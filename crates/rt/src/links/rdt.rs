@@ -1,7 +1,8 @@
 //! ATI Net F/T over RDT, both sides: [`RdtSensor`] is the [`SensorLink`] of the loop (RDT over
-//! UDP, codec in [`crate::rdt`]; counts per unit from `/netftapi2.xml` over HTTP,
-//! [`crate::netftapi`], unless given), [`RdtEndpoint`] the emulated sensor's
-//! [`SensorEndpoint`].
+//! UDP, codec in [`crate::rdt`]; counts per unit and the configured units from
+//! `/netftapi2.xml` over HTTP, [`crate::netftapi`], unless given), [`RdtEndpoint`] the emulated
+//! sensor's [`SensorEndpoint`] (configurable units: fault injection for clients that ignore
+//! them).
 //!
 //! A record is accepted when it comes from the sensor's address, is 36 bytes, has a sequence
 //! number newer than the last accepted one (gaps are counted as `lost`) and status 0; its
@@ -18,7 +19,9 @@ use super::{
     LinkStats, SensorEndpoint, SensorLink, Wrench,
 };
 use crate::error::{Result, RtError};
-use crate::netftapi::{fetch_counts, netftapi_xml, NetFtApiServer};
+use crate::netftapi::{
+    fetch_counts, netftapi_xml, ForceUnit, NetFtApiServer, SensorCalibration, TorqueUnit,
+};
 use crate::rdt::{CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, SequenceTracker, RDT_PORT};
 
 /// Options of an RDT sensor link (`[sensor] kind = "rdt"`).
@@ -59,7 +62,10 @@ impl Default for RdtOptions {
 pub struct RdtSensor {
     socket: UdpSocket,
     peer: SocketAddr,
+    /// Counts per N and per N·m.
     counts: CountsPerUnit,
+    /// What `/netftapi2.xml` said (None: the counts were given in the options).
+    calibration: Option<SensorCalibration>,
     sequence: SequenceTracker,
     stats: LinkStats,
     bias_pending: bool,
@@ -67,19 +73,30 @@ pub struct RdtSensor {
 }
 
 impl RdtSensor {
-    /// Validates the options, reads the counts per unit (HTTP, unless both are given) and
-    /// binds the client socket.
+    /// Validates the options, reads the counts per unit and the configured units (HTTP,
+    /// unless both counts are given, then per N and N·m) and binds the client socket.
     pub fn open(o: &RdtOptions, context: &LinkContext) -> Result<Self> {
-        let counts = match (o.counts_per_force, o.counts_per_torque) {
+        let (counts, calibration) = match (o.counts_per_force, o.counts_per_torque) {
             (Some(force), Some(torque)) => {
                 if !(force.is_finite() && force > 0.0 && torque.is_finite() && torque > 0.0) {
-                    return Err(RtError::option("counts_per_force", "counts per unit must be positive numbers"));
+                    return Err(RtError::option(
+                        "counts_per_force",
+                        "counts per unit must be positive numbers",
+                    ));
                 }
-                CountsPerUnit { force, torque }
+                (CountsPerUnit { force, torque }, None)
             }
-            (None, None) => fetch_counts(&o.host, o.http_port, Duration::from_secs_f64(context.connect_timeout.min(5.0)))
-                .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit: {e} (or give counts_per_force and counts_per_torque)")))?,
-            _ => return Err(RtError::option("counts_per_force", "give both counts_per_force and counts_per_torque, or neither")),
+            (None, None) => {
+                let c = fetch_counts(&o.host, o.http_port, Duration::from_secs_f64(context.connect_timeout.min(5.0)))
+                    .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit: {e} (or give counts_per_force and counts_per_torque)")))?;
+                (c.counts, Some(c))
+            }
+            _ => {
+                return Err(RtError::option(
+                    "counts_per_force",
+                    "give both counts_per_force and counts_per_torque, or neither",
+                ))
+            }
         };
         let peer = resolve("sensor_host", &o.host, o.port)?;
         let bind: SocketAddr = if peer.ip().is_loopback() {
@@ -91,6 +108,7 @@ impl RdtSensor {
             socket: bind_udp("RDT client", bind)?,
             peer,
             counts,
+            calibration,
             sequence: SequenceTracker::new(),
             stats: LinkStats::default(),
             bias_pending: o.bias,
@@ -98,9 +116,16 @@ impl RdtSensor {
         })
     }
 
-    /// The counts per unit in use.
+    /// The counts per N and per N·m in use.
     pub fn counts(&self) -> CountsPerUnit {
         self.counts
+    }
+
+    /// What the sensor's `/netftapi2.xml` said: its configured force and torque units (the
+    /// page's counts are per these) and whether they were assumed (N, N·m: the page gives
+    /// none). None when the counts were given in the options (per N and N·m).
+    pub fn calibration(&self) -> Option<SensorCalibration> {
+        self.calibration
     }
 
     fn request(&mut self, command: RdtCommand) {
@@ -182,6 +207,20 @@ impl SensorLink for RdtSensor {
         let mut m = serde_json::Map::new();
         m.insert("counts_per_force".into(), self.counts.force.into());
         m.insert("counts_per_torque".into(), self.counts.torque.into());
+        // the sensor's configured units and where they came from
+        let (force, torque, source) = match self.calibration {
+            None => (ForceUnit::N, TorqueUnit::Nm, "options"),
+            Some(c) if c.units_assumed => (
+                c.force_unit,
+                c.torque_unit,
+                "assumed: netftapi2.xml gives no unit",
+            ),
+            Some(c) => (c.force_unit, c.torque_unit, "netftapi2.xml"),
+        };
+        m.insert(
+            "sensor_units".into(),
+            serde_json::json!({"force": force.name(), "torque": torque.name(), "source": source}),
+        );
         m
     }
 }
@@ -197,10 +236,16 @@ pub struct RdtEndpointOptions {
     /// HTTP port of `/netftapi2.xml` (80 on a real sensor; 0 = no HTTP server) (CLI
     /// `--http-port`).
     pub http_port: u16,
-    /// Counts per N of the records (`cfgcpf`, > 0) (CLI `--counts-per-force`).
+    /// Counts per `force_unit` of the records (`cfgcpf`, > 0) (CLI `--counts-per-force`).
     pub counts_per_force: f64,
-    /// Counts per N·m of the records (`cfgcpt`, > 0) (CLI `--counts-per-torque`).
+    /// Counts per `torque_unit` of the records (`cfgcpt`, > 0) (CLI `--counts-per-torque`).
     pub counts_per_torque: f64,
+    /// The configured force unit (`scfgfu`/`cfgfu`): `"N"` (default), `"lbf"`, `"klbf"`,
+    /// `"kN"`, `"kgf"`, `"gf"`. Another unit than N tests that a client reads the units.
+    pub force_unit: String,
+    /// The configured torque unit (`scfgtu`/`cfgtu`): `"N-m"` (default), `"lbf-in"`,
+    /// `"lbf-ft"`, `"N-mm"`, `"kgf-cm"`, `"kN-m"`.
+    pub torque_unit: String,
 }
 
 impl Default for RdtEndpointOptions {
@@ -211,6 +256,8 @@ impl Default for RdtEndpointOptions {
             http_port: 80,
             counts_per_force: CountsPerUnit::default().force,
             counts_per_torque: CountsPerUnit::default().torque,
+            force_unit: ForceUnit::N.name().into(),
+            torque_unit: TorqueUnit::Nm.name().into(),
         }
     }
 }
@@ -220,11 +267,13 @@ impl Default for RdtEndpointOptions {
 /// records or until a stop (0x0000); 0x0042 biases the output by the current reading.
 /// `rdt_sequence` counts the records sent, `ft_sequence` the samples taken (one per control
 /// period, streaming or not), as the real sensor keeps them. `/netftapi2.xml` gives the counts
-/// per unit. A count beyond the `i32` range saturates and sets status `0x80010000`.
+/// per configured unit and the units; the records count in those units. A count beyond the
+/// `i32` range saturates and sets status `0x80010000`.
 pub struct RdtEndpoint {
     socket: UdpSocket,
     address: SocketAddr,
     http: Option<NetFtApiServer>,
+    /// Counts per N and per N·m (the options' counts per configured unit, converted).
     counts: CountsPerUnit,
     /// Streaming destination.
     client: Option<SocketAddr>,
@@ -241,8 +290,8 @@ pub struct RdtEndpoint {
 }
 
 impl RdtEndpoint {
-    /// Validates the counts per unit, binds the RDT socket and starts the HTTP server (unless
-    /// `http_port` is 0).
+    /// Validates the counts per unit and the units, binds the RDT socket and starts the HTTP
+    /// server (unless `http_port` is 0).
     pub fn open(o: &RdtEndpointOptions, context: &EndpointContext) -> Result<Self> {
         for (key, v) in [
             ("counts_per_force", o.counts_per_force),
@@ -255,9 +304,32 @@ impl RdtEndpoint {
                 ));
             }
         }
-        let counts = CountsPerUnit {
+        let force_unit = ForceUnit::from_name(&o.force_unit).ok_or_else(|| {
+            RtError::option(
+                "force_unit",
+                format!(
+                    "unknown force unit {:?}; one of lbf, N, klbf, kN, kgf, gf",
+                    o.force_unit
+                ),
+            )
+        })?;
+        let torque_unit = TorqueUnit::from_name(&o.torque_unit).ok_or_else(|| {
+            RtError::option(
+                "torque_unit",
+                format!(
+                    "unknown torque unit {:?}; one of lbf-in, lbf-ft, N-m, N-mm, kgf-cm, kN-m",
+                    o.torque_unit
+                ),
+            )
+        })?;
+        // the page's counts are per configured unit; the records count the wrench in those units
+        let per_unit = CountsPerUnit {
             force: o.counts_per_force,
             torque: o.counts_per_torque,
+        };
+        let counts = CountsPerUnit {
+            force: o.counts_per_force / force_unit.newtons(),
+            torque: o.counts_per_torque / torque_unit.newton_metres(),
         };
         let socket = bind_udp("sensor (RDT)", resolve("bind_host", &o.bind_host, o.port)?)?;
         let address = local_addr("sensor (RDT)", &socket)?;
@@ -265,7 +337,7 @@ impl RdtEndpoint {
             None
         } else {
             let addr = resolve("bind_host", &o.bind_host, o.http_port)?;
-            let xml = netftapi_xml(&counts, 1.0 / context.period);
+            let xml = netftapi_xml(&per_unit, force_unit, torque_unit, 1.0 / context.period);
             Some(NetFtApiServer::start(addr, xml).map_err(|e| match e {
                 RtError::Io { context, kind, errno, message } => RtError::Io {
                     context,
