@@ -34,7 +34,7 @@ def test_facility_defaults_are_grouped_with_kinds():
     }
     assert d["robot"] == {
         "kind": "egm", "host": "127.0.0.1", "port": 6510, "local_port": 0, "period": 0.004,
-        "offset_mm": [0.0, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0],
+        "offset_mm": [0.0, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0], "robotware": 7,
     }
     assert d["silence_sensor_after"] is None and d["silence_robot_after"] is None
     # every flat key of earlier versions names a key of its device's defaults

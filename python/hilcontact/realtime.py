@@ -222,13 +222,14 @@ def start_facility(scenario: Scenario | str, options: Mapping[str, Any] | None =
     """Start the emulated facility of ``scenario`` (its robot delay, servo lag, contact, sensor
     delay and noise) with ``options``, grouped per device like :func:`run_hil`'s: ``{"sensor":
     {"kind": "rdt", "bind_host", "port", "http_port", "counts_per_force", ...}, "robot":
-    {"kind": "egm", "host", "port", "local_port", "period", "offset_mm", "rotation"},
-    "silence_sensor_after", "silence_robot_after"}`` (the flat keys ``sensor_port``,
-    ``egm_port``, ... still work, see :data:`LEGACY_KEYS`).
+    {"kind": "egm", "host", "port", "local_port", "period", "offset_mm", "rotation",
+    "robotware"}, "silence_sensor_after", "silence_robot_after"}`` (the flat keys
+    ``sensor_port``, ``egm_port``, ... still work, see :data:`LEGACY_KEYS`).
 
     RDT: the sensor answers requests on ``bind_host:port`` and serves ``/netftapi2.xml`` on
     ``http_port`` (0 = no HTTP). EGM: the robot sends feedback to ``host:port`` every 4 ms and
-    follows the corrections it gets back. Raises :class:`~hilcontact.errors.RealtimeError` (with
+    follows the corrections it gets back; ``robotware = 6`` (default 7) sends RobotWare 6's
+    ``measuredForce`` layout. Raises :class:`~hilcontact.errors.RealtimeError` (with
     ``errno``, e.g. ``EADDRINUSE``) if a port cannot be bound.
     """
     scenario = _scenario(scenario)

@@ -12,6 +12,12 @@
 //! right message type (`MSGTYPE_DATA` from the robot, `MSGTYPE_CORRECTION` from the PC), a
 //! Cartesian pose with position and quaternion, all finite, positions within
 //! [`EGM_MAX_POSITION_MM`], quaternion norm within [`QUATERNION_TOLERANCE`] of 1.
+//!
+//! Feedback of both `egm.proto` generations decodes: RobotWare 6 and 7 differ, for the fields
+//! a controller sends, only in `EgmMeasuredForce`, whose field 1 is RobotWare 6's `force` and
+//! RobotWare 7's `fcActive`; [`EgmMeasuredForce`] tells them apart by wire type (see
+//! [`crate::egm_proto`]). The measured force is reported when it has six finite values; it is
+//! not validated further, as the loop does not use it.
 
 use prost::Message;
 use thiserror::Error;
@@ -79,6 +85,9 @@ pub struct RobotFeedback {
     pub planned: Option<EgmPoseMm>,
     /// Motors on (`None` if not sent).
     pub motors_on: Option<bool>,
+    /// `measuredForce`, `[Fx, Fy, Fz, Tx, Ty, Tz]` (N, N·m) in either generation's layout;
+    /// `None` unless sent with exactly six finite values.
+    pub measured_force: Option<[f64; 6]>,
 }
 
 impl RobotFeedback {
@@ -177,6 +186,12 @@ fn check_header(header: &Option<EgmHeader>, expected: MessageType) -> Result<(u3
         return Err(EgmError::WrongType(mtype));
     }
     Ok((seqno, h.tm.unwrap_or(0)))
+}
+
+/// Six finite values as an array, else None.
+fn six_finite(values: &[f64]) -> Option<[f64; 6]> {
+    let six: [f64; 6] = values.try_into().ok()?;
+    six.iter().all(|v| v.is_finite()).then_some(six)
 }
 
 fn check_size(datagram: &[u8]) -> Result<(), EgmError> {
@@ -291,6 +306,7 @@ impl RobotDecoder {
         let motors_on = m
             .motor_state
             .map(|s| s.state == MotorStateType::MotorsOn as i32);
+        let measured_force = m.measured_force.as_ref().and_then(|f| six_finite(&f.force));
         Ok(RobotFeedback {
             seqno,
             tm_ms,
@@ -298,6 +314,7 @@ impl RobotDecoder {
             actual,
             planned,
             motors_on,
+            measured_force,
         })
     }
 }
@@ -469,6 +486,9 @@ impl CorrectionEncoder {
 /// Encodes `EgmRobot` feedback (the emulated controller's side) into a preallocated buffer.
 pub struct FeedbackEncoder {
     msg: EgmRobot,
+    /// RobotWare 6's `measuredForce`, sent after the other fields (None: RobotWare 7 feedback,
+    /// without a measured force).
+    measured_force_rw6: Option<EgmMeasuredForceRw6>,
     buf: Vec<u8>,
 }
 
@@ -515,7 +535,20 @@ impl FeedbackEncoder {
         };
         FeedbackEncoder {
             msg,
+            measured_force_rw6: None,
             buf: Vec::with_capacity(EGM_MAX_DATAGRAM),
+        }
+    }
+
+    /// An encoder of a RobotWare 6 controller's feedback: as [`FeedbackEncoder::new`], plus
+    /// `measuredForce` in RobotWare 6's layout (`repeated double force = 1`, six zeros: the
+    /// emulated robot has no force control), which RobotWare 7's `egm.proto` cannot decode.
+    pub fn robotware6() -> Self {
+        FeedbackEncoder {
+            measured_force_rw6: Some(EgmMeasuredForceRw6 {
+                force: vec![0.0; 6],
+            }),
+            ..Self::new()
         }
     }
 
@@ -546,6 +579,10 @@ impl FeedbackEncoder {
         }
         self.buf.clear();
         let _ = self.msg.encode(&mut self.buf);
+        if let Some(force) = &self.measured_force_rw6 {
+            // field 9 after field 10: protobuf fields may come in any order
+            prost::encoding::message::encode(9, force, &mut self.buf);
+        }
         &self.buf
     }
 }
@@ -668,23 +705,170 @@ mod tests {
         assert!(dec.decode(&good).is_ok());
     }
 
+    /// An `EgmRobot` datagram from `FeedbackEncoder` (no measured force) with `body` (an
+    /// encoded `measuredForce` body) appended as field 9.
+    fn with_measured_force(seqno: u32, body: &[u8]) -> Vec<u8> {
+        let mut bytes = FeedbackEncoder::new()
+            .encode(seqno, 8000, &pose(-995.0), &pose(-990.0))
+            .to_vec();
+        prost::encoding::bytes::encode(9, &body.to_vec(), &mut bytes);
+        bytes
+    }
+
+    const FORCE: [f64; 6] = [1.5, -2.0, 30.25, 0.1, -0.2, 0.0];
+
     #[test]
     fn current_proto_measured_force_decodes() {
-        // RobotWare 7: measuredForce { fcActive = 1; force = 2 } (abbegm's older proto differs)
+        // RobotWare 7: measuredForce { fcActive = 1; force = 2 }
         let mut enc = FeedbackEncoder::new();
         let mut m = EgmRobot::decode(enc.encode(3, 0, &pose(1.0), &pose(1.0))).unwrap();
         m.measured_force = Some(EgmMeasuredForce {
             fc_active: Some(true),
-            force: vec![1.0, 2.0, 3.0, 0.0, 0.0, 0.0],
+            force: FORCE.to_vec(),
         });
         m.move_index = Some(9);
-        assert_eq!(
-            RobotDecoder::new()
-                .decode(&m.encode_to_vec())
-                .unwrap()
-                .seqno,
-            3
+        let fb = RobotDecoder::new().decode(&m.encode_to_vec()).unwrap();
+        assert_eq!(fb.seqno, 3);
+        assert_eq!(fb.actual, pose(1.0));
+        assert_eq!(fb.measured_force, Some(FORCE));
+        // the hand-written message round-trips in RobotWare 7's layout, fcActive false included
+        for fc_active in [Some(true), Some(false), None] {
+            let f = EgmMeasuredForce {
+                fc_active,
+                force: FORCE.to_vec(),
+            };
+            let bytes = f.encode_to_vec();
+            assert_eq!(bytes.len(), f.encoded_len());
+            assert_eq!(EgmMeasuredForce::decode(&bytes[..]).unwrap(), f);
+        }
+        // packed RobotWare 7 forces decode too
+        let mut body = Vec::new();
+        prost::encoding::bool::encode(1, &false, &mut body);
+        prost::encoding::double::encode_packed(2, &FORCE, &mut body);
+        let fb = RobotDecoder::new()
+            .decode(&with_measured_force(4, &body))
+            .unwrap();
+        assert_eq!(fb.measured_force, Some(FORCE));
+    }
+
+    #[test]
+    fn robotware6_measured_force_decodes_unpacked_and_packed() {
+        // RobotWare 6: measuredForce { repeated double force = 1 }, unpacked (wire type 1, as
+        // proto2 encodes it) and packed (wire type 2)
+        let unpacked = EgmMeasuredForceRw6 {
+            force: FORCE.to_vec(),
+        }
+        .encode_to_vec();
+        assert_eq!(unpacked[0], (1 << 3) | 1);
+        let mut packed = Vec::new();
+        prost::encoding::double::encode_packed(1, &FORCE, &mut packed);
+        assert_eq!(packed[0], (1 << 3) | 2);
+        let mut dec = RobotDecoder::new();
+        for (seqno, body) in [(1, &unpacked), (2, &packed)] {
+            let fb = dec.decode(&with_measured_force(seqno, body)).unwrap();
+            assert_eq!(fb.seqno, seqno);
+            assert_eq!(fb.tm_ms, 8);
+            assert_eq!(fb.actual, pose(-995.0));
+            assert_eq!(fb.planned, Some(pose(-990.0)));
+            assert_eq!(fb.measured_force, Some(FORCE));
+            assert_eq!(dec.msg.measured_force.as_ref().unwrap().fc_active, None);
+        }
+        // the emulated RobotWare 6 controller's feedback decodes (zero force)
+        let bytes = FeedbackEncoder::robotware6()
+            .encode(7, 4000, &pose(-995.0), &pose(-995.0))
+            .to_vec();
+        let fb = dec.decode(&bytes).unwrap();
+        assert_eq!((fb.seqno, fb.actual), (7, pose(-995.0)));
+        assert_eq!(fb.measured_force, Some([0.0; 6]));
+    }
+
+    /// RobotWare 7's `EgmMeasuredForce` as a `prost` derive would decode it (the definition
+    /// before both generations were accepted).
+    #[derive(Clone, PartialEq, Message)]
+    struct DerivedRw7Force {
+        #[prost(bool, optional, tag = "1")]
+        fc_active: Option<bool>,
+        #[prost(double, repeated, packed = "false", tag = "2")]
+        force: Vec<f64>,
+    }
+
+    #[derive(Clone, PartialEq, Message)]
+    struct DerivedRw7Robot {
+        #[prost(message, optional, tag = "9")]
+        measured_force: Option<DerivedRw7Force>,
+    }
+
+    #[test]
+    fn robotware6_feedback_is_what_a_derived_robotware7_proto_rejects() {
+        let rw6 = FeedbackEncoder::robotware6()
+            .encode(1, 0, &pose(1.0), &pose(1.0))
+            .to_vec();
+        assert!(DerivedRw7Robot::decode(&rw6[..]).is_err());
+        let rw7 = FeedbackEncoder::new()
+            .encode(1, 0, &pose(1.0), &pose(1.0))
+            .to_vec();
+        assert!(DerivedRw7Robot::decode(&rw7[..]).is_ok());
+        assert!(RobotDecoder::new().decode(&rw6).is_ok());
+    }
+
+    #[test]
+    fn bad_measured_force_is_rejected_or_left_out() {
+        let d = |body: &[u8]| RobotDecoder::new().decode(&with_measured_force(1, body));
+        // field 1 neither a bool nor doubles: 32-bit, a start group, packed doubles of a
+        // length that is not a multiple of 8, a truncated varint
+        let mut fixed32 = Vec::new();
+        prost::encoding::float::encode(1, &1.0, &mut fixed32);
+        for garbage in [
+            &fixed32[..],
+            &[(1 << 3) | 3, (1 << 3) | 4][..],
+            &[(1 << 3) | 2, 5, 0, 0, 0, 0, 0][..],
+            &[(1 << 3) | 2, 9, 0, 0, 0, 0, 0, 0, 0, 0, 0][..],
+            &[1 << 3, 0x80][..],
+            &[(1 << 3) | 1, 0, 0, 0][..],
+        ] {
+            assert_eq!(d(garbage), Err(EgmError::Decode), "{garbage:?}");
+        }
+        // well-formed but not six finite values: the pose is used, the force left out
+        let five = EgmMeasuredForceRw6 {
+            force: FORCE[..5].to_vec(),
+        }
+        .encode_to_vec();
+        let mut nan = FORCE;
+        nan[2] = f64::NAN;
+        let nan = EgmMeasuredForceRw6 {
+            force: nan.to_vec(),
+        }
+        .encode_to_vec();
+        for body in [&five, &nan] {
+            let fb = d(body).unwrap();
+            assert_eq!((fb.actual, fb.measured_force), (pose(-995.0), None));
+        }
+    }
+
+    #[test]
+    fn decoder_forgets_the_measured_force_and_keeps_its_buffer() {
+        let mut dec = RobotDecoder::new();
+        let force = |dec: &RobotDecoder| dec.msg.measured_force.as_ref().unwrap().force.as_ptr();
+        let buffer = force(&dec);
+        let rw6 = with_measured_force(
+            1,
+            &EgmMeasuredForceRw6 {
+                force: FORCE.to_vec(),
+            }
+            .encode_to_vec(),
         );
+        assert_eq!(dec.decode(&rw6).unwrap().measured_force, Some(FORCE));
+        let plain = FeedbackEncoder::new()
+            .encode(2, 0, &pose(1.0), &pose(1.0))
+            .to_vec();
+        assert_eq!(dec.decode(&plain).unwrap().measured_force, None);
+        // a force field of nearly as many doubles as a datagram can hold: no reallocation
+        let mut body = Vec::new();
+        prost::encoding::double::encode_packed(1, &[0.5; 140], &mut body);
+        let big = with_measured_force(3, &body);
+        assert!(big.len() <= EGM_MAX_DATAGRAM);
+        assert_eq!(dec.decode(&big).unwrap().measured_force, None);
+        assert_eq!(force(&dec), buffer);
     }
 
     proptest! {

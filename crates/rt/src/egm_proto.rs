@@ -2,14 +2,27 @@
 //!
 //! Field numbers, types and labels follow the `egm.proto` that ships with RobotWare 7 (and with
 //! the `abb-robot-client` Python package, whose compiled descriptor was used to check every
-//! tag). The `abbegm` crate carries an older revision in which `EgmMeasuredForce.force` has
-//! tag 1 (now `fcActive`) and `EgmRobot` stops at tag 10, so a current controller's message
-//! with a measured force would not decode with it; hence these definitions, encoded and
-//! decoded by `prost` (no hand-written wire code).
+//! tag). Encoded and decoded by `prost` (no hand-written wire code).
+//!
+//! RobotWare 6 controllers use an older revision ("sensor interface V1.1", e.g. the one in
+//! `abb_libegm` and in the `abbegm` crate). Three differences, one of which matters here:
+//! - `EgmMeasuredForce` is `repeated double force = 1` in RobotWare 6, `optional bool
+//!   fcActive = 1; repeated double force = 2` in RobotWare 7. The same field number carries a
+//!   double (wire type 1, or 2 when packed) in one and a bool (wire type 0) in the other, so a
+//!   derived message of either revision rejects the other's datagrams. [`EgmMeasuredForce`]
+//!   is therefore written by hand: it tells the two apart by field 1's wire type.
+//! - `EgmRobot` ends at tag 10 (`utilizationRate`) in RobotWare 6; 11 to 13 are RobotWare 7
+//!   additions, simply absent from an older controller's messages.
+//! - `EgmSensor` has no `RAPIDtoRobot` (tag 4) in RobotWare 6; the PC side never sends it.
+//!
+//! [`EgmMeasuredForceRw6`] is the RobotWare 6 message, used by the emulated robot to send
+//! RobotWare 6 feedback.
 
 #![allow(missing_docs)] // the names are ABB's; each message says what it is
 
-use prost::{Enumeration, Message};
+use prost::bytes::{Buf, BufMut};
+use prost::encoding::{self, DecodeContext, WireType};
+use prost::{DecodeError, Enumeration, Message};
 
 /// Header of every message: sequence number, time stamp (ms), message type.
 #[derive(Clone, PartialEq, Message)]
@@ -211,12 +224,70 @@ pub struct EgmTestSignals {
     pub signals: Vec<f64>,
 }
 
-/// Force measured by the controller's force control.
-#[derive(Clone, PartialEq, Message)]
+/// Force measured by the controller's force control, of either `egm.proto` generation:
+/// RobotWare 7's `optional bool fcActive = 1; repeated double force = 2` and RobotWare 6's
+/// `repeated double force = 1`.
+///
+/// Decoding tells them apart by field 1's wire type: a varint is RobotWare 7's `fcActive`, a
+/// 64-bit value (one double) or a length-delimited field (packed doubles) is RobotWare 6's
+/// `force`; any other wire type is an error. Forces of both tags go to `force`. Encoding
+/// writes the RobotWare 7 layout.
+#[derive(Clone, PartialEq, Debug, Default)]
 pub struct EgmMeasuredForce {
-    #[prost(bool, optional, tag = "1")]
+    /// Whether force control is active (RobotWare 7 only).
     pub fc_active: Option<bool>,
-    #[prost(double, repeated, packed = "false", tag = "2")]
+    /// `[Fx, Fy, Fz, Tx, Ty, Tz]` as sent (N, N·m).
+    pub force: Vec<f64>,
+}
+
+impl Message for EgmMeasuredForce {
+    fn encode_raw(&self, buf: &mut impl BufMut) {
+        if let Some(active) = &self.fc_active {
+            encoding::bool::encode(1, active, buf);
+        }
+        encoding::double::encode_repeated(2, &self.force, buf);
+    }
+
+    fn merge_field(
+        &mut self,
+        tag: u32,
+        wire_type: WireType,
+        buf: &mut impl Buf,
+        ctx: DecodeContext,
+    ) -> Result<(), DecodeError> {
+        match (tag, wire_type) {
+            // RobotWare 6: `repeated double force = 1`, unpacked or packed
+            (1, WireType::SixtyFourBit | WireType::LengthDelimited) => {
+                encoding::double::merge_repeated(wire_type, &mut self.force, buf, ctx)
+            }
+            // RobotWare 7: `optional bool fcActive = 1` (another wire type is an error)
+            (1, _) => {
+                encoding::bool::merge(wire_type, self.fc_active.get_or_insert(false), buf, ctx)
+            }
+            // RobotWare 7: `repeated double force = 2`
+            (2, _) => encoding::double::merge_repeated(wire_type, &mut self.force, buf, ctx),
+            _ => encoding::skip_field(wire_type, tag, buf, ctx),
+        }
+    }
+
+    fn encoded_len(&self) -> usize {
+        self.fc_active
+            .as_ref()
+            .map_or(0, |a| encoding::bool::encoded_len(1, a))
+            + encoding::double::encoded_len_repeated(2, &self.force)
+    }
+
+    fn clear(&mut self) {
+        self.fc_active = None;
+        self.force.clear();
+    }
+}
+
+/// RobotWare 6's `EgmMeasuredForce` (`repeated double force = 1`, unpacked as proto2 encodes
+/// it): what an older controller sends as `EgmRobot.measuredForce`.
+#[derive(Clone, PartialEq, Message)]
+pub struct EgmMeasuredForceRw6 {
+    #[prost(double, repeated, packed = "false", tag = "1")]
     pub force: Vec<f64>,
 }
 

@@ -85,7 +85,7 @@ fn emulator_options_are_grouped_per_device_kind() {
         d["robot"],
         serde_json::json!({
             "kind": "egm", "host": "127.0.0.1", "port": 6510, "local_port": 0, "period": 0.004,
-            "offset_mm": [0.0, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0],
+            "offset_mm": [0.0, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0], "robotware": 7,
         })
     );
     assert_eq!(
@@ -283,4 +283,19 @@ fn a_port_in_use_keeps_its_kind_and_errno() {
     }
     assert_eq!(err.errno(), Some(libc::EADDRINUSE));
     assert!(err.to_string().contains("cannot bind UDP"), "{err}");
+}
+
+#[test]
+fn the_robotware_generation_is_6_or_7() {
+    let o: EmulatorOptions = toml::from_str("[robot]\nkind = \"egm\"\nrobotware = 6\n").unwrap();
+    let EmulatedRobotOptions::Egm(robot) = &o.robot;
+    assert_eq!(robot.robotware, 6);
+    let mut bad = options(free_udp_port(), "127.0.0.1");
+    let EmulatedRobotOptions::Egm(robot) = &mut bad.robot;
+    robot.robotware = 5;
+    let err = FacilityHandle::start(&preset("paper-table1"), &bad)
+        .err()
+        .expect("RobotWare 5 was accepted");
+    assert!(matches!(err, RtError::Option { .. }), "{err:?}");
+    assert!(err.to_string().contains("must be 6 or 7, got 5"), "{err}");
 }

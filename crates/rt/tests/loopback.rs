@@ -5,8 +5,9 @@ mod common;
 
 use common::{loopback_options, preset};
 use hilcontact_core::compensator::{CompensatorConfig, ModelParams};
+use hilcontact_rt::links::EmulatedRobotOptions;
 use hilcontact_rt::safety::StopKind;
-use hilcontact_rt::{FacilityHandle, HilHandle};
+use hilcontact_rt::{FacilityHandle, HilHandle, RuntimeOptions};
 use serde_json::Value;
 use std::time::{Duration, Instant};
 
@@ -121,4 +122,37 @@ fn uncompensated_loop_is_stopped_by_the_force_limit() {
         .filter_map(|c| c["cov"].as_f64())
         .collect();
     assert!(covs.first().is_some_and(|c| *c > 1.3), "{covs:?}");
+}
+
+/// A RobotWare 6 controller's feedback, with `measuredForce` in the older `egm.proto` layout
+/// (field 1 = doubles, RobotWare 7's `fcActive`), is accepted: the loop connects and runs to
+/// its end without a malformed robot datagram.
+#[test]
+fn robotware6_feedback_is_accepted_and_the_loop_runs() {
+    let mut s = preset("paper-table1");
+    s.simulation.duration = 1.0;
+    let (mut emu, rt) = loopback_options();
+    let EmulatedRobotOptions::Egm(robot) = &mut emu.robot;
+    robot.robotware = 6;
+    let rt = RuntimeOptions {
+        connect_timeout: 3.0,
+        ..rt
+    };
+    let facility = FacilityHandle::start(&s, &emu).unwrap();
+    let hil = HilHandle::start(&s, &rt).unwrap();
+    assert!(hil.wait(Duration::from_secs(20)));
+    let out = hil.finish();
+    let status = facility.join();
+    let out = out.unwrap_or_else(|e| panic!("{e}; emulator: {status:?}"));
+    let rt = &out.metrics["realtime"];
+    let robot = &rt["robot"];
+    assert_eq!(robot["malformed"], 0, "{robot}");
+    assert_eq!(robot["invalid"], 0, "{robot}");
+    // 250 Hz feedback for 1 s (a busy machine may lose a few)
+    assert!(robot["accepted"].as_u64().unwrap() >= 200, "{robot}");
+    assert_eq!(rt["ticks"], 1001);
+    assert_eq!(
+        rt["stop"]["kind"],
+        serde_json::to_value(StopKind::Completed).unwrap()
+    );
 }

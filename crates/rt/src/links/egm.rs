@@ -226,6 +226,9 @@ pub struct EgmEndpointOptions {
     pub offset_mm: [f64; 3],
     /// Rotation from `t` to the EGM frame, quaternion `[w, x, y, z]` (CLI `--egm-rotation`).
     pub rotation: [f64; 4],
+    /// RobotWare generation of the feedback's `egm.proto`, 6 or 7 (fault injection: 6 sends
+    /// `measuredForce` in RobotWare 6's layout, which RobotWare 7's proto cannot decode).
+    pub robotware: u8,
 }
 
 impl Default for EgmEndpointOptions {
@@ -237,6 +240,7 @@ impl Default for EgmEndpointOptions {
             period: EGM_PERIOD,
             offset_mm: [0.0; 3],
             rotation: [1.0, 0.0, 0.0, 0.0],
+            robotware: 7,
         }
     }
 }
@@ -245,7 +249,7 @@ impl Default for EgmEndpointOptions {
 /// the actual pose (feedback) and the last commanded one (planned) goes to the PC's
 /// `host:port`; `EgmSensor` corrections are accepted from that address only, and the newest
 /// (by sequence number; gaps are counted as `lost`, older ones as `stale`) becomes the command
-/// the robot follows.
+/// the robot follows. With `robotware = 6` the feedback carries RobotWare 6's `measuredForce`.
 pub struct EgmEndpoint {
     socket: UdpSocket,
     address: SocketAddr,
@@ -266,8 +270,8 @@ pub struct EgmEndpoint {
 }
 
 impl EgmEndpoint {
-    /// Validates the period and the mapping, resolves the PC's address and binds the robot's
-    /// socket (on loopback when the PC is).
+    /// Validates the period, the RobotWare generation and the mapping, resolves the PC's
+    /// address and binds the robot's socket (on loopback when the PC is).
     pub fn open(o: &EgmEndpointOptions, context: &EndpointContext) -> Result<Self> {
         if !(o.period.is_finite() && o.period > 0.0) {
             return Err(RtError::option(
@@ -275,6 +279,16 @@ impl EgmEndpoint {
                 format!("must be a positive number, got {}", o.period),
             ));
         }
+        let encoder = match o.robotware {
+            6 => FeedbackEncoder::robotware6(),
+            7 => FeedbackEncoder::new(),
+            other => {
+                return Err(RtError::option(
+                    "robotware",
+                    format!("must be 6 or 7, got {other}"),
+                ))
+            }
+        };
         let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
         let peer = resolve("egm_host", &o.host, o.port)?;
         let bind: SocketAddr = match peer.ip() {
@@ -295,7 +309,7 @@ impl EgmEndpoint {
             seqno: 0,
             sequence: SequenceTracker::new(),
             decoder: CorrectionDecoder::new(),
-            encoder: FeedbackEncoder::new(),
+            encoder,
             stats: LinkStats::default(),
             buf: [0u8; 2048],
         })
