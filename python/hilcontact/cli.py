@@ -688,6 +688,10 @@ _HIL_OPTIONS = [
     click.option("--retreat-distance", type=float, default=None, help="Longest retreat after a force or moment stop." + _dflt("runtime", "limits.retreat_distance", "m")),
     click.option("--tracking-limit", type=float, default=None, help="Safety stop when the fed-back rod tip is this far from every command of the tracking window (frozen feedback, a robot that does not follow)." + _dflt("runtime", "limits.tracking_limit", "m")),
     click.option("--tracking-window", type=float, default=None, help="How far back commands are compared with the feedback (longer than the robot's delay)." + _dflt("runtime", "limits.tracking_window", "s")),
+    click.option("--offset", "offset_mode", type=click.Choice(["measure", "off"]), default=None, help="The sensor's offset at start: measured with the rod free (nothing commanded) and subtracted, or used as it comes." + _dflt("runtime", "offset.mode")),
+    click.option("--offset-time", type=float, default=None, help="How long the offset is averaged at start." + _dflt("runtime", "offset.time", "s")),
+    click.option("--max-offset-force", type=float, default=None, help="Refuse the start when the force offset is larger (the rod may touch something)." + _dflt("runtime", "offset.max_force", "N")),
+    click.option("--max-offset-moment", type=float, default=None, help="Refuse the start when the moment offset is larger." + _dflt("runtime", "offset.max_moment", "N m")),
     click.option("--connect-timeout", type=float, default=None, help="Longest wait for the sensor and the robot." + _dflt("runtime", "connect_timeout", "s")),
     click.option("--start-tolerance", type=float, default=None, help="Largest distance of the robot from the initial pose at start." + _dflt("runtime", "start_tolerance", "m")),
 ]
@@ -699,15 +703,19 @@ def _runtime_options(sensor_protocol: str | None, robot_protocol: str | None, se
                      extrapolation: str | None, force_limit: float | None, moment_limit: float | None,
                      watchdog_ms: float | None, workspace: float | None, hold_deviation: float | None,
                      retreat_speed: float | None, retreat_distance: float | None, tracking_limit: float | None,
-                     tracking_window: float | None, connect_timeout: float | None, start_tolerance: float | None, egm_offset: str | None,
+                     tracking_window: float | None, offset_mode: str | None, offset_time: float | None,
+                     max_offset_force: float | None, max_offset_moment: float | None, connect_timeout: float | None, start_tolerance: float | None, egm_offset: str | None,
                      egm_rotation: str | None) -> dict[str, Any]:
     limits = {k: v for k, v in (("force_limit", force_limit), ("moment_limit", moment_limit),
                                 ("watchdog_ms", watchdog_ms), ("workspace", workspace),
                                 ("hold_deviation", hold_deviation), ("retreat_speed", retreat_speed),
                                 ("retreat_distance", retreat_distance), ("tracking_limit", tracking_limit),
                                 ("tracking_window", tracking_window)) if v is not None}
+    offset = {k: v for k, v in (("mode", offset_mode), ("time", offset_time), ("max_force", max_offset_force),
+                                ("max_moment", max_offset_moment)) if v is not None}
     # the flags keep their flat keys; hilcontact.realtime.LEGACY_KEYS moves them into the links
     return {
+        "offset": offset or None,
         "sensor": {"kind": sensor_protocol} if sensor_protocol else None,
         "robot": {"kind": robot_protocol} if robot_protocol else None,
         "sensor_host": sensor_host, "sensor_port": sensor_port, "http_port": http_port,

@@ -57,6 +57,9 @@ pub struct EmulatorOptions {
     pub silence_sensor_after: Option<f64>,
     /// Fault injection: the robot stops sending after this many seconds (None = never).
     pub silence_robot_after: Option<f64>,
+    /// Fault injection: an offset added to every measured wrench (an unbiased sensor),
+    /// `[Fx, Fy, Fz]` N then `[Mx, My, Mz]` N·m, sensor frame.
+    pub sensor_offset: [f64; 6],
 }
 
 /// [`LinkStats`] as atomics: the emulator thread stores its endpoints' counters after each
@@ -198,6 +201,12 @@ impl FacilityHandle {
                 ));
             }
         }
+        if !o.sensor_offset.iter().all(|v| v.is_finite()) {
+            return Err(RtError::option(
+                "sensor_offset",
+                format!("must be 6 finite numbers, got {:?}", o.sensor_offset),
+            ));
+        }
         let period = plan.period;
         let initial = VirtualDynamics::new(&plan).command();
         let initial = RelativeMotion {
@@ -227,6 +236,10 @@ impl FacilityHandle {
             period_ns: (period * 1e9).round() as u64,
             sensor_silent_from: silence(o.silence_sensor_after),
             robot_silent_from: silence(o.silence_robot_after),
+            offset: Wrench {
+                force: Vector3::new(o.sensor_offset[0], o.sensor_offset[1], o.sensor_offset[2]),
+                moment: Vector3::new(o.sensor_offset[3], o.sensor_offset[4], o.sensor_offset[5]),
+            },
             command: initial,
         };
         let thread = std::thread::Builder::new()
@@ -315,6 +328,8 @@ struct Emulator {
     period_ns: u64,
     sensor_silent_from: u64,
     robot_silent_from: u64,
+    /// Added to every measured wrench (fault injection), N and N·m.
+    offset: Wrench,
     /// The command the robot follows (newest command, held), `t` frame.
     command: RelativeMotion,
 }
@@ -360,8 +375,8 @@ impl Emulator {
             Ordering::Relaxed,
         );
         let wrench = Wrench {
-            force: m.force,
-            moment: m.moment,
+            force: m.force + self.offset.force,
+            moment: m.moment + self.offset.moment,
         };
         self.sensor.sample(&wrench, k < self.sensor_silent_from);
         self.robot

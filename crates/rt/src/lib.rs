@@ -27,6 +27,7 @@ pub mod feedback;
 pub mod links;
 pub mod mapping;
 pub mod netftapi;
+pub mod offset;
 pub mod rdt;
 pub mod report;
 pub mod runtime;

@@ -79,6 +79,9 @@ pub struct RunOutcome {
     pub sensor_report: serde_json::Map<String, serde_json::Value>,
     /// The robot's address.
     pub robot_address: Option<SocketAddr>,
+    /// The sensor's offset measured at start and subtracted from every record, `[Fx, Fy, Fz]`
+    /// N then `[Mx, My, Mz]` N·m (None: `bias.mode = "off"`).
+    pub sensor_offset: Option<[f64; 6]>,
 }
 
 /// Everything a real-time run produces.
@@ -168,6 +171,7 @@ pub fn build_output(
         "samples_dropped": outcome.samples_dropped,
         "pacing": outcome.pacing,
         "robot_address": outcome.robot_address.map(|a| a.to_string()),
+        "sensor_offset": outcome.sensor_offset,
         "options": options,
     });
     // the sensor link's own facts (RDT: counts_per_force, counts_per_torque, sensor_units)

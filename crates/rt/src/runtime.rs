@@ -39,6 +39,7 @@ use hilcontact_core::hil::HilStep;
 use hilcontact_core::world::RelativeMotion;
 use hilcontact_core::{metrics, sim, Plan, Scenario};
 
+use crate::offset::{OffsetMode, OffsetOptions, WrenchStats};
 use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack, Histogram};
 use crate::error::{Result, RtError};
 use crate::feedback::{Extrapolation, FeedbackEstimator};
@@ -75,6 +76,8 @@ pub struct RuntimeOptions {
     pub start_tolerance: f64,
     /// How long the hold command is streamed after a stop, s.
     pub hold_time: f64,
+    /// The sensor's offset at start: measured with the rod free and subtracted, or not.
+    pub offset: OffsetOptions,
 }
 
 impl Default for RuntimeOptions {
@@ -87,6 +90,7 @@ impl Default for RuntimeOptions {
             connect_timeout: 5.0,
             start_tolerance: 0.005,
             hold_time: 0.1,
+            offset: OffsetOptions::default(),
         }
     }
 }
@@ -190,6 +194,13 @@ impl HilHandle {
         let plan = scenario.resolve()?;
         let o = options;
         o.limits.validate()?;
+        o.offset.validate()?;
+        if o.offset.mode == OffsetMode::Measure && plan.system.contact_force(&plan.initial).0.norm() > 0.0 {
+            return Err(RtError::option(
+                "offset.mode",
+                "the scenario starts in contact, so the sensor's offset cannot be measured at start: bias the sensor with the rod free and set offset.mode = \"off\" (--offset off)",
+            ));
+        }
         for (key, v) in [
             ("connect_timeout", o.connect_timeout),
             ("start_tolerance", o.start_tolerance),
@@ -290,6 +301,8 @@ impl HilHandle {
             connect_timeout: o.connect_timeout,
             start_tolerance: o.start_tolerance,
             hold_time: o.hold_time,
+            offset: o.offset,
+            sensor_offset: Wrench::default(),
             pacing,
             late_ns: (1.5 * feedback_period * 1e9) as u64,
             sensor,
@@ -421,6 +434,9 @@ struct Loop {
     connect_timeout: f64,
     start_tolerance: f64,
     hold_time: f64,
+    offset: OffsetOptions,
+    /// The sensor's offset measured at start (subtracted from every record), N and N·m.
+    sensor_offset: Wrench,
     // the links
     pacing: Pacing,
     /// Robot feedback later than this after the previous one is `late`, ns.
@@ -521,6 +537,10 @@ impl Loop {
             pacing: self.pacing,
             sensor_report: self.sensor.report(),
             robot_address: self.robot.peer(),
+            sensor_offset: (self.offset.mode == OffsetMode::Measure).then(|| {
+                let (f, m) = (self.sensor_offset.force, self.sensor_offset.moment);
+                [f.x, f.y, f.z, m.x, m.y, m.z]
+            }),
         })
     }
 
@@ -603,9 +623,38 @@ impl Loop {
                 self.start_tolerance * 1e3
             )));
         }
+        if self.offset.mode == OffsetMode::Measure {
+            if let Err(e) = self.measure_offset() {
+                self.hold(None);
+                return Err(e);
+            }
+        }
         // forget the start-up's sequence bookkeeping for the lateness counters
         self.sensor.stats_mut().late = 0;
         self.robot.stats_mut().late = 0;
+        Ok(())
+    }
+
+    /// Averages the sensor's records over `offset.time` with the robot held at its own pose (rod
+    /// free: the start pose was checked) and keeps the mean as the offset, or refuses
+    /// ([`OffsetOptions::offset`]).
+    fn measure_offset(&mut self) -> Result<()> {
+        let mut stats = WrenchStats::default();
+        let start = now_ns();
+        let end = start + (self.offset.time * 1e9) as u64;
+        while now_ns() < end {
+            if self.poll_links(now_ns()) {
+                stats.push(&Wrench {
+                    force: self.force,
+                    moment: self.moment,
+                });
+            }
+            if let Some(pose) = self.checked_pose() {
+                self.robot.hold(&pose, now_ns().saturating_sub(self.t0_ns));
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        self.sensor_offset = self.offset.offset(&stats)?;
         Ok(())
     }
 
@@ -699,8 +748,8 @@ impl Loop {
     fn poll_links(&mut self, now: u64) -> bool {
         let new_record = match self.sensor.poll(now) {
             Some(Wrench { force, moment }) => {
-                self.force = force;
-                self.moment = moment;
+                self.force = force - self.sensor_offset.force;
+                self.moment = moment - self.sensor_offset.moment;
                 self.last_sensor_ns = now;
                 true
             }

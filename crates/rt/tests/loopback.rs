@@ -156,3 +156,66 @@ fn robotware6_feedback_is_accepted_and_the_loop_runs() {
         serde_json::to_value(StopKind::Completed).unwrap()
     );
 }
+
+/// An unbiased sensor (offset (3, −2, 20) N, (0.5, −0.3, 0.2) N·m, which stopped the run at
+/// 0.41 s on the force limit before) is measured at start with the rod free, recorded and
+/// subtracted: pida runs faithful. An offset beyond `offset.max_force` refuses the start, naming
+/// the offset.
+#[test]
+fn a_sensor_offset_is_measured_at_start_and_subtracted() {
+    let mut s = preset("paper-table1");
+    s.facility.robot_delay = 0.02;
+    s.simulation.duration = 2.5;
+    s.compensator = CompensatorConfig::Pida(ModelParams::default());
+    let (mut emu, rt) = loopback_options();
+    let offset = [3.0, -2.0, 20.0, 0.5, -0.3, 0.2];
+    emu.sensor_offset = offset;
+    let facility = FacilityHandle::start(&s, &emu).unwrap();
+    let hil = HilHandle::start(&s, &rt).unwrap();
+    assert!(hil.wait(Duration::from_secs(30)));
+    let out = hil.finish();
+    facility.join();
+    let m = out.unwrap().metrics;
+    assert!(
+        m["status"] == "ok" || m["status"] == "unfaithful",
+        "{}: {}",
+        m["status"],
+        m["reason"]
+    );
+    assert_eq!(m["realtime"]["stop"]["kind"], "completed");
+    let measured: Vec<f64> = m["realtime"]["sensor_offset"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    for (i, (a, b)) in measured.iter().zip(offset).enumerate() {
+        assert!((a - b).abs() < 0.2, "offset[{i}] measured {a}, injected {b}");
+    }
+    let covs: Vec<f64> = m["collisions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|c| c["cov"].as_f64())
+        .collect();
+    assert!(!covs.is_empty());
+    for cov in &covs {
+        assert!((0.9..=1.1).contains(cov), "CoV {cov} in {covs:?}");
+    }
+
+    // 80 N with the rod free: refused, with the offset in the message
+    let (mut emu, rt) = loopback_options();
+    emu.sensor_offset = [0.0, 0.0, 80.0, 0.0, 0.0, 0.0];
+    let facility = FacilityHandle::start(&s, &emu).unwrap();
+    let hil = HilHandle::start(&s, &rt).unwrap();
+    assert!(hil.wait(Duration::from_secs(30)));
+    let Err(error) = hil.finish() else {
+        panic!("an 80 N offset must refuse the start")
+    };
+    facility.join();
+    let error = error.to_string();
+    assert!(
+        error.contains("80.") && error.contains("offset.max_force"),
+        "{error}"
+    );
+}
