@@ -35,19 +35,19 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use hilcontact_core::facility::Measurement;
-use hilcontact_core::hil::HilStep;
+use hilcontact_core::hil::{HilStep, VirtualDynamics};
 use hilcontact_core::world::RelativeMotion;
 use hilcontact_core::{metrics, sim, Plan, Scenario};
 
-use crate::offset::{OffsetMode, OffsetOptions, WrenchStats};
 use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack, Histogram};
 use crate::error::{Result, RtError};
 use crate::feedback::{Extrapolation, FeedbackEstimator};
 pub use crate::links::LinkStats;
 use crate::links::{
     open_robot, open_sensor, LinkContext, Pacing, RobotLink, RobotOptions, SensorLink,
-    SensorOptions, Wrench,
+    SensorOptions, StartRegion, Wrench,
 };
+use crate::offset::{OffsetMode, OffsetOptions, WrenchStats};
 use crate::report::{build_output, HilOutput};
 pub use crate::report::{RunOutcome, Sample};
 use crate::safety::{
@@ -170,6 +170,11 @@ impl HilHandle {
         let context = LinkContext {
             period: plan.period,
             connect_timeout: options.connect_timeout,
+            start: Some(StartRegion {
+                pose: VirtualDynamics::new(&plan).command(),
+                rod: plan.system.rod_tip,
+                tolerance: options.start_tolerance,
+            }),
         };
         let sensor = open_sensor(&options.sensor, &context)?;
         let robot = open_robot(&options.robot, &context)?;
@@ -195,7 +200,9 @@ impl HilHandle {
         let o = options;
         o.limits.validate()?;
         o.offset.validate()?;
-        if o.offset.mode == OffsetMode::Measure && plan.system.contact_force(&plan.initial).0.norm() > 0.0 {
+        if o.offset.mode == OffsetMode::Measure
+            && plan.system.contact_force(&plan.initial).0.norm() > 0.0
+        {
             return Err(RtError::option(
                 "offset.mode",
                 "the scenario starts in contact, so the sensor's offset cannot be measured at start: bias the sensor with the rod free and set offset.mode = \"off\" (--offset off)",

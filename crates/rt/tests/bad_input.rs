@@ -226,11 +226,41 @@ fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
     assert!(stops >= 1, "no RDT stop request");
 }
 
-/// A robot outside `start_tolerance` is refused, and nothing that could move it is sent: before
-/// its first feedback nothing at all, then only holds at its own fed-back pose at rest (a
-/// correction toward the scenario's start would be executed by a real controller).
+/// A robot outside `start_tolerance` is refused, and nothing that could move it is sent. Named
+/// with `--robot`: before its first feedback nothing at all, then only holds at its own
+/// fed-back pose at rest (a correction toward the scenario's start would be executed by a real
+/// controller). Not named: it is never locked onto (it is not at the start), nothing at all is
+/// sent, and the error says where its feedback was.
 #[test]
 fn a_refused_start_commands_no_motion() {
+    for named in [true, false] {
+        let (error, corrections, away) = refused_start(named);
+        if named {
+            assert!(
+                error.contains("50.0 mm from the scenario's initial position"),
+                "{error}"
+            );
+            assert!(
+                !corrections.is_empty(),
+                "the refusal holds the robot where it is"
+            );
+        } else {
+            assert!(
+                error.contains("50.0 mm from the scenario's start") && error.contains("--robot"),
+                "{error}"
+            );
+            assert!(corrections.is_empty(), "sent {corrections:?}");
+        }
+        for c in &corrections {
+            assert_eq!(c.pose, away, "a correction toward another pose was sent");
+            assert_eq!(c.speed, [0.0; 6]);
+        }
+    }
+}
+
+/// A start refused because the robot is 50 mm short of the scenario's start (-995 mm), with
+/// the robot named (`robot_host`) or not: the error, the corrections received, the robot's pose.
+fn refused_start(named: bool) -> (String, Vec<hilcontact_rt::mapping::EgmTarget>, EgmPoseMm) {
     let mut s = preset("paper-table1");
     s.simulation.duration = 2.0;
     let sensor = UdpSocket::bind("127.0.0.1:0").unwrap();
@@ -240,14 +270,17 @@ fn a_refused_start_commands_no_motion() {
         .unwrap();
     let egm_port = free_udp_port();
     let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
-    let options = RuntimeOptions {
-        connect_timeout: 5.0,
+    let mut options = RuntimeOptions {
+        connect_timeout: if named { 5.0 } else { 1.0 },
         ..scripted(&sensor, egm_port)
     };
+    if named {
+        let RobotOptions::Egm(o) = &mut options.robot;
+        o.robot_host = Some("127.0.0.1".into());
+    }
     let hil = HilHandle::start(&s, &options).unwrap();
     let mut buf = [0u8; 64];
     let (_, client) = sensor.recv_from(&mut buf).unwrap();
-    // the robot is 50 mm short of the scenario's start (-995 mm)
     let away = pose(-1045.0, 1.0);
     let mut feedback = FeedbackEncoder::new();
     robot.set_nonblocking(true).unwrap();
@@ -282,22 +315,91 @@ fn a_refused_start_commands_no_motion() {
     let Err(error) = hil.finish() else {
         panic!("the start must be refused")
     };
-    let error = error.to_string();
-    assert!(
-        error.contains("50.0 mm from the scenario's initial position"),
-        "{error}"
-    );
     while let Ok(n) = robot.recv(&mut big) {
         corrections.push(decoder.decode(&big[..n]).unwrap().target);
     }
-    assert!(
-        !corrections.is_empty(),
-        "the refusal holds the robot where it is"
-    );
-    for c in &corrections {
-        assert_eq!(c.pose, away, "a correction toward another pose was sent");
-        assert_eq!(c.speed, [0.0; 6]);
+    (error.to_string(), corrections, away)
+}
+
+/// Without `--robot`, a foreign EGM sender that started first (another robot, 200 mm from the
+/// scenario's start) is never locked onto: the robot at the start is, every correction goes
+/// to it, and the foreign sender's datagrams are counted.
+#[test]
+fn a_foreign_sender_that_starts_first_is_not_the_robot() {
+    let mut s = preset("paper-table1");
+    s.simulation.duration = 0.5;
+    let sensor = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let robot = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let foreign = UdpSocket::bind("127.0.0.1:0").unwrap();
+    sensor
+        .set_read_timeout(Some(Duration::from_secs(5)))
+        .unwrap();
+    let egm_port = free_udp_port();
+    let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
+    let options = RuntimeOptions {
+        limits: SafetyLimits {
+            watchdog_ms: 500.0,
+            ..Default::default()
+        },
+        ..scripted(&sensor, egm_port)
+    };
+    let hil = HilHandle::start(&s, &options).unwrap();
+    let mut buf = [0u8; 64];
+    let (_, client) = sensor.recv_from(&mut buf).unwrap();
+    let (mut robot_feedback, mut foreign_feedback) =
+        (FeedbackEncoder::new(), FeedbackEncoder::new());
+    let elsewhere = pose(-1195.0, 1.0);
+    robot.set_nonblocking(true).unwrap();
+    foreign.set_nonblocking(true).unwrap();
+    let mut big = [0u8; 2048];
+    let (mut to_robot, mut to_foreign) = (0, 0);
+    let start = Instant::now();
+    let mut ms = 0u32;
+    while !hil.is_finished() && start.elapsed() < Duration::from_secs(15) {
+        ms += 1;
+        let record = RdtRecord {
+            rdt_sequence: ms,
+            ft_sequence: ms,
+            status: 0,
+            counts: [0; 6],
+        };
+        sensor.send_to(&record.encode(), client).unwrap();
+        if ms.is_multiple_of(4) {
+            // the foreign sender from the start, with a high sequence number; the robot 100 ms later
+            let bytes =
+                foreign_feedback.encode(1000 + ms, ms as u64 * 1000, &elsewhere, &elsewhere);
+            foreign.send_to(bytes, egm).unwrap();
+            if ms > 100 {
+                // the robot follows the command: 20 mm/s from the start
+                let t = (ms - 100) as f64 * 1e-3;
+                let p = pose(-995.0 + 20.0 * t, 1.0);
+                let bytes = robot_feedback.encode(ms / 4, ms as u64 * 1000, &p, &p);
+                robot.send_to(bytes, egm).unwrap();
+            }
+        }
+        while robot.recv(&mut big).is_ok() {
+            to_robot += 1;
+        }
+        while foreign.recv(&mut big).is_ok() {
+            to_foreign += 1;
+        }
+        std::thread::sleep(Duration::from_millis(1));
     }
+    assert!(hil.wait(Duration::from_secs(5)));
+    let out = hil.finish().unwrap_or_else(|e| panic!("{e}"));
+    let rt = &out.metrics["realtime"];
+    assert_eq!(rt["stop"]["kind"], "completed", "{}", out.metrics["reason"]);
+    assert_eq!(
+        rt["robot_address"].as_str().unwrap(),
+        robot.local_addr().unwrap().to_string()
+    );
+    assert_eq!(to_foreign, 0, "corrections went to the foreign sender");
+    assert!(to_robot > 100, "{to_robot} corrections to the robot");
+    assert!(
+        rt["robot"]["foreign"].as_u64().unwrap() >= 100,
+        "{}",
+        rt["robot"]
+    );
 }
 
 /// What a scripted run saw: the output (or the error) and every correction the robot got.

@@ -21,6 +21,7 @@ use hilcontact_rt::links::{
     wait_readable, EndpointContext, LinkContext, LinkStats, Pacing, SensorEndpoint, Wrench,
 };
 use hilcontact_rt::netftapi::{ForceUnit, TorqueUnit};
+use hilcontact_rt::offset::{OffsetMode, OffsetOptions};
 use hilcontact_rt::rdt::{RdtCommand, RdtRecord, RdtRequest};
 use hilcontact_rt::safety::SafetyLimits;
 use hilcontact_rt::{
@@ -167,6 +168,11 @@ fn robot_paced_loop_runs_one_tick_per_robot_packet_and_answers_each() {
     let options = RuntimeOptions {
         limits: SafetyLimits {
             watchdog_ms: 100.0,
+            ..Default::default()
+        },
+        // no offset measurement at start: its holds would be answered like the run's ticks
+        offset: OffsetOptions {
+            mode: OffsetMode::Off,
             ..Default::default()
         },
         ..Default::default()
@@ -318,6 +324,7 @@ fn socket_errors_are_counted_per_link() {
         &LinkContext {
             period: 0.001,
             connect_timeout: 1.0,
+            start: None,
         },
     )
     .unwrap();
@@ -459,6 +466,7 @@ fn rdt_link_reads_a_sensor_configured_in_lbf_and_lbf_in_in_n_and_n_m() {
         &LinkContext {
             period: 0.001,
             connect_timeout: 2.0,
+            start: None,
         },
     )
     .unwrap();

@@ -8,19 +8,24 @@
 //! address the feedback came from. Poses cross the link through [`PoseMapping`] (m and the
 //! `t` frame on the loop's side, mm and quaternions in the EGM frame on the robot's).
 //!
-//! A feedback message is accepted when it comes from the robot (`robot_host` if given, else
-//! the first robot that sent valid feedback), decodes, has finite in-range values and a unit
-//! quaternion, and a sequence number newer than the last accepted one.
+//! A feedback message is accepted when it comes from the robot, decodes, has finite in-range
+//! values and a unit quaternion, and a sequence number newer than the last accepted one. The
+//! robot is `robot_host` if given; else it is identified, not raced for: the first sender
+//! whose valid feedback puts the rod tip within the start region ([`LinkContext::start`]:
+//! `start_tolerance` of the scenario's start), so that a foreign EGM sender that started
+//! earlier (another robot, a simulator) is counted `foreign` and never locked onto. Every
+//! other sender is counted `foreign`.
 
 use std::net::{IpAddr, SocketAddr, UdpSocket};
 
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
 
 use super::{
     bind_udp, local_addr, recv_counted, resolve, sequence_counted, EndpointContext, LinkContext,
-    LinkStats, Pacing, RobotEndpoint, RobotLink,
+    LinkStats, Pacing, RobotEndpoint, RobotLink, StartRegion,
 };
 use crate::egm::{
     CorrectionDecoder, CorrectionEncoder, EgmError, FeedbackEncoder, RobotDecoder, EGM_PERIOD,
@@ -39,8 +44,8 @@ pub struct EgmOptions {
     pub bind_host: String,
     /// UDP port the robot controller sends its EGM feedback to (6510) (CLI `--egm-port`).
     pub port: u16,
-    /// Accept EGM feedback only from this host; None = from the first robot that sends
-    /// (CLI `--robot`).
+    /// Accept EGM feedback only from this host; None = from the first sender whose feedback
+    /// is at the scenario's start (CLI `--robot`).
     pub robot_host: Option<String>,
     /// Origin of the target frame `t` in the EGM frame, mm (CLI `--egm-offset`).
     pub offset_mm: [f64; 3],
@@ -66,6 +71,10 @@ pub struct EgmRobot {
     port: u16,
     robot_ip: Option<IpAddr>,
     robot_addr: Option<SocketAddr>,
+    /// Where the robot must be to be locked onto (without `robot_host`).
+    start: Option<StartRegion>,
+    /// The nearest sender whose feedback was outside the start region, and its distance, m.
+    nearest_outside: Option<(SocketAddr, f64)>,
     mapping: PoseMapping,
     sequence: SequenceTracker,
     decoder: RobotDecoder,
@@ -77,7 +86,7 @@ pub struct EgmRobot {
 
 impl EgmRobot {
     /// Validates the mapping and binds the EGM endpoint.
-    pub fn open(o: &EgmOptions, _context: &LinkContext) -> Result<Self> {
+    pub fn open(o: &EgmOptions, context: &LinkContext) -> Result<Self> {
         let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
         let socket = bind_udp(
             "EGM endpoint",
@@ -92,6 +101,8 @@ impl EgmRobot {
             socket,
             robot_ip,
             robot_addr: None,
+            start: context.start,
+            nearest_outside: None,
             mapping,
             sequence: SequenceTracker::new(),
             decoder: RobotDecoder::new(),
@@ -109,7 +120,15 @@ impl RobotLink for EgmRobot {
     }
 
     fn describe(&self) -> String {
-        format!("the robot on UDP port {}", self.port)
+        let mut text = format!("the robot on UDP port {}", self.port);
+        if let (Some((addr, distance)), Some(start)) = (self.nearest_outside, self.start) {
+            text += &format!(
+                " (EGM feedback came from {addr}, but {:.1} mm from the scenario's start, beyond start_tolerance {:.1} mm: move the robot there, or name it with --robot)",
+                distance * 1e3,
+                start.tolerance * 1e3
+            );
+        }
+        text
     }
 
     fn pacing(&self) -> Pacing {
@@ -138,13 +157,30 @@ impl RobotLink for EgmRobot {
             else {
                 continue;
             };
+            let (position, orientation) = self.mapping.from_egm(&feedback.actual);
+            if let (None, None, Some(start)) = (self.robot_ip, self.robot_addr, self.start) {
+                // not locked yet: the robot is the sender at the scenario's start
+                let distance = start.distance(&RelativeMotion {
+                    position,
+                    orientation,
+                    velocity: Vector3::zeros(),
+                    angular_velocity: Vector3::zeros(),
+                });
+                let at_start = distance <= start.tolerance; // false for NaN
+                if !at_start {
+                    self.stats.foreign += 1;
+                    if self.nearest_outside.is_none_or(|(_, d)| distance < d) {
+                        self.nearest_outside = Some((from, distance));
+                    }
+                    continue;
+                }
+            }
             if !sequence_counted(&mut self.sequence, feedback.seqno, &mut self.stats) {
                 continue;
             }
             if self.robot_addr.is_none() {
                 self.robot_addr = Some(from);
             }
-            let (position, orientation) = self.mapping.from_egm(&feedback.actual);
             if !estimator.push(feedback.robot_time(), now_ns, position, orientation) {
                 self.stats.invalid += 1; // a jump no robot makes in one cycle
                 continue;

@@ -245,6 +245,29 @@ pub struct LinkContext {
     pub period: f64,
     /// Longest wait for the peers at start, s (also bounds the HTTP read of the counts).
     pub connect_timeout: f64,
+    /// Where the robot must be at start: a robot link that is not told its robot's address
+    /// locks onto the first sender whose feedback lies in it (None: the first sender).
+    pub start: Option<StartRegion>,
+}
+
+/// The scenario's start as a robot link sees it: a sender whose fed-back rod tip is within
+/// `tolerance` of the initial rod tip is the robot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StartRegion {
+    /// The scenario's initial relative pose (m, rad, `t` frame).
+    pub pose: RelativeMotion,
+    /// The rod tip in the servicer's body frame, m.
+    pub rod: Vector3<f64>,
+    /// Largest distance of the fed-back rod tip from the initial one, m (the runtime's
+    /// `start_tolerance`).
+    pub tolerance: f64,
+}
+
+impl StartRegion {
+    /// Distance of `pose`'s rod tip from the initial rod tip, m.
+    pub fn distance(&self, pose: &RelativeMotion) -> f64 {
+        (pose.point(&self.rod) - self.pose.point(&self.rod)).norm()
+    }
 }
 
 /// Opens the sensor link of `options` (binds, reads what it needs before the loop starts).
