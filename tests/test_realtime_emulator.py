@@ -30,13 +30,14 @@ def test_facility_defaults_are_grouped_with_kinds():
     d = realtime_defaults()["facility"]
     assert d["sensor"] == {
         "kind": "rdt", "bind_host": "127.0.0.1", "port": 49152, "http_port": 80,
-        "counts_per_force": 1e6, "counts_per_torque": 1e6,
+        "counts_per_force": 1e6, "counts_per_torque": 1e6, "force_unit": "N", "torque_unit": "N-m",
     }
     assert d["robot"] == {
         "kind": "egm", "host": "127.0.0.1", "port": 6510, "local_port": 0, "period": 0.004,
         "offset_mm": [0.0, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0], "robotware": 7,
     }
     assert d["silence_sensor_after"] is None and d["silence_robot_after"] is None
+    assert d["sensor_offset"] == [0.0] * 6
     # every flat key of earlier versions names a key of its device's defaults
     for link, kind, key in LEGACY_KEYS["facility"].values():
         assert d[link]["kind"] == kind and key in d[link], (link, key)
