@@ -20,6 +20,7 @@ from conftest import synthetic_run
 
 import hilcontact as hc
 from hilcontact.cli import cli
+from hilcontact.output import MARKER
 from hilcontact.comparison import (
     ALL_KINDS,
     SUMMARY_COLUMNS,
@@ -32,7 +33,7 @@ from hilcontact.run import OPTIONAL_TIMESERIES_COLUMNS, REFERENCE_COLUMNS, TIMES
 
 KINDS = ["none", "pic", "dac", "pida", "tdpa-impedance", "tdpa-admittance"]
 IDENTIFYING = {"pic", "dac", "pida"}
-RUN_FILES = {"timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml"}
+RUN_FILES = {"timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml", MARKER}
 RUN_PLOTS = {"contact_velocity.png", "contact_force.png", "energy.png"}
 COMPARE_PLOTS = {
     "compare_velocity.png",
@@ -280,7 +281,7 @@ def test_save_writes_runs_report_and_figures(tmp_path):
     out = comparison.save(tmp_path / "cmp")
     assert out == tmp_path / "cmp"
     names = {p.name for p in out.iterdir()}
-    assert names == {"none", "pic", "pida", "tdpa-impedance", "comparison.md", "comparison.csv"} | COMPARE_PLOTS
+    assert names == {"none", "pic", "pida", "tdpa-impedance", "comparison.md", "comparison.csv", MARKER} | COMPARE_PLOTS
     for kind, run in comparison.runs.items():
         files = {p.name for p in (out / kind).iterdir()}
         expected = RUN_FILES | RUN_PLOTS | ({"identification.png"} if kind in IDENTIFYING else set())
@@ -298,11 +299,11 @@ def test_save_writes_runs_report_and_figures(tmp_path):
 
 def test_save_without_plots_and_replacing_an_old_folder(tmp_path):
     out = tmp_path / "cmp"
-    out.mkdir()
-    (out / "stale.txt").write_text("old")
     comparison = fake_comparison(("none", "pida"))
+    comparison.save(out, plots=False)  # a folder hilcontact wrote: replaced completely
+    (out / "stale.txt").write_text("old")
     comparison.save(out, plots=False)
-    assert {p.name for p in out.iterdir()} == {"none", "pida", "comparison.md", "comparison.csv"}
+    assert {p.name for p in out.iterdir()} == {"none", "pida", "comparison.md", "comparison.csv", MARKER}
     assert {p.name for p in (out / "pida").iterdir()} == RUN_FILES
     assert "## Figures" not in (out / "comparison.md").read_text()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cmp"]
@@ -318,8 +319,8 @@ def test_failed_save_leaves_the_old_folder_untouched(tmp_path, monkeypatch):
         raise OSError("disk full")
 
     monkeypatch.setattr(Comparison, "to_markdown", boom)  # after the runs and the CSV
-    with pytest.raises(OSError, match="disk full"):
-        comparison.save(out, plots=False)
+    with pytest.raises(hc.HilContactError, match="disk full"):
+        comparison.save(out, plots=False, overwrite=True)
     assert [p.name for p in out.iterdir()] == ["comparison.md"]
     assert (out / "comparison.md").read_text() == "old"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cmp"]
@@ -400,7 +401,7 @@ def test_compare_tables_through_the_core(paper_comparison):
 
 def test_compare_save_through_the_core(paper_comparison, tmp_path):
     out = paper_comparison.save(tmp_path / "paper-table1-compare")
-    assert {p.name for p in out.iterdir()} == set(KINDS) | {"comparison.md", "comparison.csv"} | COMPARE_PLOTS
+    assert {p.name for p in out.iterdir()} == set(KINDS) | {"comparison.md", "comparison.csv", MARKER} | COMPARE_PLOTS
     for kind in KINDS:
         files = {p.name for p in (out / kind).iterdir()}
         assert RUN_FILES | RUN_PLOTS <= files
@@ -419,7 +420,7 @@ def test_cli_compare(core, tmp_path):
     out = tmp_path / "cmp"
     result = invoke("compare", "paper-table1", "--compensators", "none,pida", "--no-plots", "--out", str(out))
     assert result.exit_code == 0, (result.output, result.stderr)
-    assert {p.name for p in out.iterdir()} == {"none", "pida", "comparison.md", "comparison.csv"}
+    assert {p.name for p in out.iterdir()} == {"none", "pida", "comparison.md", "comparison.csv", MARKER}
     assert {p.name for p in (out / "pida").iterdir()} == RUN_FILES
     metrics = json.loads((out / "none" / "metrics.json").read_text())
     assert metrics["status"] == "diverged"
@@ -440,7 +441,7 @@ def test_cli_compare_default_folder_and_sets(core, tmp_path):
     )
     assert result.exit_code == 0, (result.output, result.stderr)
     out = tmp_path / "runs" / "paper-table1-compare"
-    assert {p.name for p in out.iterdir()} == {"pic", "comparison.md", "comparison.csv"}
+    assert {p.name for p in out.iterdir()} == {"pic", "comparison.md", "comparison.csv", MARKER}
     scenario = hc.load_scenario(out / "pic" / "scenario.toml")
     assert scenario.facility.robot_delay == 0.004 and scenario.simulation.duration == 1.0
     assert scenario.compensator.kind == "pic" and scenario.compensator.alpha_max == 1000.0

@@ -17,12 +17,13 @@ from conftest import synthetic_run
 
 import hilcontact as hc
 from hilcontact.cli import cli
+from hilcontact.output import MARKER
 from hilcontact.plots import MAX_POINTS, moves_in_1d, thin
 from hilcontact.run import (
     OPTIONAL_TIMESERIES_COLUMNS, PLOT_FILES, PLOT_FILES_6DOF, REFERENCE_COLUMNS, TIMESERIES_COLUMNS,
 )
 
-DATA_FILES = {"timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml"}
+DATA_FILES = {"timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml", MARKER}
 PLOTS = {"contact_velocity.png", "contact_force.png", "energy.png"}
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -58,7 +59,7 @@ def test_save_without_plots(tmp_path, fake_run):
 
 def test_save_replaces_existing_folder_completely(tmp_path, fake_run):
     out = tmp_path / "run"
-    out.mkdir()
+    fake_run.save(out, plots=False)  # a folder hilcontact wrote: replaced completely
     (out / "stale.txt").write_text("old")
     (out / "metrics.json").write_text("old")
     fake_run.save(out, plots=False)
@@ -73,11 +74,11 @@ def test_failed_save_leaves_existing_folder_untouched(tmp_path, fake_run, monkey
     (out / "metrics.json").write_text("old")
 
     def boom(self, *args, **kwargs):
-        raise OSError("disk full")
+        raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(hc.Scenario, "to_toml", boom)  # fails after the parquet files are written
-    with pytest.raises(OSError, match="disk full"):
-        fake_run.save(out)
+    with pytest.raises(hc.HilContactError, match="No space left on device"):
+        fake_run.save(out, overwrite=True)
     assert [p.name for p in out.iterdir()] == ["metrics.json"]
     assert (out / "metrics.json").read_text() == "old"
     assert siblings(out) == ["run"]
@@ -85,7 +86,7 @@ def test_failed_save_leaves_existing_folder_untouched(tmp_path, fake_run, monkey
 
 def test_failed_save_creates_nothing(tmp_path, fake_run, monkeypatch):
     monkeypatch.setattr(pd.DataFrame, "to_parquet", lambda *a, **k: (_ for _ in ()).throw(OSError("nope")))
-    with pytest.raises(OSError):
+    with pytest.raises(hc.HilContactError, match="nope"):
         fake_run.save(tmp_path / "new")
     assert list(tmp_path.iterdir()) == []
 

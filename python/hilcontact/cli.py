@@ -39,6 +39,7 @@ from rich.table import Table
 from . import __version__
 from .comparison import ALL_KINDS, Comparison, comparison_scenarios, run_comparison
 from .errors import HilContactError, RealtimeOptionError, ScenarioError
+from .output import OutputError, check_output_folder
 from .run import Run, core_version, simulate
 from .scenario import load_scenario, presets
 
@@ -71,10 +72,20 @@ def _fail(message: str, code: int) -> None:
 def _errors() -> Iterator[None]:
     try:
         yield
-    except (ScenarioError, RealtimeOptionError) as exc:
+    except (ScenarioError, RealtimeOptionError, OutputError) as exc:
         _fail(str(exc), 2)
     except HilContactError as exc:
         _fail(str(exc), 1)
+
+
+_FORCE_HELP = "Replace --out even if it holds files hilcontact did not write."
+
+
+def _out_folder(out: str | None, default: Path, force: bool) -> Path:
+    """The output folder, checked before anything runs (hilcontact.output)."""
+    folder = Path(out) if out is not None else default
+    check_output_folder(folder, overwrite=force)
+    return folder
 
 
 def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
@@ -120,16 +131,15 @@ _SET_HELP = (
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>].")
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
-def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool) -> None:
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
+def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, force: bool) -> None:
     """Simulate SCENARIO (a preset name or a TOML file) and save the results."""
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
-        folder = Path(out) if out is not None else Path("runs") / resolved.name
-        if folder.exists() and not folder.is_dir():
-            raise ScenarioError(f"--out {folder}: exists and is not a directory")
+        folder = _out_folder(out, Path("runs") / resolved.name, force)
         with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
             result = simulate(resolved)
-        result.save(folder, plots=not no_plots)
+        result.save(folder, plots=not no_plots, overwrite=force)
     _report(Console(), result, folder)
 
 
@@ -202,7 +212,8 @@ def _report(console: Console, result: Run, folder: Path) -> None:
     "--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-compare]."
 )
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
-def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool) -> None:
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
+def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool, force: bool) -> None:
     """Simulate SCENARIO once per compensator and compare them.
 
     Writes a run folder per compensator, comparison.md and comparison.csv (CoV, CoF, peak
@@ -215,9 +226,7 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
         overrides = parse_set_options(sets)
         scenarios = comparison_scenarios(scenario, kinds, overrides)  # validate all before running
         name = next(iter(scenarios.values())).name
-        folder = Path(out) if out is not None else Path("runs") / f"{name}-compare"
-        if folder.exists() and not folder.is_dir():
-            raise ScenarioError(f"--out {folder}: exists and is not a directory")
+        folder = _out_folder(out, Path("runs") / f"{name}-compare", force)
         stderr = Console(stderr=True)
         with Progress(
             TextColumn("[bold]{task.description}"),
@@ -234,7 +243,7 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
 
             result = run_comparison(scenarios, progress=advance)
             progress.update(task, completed=len(scenarios), description="Writing files")
-            result.save(folder, plots=not no_plots)
+            result.save(folder, plots=not no_plots, overwrite=force)
     _report_comparison(Console(), result, folder)
 
 
@@ -332,13 +341,14 @@ def sweep_command(
         TimeRemainingColumn,
     )
 
-    from .sweep import plan_sweep, run_plan
+    from .sweep import check_sweep_folder, plan_sweep, run_plan
 
     if threads is not None and threads < 1:
         _fail("--threads: expected a whole number >= 1", 2)
     with _errors():
         overrides = parse_set_options(sets)
         plan = plan_sweep(scenario, list(grids), kinds, seeds, overrides)  # validate before anything runs
+        check_sweep_folder(Path(out), plan, resume)
         stderr = Console(stderr=True)
         where = f"on Dask ({dask})" if dask else f"on {threads or 'all'} core(s)"
         stderr.print(
@@ -727,13 +737,13 @@ def _runtime_options(sensor_protocol: str | None, robot_protocol: str | None, se
     }
 
 
-def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots: bool) -> None:
+def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots: bool, force: bool) -> None:
     from .realtime import exit_code, run_hil
 
     stderr = Console(stderr=True)
     with stderr.status(f"{escape(resolved.name)}: connecting to the sensor and the robot ...") as status:
         result = run_hil(resolved, options, on_status=lambda s: status.update(escape(_hil_line(s))))
-    result.save(folder, plots=not no_plots)
+    result.save(folder, plots=not no_plots, overwrite=force)
     console = Console()
     _report(console, result, folder)
     _report_realtime(console, result)
@@ -748,7 +758,8 @@ def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots
 @_with(_HIL_OPTIONS + _MAPPING_OPTIONS)
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-rt].")
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
-def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, **kw: Any) -> None:
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
+def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, force: bool, **kw: Any) -> None:
     """Run the HIL loop of SCENARIO in real time: RDT client of the F/T sensor at --sensor,
     EGM endpoint on UDP --egm-port for the robot controller, the scenario's compensator and
     virtual dynamics in a Rust real-time thread. Shows a live line; writes the same files as
@@ -764,10 +775,8 @@ def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots:
     """
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
-        folder = Path(out) if out is not None else Path("runs") / f"{resolved.name}-rt"
-        if folder.exists() and not folder.is_dir():
-            raise ScenarioError(f"--out {folder}: exists and is not a directory")
-        _run_realtime(resolved, _runtime_options(**kw), folder, no_plots)
+        folder = _out_folder(out, Path("runs") / f"{resolved.name}-rt", force)
+        _run_realtime(resolved, _runtime_options(**kw), folder, no_plots, force)
 
 
 def _free_port(kind: int) -> int:
@@ -800,8 +809,9 @@ def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tu
 @_protocol_option("robot", "facility")
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-demo-rt].")
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
+@click.option("--force", is_flag=True, help=_FORCE_HELP)
 def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay: float, sensor_protocol: str | None,
-            robot_protocol: str | None, out: str | None, no_plots: bool) -> None:
+            robot_protocol: str | None, out: str | None, no_plots: bool, force: bool) -> None:
     """Run the emulated facility and the real-time HIL loop on loopback in one process (free
     ports, HTTP included): `hilcontact facility` and `hilcontact hil` together.
 
@@ -817,7 +827,7 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
         overrides.setdefault("facility.robot_delay", robot_delay)
         overrides["compensator.kind"] = compensator
         resolved = load_scenario(scenario, overrides)
-        folder = Path(out) if out is not None else Path("runs") / f"{resolved.name}-demo-rt"
+        folder = _out_folder(out, Path("runs") / f"{resolved.name}-demo-rt", force)
         facility_options, runtime_options = _demo_options(sensor_protocol, robot_protocol)
         with start_facility(resolved, facility_options) as facility:
             a = facility.addresses
@@ -827,7 +837,7 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
                 soft_wrap=True,
             )
             try:
-                _run_realtime(resolved, runtime_options, folder, no_plots)
+                _run_realtime(resolved, runtime_options, folder, no_plots, force)
             finally:
                 final = facility.stop()
                 if final.get("io_errors"):

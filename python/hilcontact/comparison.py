@@ -25,7 +25,8 @@ import pandas as pd
 
 from .errors import HilContactError, ScenarioError
 from .registry import KINDS
-from .run import Run, simulate, write_atomically
+from .output import write_atomically
+from .run import Run, simulate
 from .scenario import COMPENSATOR_MODELS, Scenario, _override_steps, _read_source, load_scenario
 
 if TYPE_CHECKING:
@@ -309,9 +310,10 @@ class Comparison:
             save_figures(figures, directory, dpi=110)
         return figures
 
-    def save(self, directory: str | os.PathLike[str], plots: bool = True) -> Path:
+    def save(self, directory: str | os.PathLike[str], plots: bool = True, overwrite: bool = False) -> Path:
         """Write the comparison to ``directory``, atomically (a temporary sibling folder that
-        then replaces ``directory``).
+        then replaces ``directory``; only a new or empty folder, or one hilcontact wrote,
+        unless ``overwrite``: :mod:`hilcontact.output`).
 
         Contents: ``<kind>/`` (a run folder per compensator, as :meth:`Run.save`),
         ``comparison.md``, ``comparison.csv`` and, unless ``plots=False``, the run figures
@@ -324,7 +326,7 @@ class Comparison:
             (folder / "comparison.csv").write_text(self.to_csv(), encoding="utf-8")
             (folder / "comparison.md").write_text(self.to_markdown(names), encoding="utf-8")
 
-        return write_atomically(directory, write)
+        return write_atomically(directory, write, "comparison", overwrite)
 
 
 def _cell(value: Any, fmt: str) -> str:

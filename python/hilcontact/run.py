@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
 
 import json
 import os
-import shutil
-import uuid
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -16,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import HilContactError
+from .output import write_atomically
 from .scenario import Scenario, load_scenario
 
 if TYPE_CHECKING:
@@ -152,15 +150,18 @@ class Run:
             save_figures(figures, directory, dpi=120)
         return figures
 
-    def save(self, directory: str | os.PathLike[str], plots: bool = True) -> Path:
+    def save(self, directory: str | os.PathLike[str], plots: bool = True, overwrite: bool = False) -> Path:
         """Write the run to ``directory``, atomically.
 
         Files: timeseries.parquet, reference.parquet, metrics.json, scenario.toml (resolved,
         reproduces the run) and, unless ``plots=False``, the PNG figures. Everything is
         written into a temporary sibling folder which then replaces ``directory``: an
-        existing folder is never half-overwritten. Returns the folder's path.
+        existing folder is never half-overwritten. Only a new or empty folder, or one that
+        hilcontact wrote, is replaced (``overwrite=True`` replaces any other folder; see
+        :mod:`hilcontact.output`); else :class:`~hilcontact.output.OutputError`. Returns the
+        folder's path.
         """
-        return write_atomically(directory, lambda folder: self._write(folder, plots))
+        return write_atomically(directory, lambda folder: self._write(folder, plots), "run", overwrite)
 
     def _write(self, folder: Path, plots: bool) -> None:
         self.timeseries.to_parquet(folder / "timeseries.parquet", engine="pyarrow", index=False)
@@ -169,44 +170,6 @@ class Run:
         (folder / "scenario.toml").write_text(self.scenario.to_toml(), encoding="utf-8")
         if plots:
             self.plot(folder)
-
-
-def write_atomically(directory: str | os.PathLike[str], write: Callable[[Path], None]) -> Path:
-    """Call ``write(folder)`` on a temporary sibling folder of ``directory``, then swap it into
-    place: an existing ``directory`` is never half-overwritten, and nothing is left behind if
-    ``write`` fails. Returns ``directory`` as a Path."""
-    target = Path(directory)
-    if target.exists() and not target.is_dir():
-        raise HilContactError(f"{target}: exists and is not a directory")
-    parent = target.absolute().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    # os.mkdir (not tempfile.mkdtemp) so that the folder gets the usual permissions
-    staging = parent / f".{target.name}.tmp-{uuid.uuid4().hex[:12]}"
-    os.mkdir(staging)
-    try:
-        write(staging)
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    _swap_into_place(staging, target.absolute())
-    return target
-
-
-def _swap_into_place(staging: Path, target: Path) -> None:
-    """Replace ``target`` by ``staging`` (same parent folder) with renames only."""
-    old: Path | None = None
-    if target.exists() or target.is_symlink():
-        old = target.parent / f".{target.name}.old-{uuid.uuid4().hex[:12]}"
-        os.rename(target, old)
-    try:
-        os.rename(staging, target)
-    except BaseException:
-        if old is not None:
-            os.rename(old, target)
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
 
 
 def simulate(scenario: Scenario | str | os.PathLike[str]) -> Run:

@@ -34,6 +34,7 @@ import pandas as pd
 
 from .comparison import comparison_scenarios, parse_kinds
 from .errors import HilContactError, ScenarioError
+from .output import OutputError, mark_folder, marker_kind
 from .run import _core
 from .scenario import Scenario, load_scenario
 
@@ -369,12 +370,19 @@ def _chunks(items: list[Any], size: int) -> Iterator[list[Any]]:
         yield items[start : start + size]
 
 
-def _prepare_folder(folder: Path, plan: SweepPlan, resume: bool) -> set[str]:
-    """Create or check the sweep folder; returns the keys of the runs already done."""
+def check_sweep_folder(folder: Path, plan: SweepPlan, resume: bool) -> bool:
+    """Check, writing nothing, that ``folder`` can take this sweep: new, empty, or (with
+    ``resume``) a folder of the same sweep; returns whether it holds results already. Raises
+    ScenarioError or OutputError (one line)."""
     spec_path = folder / SPEC_FILE
     if folder.exists() and not folder.is_dir():
         raise ScenarioError(f"--out {folder}: exists and is not a directory")
     has_results = (folder / RESULTS_FILE).is_file() or any((folder / PARTS_DIR).glob("part-*.parquet"))
+    kind = marker_kind(folder)
+    is_sweep = kind == "sweep" or spec_path.is_file() or has_results
+    if folder.is_dir() and not is_sweep and any(folder.iterdir()):
+        what = f"a hilcontact {kind} folder" if kind else "files hilcontact did not write"
+        raise OutputError(f"--out {folder}: holds {what}; a sweep needs a new or empty folder (or its own, with --resume)")
     if resume:
         if spec_path.is_file():
             recorded = json.loads(spec_path.read_text(encoding="utf-8"))
@@ -393,7 +401,16 @@ def _prepare_folder(folder: Path, plan: SweepPlan, resume: bool) -> set[str]:
             f"--out {folder}: already holds sweep results; add --resume to continue that sweep "
             "(its finished runs are skipped), or choose another --out"
         )
+    return has_results
+
+
+def _prepare_folder(folder: Path, plan: SweepPlan, resume: bool) -> set[str]:
+    """Check (:func:`check_sweep_folder`) and create the sweep folder; returns the keys of the
+    runs already done."""
+    has_results = check_sweep_folder(folder, plan, resume)
+    spec_path = folder / SPEC_FILE
     (folder / PARTS_DIR).mkdir(parents=True, exist_ok=True)
+    mark_folder(folder, "sweep")
     spec_path.write_text(json.dumps(plan.spec(), indent=1) + "\n", encoding="utf-8")
     if not has_results:
         return set()
