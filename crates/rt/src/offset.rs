@@ -155,7 +155,10 @@ mod tests {
     fn mean_and_std_per_axis() {
         let mut s = WrenchStats::default();
         for sign in [-1.0, 1.0, -1.0, 1.0] {
-            s.push(&wrench([3.0 + sign, -2.0, 20.0], [0.1, 0.0, 0.0 + 0.5 * sign]));
+            s.push(&wrench(
+                [3.0 + sign, -2.0, 20.0],
+                [0.1, 0.0, 0.0 + 0.5 * sign],
+            ));
         }
         let (mean, std) = (s.mean(), s.std());
         assert_eq!(s.count(), 4);
@@ -176,11 +179,6 @@ mod tests {
         let e = o.offset(&pressed).unwrap_err().to_string();
         assert!(e.contains("80.0 N") && e.contains("--bias"), "{e}");
         assert!(o.offset(&WrenchStats::default()).is_err());
-        assert!(OffsetOptions {
-            time: 0.0,
-            ..o
-        }
-        .validate()
-        .is_err());
+        assert!(OffsetOptions { time: 0.0, ..o }.validate().is_err());
     }
 }

@@ -190,7 +190,10 @@ fn a_sensor_offset_is_measured_at_start_and_subtracted() {
         .map(|v| v.as_f64().unwrap())
         .collect();
     for (i, (a, b)) in measured.iter().zip(offset).enumerate() {
-        assert!((a - b).abs() < 0.2, "offset[{i}] measured {a}, injected {b}");
+        assert!(
+            (a - b).abs() < 0.2,
+            "offset[{i}] measured {a}, injected {b}"
+        );
     }
     let covs: Vec<f64> = m["collisions"]
         .as_array()
