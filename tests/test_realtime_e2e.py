@@ -98,6 +98,17 @@ def test_pida_at_20ms_in_real_time_across_processes(core, tmp_path):
     assert len(series) == 3501 and {"stiffness_estimate", "wake_latency", "sensor_age"} <= set(series.columns)
     assert (out / "reference.parquet").exists() and (out / "scenario.toml").exists()
     assert "loop: 3501 ticks" in result.stdout and "wake latency p50/p99/max" in result.stdout
+    # the loop thread's scheduling (defaults: SCHED_FIFO 80, memory locked): granted or refused
+    # depends on the machine, the report must agree with itself and be printed
+    sched = rt["scheduling"]
+    assert set(sched) == {"policy", "priority", "fifo_granted", "memory_locked", "cpu", "pinned", "refused"}
+    if sched["fifo_granted"]:
+        assert (sched["policy"], sched["priority"]) == ("fifo", 80)
+    else:
+        assert any(t.startswith("SCHED_FIFO priority 80: ") for t in sched["refused"]), sched
+    assert sched["memory_locked"] != any(t.startswith("memory lock") for t in sched["refused"]), sched
+    assert (sched["cpu"], sched["pinned"]) == (None, False)
+    assert "scheduling: " in result.stdout and ("SCHED_FIFO 80 granted" in result.stdout) == sched["fifo_granted"]
 
 
 def test_uncompensated_loop_diverges_and_the_force_limit_stops_it(core, tmp_path):

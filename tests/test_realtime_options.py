@@ -53,3 +53,40 @@ def test_the_rust_side_rejects_unknown_kinds_and_foreign_keys(tmp_path):
     for bad in ({"robot": {"kind": "rsi"}}, {"sensor": {"kind": "rdt", "offset_mm": [0, 0, 0]}}):
         with pytest.raises(RealtimeOptionError):
             run_hil("paper-table1", bad)
+
+
+def test_scheduling_defaults_and_the_cli_flags():
+    assert realtime_defaults()["runtime"]["scheduling"] == {"priority": 80, "lock_memory": True, "cpu": None}
+    from hilcontact.cli import _scheduling_options
+
+    assert _scheduling_options(None, False, None) is None  # the Rust defaults
+    assert _scheduling_options(0, True, 1) == {"priority": 0, "lock_memory": False, "cpu": 1}
+    assert json.loads(_options({"scheduling": _scheduling_options(50, False, None)}, "runtime")) == {
+        "scheduling": {"priority": 50}
+    }
+
+
+@pytest.mark.parametrize(("scheduling", "fragment"), [
+    ({"priority": 100}, "scheduling.priority"),
+    ({"cpu": 9999}, "scheduling.cpu: CPU 9999 does not exist"),
+    ({"policy": "fifo"}, "policy"),
+])
+def test_bad_scheduling_options_are_refused_before_connecting(scheduling, fragment):
+    from hilcontact.realtime import run_hil
+
+    with pytest.raises(RealtimeOptionError, match=fragment):
+        run_hil("paper-table1", {"scheduling": scheduling, "connect_timeout": 0.2})
+
+
+def test_the_report_line_says_what_was_granted_and_what_was_refused():
+    from hilcontact.cli import _scheduling_line
+
+    granted = {"policy": "fifo", "priority": 80, "fifo_granted": True, "memory_locked": True, "cpu": None,
+               "pinned": False, "refused": []}
+    assert _scheduling_line(granted) == "scheduling: SCHED_FIFO 80 granted, memory locked, not pinned"
+    refused = {"policy": "other", "priority": 0, "fifo_granted": False, "memory_locked": False, "cpu": 1,
+               "pinned": True, "refused": ["SCHED_FIFO priority 80: EPERM (Operation not permitted): needs CAP_SYS_NICE"]}
+    assert _scheduling_line(refused) == (
+        "scheduling: normal priority, memory not locked, pinned to CPU 1 "
+        "(refused: SCHED_FIFO priority 80: EPERM (Operation not permitted): needs CAP_SYS_NICE)"
+    )

@@ -8,8 +8,8 @@
     hilcontact presets
     hilcontact show SCENARIO [--set KEY=VALUE ...]
     hilcontact facility SCENARIO [--sensor-port 49152 --http-port 80 --egm-host H --egm-port 6510 ...]
-    hilcontact hil SCENARIO --sensor HOST [--egm-port 6510 --force-limit N ...] [--out DIR]
-    hilcontact demo-rt [SCENARIO] [--compensator pida] [--out DIR]
+    hilcontact hil SCENARIO --sensor HOST [--egm-port 6510 --force-limit N --rt-priority 80 --cpu N ...] [--out DIR]
+    hilcontact demo-rt [SCENARIO] [--compensator pida] [--rt-priority 80 --no-lock-memory --cpu N] [--out DIR]
     hilcontact --version
 
 Bad input (scenario, override, option, output folder) prints one ``error: ...`` line on stderr
@@ -564,6 +564,24 @@ def _facility_errors(s: dict[str, Any]) -> str:
     return "; ".join(parts)
 
 
+def _scheduling_line(s: dict[str, Any]) -> str:
+    """One line of what the OS granted the loop thread (``metrics.json`` ``realtime.scheduling``):
+    ``scheduling: SCHED_FIFO 80 granted, memory locked, not pinned``, with each refusal's reason."""
+    if s.get("policy") == "fifo":
+        parts = [f"SCHED_FIFO {s.get('priority')} " + ("granted" if s.get("fifo_granted") else "(inherited)")]
+    elif s.get("policy") == "rr":
+        parts = [f"SCHED_RR {s.get('priority')} (inherited)"]
+    else:
+        parts = ["normal priority"]
+    parts.append("memory locked" if s.get("memory_locked") else "memory not locked")
+    parts.append(f"pinned to CPU {s.get('cpu')}" if s.get("pinned") else "not pinned")
+    line = "scheduling: " + ", ".join(parts)
+    refused = s.get("refused") or []
+    if refused:
+        line += " (refused: " + "; ".join(refused) + ")"
+    return line
+
+
 def _report_realtime(console: Console, run: Run) -> None:
     rt = run.metrics.get("realtime") or {}
     timing = rt.get("timing", {})
@@ -576,6 +594,8 @@ def _report_realtime(console: Console, run: Run) -> None:
         f"compute p99 {comp.get('p99', 0):.0f} µs; overruns {timing.get('overruns')}",
         soft_wrap=True,
     )
+    if rt.get("scheduling"):
+        console.print(_scheduling_line(rt["scheduling"]), soft_wrap=True)
     for name, link in (("sensor (RDT)", sensor), ("robot (EGM)", robot)):
         console.print(
             f"{name}: received {link.get('received')}, accepted {link.get('accepted')}, lost {link.get('lost')}, "
@@ -675,6 +695,22 @@ def facility_command(scenario: str, sets: tuple[str, ...], sensor_protocol: str 
     click.echo("endpoints: " + _facility_errors(final))
 
 
+_SCHEDULING_OPTIONS = [
+    click.option("--rt-priority", type=click.IntRange(0, 99), default=None, metavar="N",
+                 help="SCHED_FIFO priority of the loop thread, 1-99 (0 = normal scheduling); a refusal by the OS is reported, not an error (docs/realtime.md)." + _dflt("runtime", "scheduling.priority")),
+    click.option("--no-lock-memory", is_flag=True, default=False, help="Do not lock the process's memory (mlockall) [default: locked]."),
+    click.option("--cpu", type=click.IntRange(min=0), default=None, metavar="N", help="Pin the loop thread to this CPU (0-based) [default: any CPU]."),
+]
+
+
+def _scheduling_options(rt_priority: int | None, no_lock_memory: bool, cpu: int | None) -> dict[str, Any] | None:
+    """``{"scheduling": ...}``'s value from the CLI flags (None: the Rust defaults)."""
+    scheduling = {k: v for k, v in (("priority", rt_priority), ("cpu", cpu)) if v is not None}
+    if no_lock_memory:
+        scheduling["lock_memory"] = False
+    return scheduling or None
+
+
 _HIL_OPTIONS = [
     _protocol_option("sensor", "runtime"),
     _protocol_option("robot", "runtime"),
@@ -704,6 +740,7 @@ _HIL_OPTIONS = [
     click.option("--max-offset-moment", type=float, default=None, help="Refuse the start when the moment offset is larger." + _dflt("runtime", "offset.max_moment", "N m")),
     click.option("--connect-timeout", type=float, default=None, help="Longest wait for the sensor and the robot." + _dflt("runtime", "connect_timeout", "s")),
     click.option("--start-tolerance", type=float, default=None, help="Largest distance of the robot from the initial pose at start." + _dflt("runtime", "start_tolerance", "m")),
+    *_SCHEDULING_OPTIONS,
 ]
 
 
@@ -715,7 +752,7 @@ def _runtime_options(sensor_protocol: str | None, robot_protocol: str | None, se
                      retreat_speed: float | None, retreat_distance: float | None, tracking_limit: float | None,
                      tracking_window: float | None, offset_mode: str | None, offset_time: float | None,
                      max_offset_force: float | None, max_offset_moment: float | None, connect_timeout: float | None, start_tolerance: float | None, egm_offset: str | None,
-                     egm_rotation: str | None) -> dict[str, Any]:
+                     egm_rotation: str | None, rt_priority: int | None, no_lock_memory: bool, cpu: int | None) -> dict[str, Any]:
     limits = {k: v for k, v in (("force_limit", force_limit), ("moment_limit", moment_limit),
                                 ("watchdog_ms", watchdog_ms), ("workspace", workspace),
                                 ("hold_deviation", hold_deviation), ("retreat_speed", retreat_speed),
@@ -726,6 +763,7 @@ def _runtime_options(sensor_protocol: str | None, robot_protocol: str | None, se
     # the flags keep their flat keys; hilcontact.realtime.LEGACY_KEYS moves them into the links
     return {
         "offset": offset or None,
+        "scheduling": _scheduling_options(rt_priority, no_lock_memory, cpu),
         "sensor": {"kind": sensor_protocol} if sensor_protocol else None,
         "robot": {"kind": robot_protocol} if robot_protocol else None,
         "sensor_host": sensor_host, "sensor_port": sensor_port, "http_port": http_port,
@@ -763,7 +801,9 @@ def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots:
     """Run the HIL loop of SCENARIO in real time: RDT client of the F/T sensor at --sensor,
     EGM endpoint on UDP --egm-port for the robot controller, the scenario's compensator and
     virtual dynamics in a Rust real-time thread. Shows a live line; writes the same files as
-    `run` (metrics.json with a "realtime" section: timing statistics, packet counters, stop).
+    `run` (metrics.json with a "realtime" section: timing statistics, packet counters, stop,
+    and the loop thread's scheduling: SCHED_FIFO --rt-priority, locked memory, --cpu, each
+    granted or refused by the OS; a refusal is reported, the run goes on).
 
     Exit code: 0 completed, 3 safety stop (force/moment limit, watchdog, workspace, divergence;
     the robot is commanded to hold, streaming stops, the run is saved), 130 Ctrl-C (same),
@@ -807,11 +847,13 @@ def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tu
 @click.option("--robot-delay", type=float, default=0.02, show_default=True, help="The emulated robot's response delay, s.")
 @_protocol_option("sensor", "facility")
 @_protocol_option("robot", "facility")
+@_with(_SCHEDULING_OPTIONS)
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-demo-rt].")
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
 def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay: float, sensor_protocol: str | None,
-            robot_protocol: str | None, out: str | None, no_plots: bool, force: bool) -> None:
+            robot_protocol: str | None, rt_priority: int | None, no_lock_memory: bool, cpu: int | None,
+            out: str | None, no_plots: bool, force: bool) -> None:
     """Run the emulated facility and the real-time HIL loop on loopback in one process (free
     ports, HTTP included): `hilcontact facility` and `hilcontact hil` together.
 
@@ -829,6 +871,9 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
         resolved = load_scenario(scenario, overrides)
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-demo-rt", force)
         facility_options, runtime_options = _demo_options(sensor_protocol, robot_protocol)
+        scheduling = _scheduling_options(rt_priority, no_lock_memory, cpu)
+        if scheduling:
+            runtime_options["scheduling"] = scheduling
         with start_facility(resolved, facility_options) as facility:
             a = facility.addresses
             Console(stderr=True).print(

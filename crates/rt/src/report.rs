@@ -19,7 +19,7 @@ use hilcontact_core::Plan;
 
 use std::net::SocketAddr;
 
-use crate::clock::TimingSummary;
+use crate::clock::{SchedulingReport, TimingSummary};
 use crate::error::{Result, RtError};
 use crate::links::{LinkStats, Pacing};
 use crate::safety::StopEvent;
@@ -82,6 +82,8 @@ pub struct RunOutcome {
     /// The sensor's offset measured at start and subtracted from every record, `[Fx, Fy, Fz]`
     /// N then `[Mx, My, Mz]` N·m (None: `bias.mode = "off"`).
     pub sensor_offset: Option<[f64; 6]>,
+    /// What the OS granted the loop thread: policy, priority, locked memory, CPU.
+    pub scheduling: SchedulingReport,
 }
 
 /// Everything a real-time run produces.
@@ -106,7 +108,7 @@ pub struct RealtimeMetrics {
     /// The metrics of the run, as a simulation computes them.
     #[serde(flatten)]
     pub core: Metrics,
-    /// Timing, packet counters, links, options.
+    /// Timing, packet counters, links, the loop thread's scheduling, options.
     pub realtime: Value,
 }
 
@@ -172,6 +174,7 @@ pub fn build_output(
         "pacing": outcome.pacing,
         "robot_address": outcome.robot_address.map(|a| a.to_string()),
         "sensor_offset": outcome.sensor_offset,
+        "scheduling": outcome.scheduling,
         "options": options,
     });
     // the sensor link's own facts (RDT: counts_per_force, counts_per_torque, sensor_units)

@@ -39,7 +39,10 @@ use hilcontact_core::hil::{HilStep, VirtualDynamics};
 use hilcontact_core::world::RelativeMotion;
 use hilcontact_core::{metrics, sim, Plan, Scenario};
 
-use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack, Histogram};
+use crate::clock::{
+    now_ns, request_realtime, sleep_until_ns, tighten_timer_slack, Histogram, SchedulingOptions,
+    SchedulingReport,
+};
 use crate::error::{Result, RtError};
 use crate::feedback::{Extrapolation, FeedbackEstimator};
 pub use crate::links::LinkStats;
@@ -78,6 +81,9 @@ pub struct RuntimeOptions {
     pub hold_time: f64,
     /// The sensor's offset at start: measured with the rod free and subtracted, or not.
     pub offset: OffsetOptions,
+    /// Real-time scheduling of the loop thread (`SCHED_FIFO` priority, locked memory, CPU); a
+    /// refusal by the OS is reported in `metrics.json` (`realtime.scheduling`), not an error.
+    pub scheduling: SchedulingOptions,
 }
 
 impl Default for RuntimeOptions {
@@ -91,6 +97,7 @@ impl Default for RuntimeOptions {
             start_tolerance: 0.005,
             hold_time: 0.1,
             offset: OffsetOptions::default(),
+            scheduling: SchedulingOptions::default(),
         }
     }
 }
@@ -200,6 +207,7 @@ impl HilHandle {
         let o = options;
         o.limits.validate()?;
         o.offset.validate()?;
+        o.scheduling.validate()?;
         if o.offset.mode == OffsetMode::Measure
             && plan.system.contact_force(&plan.initial).0.norm() > 0.0
         {
@@ -330,12 +338,16 @@ impl HilHandle {
             compute: Histogram::new(20_000),
             overruns: 0,
             t0_ns: 0,
+            scheduling: SchedulingReport::normal(),
         };
         let flag = shared.clone();
+        let scheduling = o.scheduling;
+        // the writer (started above) keeps normal scheduling: only this thread asks for more
         let thread = std::thread::Builder::new()
             .name("hil-rt".into())
             .spawn(move || {
                 tighten_timer_slack();
+                state.scheduling = request_realtime(&scheduling);
                 let outcome = state.run();
                 flag.phase.store(3, Ordering::Release);
                 flag.finished.store(true, Ordering::Release);
@@ -471,6 +483,8 @@ struct Loop {
     compute: Histogram,
     overruns: u64,
     t0_ns: u64,
+    /// What the OS granted this thread (asked for at its start).
+    scheduling: SchedulingReport,
 }
 
 impl Loop {
@@ -548,6 +562,7 @@ impl Loop {
                 let (f, m) = (self.sensor_offset.force, self.sensor_offset.moment);
                 [f.x, f.y, f.z, m.x, m.y, m.z]
             }),
+            scheduling: self.scheduling.clone(),
         })
     }
 

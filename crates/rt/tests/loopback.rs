@@ -222,3 +222,130 @@ fn a_sensor_offset_is_measured_at_start_and_subtracted() {
         "{error}"
     );
 }
+
+/// The scheduling policy of every thread of this process named `name` (`/proc/self/task/*/stat`
+/// field 41: 0 `SCHED_OTHER`, 1 `SCHED_FIFO`).
+fn thread_policies(name: &str) -> Vec<u32> {
+    let mut policies = Vec::new();
+    for task in std::fs::read_dir("/proc/self/task").unwrap().flatten() {
+        let Ok(stat) = std::fs::read_to_string(task.path().join("stat")) else {
+            continue; // the thread ended
+        };
+        // "tid (comm) state ...": the fields after the comm start with the state (field 3)
+        let (Some(open), Some(close)) = (stat.find('('), stat.rfind(')')) else {
+            continue;
+        };
+        if &stat[open + 1..close] != name {
+            continue;
+        }
+        let fields: Vec<&str> = stat[close + 2..].split_whitespace().collect();
+        policies.push(fields[41 - 3].parse().unwrap());
+    }
+    policies
+}
+
+/// `realtime.scheduling` in metrics.json agrees with itself and with the options (granted or
+/// refused depends on the machine: consistency is asserted, not a value); the writer and the
+/// emulator are never raised; invalid scheduling options are refused before anything starts.
+#[test]
+fn the_loop_reports_its_scheduling() {
+    let mut s = preset("paper-table1");
+    s.facility.robot_delay = 0.02;
+    s.simulation.duration = 1.0;
+    s.compensator = CompensatorConfig::Pida(ModelParams::default());
+
+    // the defaults: SCHED_FIFO 80, memory locked, no CPU
+    let (emu, rt) = loopback_options();
+    assert_eq!(
+        (
+            rt.scheduling.priority,
+            rt.scheduling.lock_memory,
+            rt.scheduling.cpu
+        ),
+        (80, true, None)
+    );
+    let facility = FacilityHandle::start(&s, &emu).unwrap();
+    let hil = HilHandle::start(&s, &rt).unwrap();
+    while hil.status().phase != "running" && !hil.is_finished() {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // other tests' loops may run alongside: every writer and emulator of the process
+    let writers = thread_policies("hil-writer");
+    let facilities = thread_policies("hil-facility");
+    assert!(!writers.is_empty() && !facilities.is_empty());
+    assert!(
+        writers.iter().chain(&facilities).all(|p| *p == 0),
+        "writer {writers:?}, emulator {facilities:?}: must stay SCHED_OTHER"
+    );
+    assert!(hil.wait(Duration::from_secs(30)));
+    let m = hil.finish().unwrap().metrics;
+    facility.join();
+    let sched = &m["realtime"]["scheduling"];
+    eprintln!("{}", serde_json::to_string_pretty(sched).unwrap());
+    let refused: Vec<&str> = sched["refused"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t.as_str().unwrap())
+        .collect();
+    let granted = sched["fifo_granted"].as_bool().unwrap();
+    if granted {
+        assert_eq!(
+            (&sched["policy"], &sched["priority"]),
+            (&"fifo".into(), &80.into())
+        );
+    } else {
+        assert!(
+            refused
+                .iter()
+                .any(|t| t.starts_with("SCHED_FIFO priority 80: ")),
+            "{sched}"
+        );
+    }
+    let locked = sched["memory_locked"].as_bool().unwrap();
+    assert_eq!(
+        locked,
+        !refused.iter().any(|t| t.starts_with("memory lock")),
+        "{sched}"
+    );
+    assert_eq!(refused.len(), usize::from(!granted) + usize::from(!locked));
+    assert_eq!(
+        (&sched["cpu"], &sched["pinned"]),
+        (&Value::Null, &false.into())
+    );
+    assert_eq!(m["realtime"]["options"]["scheduling"]["priority"], 80);
+
+    // nothing asked: normal scheduling, nothing refused; pinned to CPU 0 when asked
+    let (emu, mut rt) = loopback_options();
+    rt.scheduling.priority = 0;
+    rt.scheduling.lock_memory = false;
+    rt.scheduling.cpu = Some(0);
+    let facility = FacilityHandle::start(&s, &emu).unwrap();
+    let hil = HilHandle::start(&s, &rt).unwrap();
+    assert!(hil.wait(Duration::from_secs(30)));
+    let m = hil.finish().unwrap().metrics;
+    facility.join();
+    let sched = &m["realtime"]["scheduling"];
+    assert_eq!(sched["policy"], "other", "{sched}");
+    assert_eq!(sched["priority"], 0);
+    assert_eq!(sched["fifo_granted"], false);
+    assert_eq!(sched["memory_locked"], false);
+    assert_eq!(sched["cpu"], 0);
+    let pinned = sched["pinned"].as_bool().unwrap();
+    let refused = sched["refused"].as_array().unwrap();
+    assert_eq!(refused.len(), usize::from(!pinned), "{sched}");
+
+    // out of range: option errors, before any socket is bound
+    for (priority, cpu, key) in [
+        (100, None, "scheduling.priority"),
+        (80, Some(9999), "scheduling.cpu"),
+    ] {
+        let (_, mut rt) = loopback_options();
+        rt.scheduling.priority = priority;
+        rt.scheduling.cpu = cpu;
+        let Err(error) = HilHandle::start(&s, &rt) else {
+            panic!("{key} must be refused")
+        };
+        assert!(error.to_string().starts_with(key), "{error}");
+    }
+}
