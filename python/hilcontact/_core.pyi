@@ -147,5 +147,12 @@ def start_facility(scenario_json: str, options_json: str) -> FacilityHandle:
     ``realtime_defaults()["facility"]``). Raises like :func:`start_hil`."""
 
 
+def check(scenario_json: str, options_json: str, duration: float) -> str:
+    """A dry run (``hilcontact check``): open the sensor and robot links of the runtime options
+    (as :func:`start_hil`) as a run would, listen for ``duration`` s (GIL released) commanding
+    nothing to the robot, and return the report as JSON (``sensor``, ``robot``,
+    ``would_start``, ``reasons``). Raises like :func:`start_hil`."""
+
+
 def realtime_defaults() -> str:
     """The default runtime and facility options as JSON: ``{"runtime": {...}, "facility": {...}}``."""

@@ -9,18 +9,21 @@
     hilcontact show SCENARIO [--set KEY=VALUE ...]
     hilcontact facility SCENARIO [--sensor-port 49152 --http-port 80 --egm-host H --egm-port 6510 ...]
     hilcontact hil SCENARIO --sensor HOST [--egm-port 6510 --force-limit N --rt-priority 80 --cpu N ...] [--out DIR]
+    hilcontact check SCENARIO --sensor HOST [the options of hil] [--duration 1] [--out DIR]
     hilcontact demo-rt [SCENARIO] [--compensator pida] [--rt-priority 80 --no-lock-memory --cpu N] [--out DIR]
     hilcontact --version
 
 Bad input (scenario, override, option, output folder) prints one ``error: ...`` line on stderr
 and exits with code 2; nothing is written then. ``hil`` and ``demo-rt`` exit with 3 after a
 safety stop and 130 after Ctrl-C (the run is saved in both cases); a facility that cannot be
-reached or a port in use exits with 1. An interrupted sweep (Ctrl-C) keeps its finished rows
+reached or a port in use exits with 1. ``check`` exits with 0 when a run would start, 1 when it
+would refuse. An interrupted sweep (Ctrl-C) keeps its finished rows
 and exits with code 130.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import signal
 import socket
@@ -817,6 +820,115 @@ def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots:
         resolved = load_scenario(scenario, parse_set_options(sets))
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-rt", force)
         _run_realtime(resolved, _runtime_options(**kw), folder, no_plots, force)
+
+
+def _vector(values: Sequence[float] | None, scale: float = 1.0, fmt: str = ".2f") -> str:
+    if values is None:
+        return "-"
+    return "(" + ", ".join(f"{v * scale:{fmt}}" for v in values) + ")"
+
+
+def _rate(hz: float | None) -> str:
+    return "-" if hz is None else f"{hz:.0f} Hz"
+
+
+def _stats_line(stats: dict[str, Any]) -> str:
+    """A link's counters: received, accepted, then every other non-zero counter (`sent` always:
+    the robot's must stay 0)."""
+    rest = [f"{k} {v}" for k, v in stats.items() if k not in ("received", "accepted", "sent") and v]
+    return ", ".join([f"received {stats.get('received')}", f"accepted {stats.get('accepted')}",
+                      f"sent {stats.get('sent')}", *rest])
+
+
+def _link_report(report: dict[str, Any]) -> str:
+    """What a link reports of its device (RDT: counts per unit, the sensor's units), as text."""
+    parts = []
+    for key, value in report.items():
+        if isinstance(value, dict):
+            value = ", ".join(f"{k} {v}" for k, v in value.items())
+        elif isinstance(value, float):
+            value = f"{value:g}"
+        parts.append(f"{key}: {value}")
+    return "; ".join(parts) or "-"
+
+
+def _report_check(console: Console, report: dict[str, Any]) -> None:
+    """`hilcontact check`'s report: both links, aligned, then the verdict."""
+    sensor, robot = report["sensor"], report["robot"]
+    table = Table.grid(padding=(0, 2))
+    table.add_column(style="bold")
+    table.add_column()
+    table.add_row(f"sensor ({escape(sensor['protocol'])})", escape(sensor["address"]))
+    table.add_row("  records", f"{_rate(sensor['rate'])}; {_stats_line(sensor['stats'])}")
+    table.add_row("  device", escape(_link_report(sensor["report"])))
+    offset, noise = sensor["offset"], sensor["noise"]
+    if offset is None:
+        table.add_row("  offset", "- (no record)")
+    else:
+        table.add_row(
+            "  offset",
+            f"F {_vector(offset[:3])} N, |F| {sensor['offset_force']:.2f} N (max {sensor['offset_max_force']:g} N); "
+            f"M {_vector(offset[3:], fmt='.3f')} N m, |M| {sensor['offset_moment']:.3f} N m (max {sensor['offset_max_moment']:g} N m); "
+            f"offset mode {sensor['offset_mode']}; {sensor['samples']} records",
+        )
+        table.add_row("  noise (std)", f"F {_vector(noise[:3], fmt='.3f')} N; M {_vector(noise[3:], fmt='.4f')} N m")
+    table.add_row(f"robot ({escape(robot['protocol'])})", escape(robot["address"]))
+    table.add_row("  locked onto", escape(robot["peer"] or "-"))
+    table.add_row("  feedback", f"{_rate(robot['rate'])}; {_stats_line(robot['stats'])}")
+    start = f"the scenario's start {_vector(robot['start_rod_tip'], 1e3, '.1f')} mm"
+    if robot["start_distance"] is None:
+        table.add_row("  rod tip", f"- (no feedback); {start}")
+    else:
+        table.add_row(
+            "  rod tip",
+            f"{_vector(robot['rod_tip'], 1e3, '.1f')} mm, {robot['start_distance'] * 1e3:.1f} mm from {start} "
+            f"(start_tolerance {robot['start_tolerance'] * 1e3:.1f} mm)",
+        )
+    console.print(f"check {escape(report['scenario'])}: listened {report['duration']:g} s, nothing commanded to the robot")
+    console.print(table)
+    if report["would_start"]:
+        console.print("[bold green]verdict: a run would start[/]")
+    else:
+        console.print("[bold red]verdict: a run would refuse:[/]")
+        for reason in report["reasons"]:
+            console.print("  - " + escape(reason), soft_wrap=True)
+
+
+@cli.command(name="check", short_help="Dry run: connect to the sensor and the robot as `hil` would, command nothing, report.")
+@click.argument("scenario")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
+@_with(_HIL_OPTIONS + _MAPPING_OPTIONS)
+@click.option("--duration", type=float, default=1.0, show_default=True, metavar="S", help="How long to listen to the sensor and the robot, s.")
+@click.option("--out", "out", metavar="DIR", default=None, help="Write check.json (the report) to this folder.")
+def check_command(scenario: str, sets: tuple[str, ...], duration: float, out: str | None, **kw: Any) -> None:
+    """Check that `hilcontact hil SCENARIO` with the same options would start, commanding
+    nothing: connect to the sensor and the robot exactly as `hil` would, listen for --duration
+    seconds, and report the sensor (rate, counters, counts per unit and units, the offset and
+    the noise with the rod free) and the robot (the address locked onto, feedback rate,
+    counters, the rod tip's distance from the scenario's start), then the verdict with the run's
+    own reasons. The robot is sent nothing at all, not even a hold.
+
+    Exit code: 0 a run would start, 1 it would refuse (or a link cannot be opened), 2 bad input.
+
+    \b
+    Example, against `hilcontact facility paper-table1 --http-port 8080`:
+      hilcontact check paper-table1 --sensor 127.0.0.1 --http-port 8080 --egm-port 6510
+    """
+    from .realtime import check
+
+    with _errors():
+        resolved = load_scenario(scenario, parse_set_options(sets))
+        folder = Path(out) if out is not None else None
+        if folder is not None and folder.exists() and not folder.is_dir():
+            raise ScenarioError(f"--out {folder}: exists and is not a directory")
+        with Console(stderr=True).status(f"{escape(resolved.name)}: listening to the sensor and the robot for {duration:g} s ..."):
+            report = check(resolved, _runtime_options(**kw), duration)
+        if folder is not None:
+            folder.mkdir(parents=True, exist_ok=True)
+            (folder / "check.json").write_text(json.dumps(report, indent=2) + "\n")
+    _report_check(Console(), report)
+    if not report["would_start"]:
+        raise click.exceptions.Exit(1)
 
 
 def _free_port(kind: int) -> int:

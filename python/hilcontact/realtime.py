@@ -6,6 +6,9 @@ facility that speaks them.
   over UDP): compensator and virtual dynamics in a Rust real-time thread, the same step code
   as :func:`hilcontact.simulate`. It returns a :class:`~hilcontact.Run` whose ``metrics`` has a
   ``realtime`` section (timing statistics, packet counters, the stop and its exit code).
+- :func:`check` is a dry run: it connects to the sensor and the robot as :func:`run_hil` would,
+  listens for a while commanding nothing to the robot, and reports both links and whether a
+  run would start (and if not, why).
 - :func:`start_facility` starts the emulated facility of a scenario (robot with the scenario's
   response lag, contact, sensor with its delay and noise) behind those protocols.
 
@@ -40,6 +43,7 @@ __all__ = [
     "LEGACY_KEYS",
     "REALTIME_COLUMNS",
     "Facility",
+    "check",
     "exit_code",
     "realtime_defaults",
     "run_hil",
@@ -185,6 +189,24 @@ def run_hil(
         timeseries=_frame(result["timeseries"], TIMESERIES_COLUMNS + OPTIONAL_TIMESERIES_COLUMNS + REALTIME_COLUMNS),
         reference=_frame(result["reference"], REFERENCE_COLUMNS),
     )
+
+
+def check(scenario: Scenario | str, options: Mapping[str, Any] | None = None, duration: float = 1.0) -> dict[str, Any]:
+    """A dry run of :func:`run_hil`: open the sensor and robot links of ``options`` exactly as
+    a run would, listen for ``duration`` seconds, and apply the run's start checks, commanding
+    nothing to the robot (not even a hold; the sensor is asked to stream and to stop).
+
+    Returns the report as a dict: ``sensor`` (protocol, address, rate in Hz, stats, the link's
+    ``report`` such as counts per unit, ``offset`` and ``noise`` as ``[Fx, Fy, Fz, Mx, My, Mz]``
+    in N and N m, the offset bounds), ``robot`` (protocol, address, ``peer`` locked onto, rate
+    in Hz, stats, ``rod_tip`` and ``start_rod_tip`` in m, ``start_distance`` and
+    ``start_tolerance`` in m), ``would_start`` and ``reasons`` (the run's own refusal messages).
+    Raises ScenarioError/RealtimeOptionError for invalid input and
+    :class:`~hilcontact.errors.RealtimeError` when a link cannot be opened (a port in use, the
+    sensor's ``/netftapi2.xml`` unreachable).
+    """
+    scenario = _scenario(scenario)
+    return json.loads(_core().check(scenario.to_json(), _options(options, "runtime"), float(duration)))
 
 
 class Facility:

@@ -227,6 +227,26 @@ impl PyHilHandle {
     }
 }
 
+/// A dry run of the real-time HIL loop (`hilcontact check`): opens the sensor and robot links
+/// of the runtime options (JSON, as `start_hil`'s) as a run would, listens for `duration` s
+/// (GIL released) commanding nothing to the robot, and returns the report as JSON (the Rust
+/// `CheckReport`: `sensor`, `robot`, `would_start`, `reasons`). Raises for bad input and for
+/// links that cannot be opened (RealtimeError: a port in use, the sensor's counts unreadable).
+#[pyfunction]
+fn check(
+    py: Python<'_>,
+    scenario_json: &str,
+    options_json: &str,
+    duration: f64,
+) -> PyResult<String> {
+    let scenario = scenario_data(py, scenario_json)?;
+    let options: RuntimeOptions = parse_options(py, options_json)?;
+    let report = py
+        .allow_threads(|| hilcontact_rt::check(&scenario, &options, duration))
+        .map_err(|e| rt_err(py, e))?;
+    serde_json::to_string(&report).map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
 /// Starts the real-time HIL loop of a scenario (JSON) with runtime options (JSON, keys of
 /// `RuntimeOptions`: `sensor` and `robot` grouped with their `kind`, defaults for the missing
 /// ones). Binds the sockets and reads the sensor's
@@ -544,6 +564,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(resolve_scenario, m)?)?;
     m.add_function(wrap_pyfunction!(start_hil, m)?)?;
     m.add_function(wrap_pyfunction!(start_facility, m)?)?;
+    m.add_function(wrap_pyfunction!(check, m)?)?;
     m.add_function(wrap_pyfunction!(realtime_defaults, m)?)?;
     m.add_class::<PyHilHandle>()?;
     m.add_class::<PyFacilityHandle>()?;

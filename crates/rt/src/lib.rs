@@ -12,12 +12,15 @@
 //!   those protocols;
 //! - [`runtime`]: the HIL loop thread (the core's [`hilcontact_core::hil::VirtualDynamics`]) on a
 //!   monotonic clock, with [`safety`] limits, a lock-free sample log and timing statistics;
-//! - [`report`]: time series and metrics of a real-time run, as a simulation writes them.
+//! - [`report`]: time series and metrics of a real-time run, as a simulation writes them;
+//! - [`check`]: a dry run (`hilcontact check`): both links opened as a run opens them, listened
+//!   to, and the run's start checks applied, with nothing commanded to the robot.
 //!
 //! The numerics stay in `hilcontact-core`; this crate owns the I/O, the clocks and the threads.
 
 #![warn(missing_docs)]
 
+pub mod check;
 pub mod clock;
 pub mod egm;
 pub mod egm_proto;
@@ -33,6 +36,7 @@ pub mod report;
 pub mod runtime;
 pub mod safety;
 
+pub use check::{check, CheckReport};
 pub use emulator::{EmulatorOptions, FacilityHandle};
 pub use error::{Result, RtError};
 pub use links::{LinkStats, Pacing, RobotLink, RobotOptions, SensorLink, SensorOptions};

@@ -8,6 +8,8 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use hilcontact_core::Plan;
+
 use crate::error::{Result, RtError};
 use crate::links::Wrench;
 
@@ -65,6 +67,20 @@ impl OffsetOptions {
                     format!("must be a positive number, got {v}"),
                 ));
             }
+        }
+        Ok(())
+    }
+
+    /// Refuses to measure the offset of a scenario that starts in contact (mode
+    /// [`OffsetMode::Measure`]): the rod is not free at start.
+    pub fn check_start(&self, plan: &Plan) -> Result<()> {
+        if self.mode == OffsetMode::Measure
+            && plan.system.contact_force(&plan.initial).0.norm() > 0.0
+        {
+            return Err(RtError::option(
+                "offset.mode",
+                "the scenario starts in contact, so the sensor's offset cannot be measured at start: bias the sensor with the rod free and set offset.mode = \"off\" (--offset off)",
+            ));
         }
         Ok(())
     }

@@ -174,15 +174,7 @@ impl HilHandle {
     /// starts the writer and loop threads.
     pub fn start(scenario: &Scenario, options: &RuntimeOptions) -> Result<Self> {
         let plan = Self::validate(scenario, options)?;
-        let context = LinkContext {
-            period: plan.period,
-            connect_timeout: options.connect_timeout,
-            start: Some(StartRegion {
-                pose: VirtualDynamics::new(&plan).command(),
-                rod: plan.system.rod_tip,
-                tolerance: options.start_tolerance,
-            }),
-        };
+        let context = link_context(&plan, options);
         let sensor = open_sensor(&options.sensor, &context)?;
         let robot = open_robot(&options.robot, &context)?;
         Self::start_inner(plan, options, sensor, robot)
@@ -201,21 +193,21 @@ impl HilHandle {
         Self::start_inner(plan, options, sensor, robot)
     }
 
-    /// The scenario's plan, once the options are checked too.
-    fn validate(scenario: &Scenario, options: &RuntimeOptions) -> Result<Plan> {
+    /// The scenario's plan, once the options are checked too, and that the scenario can start
+    /// with them ([`OffsetOptions::check_start`]).
+    pub(crate) fn validate(scenario: &Scenario, options: &RuntimeOptions) -> Result<Plan> {
+        let plan = Self::validate_options(scenario, options)?;
+        options.offset.check_start(&plan)?;
+        Ok(plan)
+    }
+
+    /// The scenario's plan, once the options are checked (each alone: bad input).
+    pub(crate) fn validate_options(scenario: &Scenario, options: &RuntimeOptions) -> Result<Plan> {
         let plan = scenario.resolve()?;
         let o = options;
         o.limits.validate()?;
         o.offset.validate()?;
         o.scheduling.validate()?;
-        if o.offset.mode == OffsetMode::Measure
-            && plan.system.contact_force(&plan.initial).0.norm() > 0.0
-        {
-            return Err(RtError::option(
-                "offset.mode",
-                "the scenario starts in contact, so the sensor's offset cannot be measured at start: bias the sensor with the rod free and set offset.mode = \"off\" (--offset off)",
-            ));
-        }
         for (key, v) in [
             ("connect_timeout", o.connect_timeout),
             ("start_tolerance", o.start_tolerance),
@@ -243,29 +235,9 @@ impl HilHandle {
         robot: Box<dyn RobotLink>,
     ) -> Result<Self> {
         let o = options;
+        check_pacing(robot.as_ref(), plan.period)?;
         let pacing = robot.pacing();
         let feedback_period = robot.feedback_period();
-        if !(feedback_period.is_finite() && feedback_period > 0.0) {
-            return Err(RtError::option(
-                "robot",
-                format!(
-                    "the {} link reports a feedback period of {feedback_period} s",
-                    robot.name()
-                ),
-            ));
-        }
-        if pacing == Pacing::Robot && (feedback_period - plan.period).abs() > 1e-6 * feedback_period
-        {
-            return Err(RtError::option(
-                "simulation.period",
-                format!(
-                    "the {} robot paces the loop every {} s: set simulation.period = {}",
-                    robot.name(),
-                    feedback_period,
-                    feedback_period
-                ),
-            ));
-        }
 
         let reference_energy = sim::run_reference(&plan, false).0.energy;
         let energy_bound = metrics::divergence_bound(
@@ -433,6 +405,87 @@ impl Drop for HilHandle {
             let _ = t.join();
         }
     }
+}
+
+/// What the links of a run of `plan` are told when they are opened: the period, the connect
+/// timeout and the start region (the scenario's initial pose, the rod, `start_tolerance`).
+pub(crate) fn link_context(plan: &Plan, options: &RuntimeOptions) -> LinkContext {
+    LinkContext {
+        period: plan.period,
+        connect_timeout: options.connect_timeout,
+        start: Some(StartRegion {
+            pose: VirtualDynamics::new(plan).command(),
+            rod: plan.system.rod_tip,
+            tolerance: options.start_tolerance,
+        }),
+    }
+}
+
+/// Refuses a robot link whose feedback period is not a positive number, or that paces the
+/// loop ([`Pacing::Robot`]) at another period than the scenario's (`period`, s).
+pub(crate) fn check_pacing(robot: &dyn RobotLink, period: f64) -> Result<()> {
+    let feedback_period = robot.feedback_period();
+    if !(feedback_period.is_finite() && feedback_period > 0.0) {
+        return Err(RtError::option(
+            "robot",
+            format!(
+                "the {} link reports a feedback period of {feedback_period} s",
+                robot.name()
+            ),
+        ));
+    }
+    if robot.pacing() == Pacing::Robot && (feedback_period - period).abs() > 1e-6 * feedback_period
+    {
+        return Err(RtError::option(
+            "simulation.period",
+            format!(
+                "the {} robot paces the loop every {} s: set simulation.period = {}",
+                robot.name(),
+                feedback_period,
+                feedback_period
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// What is missing at start: "no RDT record from the sensor at ..." and/or "no EGM feedback
+/// from the robot on ..." (the links' own descriptions, which explain e.g. senders that were
+/// not at the start); empty when both peers were heard.
+pub(crate) fn missing_peers(
+    sensor: &dyn SensorLink,
+    robot: &dyn RobotLink,
+    has_feedback: bool,
+) -> Vec<String> {
+    let mut missing = Vec::new();
+    if sensor.stats().accepted == 0 {
+        missing.push(format!(
+            "no {} record from {}",
+            sensor.name(),
+            sensor.describe()
+        ));
+    }
+    if !has_feedback {
+        missing.push(format!(
+            "no {} feedback from {}",
+            robot.name(),
+            robot.describe()
+        ));
+    }
+    missing
+}
+
+/// Refuses a start whose fed-back rod tip is `distance` from the scenario's initial one, beyond
+/// `tolerance` (both m).
+pub(crate) fn check_start_distance(distance: f64, tolerance: f64) -> Result<()> {
+    if distance > tolerance {
+        return Err(RtError::Connect(format!(
+            "the robot's rod tip is {:.1} mm from the scenario's initial position (start_tolerance {:.1} mm): move it there first",
+            distance * 1e3,
+            tolerance * 1e3
+        )));
+    }
+    Ok(())
 }
 
 /// Below this measured force magnitude the rod is taken as free of contact (the retreat
@@ -604,21 +657,11 @@ impl Loop {
                 break;
             }
             if now - start > timeout_ns {
-                let mut missing = Vec::new();
-                if self.sensor.stats().accepted == 0 {
-                    missing.push(format!(
-                        "no {} record from {}",
-                        self.sensor.name(),
-                        self.sensor.describe()
-                    ));
-                }
-                if !self.estimator.has_feedback() {
-                    missing.push(format!(
-                        "no {} feedback from {}",
-                        self.robot.name(),
-                        self.robot.describe()
-                    ));
-                }
+                let missing = missing_peers(
+                    self.sensor.as_ref(),
+                    self.robot.as_ref(),
+                    self.estimator.has_feedback(),
+                );
                 return Err(RtError::Connect(format!(
                     "{} within {} s (connect_timeout)",
                     missing.join(" and "),
@@ -637,13 +680,9 @@ impl Loop {
             .last_pose()
             .map_or(self.initial.position, |p| p.point(&self.rod));
         let distance = (actual - self.initial.point(&self.rod)).norm();
-        if distance > self.start_tolerance {
+        if let Err(e) = check_start_distance(distance, self.start_tolerance) {
             self.hold(None);
-            return Err(RtError::Connect(format!(
-                "the robot's rod tip is {:.1} mm from the scenario's initial position (start_tolerance {:.1} mm): move it there first",
-                distance * 1e3,
-                self.start_tolerance * 1e3
-            )));
+            return Err(e);
         }
         if self.offset.mode == OffsetMode::Measure {
             if let Err(e) = self.measure_offset() {
