@@ -35,7 +35,9 @@ fn emulator_options_are_grouped_per_device_kind() {
         offset_mm = [1.0, 2.0, 3.0]
     "#;
     let o: EmulatorOptions = toml::from_str(text).unwrap();
-    let EmulatedSensorOptions::Rdt(sensor) = &o.sensor;
+    let EmulatedSensorOptions::Rdt(sensor) = &o.sensor else {
+        panic!("{:?}", o.sensor)
+    };
     let EmulatedRobotOptions::Egm(robot) = &o.robot;
     assert_eq!(
         (sensor.port, sensor.http_port, sensor.bind_host.as_str()),
