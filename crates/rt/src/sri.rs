@@ -324,7 +324,9 @@ impl SriRateCommand {
     }
 }
 
-/// An AT command to the box.
+/// An AT command to the box (built on the stack, a few per run: the matrix variant's size
+/// does not matter).
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum SriCommand {
     /// `AT+SMPR=<Hz>` (or SMPF): the sample rate, Hz (integer on the wire).

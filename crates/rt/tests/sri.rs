@@ -258,7 +258,7 @@ fn the_link_configures_the_box_and_counts_split_corrupt_and_missing_frames() {
     let o = SriOptions {
         port,
         sample_rate: Some(1000.0),
-        decoupling_matrix: Some(matrix),
+        decoupling_matrix: Some(Box::new(matrix)),
         ..Default::default()
     };
     let mut link = SriSensor::open(&o, &link_context()).unwrap();
@@ -347,7 +347,7 @@ fn the_link_reads_the_emulated_box() {
     );
     link.stop_streaming();
     let report = link.report();
-    assert_eq!(report["rate_command"], "SMPR");
+    assert_eq!(report["sensor_rate_command"], "SMPR");
     stop.store(true, Ordering::Relaxed);
     let e = handle.join().unwrap();
     assert!(e.stats().sent >= 200);

@@ -47,7 +47,7 @@ pub struct SriOptions {
     /// The 6×6 decoupling matrix from the sensor's calibration sheet, row by row, applied by
     /// the box to the bridge signals in mV/V (sent with `AT+DCPCU=MVPV`); None: the matrix
     /// stored in the box is used.
-    pub decoupling_matrix: Option<[[f64; 6]; 6]>,
+    pub decoupling_matrix: Option<Box<[[f64; 6]; 6]>>,
 }
 
 impl Default for SriOptions {
@@ -128,9 +128,9 @@ impl SriSensor {
             SriCommand::DataMode,
             SriCommand::SampleRate(o.rate_command, link.rate),
         ];
-        if let Some(m) = o.decoupling_matrix {
+        if let Some(m) = &o.decoupling_matrix {
             configuration.push(SriCommand::ComputeUnitMvpv);
-            configuration.push(SriCommand::DecouplingMatrix(m));
+            configuration.push(SriCommand::DecouplingMatrix(**m));
         }
         let mut pending = Vec::new();
         for command in configuration {
@@ -304,10 +304,13 @@ impl SensorLink for SriSensor {
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
         let mut m = serde_json::Map::new();
-        m.insert("sample_rate".into(), self.rate.into());
-        m.insert("rate_command".into(), self.rate_command.name().into());
+        m.insert("sensor_sample_rate".into(), self.rate.into());
         m.insert(
-            "decoupling_matrix".into(),
+            "sensor_rate_command".into(),
+            self.rate_command.name().into(),
+        );
+        m.insert(
+            "sensor_decoupling_matrix".into(),
             if self.matrix_sent {
                 "options"
             } else {
