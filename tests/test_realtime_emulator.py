@@ -17,7 +17,7 @@ core = pytest.importorskip("hilcontact._core")
 
 from hilcontact.cli import cli  # noqa: E402
 from hilcontact.scenario import load_scenario  # noqa: E402
-from hilcontact.realtime import LEGACY_KEYS, _options, realtime_defaults, start_facility  # noqa: E402
+from hilcontact.realtime import ANY_KIND, LEGACY_KEYS, _options, realtime_defaults, start_facility  # noqa: E402
 
 
 def free_port(kind: int = socket.SOCK_DGRAM) -> int:
@@ -40,7 +40,7 @@ def test_facility_defaults_are_grouped_with_kinds():
     assert d["sensor_offset"] == [0.0] * 6
     # every flat key of earlier versions names a key of its device's defaults
     for link, kind, key in LEGACY_KEYS["facility"].values():
-        assert d[link]["kind"] == kind and key in d[link], (link, key)
+        assert kind in (d[link]["kind"], ANY_KIND) and key in d[link], (link, key)
 
 
 def test_flat_facility_keys_move_into_their_device_and_round_trip():
@@ -79,8 +79,8 @@ def test_the_emulator_runs_from_grouped_options(core):
 def test_an_unknown_protocol_is_rejected_listing_the_allowed_ones(section):
     with pytest.raises(RealtimeOptionError, match=r"robot.kind: unknown robot protocol 'rsi'; allowed: egm"):
         _options({"robot": {"kind": "rsi"}}, section)
-    with pytest.raises(RealtimeOptionError, match=r"sensor.kind: unknown sensor protocol 'sri'; allowed: rdt"):
-        _options({"sensor": {"kind": "sri", "port": 1}}, section)
+    with pytest.raises(RealtimeOptionError, match=r"sensor.kind: unknown sensor protocol 'ftx'; allowed: rdt, sri"):
+        _options({"sensor": {"kind": "ftx", "port": 1}}, section)
 
 
 def test_the_rust_side_rejects_an_unknown_protocol_too(core):
@@ -94,11 +94,11 @@ def test_the_cli_offers_the_protocols_of_the_core():
     runner = CliRunner()
     for command in ("facility", "demo-rt"):
         help_text = runner.invoke(cli, [command, "--help"], prog_name="hilcontact").output
-        assert "--sensor-protocol [rdt]" in help_text and "--robot-protocol [egm]" in help_text, help_text
+        assert "--sensor-protocol [rdt|sri]" in help_text and "--robot-protocol [egm]" in help_text, help_text
     bad = runner.invoke(cli, ["facility", "paper-table1", "--robot-protocol", "rsi"], prog_name="hilcontact")
     assert bad.exit_code == 2 and "--robot-protocol" in bad.output and "'rsi'" in bad.output and "egm" in bad.output, bad.output
-    bad = runner.invoke(cli, ["demo-rt", "--sensor-protocol", "sri"], prog_name="hilcontact")
-    assert bad.exit_code == 2 and "--sensor-protocol" in bad.output and "'sri'" in bad.output and "rdt" in bad.output, bad.output
+    bad = runner.invoke(cli, ["demo-rt", "--sensor-protocol", "ftx"], prog_name="hilcontact")
+    assert bad.exit_code == 2 and "--sensor-protocol" in bad.output and "'ftx'" in bad.output and "rdt" in bad.output, bad.output
 
 
 def test_the_emulators_send_errors_are_counted(core):

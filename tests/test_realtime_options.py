@@ -10,7 +10,7 @@ from hilcontact.errors import RealtimeOptionError
 
 core = pytest.importorskip("hilcontact._core")
 
-from hilcontact.realtime import LEGACY_KEYS, _options, realtime_defaults  # noqa: E402
+from hilcontact.realtime import ANY_KIND, LEGACY_KEYS, _options, realtime_defaults  # noqa: E402
 
 
 def test_defaults_are_grouped_with_kinds_and_list_the_protocols():
@@ -20,7 +20,7 @@ def test_defaults_are_grouped_with_kinds_and_list_the_protocols():
         "counts_per_force": None, "counts_per_torque": None, "local_port": 0, "bias": False,
     }
     assert d["runtime"]["robot"]["kind"] == "egm" and d["runtime"]["robot"]["port"] == 6510
-    assert d["protocols"] == {"sensor": ["rdt"], "robot": ["egm"]}
+    assert d["protocols"] == {"sensor": ["rdt", "sri"], "robot": ["egm"]}
 
 
 def test_flat_legacy_keys_move_into_their_link():
@@ -34,7 +34,7 @@ def test_flat_legacy_keys_move_into_their_link():
     # every legacy key names a key of its link's defaults
     d = realtime_defaults()["runtime"]
     for link, kind, key in LEGACY_KEYS["runtime"].values():
-        assert d[link]["kind"] == kind and key in d[link]
+        assert kind in (d[link]["kind"], ANY_KIND) and key in d[link]
 
 
 def test_grouped_and_flat_keys_merge_and_kinds_are_checked():
@@ -90,3 +90,13 @@ def test_the_report_line_says_what_was_granted_and_what_was_refused():
         "scheduling: normal priority, memory not locked, pinned to CPU 1 "
         "(refused: SCHED_FIFO priority 80: EPERM (Operation not permitted): needs CAP_SYS_NICE)"
     )
+
+
+def test_sensor_host_and_port_go_to_any_sensor_kind():
+    """`hil --sensor-protocol sri --sensor HOST --sensor-port P`: the flat host and port are the
+    SRI box's; an RDT-only key with kind sri is refused."""
+    grouped = json.loads(_options({"sensor": {"kind": "sri"}, "sensor_host": "192.168.0.108", "sensor_port": 4008}, "runtime"))
+    assert grouped["sensor"] == {"kind": "sri", "host": "192.168.0.108", "port": 4008}
+    assert "sri" in realtime_defaults()["protocols"]["sensor"]
+    with pytest.raises(RealtimeOptionError, match="http_port.*sensor kind 'rdt', not 'sri'"):
+        _options({"sensor": {"kind": "sri"}, "http_port": 80}, "runtime")

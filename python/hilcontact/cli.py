@@ -943,7 +943,8 @@ def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tu
     defaults = _RT_DEFAULTS.get("facility", {})
     sensor_kind = sensor_protocol or defaults.get("sensor", {}).get("kind", "rdt")
     robot_kind = robot_protocol or defaults.get("robot", {}).get("kind", "egm")
-    sensor = {"kind": sensor_kind, "port": _free_port(socket.SOCK_DGRAM)}
+    sensor_socket = socket.SOCK_STREAM if sensor_kind == "sri" else socket.SOCK_DGRAM  # SRI M812x: TCP
+    sensor = {"kind": sensor_kind, "port": _free_port(sensor_socket)}
     robot = {"kind": robot_kind, "port": _free_port(socket.SOCK_DGRAM)}
     if sensor_kind == "rdt":
         sensor["http_port"] = _free_port(socket.SOCK_STREAM)

@@ -69,13 +69,17 @@ def realtime_defaults() -> dict[str, Any]:
     return json.loads(_core().realtime_defaults())
 
 
+#: The kind of a flat key every protocol of its link has (host, port): it implies no kind.
+ANY_KIND = "*"
+
 #: Flat option keys of earlier versions, per section: ``key -> (link, kind, key in the link)``.
-#: ``{"sensor_port": 49152}`` is ``{"sensor": {"kind": "rdt", "port": 49152}}``. The one
-#: mapping table between the flat keys (and the CLI flags built on them) and the grouped form.
+#: ``{"sensor_port": 49152}`` is ``{"sensor": {"kind": "rdt", "port": 49152}}`` (the default
+#: kind; with ``"sensor": {"kind": "sri"}`` the SRI box's port). The one mapping table between
+#: the flat keys (and the CLI flags built on them) and the grouped form.
 LEGACY_KEYS: dict[str, dict[str, tuple[str, str, str]]] = {
     "runtime": {
-        "sensor_host": ("sensor", "rdt", "host"),
-        "sensor_port": ("sensor", "rdt", "port"),
+        "sensor_host": ("sensor", ANY_KIND, "host"),
+        "sensor_port": ("sensor", ANY_KIND, "port"),
         "http_port": ("sensor", "rdt", "http_port"),
         "counts_per_force": ("sensor", "rdt", "counts_per_force"),
         "counts_per_torque": ("sensor", "rdt", "counts_per_torque"),
@@ -88,8 +92,8 @@ LEGACY_KEYS: dict[str, dict[str, tuple[str, str, str]]] = {
         "egm_rotation": ("robot", "egm", "rotation"),
     },
     "facility": {
-        "bind_host": ("sensor", "rdt", "bind_host"),
-        "sensor_port": ("sensor", "rdt", "port"),
+        "bind_host": ("sensor", ANY_KIND, "bind_host"),
+        "sensor_port": ("sensor", ANY_KIND, "port"),
         "http_port": ("sensor", "rdt", "http_port"),
         "counts_per_force": ("sensor", "rdt", "counts_per_force"),
         "counts_per_torque": ("sensor", "rdt", "counts_per_torque"),
@@ -122,7 +126,8 @@ def _options(options: Mapping[str, Any] | None, section: str) -> str:
         if key in legacy:
             link, kind, inner = legacy[key]
             links.setdefault(link, {})[inner] = value
-            implied.setdefault(link, (kind, key))
+            if kind != ANY_KIND:
+                implied.setdefault(link, (kind, key))
         elif key in LINKS and key in known:
             if not isinstance(value, Mapping):
                 raise RealtimeOptionError(f"{section} option {key!r} must be a table with a 'kind', got {value!r}")

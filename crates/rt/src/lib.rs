@@ -4,6 +4,7 @@
 //! network protocols, and an emulated facility that speaks them.
 //!
 //! - [`rdt`], [`netftapi`]: ATI Net F/T sensor (RDT over UDP, `/netftapi2.xml` over HTTP);
+//! - [`sri`]: SRI M812x interface box (AT commands and binary frames over TCP);
 //! - [`egm`], [`egm_proto`]: ABB Externally Guided Motion (protobuf over UDP);
 //! - [`links`]: the loop's seam to the devices: the [`SensorLink`] and [`RobotLink`] traits,
 //!   [`Pacing`], and their RDT and EGM implementations;
@@ -35,6 +36,7 @@ pub mod rdt;
 pub mod report;
 pub mod runtime;
 pub mod safety;
+pub mod sri;
 
 pub use check::{check, CheckReport};
 pub use emulator::{EmulatorOptions, FacilityHandle};

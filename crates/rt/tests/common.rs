@@ -59,3 +59,28 @@ pub fn loopback_options() -> (EmulatorOptions, RuntimeOptions) {
     };
     (emulator, runtime)
 }
+
+/// A TCP port that was free a moment ago.
+pub fn free_tcp_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// [`loopback_options`] with the sensor an SRI M812x box (TCP) instead of a Net F/T.
+pub fn loopback_sri_options() -> (EmulatorOptions, RuntimeOptions) {
+    use hilcontact_rt::links::sri::{SriEndpointOptions, SriOptions};
+    let (mut emulator, mut runtime) = loopback_options();
+    let port = free_tcp_port();
+    emulator.sensor = EmulatedSensorOptions::Sri(SriEndpointOptions {
+        port,
+        ..Default::default()
+    });
+    runtime.sensor = SensorOptions::Sri(SriOptions {
+        port,
+        ..Default::default()
+    });
+    (emulator, runtime)
+}

@@ -35,7 +35,9 @@ fn emulator_options_are_grouped_per_device_kind() {
         offset_mm = [1.0, 2.0, 3.0]
     "#;
     let o: EmulatorOptions = toml::from_str(text).unwrap();
-    let EmulatedSensorOptions::Rdt(sensor) = &o.sensor;
+    let EmulatedSensorOptions::Rdt(sensor) = &o.sensor else {
+        panic!("{:?}", o.sensor)
+    };
     let EmulatedRobotOptions::Egm(robot) = &o.robot;
     assert_eq!(
         (sensor.port, sensor.http_port, sensor.bind_host.as_str()),
@@ -114,7 +116,7 @@ fn emulator_options_are_grouped_per_device_kind() {
 fn an_unknown_protocol_is_rejected_naming_the_allowed_ones() {
     for bad in [
         r#"{"robot": {"kind": "rsi"}}"#,
-        r#"{"sensor": {"kind": "sri"}}"#,
+        r#"{"sensor": {"kind": "m8128x"}}"#,
     ] {
         let emulator = serde_json::from_str::<EmulatorOptions>(bad)
             .unwrap_err()

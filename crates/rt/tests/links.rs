@@ -355,7 +355,9 @@ fn options_are_grouped_per_device_kind() {
         offset_mm = [1.0, 2.0, 3.0]
     "#;
     let o: RuntimeOptions = toml::from_str(text).unwrap();
-    let SensorOptions::Rdt(sensor) = &o.sensor;
+    let SensorOptions::Rdt(sensor) = &o.sensor else {
+        panic!("{:?}", o.sensor)
+    };
     let RobotOptions::Egm(robot) = &o.robot;
     assert_eq!(
         (sensor.host.as_str(), sensor.port, sensor.http_port),

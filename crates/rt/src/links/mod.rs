@@ -16,7 +16,9 @@
 //!
 //! Implementations, one file per protocol with both sides: `rdt.rs` ([`rdt::RdtSensor`] and the
 //! emulated [`rdt::RdtEndpoint`], ATI Net F/T, RDT over UDP) and `egm.rs` ([`egm::EgmRobot`]
-//! and the emulated [`egm::EgmEndpoint`], ABB EGM, protobuf over UDP). A new protocol is one
+//! and the emulated [`egm::EgmEndpoint`], ABB EGM, protobuf over UDP), `sri.rs`
+//! ([`sri::SriSensor`] and the emulated [`sri::SriEndpoint`], SRI M812x, AT commands and binary
+//! frames over TCP). A new protocol is one
 //! file implementing the link and the endpoint, one variant in [`SensorOptions`] /
 //! [`RobotOptions`] and in [`EmulatedSensorOptions`] / [`EmulatedRobotOptions`], one arm in
 //! [`open_sensor`] / [`open_robot`] and [`open_sensor_endpoint`] / [`open_robot_endpoint`], and
@@ -28,6 +30,7 @@
 
 pub mod egm;
 pub mod rdt;
+pub mod sri;
 
 use std::io::ErrorKind;
 use std::net::{SocketAddr, ToSocketAddrs, UdpSocket};
@@ -45,7 +48,7 @@ use crate::rdt::{SequenceTracker, SequenceVerdict};
 /// Sensor protocols, as `[sensor] kind` / `--sensor-protocol` accept them, in the runtime's
 /// options and the emulator's alike (the one list; a test checks both option types take
 /// exactly these kinds).
-pub const SENSOR_KINDS: &[&str] = &["rdt"];
+pub const SENSOR_KINDS: &[&str] = &["rdt", "sri"];
 /// Robot protocols, as `[robot] kind` / `--robot-protocol` accept them, in the runtime's
 /// options and the emulator's alike (the one list).
 pub const ROBOT_KINDS: &[&str] = &["egm"];
@@ -216,6 +219,8 @@ pub trait RobotLink: Send {
 pub enum SensorOptions {
     /// ATI Net F/T over RDT.
     Rdt(rdt::RdtOptions),
+    /// SRI M812x interface box over TCP.
+    Sri(sri::SriOptions),
 }
 
 impl Default for SensorOptions {
@@ -274,6 +279,7 @@ impl StartRegion {
 pub fn open_sensor(options: &SensorOptions, context: &LinkContext) -> Result<Box<dyn SensorLink>> {
     Ok(match options {
         SensorOptions::Rdt(o) => Box::new(rdt::RdtSensor::open(o, context)?),
+        SensorOptions::Sri(o) => Box::new(sri::SriSensor::open(o, context)?),
     })
 }
 
@@ -347,6 +353,8 @@ pub trait RobotEndpoint: Send {
 pub enum EmulatedSensorOptions {
     /// ATI Net F/T over RDT, with `/netftapi2.xml` over HTTP.
     Rdt(rdt::RdtEndpointOptions),
+    /// SRI M812x interface box over TCP.
+    Sri(sri::SriEndpointOptions),
 }
 
 impl Default for EmulatedSensorOptions {
@@ -387,6 +395,7 @@ pub fn open_sensor_endpoint(
 ) -> Result<Box<dyn SensorEndpoint>> {
     Ok(match options {
         EmulatedSensorOptions::Rdt(o) => Box::new(rdt::RdtEndpoint::open(o, context)?),
+        EmulatedSensorOptions::Sri(o) => Box::new(sri::SriEndpoint::open(o, context)?),
     })
 }
 
