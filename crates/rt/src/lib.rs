@@ -7,6 +7,7 @@
 //! - [`egm`], [`egm_proto`]: ABB Externally Guided Motion (protobuf over UDP);
 //! - [`links`]: the loop's seam to the devices: the [`SensorLink`] and [`RobotLink`] traits,
 //!   [`Pacing`], and their RDT and EGM implementations;
+//! - [`rsi`]: KUKA RobotSensorInterface over Ethernet (XML over UDP);
 //! - [`mapping`]: the scenario's relative motion (`t` frame, m) as EGM poses (mm, quaternion);
 //! - [`emulator`]: robot, contact and sensor (the core's facility model) in real time behind
 //!   those protocols;
@@ -30,6 +31,7 @@ pub mod netftapi;
 pub mod offset;
 pub mod rdt;
 pub mod report;
+pub mod rsi;
 pub mod runtime;
 pub mod safety;
 
