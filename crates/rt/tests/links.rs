@@ -356,7 +356,9 @@ fn options_are_grouped_per_device_kind() {
     "#;
     let o: RuntimeOptions = toml::from_str(text).unwrap();
     let SensorOptions::Rdt(sensor) = &o.sensor;
-    let RobotOptions::Egm(robot) = &o.robot;
+    let RobotOptions::Egm(robot) = &o.robot else {
+        panic!("EGM options expected")
+    };
     assert_eq!(
         (sensor.host.as_str(), sensor.port, sensor.http_port),
         ("192.168.1.1", 49153, 80)

@@ -132,7 +132,9 @@ fn robotware6_feedback_is_accepted_and_the_loop_runs() {
     let mut s = preset("paper-table1");
     s.simulation.duration = 1.0;
     let (mut emu, rt) = loopback_options();
-    let EmulatedRobotOptions::Egm(robot) = &mut emu.robot;
+    let EmulatedRobotOptions::Egm(robot) = &mut emu.robot else {
+        panic!("EGM options expected")
+    };
     robot.robotware = 6;
     let rt = RuntimeOptions {
         connect_timeout: 3.0,
