@@ -309,7 +309,8 @@ impl RobotLink for RsiRobot {
                     velocity: Vector3::zeros(),
                     angular_velocity: Vector3::zeros(),
                 });
-                if !(distance <= start.tolerance) {
+                let at_start = distance <= start.tolerance; // false for NaN
+                if !at_start {
                     self.stats.foreign += 1;
                     if self.nearest_outside.is_none_or(|(_, d)| distance < d) {
                         self.nearest_outside = Some((from, distance));
