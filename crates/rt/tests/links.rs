@@ -381,8 +381,9 @@ fn options_are_grouped_per_device_kind() {
     );
     // an unknown kind, a key of another kind, and a missing kind are errors
     for bad in [
-        r#"{"robot": {"kind": "rsi"}}"#,
+        r#"{"robot": {"kind": "fri"}}"#,
         r#"{"robot": {"kind": "egm", "http_port": 80}}"#,
+        r#"{"robot": {"kind": "rsi", "offset": 80}}"#,
         r#"{"sensor": {"port": 5}}"#,
     ] {
         assert!(
