@@ -50,6 +50,6 @@ def test_grouped_and_flat_keys_merge_and_kinds_are_checked():
 def test_the_rust_side_rejects_unknown_kinds_and_foreign_keys(tmp_path):
     from hilcontact.realtime import run_hil
 
-    for bad in ({"robot": {"kind": "rsi"}}, {"sensor": {"kind": "rdt", "offset_mm": [0, 0, 0]}}):
+    for bad in ({"robot": {"kind": "fri"}}, {"sensor": {"kind": "rdt", "offset_mm": [0, 0, 0]}}):
         with pytest.raises(RealtimeOptionError):
             run_hil("paper-table1", bad)
