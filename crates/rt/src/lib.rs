@@ -6,7 +6,7 @@
 //! - [`rdt`], [`netftapi`]: ATI Net F/T sensor (RDT over UDP, `/netftapi2.xml` over HTTP);
 //! - [`egm`], [`egm_proto`]: ABB Externally Guided Motion (protobuf over UDP);
 //! - [`links`]: the loop's seam to the devices: the [`SensorLink`] and [`RobotLink`] traits,
-//!   [`Pacing`], and their RDT and EGM implementations;
+//!   [`Pacing`], and their RDT, EGM and RSI implementations;
 //! - [`rsi`]: KUKA RobotSensorInterface over Ethernet (XML over UDP);
 //! - [`mapping`]: the scenario's relative motion (`t` frame, m) as EGM poses (mm, quaternion);
 //! - [`emulator`]: robot, contact and sensor (the core's facility model) in real time behind
