@@ -20,7 +20,7 @@ def test_defaults_are_grouped_with_kinds_and_list_the_protocols():
         "counts_per_force": None, "counts_per_torque": None, "local_port": 0, "bias": False,
     }
     assert d["runtime"]["robot"]["kind"] == "egm" and d["runtime"]["robot"]["port"] == 6510
-    assert d["protocols"] == {"sensor": ["rdt"], "robot": ["egm"]}
+    assert d["protocols"] == {"sensor": ["rdt"], "robot": ["egm", "rsi"]}
 
 
 def test_flat_legacy_keys_move_into_their_link():
