@@ -77,15 +77,15 @@ def test_the_emulator_runs_from_grouped_options(core):
 
 @pytest.mark.parametrize("section", ["facility", "runtime"])
 def test_an_unknown_protocol_is_rejected_listing_the_allowed_ones(section):
-    with pytest.raises(RealtimeOptionError, match=r"robot.kind: unknown robot protocol 'rsi'; allowed: egm"):
-        _options({"robot": {"kind": "rsi"}}, section)
+    with pytest.raises(RealtimeOptionError, match=r"robot.kind: unknown robot protocol 'fri'; allowed: egm, rsi"):
+        _options({"robot": {"kind": "fri"}}, section)
     with pytest.raises(RealtimeOptionError, match=r"sensor.kind: unknown sensor protocol 'ftx'; allowed: rdt, sri"):
         _options({"sensor": {"kind": "ftx", "port": 1}}, section)
 
 
 def test_the_rust_side_rejects_an_unknown_protocol_too(core):
-    with pytest.raises(RealtimeOptionError, match=r"unknown variant `rsi`, expected `egm`"):
-        core.start_facility(load_scenario("paper-table1").to_json(), json.dumps({"robot": {"kind": "rsi"}}))
+    with pytest.raises(RealtimeOptionError, match=r"unknown variant `fri`, expected `egm` or `rsi`"):
+        core.start_facility(load_scenario("paper-table1").to_json(), json.dumps({"robot": {"kind": "fri"}}))
 
 
 def test_the_cli_offers_the_protocols_of_the_core():
@@ -94,9 +94,9 @@ def test_the_cli_offers_the_protocols_of_the_core():
     runner = CliRunner()
     for command in ("facility", "demo-rt"):
         help_text = runner.invoke(cli, [command, "--help"], prog_name="hilcontact").output
-        assert "--sensor-protocol [rdt|sri]" in help_text and "--robot-protocol [egm]" in help_text, help_text
-    bad = runner.invoke(cli, ["facility", "paper-table1", "--robot-protocol", "rsi"], prog_name="hilcontact")
-    assert bad.exit_code == 2 and "--robot-protocol" in bad.output and "'rsi'" in bad.output and "egm" in bad.output, bad.output
+        assert "--sensor-protocol [rdt|sri]" in help_text and "--robot-protocol [egm|rsi]" in help_text, help_text
+    bad = runner.invoke(cli, ["facility", "paper-table1", "--robot-protocol", "fri"], prog_name="hilcontact")
+    assert bad.exit_code == 2 and "--robot-protocol" in bad.output and "'fri'" in bad.output and "egm" in bad.output, bad.output
     bad = runner.invoke(cli, ["demo-rt", "--sensor-protocol", "ftx"], prog_name="hilcontact")
     assert bad.exit_code == 2 and "--sensor-protocol" in bad.output and "'ftx'" in bad.output and "rdt" in bad.output, bad.output
 

@@ -20,7 +20,7 @@ def test_defaults_are_grouped_with_kinds_and_list_the_protocols():
         "counts_per_force": None, "counts_per_torque": None, "local_port": 0, "bias": False,
     }
     assert d["runtime"]["robot"]["kind"] == "egm" and d["runtime"]["robot"]["port"] == 6510
-    assert d["protocols"] == {"sensor": ["rdt", "sri"], "robot": ["egm"]}
+    assert d["protocols"] == {"sensor": ["rdt", "sri"], "robot": ["egm", "rsi"]}
 
 
 def test_flat_legacy_keys_move_into_their_link():
@@ -50,7 +50,7 @@ def test_grouped_and_flat_keys_merge_and_kinds_are_checked():
 def test_the_rust_side_rejects_unknown_kinds_and_foreign_keys(tmp_path):
     from hilcontact.realtime import run_hil
 
-    for bad in ({"robot": {"kind": "rsi"}}, {"sensor": {"kind": "rdt", "offset_mm": [0, 0, 0]}}):
+    for bad in ({"robot": {"kind": "fri"}}, {"sensor": {"kind": "rdt", "offset_mm": [0, 0, 0]}}):
         with pytest.raises(RealtimeOptionError):
             run_hil("paper-table1", bad)
 

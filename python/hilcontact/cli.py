@@ -599,11 +599,19 @@ def _report_realtime(console: Console, run: Run) -> None:
     )
     if rt.get("scheduling"):
         console.print(_scheduling_line(rt["scheduling"]), soft_wrap=True)
-    for name, link in (("sensor (RDT)", sensor), ("robot (EGM)", robot)):
+    kinds = {k: str((rt.get("options", {}).get(k) or {}).get("kind", d)).upper() for k, d in (("sensor", "rdt"), ("robot", "egm"))}
+    for name, link in ((f"sensor ({kinds['sensor']})", sensor), (f"robot ({kinds['robot']})", robot)):
         console.print(
             f"{name}: received {link.get('received')}, accepted {link.get('accepted')}, lost {link.get('lost')}, "
             f"late {link.get('late')}, malformed {link.get('malformed')}, invalid {link.get('invalid')}, "
             f"foreign {link.get('foreign')}, stale {link.get('stale')}",
+            soft_wrap=True,
+        )
+    if rsi := rt.get("rsi"):
+        ans = rsi.get("answer_latency_us", {})
+        console.print(
+            f"RSI answers: latency p50/p99/max {ans.get('p50', 0):.0f}/{ans.get('p99', 0):.0f}/{ans.get('max', 0):.0f} µs, "
+            f"late (> {rsi.get('deadline_us', 0):.0f} µs) {rsi.get('answers_late')}, unanswered {rsi.get('unanswered')}",
             soft_wrap=True,
         )
 

@@ -4,7 +4,8 @@
 //!
 //! The emulator names no protocol: it holds a [`SensorEndpoint`] and a [`RobotEndpoint`]
 //! ([`crate::links`]), opened from the options' `sensor` and `robot` groups by their `kind`
-//! (RDT: [`crate::links::rdt::RdtEndpoint`], EGM: [`crate::links::egm::EgmEndpoint`]).
+//! (RDT: [`crate::links::rdt::RdtEndpoint`], EGM: [`crate::links::egm::EgmEndpoint`], KUKA RSI:
+//! [`crate::links::rsi::RsiEndpoint`]).
 //!
 //! One control period k (`simulation.period`, on the monotonic clock; a late wake-up is caught
 //! up by running the missed periods at once, as time goes on for hardware):

@@ -7,7 +7,8 @@
 //! - [`sri`]: SRI M812x interface box (AT commands and binary frames over TCP);
 //! - [`egm`], [`egm_proto`]: ABB Externally Guided Motion (protobuf over UDP);
 //! - [`links`]: the loop's seam to the devices: the [`SensorLink`] and [`RobotLink`] traits,
-//!   [`Pacing`], and their RDT and EGM implementations;
+//!   [`Pacing`], and their RDT, EGM and RSI implementations;
+//! - [`rsi`]: KUKA RobotSensorInterface over Ethernet (XML over UDP);
 //! - [`mapping`]: the scenario's relative motion (`t` frame, m) as EGM poses (mm, quaternion);
 //! - [`emulator`]: robot, contact and sensor (the core's facility model) in real time behind
 //!   those protocols;
@@ -34,6 +35,7 @@ pub mod netftapi;
 pub mod offset;
 pub mod rdt;
 pub mod report;
+pub mod rsi;
 pub mod runtime;
 pub mod safety;
 pub mod sri;

@@ -77,6 +77,8 @@ pub struct RunOutcome {
     pub pacing: Pacing,
     /// The sensor link's own facts for the metrics (e.g. counts per unit).
     pub sensor_report: serde_json::Map<String, serde_json::Value>,
+    /// The robot link's own facts for the metrics (e.g. RSI's answer latency).
+    pub robot_report: serde_json::Map<String, serde_json::Value>,
     /// The robot's address.
     pub robot_address: Option<SocketAddr>,
     /// The sensor's offset measured at start and subtracted from every record, `[Fx, Fy, Fz]`
@@ -177,9 +179,9 @@ pub fn build_output(
         "scheduling": outcome.scheduling,
         "options": options,
     });
-    // the sensor link's own facts (RDT: counts_per_force, counts_per_torque, sensor_units)
+    // the links' own facts (RDT: counts_per_force, counts_per_torque, sensor_units; RSI: rsi)
     if let Some(section) = realtime.as_object_mut() {
-        for (key, value) in &outcome.sensor_report {
+        for (key, value) in outcome.sensor_report.iter().chain(&outcome.robot_report) {
             section.insert(key.clone(), value.clone());
         }
     }

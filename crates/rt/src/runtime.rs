@@ -610,6 +610,7 @@ impl Loop {
             robot_name: self.robot.name(),
             pacing: self.pacing,
             sensor_report: self.sensor.report(),
+            robot_report: self.robot.report(),
             robot_address: self.robot.peer(),
             sensor_offset: (self.offset.mode == OffsetMode::Measure).then(|| {
                 let (f, m) = (self.sensor_offset.force, self.sensor_offset.moment);

@@ -275,7 +275,9 @@ fn refused_start(named: bool) -> (String, Vec<hilcontact_rt::mapping::EgmTarget>
         ..scripted(&sensor, egm_port)
     };
     if named {
-        let RobotOptions::Egm(o) = &mut options.robot;
+        let RobotOptions::Egm(o) = &mut options.robot else {
+            panic!("EGM options expected")
+        };
         o.robot_host = Some("127.0.0.1".into());
     }
     let hil = HilHandle::start(&s, &options).unwrap();

@@ -84,3 +84,21 @@ pub fn loopback_sri_options() -> (EmulatorOptions, RuntimeOptions) {
     });
     (emulator, runtime)
 }
+
+/// Emulator and runtime options that meet on loopback with the robot on KUKA RSI (sensor RDT,
+/// without HTTP); the scenario's period must be the RSI cycle (0.004 s).
+pub fn rsi_loopback_options() -> (EmulatorOptions, RuntimeOptions) {
+    use hilcontact_rt::links::rsi::{RsiEndpointOptions, RsiOptions};
+    let (mut emulator, mut runtime) = loopback_options();
+    let port = free_udp_port();
+    runtime.robot = RobotOptions::Rsi(RsiOptions {
+        port,
+        bind_host: "127.0.0.1".into(),
+        ..Default::default()
+    });
+    emulator.robot = EmulatedRobotOptions::Rsi(RsiEndpointOptions {
+        port,
+        ..Default::default()
+    });
+    (emulator, runtime)
+}

@@ -38,7 +38,9 @@ fn emulator_options_are_grouped_per_device_kind() {
     let EmulatedSensorOptions::Rdt(sensor) = &o.sensor else {
         panic!("{:?}", o.sensor)
     };
-    let EmulatedRobotOptions::Egm(robot) = &o.robot;
+    let EmulatedRobotOptions::Egm(robot) = &o.robot else {
+        panic!("EGM options expected")
+    };
     assert_eq!(
         (sensor.port, sensor.http_port, sensor.bind_host.as_str()),
         (49153, 0, "127.0.0.1")
@@ -115,7 +117,7 @@ fn emulator_options_are_grouped_per_device_kind() {
 #[test]
 fn an_unknown_protocol_is_rejected_naming_the_allowed_ones() {
     for bad in [
-        r#"{"robot": {"kind": "rsi"}}"#,
+        r#"{"robot": {"kind": "fri"}}"#,
         r#"{"sensor": {"kind": "m8128x"}}"#,
     ] {
         let emulator = serde_json::from_str::<EmulatorOptions>(bad)
@@ -290,10 +292,14 @@ fn a_port_in_use_keeps_its_kind_and_errno() {
 #[test]
 fn the_robotware_generation_is_6_or_7() {
     let o: EmulatorOptions = toml::from_str("[robot]\nkind = \"egm\"\nrobotware = 6\n").unwrap();
-    let EmulatedRobotOptions::Egm(robot) = &o.robot;
+    let EmulatedRobotOptions::Egm(robot) = &o.robot else {
+        panic!("EGM options expected")
+    };
     assert_eq!(robot.robotware, 6);
     let mut bad = options(free_udp_port(), "127.0.0.1");
-    let EmulatedRobotOptions::Egm(robot) = &mut bad.robot;
+    let EmulatedRobotOptions::Egm(robot) = &mut bad.robot else {
+        panic!("EGM options expected")
+    };
     robot.robotware = 5;
     let err = FacilityHandle::start(&preset("paper-table1"), &bad)
         .err()

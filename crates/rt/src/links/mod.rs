@@ -15,10 +15,11 @@
 //! either.
 //!
 //! Implementations, one file per protocol with both sides: `rdt.rs` ([`rdt::RdtSensor`] and the
-//! emulated [`rdt::RdtEndpoint`], ATI Net F/T, RDT over UDP) and `egm.rs` ([`egm::EgmRobot`]
-//! and the emulated [`egm::EgmEndpoint`], ABB EGM, protobuf over UDP), `sri.rs`
-//! ([`sri::SriSensor`] and the emulated [`sri::SriEndpoint`], SRI M812x, AT commands and binary
-//! frames over TCP). A new protocol is one
+//! emulated [`rdt::RdtEndpoint`], ATI Net F/T, RDT over UDP), `egm.rs` ([`egm::EgmRobot`]
+//! and the emulated [`egm::EgmEndpoint`], ABB EGM, protobuf over UDP), `rsi.rs`
+//! ([`rsi::RsiRobot`] and the emulated [`rsi::RsiEndpoint`], KUKA RSI, XML over UDP, robot
+//! paced) and `sri.rs` ([`sri::SriSensor`] and the emulated [`sri::SriEndpoint`], SRI M812x,
+//! AT commands and binary frames over TCP). A new protocol is one
 //! file implementing the link and the endpoint, one variant in [`SensorOptions`] /
 //! [`RobotOptions`] and in [`EmulatedSensorOptions`] / [`EmulatedRobotOptions`], one arm in
 //! [`open_sensor`] / [`open_robot`] and [`open_sensor_endpoint`] / [`open_robot_endpoint`], and
@@ -30,6 +31,7 @@
 
 pub mod egm;
 pub mod rdt;
+pub mod rsi;
 pub mod sri;
 
 use std::io::ErrorKind;
@@ -51,7 +53,7 @@ use crate::rdt::{SequenceTracker, SequenceVerdict};
 pub const SENSOR_KINDS: &[&str] = &["rdt", "sri"];
 /// Robot protocols, as `[robot] kind` / `--robot-protocol` accept them, in the runtime's
 /// options and the emulator's alike (the one list).
-pub const ROBOT_KINDS: &[&str] = &["egm"];
+pub const ROBOT_KINDS: &[&str] = &["egm", "rsi"];
 
 /// Packet counters of one link.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
@@ -211,6 +213,12 @@ pub trait RobotLink: Send {
 
     /// The link's counters, for the loop's own (`late`).
     fn stats_mut(&mut self) -> &mut LinkStats;
+
+    /// Device-specific facts for `metrics.json`'s `realtime` section (e.g. RSI's answer
+    /// latency), merged into it at the end of a run.
+    fn report(&self) -> serde_json::Map<String, serde_json::Value> {
+        serde_json::Map::new()
+    }
 }
 
 /// Options of the sensor link, one variant per protocol (`kind`).
@@ -235,6 +243,8 @@ impl Default for SensorOptions {
 pub enum RobotOptions {
     /// ABB Externally Guided Motion.
     Egm(egm::EgmOptions),
+    /// KUKA RobotSensorInterface over Ethernet.
+    Rsi(rsi::RsiOptions),
 }
 
 impl Default for RobotOptions {
@@ -287,6 +297,7 @@ pub fn open_sensor(options: &SensorOptions, context: &LinkContext) -> Result<Box
 pub fn open_robot(options: &RobotOptions, context: &LinkContext) -> Result<Box<dyn RobotLink>> {
     Ok(match options {
         RobotOptions::Egm(o) => Box::new(egm::EgmRobot::open(o, context)?),
+        RobotOptions::Rsi(o) => Box::new(rsi::RsiRobot::open(o, context)?),
     })
 }
 
@@ -370,6 +381,8 @@ impl Default for EmulatedSensorOptions {
 pub enum EmulatedRobotOptions {
     /// ABB Externally Guided Motion.
     Egm(egm::EgmEndpointOptions),
+    /// KUKA RobotSensorInterface over Ethernet.
+    Rsi(rsi::RsiEndpointOptions),
 }
 
 impl Default for EmulatedRobotOptions {
@@ -406,6 +419,7 @@ pub fn open_robot_endpoint(
 ) -> Result<Box<dyn RobotEndpoint>> {
     Ok(match options {
         EmulatedRobotOptions::Egm(o) => Box::new(egm::EgmEndpoint::open(o, context)?),
+        EmulatedRobotOptions::Rsi(o) => Box::new(rsi::RsiEndpoint::open(o, context)?),
     })
 }
 
