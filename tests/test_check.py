@@ -83,7 +83,13 @@ def test_a_scenario_that_starts_in_contact_would_refuse_to_measure_the_offset(co
     assert report["would_start"] is False
     assert len(report["reasons"]) == 1 and report["reasons"][0].startswith("offset.mode: the scenario starts in contact")
     assert report["sensor"]["offset_force"] > 800.0  # the rod is pressed into the wall
-    # with the offset off, the same facility would start
-    with start_facility(pressed, facility_options(p, [0.0] * 6)):
+    # with the offset off, the same facility would start (on new ports: the first facility's
+    # HTTP port may still be in TIME_WAIT)
+    q = ports()
+    options = {
+        "sensor": {"kind": "rdt", "host": "127.0.0.1", "port": q["sensor"], "http_port": q["http"]},
+        "robot": {"kind": "egm", "port": q["egm"], "bind_host": "127.0.0.1"},
+    }
+    with start_facility(pressed, facility_options(q, [0.0] * 6)):
         report = check(pressed, {**options, "offset": {"mode": "off"}}, duration=0.3)
     assert report["would_start"] is True, report["reasons"]
