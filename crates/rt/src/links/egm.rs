@@ -18,14 +18,13 @@
 
 use std::net::{IpAddr, SocketAddr, UdpSocket};
 
-use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
 
 use super::{
     bind_udp, local_addr, recv_counted, resolve, sequence_counted, EndpointContext, LinkContext,
-    LinkStats, Pacing, RobotEndpoint, RobotLink, StartRegion,
+    LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
 };
 use crate::egm::{
     CorrectionDecoder, CorrectionEncoder, EgmError, FeedbackEncoder, RobotDecoder, EGM_PERIOD,
@@ -69,12 +68,8 @@ impl Default for EgmOptions {
 pub struct EgmRobot {
     socket: UdpSocket,
     port: u16,
-    robot_ip: Option<IpAddr>,
-    robot_addr: Option<SocketAddr>,
-    /// Where the robot must be to be locked onto (without `robot_host`).
-    start: Option<StartRegion>,
-    /// The nearest sender whose feedback was outside the start region, and its distance, m.
-    nearest_outside: Option<(SocketAddr, f64)>,
+    /// Which sender is the robot.
+    identity: RobotIdentity,
     mapping: PoseMapping,
     sequence: SequenceTracker,
     decoder: RobotDecoder,
@@ -92,17 +87,11 @@ impl EgmRobot {
             "EGM endpoint",
             resolve("egm_bind_host", &o.bind_host, o.port)?,
         )?;
-        let robot_ip = match &o.robot_host {
-            Some(h) => Some(resolve("robot_host", h, 0)?.ip()),
-            None => None,
-        };
+        let identity = RobotIdentity::new(o.robot_host.as_deref(), context.start)?;
         Ok(EgmRobot {
             port: o.port,
             socket,
-            robot_ip,
-            robot_addr: None,
-            start: context.start,
-            nearest_outside: None,
+            identity,
             mapping,
             sequence: SequenceTracker::new(),
             decoder: RobotDecoder::new(),
@@ -120,15 +109,11 @@ impl RobotLink for EgmRobot {
     }
 
     fn describe(&self) -> String {
-        let mut text = format!("the robot on UDP port {}", self.port);
-        if let (Some((addr, distance)), Some(start)) = (self.nearest_outside, self.start) {
-            text += &format!(
-                " (EGM feedback came from {addr}, but {:.1} mm from the scenario's start, beyond start_tolerance {:.1} mm: move the robot there, or name it with --robot)",
-                distance * 1e3,
-                start.tolerance * 1e3
-            );
-        }
-        text
+        format!(
+            "the robot on UDP port {}{}",
+            self.port,
+            self.identity.describe("EGM feedback")
+        )
     }
 
     fn pacing(&self) -> Pacing {
@@ -143,13 +128,7 @@ impl RobotLink for EgmRobot {
         let mut accepted = 0;
         while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
             self.stats.received += 1;
-            let peer_ok = match (self.robot_ip, self.robot_addr) {
-                (_, Some(addr)) => from == addr,
-                (Some(ip), None) => from.ip() == ip,
-                (None, None) => true,
-            };
-            if !peer_ok {
-                self.stats.foreign += 1;
+            if !self.identity.admits(from, &mut self.stats) {
                 continue;
             }
             let Some(feedback) =
@@ -158,29 +137,16 @@ impl RobotLink for EgmRobot {
                 continue;
             };
             let (position, orientation) = self.mapping.from_egm(&feedback.actual);
-            if let (None, None, Some(start)) = (self.robot_ip, self.robot_addr, self.start) {
-                // not locked yet: the robot is the sender at the scenario's start
-                let distance = start.distance(&RelativeMotion {
-                    position,
-                    orientation,
-                    velocity: Vector3::zeros(),
-                    angular_velocity: Vector3::zeros(),
-                });
-                let at_start = distance <= start.tolerance; // false for NaN
-                if !at_start {
-                    self.stats.foreign += 1;
-                    if self.nearest_outside.is_none_or(|(_, d)| distance < d) {
-                        self.nearest_outside = Some((from, distance));
-                    }
-                    continue;
-                }
+            if !self
+                .identity
+                .at_start(from, position, orientation, &mut self.stats)
+            {
+                continue; // not locked yet: the robot is the sender at the scenario's start
             }
             if !sequence_counted(&mut self.sequence, feedback.seqno, &mut self.stats) {
                 continue;
             }
-            if self.robot_addr.is_none() {
-                self.robot_addr = Some(from);
-            }
+            self.identity.lock(from);
             if !estimator.push(feedback.robot_time(), now_ns, position, orientation) {
                 self.stats.invalid += 1; // a jump no robot makes in one cycle
                 continue;
@@ -192,7 +158,9 @@ impl RobotLink for EgmRobot {
     }
 
     fn send(&mut self, command: &RelativeMotion, clock_ns: u64) {
-        let Some(addr) = self.robot_addr else { return };
+        let Some(addr) = self.identity.address() else {
+            return;
+        };
         self.send_seq = self.send_seq.wrapping_add(1);
         let tm = (clock_ns / 1_000_000) as u32;
         let target = self.mapping.to_egm(command);
@@ -202,7 +170,7 @@ impl RobotLink for EgmRobot {
     }
 
     fn peer(&self) -> Option<SocketAddr> {
-        self.robot_addr
+        self.identity.address()
     }
 
     fn stats(&self) -> &LinkStats {

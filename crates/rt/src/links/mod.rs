@@ -35,9 +35,9 @@ pub mod rsi;
 pub mod sri;
 
 use std::io::ErrorKind;
-use std::net::{SocketAddr, ToSocketAddrs, UdpSocket};
+use std::net::{IpAddr, SocketAddr, ToSocketAddrs, UdpSocket};
 
-use nalgebra::Vector3;
+use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
@@ -282,6 +282,102 @@ impl StartRegion {
     /// Distance of `pose`'s rod tip from the initial rod tip, m.
     pub fn distance(&self, pose: &RelativeMotion) -> f64 {
         (pose.point(&self.rod) - self.pose.point(&self.rod)).norm()
+    }
+}
+
+/// Which sender is the robot, for a robot link: the host `robot_host` names, else the first
+/// sender whose valid feedback puts the rod tip in the start region ([`LinkContext::start`]);
+/// identified, not raced for: a foreign sender that started earlier, elsewhere, is counted
+/// `foreign` and never locked onto. Once locked, only that address is the robot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RobotIdentity {
+    robot_ip: Option<IpAddr>,
+    robot_addr: Option<SocketAddr>,
+    start: Option<StartRegion>,
+    /// The nearest sender whose feedback was outside the start region, and its distance, m.
+    nearest_outside: Option<(SocketAddr, f64)>,
+}
+
+impl RobotIdentity {
+    /// The robot `robot_host` names (resolved; an error names the option), or the one at
+    /// `start`.
+    pub fn new(robot_host: Option<&str>, start: Option<StartRegion>) -> Result<Self> {
+        let robot_ip = match robot_host {
+            Some(h) => Some(resolve("robot_host", h, 0)?.ip()),
+            None => None,
+        };
+        Ok(RobotIdentity {
+            robot_ip,
+            robot_addr: None,
+            start,
+            nearest_outside: None,
+        })
+    }
+
+    /// Whether a datagram from `from` may be the robot's (checked before decoding); else it is
+    /// counted `foreign`.
+    pub fn admits(&self, from: SocketAddr, stats: &mut LinkStats) -> bool {
+        let ok = match (self.robot_ip, self.robot_addr) {
+            (_, Some(addr)) => from == addr,
+            (Some(ip), None) => from.ip() == ip,
+            (None, None) => true,
+        };
+        if !ok {
+            stats.foreign += 1;
+        }
+        ok
+    }
+
+    /// After decoding a valid pose (`t` frame, m): whether its sender can be the robot. Before
+    /// the lock and without `robot_host`, a sender whose rod tip is outside the start region is
+    /// counted `foreign` (and remembered for [`RobotIdentity::describe`]).
+    pub fn at_start(
+        &mut self,
+        from: SocketAddr,
+        position: Vector3<f64>,
+        orientation: UnitQuaternion<f64>,
+        stats: &mut LinkStats,
+    ) -> bool {
+        let (None, None, Some(start)) = (self.robot_ip, self.robot_addr, self.start) else {
+            return true;
+        };
+        let distance = start.distance(&RelativeMotion {
+            position,
+            orientation,
+            velocity: Vector3::zeros(),
+            angular_velocity: Vector3::zeros(),
+        });
+        let at_start = distance <= start.tolerance; // false for NaN
+        if !at_start {
+            stats.foreign += 1;
+            if self.nearest_outside.is_none_or(|(_, d)| distance < d) {
+                self.nearest_outside = Some((from, distance));
+            }
+        }
+        at_start
+    }
+
+    /// Locks onto `from` (the first accepted feedback's sender), if not locked yet.
+    pub fn lock(&mut self, from: SocketAddr) {
+        self.robot_addr.get_or_insert(from);
+    }
+
+    /// The robot's address, once locked.
+    pub fn address(&self) -> Option<SocketAddr> {
+        self.robot_addr
+    }
+
+    /// For a connect error: `what` (e.g. "EGM feedback") came only from senders away from the
+    /// start — the nearest one and how far, and what to do; empty otherwise.
+    pub fn describe(&self, what: &str) -> String {
+        match (self.nearest_outside, self.start) {
+            (Some((addr, distance)), Some(start)) => format!(
+                " ({what} came from {addr}, but {:.1} mm from the scenario's start, beyond start_tolerance {:.1} mm: move the robot there, or name it with --robot)",
+                distance * 1e3,
+                start.tolerance * 1e3
+            ),
+            _ => String::new(),
+        }
     }
 }
 

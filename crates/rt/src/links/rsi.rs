@@ -39,7 +39,7 @@ use hilcontact_core::world::RelativeMotion;
 
 use super::{
     bind_udp, local_addr, recv_counted, resolve, wait_readable, EndpointContext, LinkContext,
-    LinkStats, Pacing, RobotEndpoint, RobotLink, StartRegion,
+    LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
 };
 use crate::clock::{now_ns, Histogram};
 use crate::error::{Result, RtError};
@@ -174,12 +174,8 @@ pub fn corrected(reference: &EgmPoseMm, correction: &KukaPose) -> EgmPoseMm {
 pub struct RsiRobot {
     socket: UdpSocket,
     port: u16,
-    robot_ip: Option<IpAddr>,
-    robot_addr: Option<SocketAddr>,
-    /// Where the robot must be to be locked onto (without `robot_host`).
-    start: Option<StartRegion>,
-    /// The nearest sender whose state was outside the start region, and its distance, m.
-    nearest_outside: Option<(SocketAddr, f64)>,
+    /// Which sender is the robot.
+    identity: RobotIdentity,
     mapping: PoseMapping,
     mode: CorrectionMode,
     period: f64,
@@ -224,17 +220,11 @@ impl RsiRobot {
             "RSI endpoint",
             resolve("rsi bind_host", &o.bind_host, o.port)?,
         )?;
-        let robot_ip = match &o.robot_host {
-            Some(h) => Some(resolve("robot_host", h, 0)?.ip()),
-            None => None,
-        };
+        let identity = RobotIdentity::new(o.robot_host.as_deref(), context.start)?;
         Ok(RsiRobot {
             socket,
             port: o.port,
-            robot_ip,
-            robot_addr: None,
-            start: context.start,
-            nearest_outside: None,
+            identity,
             mapping,
             mode: o.correction,
             period: o.period,
@@ -260,15 +250,11 @@ impl RobotLink for RsiRobot {
     }
 
     fn describe(&self) -> String {
-        let mut text = format!("the robot on UDP port {}", self.port);
-        if let (Some((addr, distance)), Some(start)) = (self.nearest_outside, self.start) {
-            text += &format!(
-                " (RSI state came from {addr}, but {:.1} mm from the scenario's start, beyond start_tolerance {:.1} mm: move the robot there, or name it with --robot)",
-                distance * 1e3,
-                start.tolerance * 1e3
-            );
-        }
-        text
+        format!(
+            "the robot on UDP port {}{}",
+            self.port,
+            self.identity.describe("RSI state")
+        )
     }
 
     fn pacing(&self) -> Pacing {
@@ -283,13 +269,7 @@ impl RobotLink for RsiRobot {
         let mut accepted = 0;
         while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
             self.stats.received += 1;
-            let peer_ok = match (self.robot_ip, self.robot_addr) {
-                (_, Some(addr)) => from == addr,
-                (Some(ip), None) => from.ip() == ip,
-                (None, None) => true,
-            };
-            if !peer_ok {
-                self.stats.foreign += 1;
+            if !self.identity.admits(from, &mut self.stats) {
                 continue;
             }
             let state = match decode_state(&self.buf[..n], &self.state_element) {
@@ -301,22 +281,11 @@ impl RobotLink for RsiRobot {
             };
             let actual = from_kuka(&state.actual);
             let (position, orientation) = self.mapping.from_egm(&actual);
-            if let (None, None, Some(start)) = (self.robot_ip, self.robot_addr, self.start) {
-                // not locked yet: the robot is the sender at the scenario's start
-                let distance = start.distance(&RelativeMotion {
-                    position,
-                    orientation,
-                    velocity: Vector3::zeros(),
-                    angular_velocity: Vector3::zeros(),
-                });
-                let at_start = distance <= start.tolerance; // false for NaN
-                if !at_start {
-                    self.stats.foreign += 1;
-                    if self.nearest_outside.is_none_or(|(_, d)| distance < d) {
-                        self.nearest_outside = Some((from, distance));
-                    }
-                    continue;
-                }
+            if !self
+                .identity
+                .at_start(from, position, orientation, &mut self.stats)
+            {
+                continue; // not locked yet: the robot is the sender at the scenario's start
             }
             if let Some(last) = self.last_ipoc {
                 if state.ipoc <= last {
@@ -328,9 +297,7 @@ impl RobotLink for RsiRobot {
                 self.stats.lost += cycles.saturating_sub(1);
             }
             self.last_ipoc = Some(state.ipoc);
-            if self.robot_addr.is_none() {
-                self.robot_addr = Some(from);
-            }
+            self.identity.lock(from);
             if !estimator.push(state.ipoc as f64 * 1e-3, now_ns, position, orientation) {
                 self.stats.invalid += 1; // a jump no robot makes in one cycle
                 continue;
@@ -364,7 +331,7 @@ impl RobotLink for RsiRobot {
     /// Answers the newest state message, once; does nothing when it has been answered.
     fn send(&mut self, command: &RelativeMotion, _clock_ns: u64) {
         let (Some(addr), Some((ipoc, read_ns)), Some(reference)) =
-            (self.robot_addr, self.pending, self.reference)
+            (self.identity.address(), self.pending, self.reference)
         else {
             return;
         };
@@ -385,7 +352,7 @@ impl RobotLink for RsiRobot {
     }
 
     fn peer(&self) -> Option<SocketAddr> {
-        self.robot_addr
+        self.identity.address()
     }
 
     fn stats(&self) -> &LinkStats {
