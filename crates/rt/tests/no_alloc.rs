@@ -1,6 +1,7 @@
-//! The real-time threads never allocate once running: a counting global allocator is armed
-//! from the loop's first tick while the loop, the writer and the emulator run (no HTTP server, the test's
-//! own thread asleep), and must count zero allocations.
+//! The real-time threads never allocate once running, with every protocol (RDT and SRI
+//! sensors, EGM and RSI robots): a counting global allocator is armed from the loop's first
+//! tick while the loop, the writer and the emulator run (no HTTP server, the test's own thread
+//! asleep), and must count zero allocations.
 
 mod common;
 
@@ -8,9 +9,9 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
-use common::{loopback_options, preset};
+use common::{loopback_options, loopback_sri_options, preset, rsi_loopback_options};
 use hilcontact_core::compensator::{CompensatorConfig, ModelParams};
-use hilcontact_rt::{FacilityHandle, HilHandle};
+use hilcontact_rt::{EmulatorOptions, FacilityHandle, HilHandle, RuntimeOptions};
 
 struct Counting;
 
@@ -38,16 +39,18 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-#[test]
-fn loop_writer_and_emulator_do_not_allocate() {
+/// Runs pida at 20 ms on loopback with `options` (emulator, runtime) at `period` s, and
+/// checks that nothing allocates from the loop's first tick over a window spanning the first
+/// collision. One configuration at a time: the allocator counts the whole process.
+fn assert_no_allocation(name: &str, period: f64, (emu, rt): (EmulatorOptions, RuntimeOptions)) {
     let mut s = preset("paper-table1");
     s.facility.robot_delay = 0.02;
     s.simulation.duration = 2.5;
+    s.simulation.period = period;
     s.compensator = CompensatorConfig::Pida(ModelParams::default());
-    let (emu, rt) = loopback_options();
+    ALLOCATIONS.store(0, Ordering::SeqCst);
     let facility = FacilityHandle::start(&s, &emu).unwrap();
     let hil = HilHandle::start(&s, &rt).unwrap();
-    // count from the loop's first tick over a window that spans the first collision
     while hil.status().phase != "running" {
         std::thread::sleep(Duration::from_micros(20));
     }
@@ -57,20 +60,32 @@ fn loop_writer_and_emulator_do_not_allocate() {
     ARMED.store(false, Ordering::SeqCst);
     let counted = ALLOCATIONS.load(Ordering::SeqCst);
     let ticks = hil.status().tick;
-    assert!(hil.wait(Duration::from_secs(10)));
+    assert!(hil.wait(Duration::from_secs(10)), "{name}");
     let out = hil.finish().unwrap();
     drop(facility);
     // ran to its end (a busy machine's late ticks may make it `unfaithful`; not this test's subject)
     assert_eq!(
         out.metrics["stop"]["kind"], "completed",
-        "{}",
+        "{name}: {}",
         out.metrics["reason"]
     );
-    assert!(ticks > 1500, "the loop ran only {ticks} ticks");
+    let expected = (1.5 / period) as u64;
+    assert!(ticks > expected, "{name}: the loop ran only {ticks} ticks");
     // armed as soon as this thread saw the loop running: within a few ticks on an idle
-    // machine; a busy one may wake this thread late, and 100 ticks still arm it well before
-    // the first collision (0.27 s) — a bound that cannot flake
-    assert!(first <= 100, "armed only after tick {first}");
+    // machine; a busy one may wake this thread late, and 0.1 s still arms it well before the
+    // first collision (0.27 s) — a bound that cannot flake
+    assert!(
+        first as f64 * period <= 0.1,
+        "{name}: armed only after tick {first}"
+    );
     assert!(!out.metrics["collisions"].as_array().unwrap().is_empty());
-    assert_eq!(counted, 0, "{counted} allocations while running");
+    assert_eq!(counted, 0, "{name}: {counted} allocations while running");
+}
+
+#[test]
+fn loop_writer_and_emulator_do_not_allocate_with_any_device() {
+    assert_no_allocation("RDT x EGM", 0.001, loopback_options());
+    assert_no_allocation("SRI x EGM", 0.001, loopback_sri_options());
+    // the RSI cycle paces the loop
+    assert_no_allocation("RDT x RSI", 0.004, rsi_loopback_options());
 }
