@@ -100,3 +100,11 @@ def test_sensor_host_and_port_go_to_any_sensor_kind():
     assert "sri" in realtime_defaults()["protocols"]["sensor"]
     with pytest.raises(RealtimeOptionError, match="http_port.*sensor kind 'rdt', not 'sri'"):
         _options({"sensor": {"kind": "sri"}, "http_port": 80}, "runtime")
+
+
+def test_robot_host_goes_to_any_robot_kind():
+    """`hil --robot-protocol rsi --robot HOST`: the robot's host is the KUKA controller's."""
+    grouped = json.loads(_options({"robot": {"kind": "rsi"}, "robot_host": "10.0.0.2"}, "runtime"))
+    assert grouped["robot"] == {"kind": "rsi", "robot_host": "10.0.0.2"}
+    grouped = json.loads(_options({"robot_host": "10.0.0.3"}, "runtime"))
+    assert grouped["robot"] == {"kind": "egm", "robot_host": "10.0.0.3"}

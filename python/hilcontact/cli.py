@@ -734,7 +734,7 @@ _HIL_OPTIONS = [
     click.option("--bias", is_flag=True, default=None, help="Bias the sensor (RDT 0x0042) before streaming; the rod must be free."),
     click.option("--egm-port", type=int, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("runtime", "robot.port")),
     click.option("--egm-bind", "egm_bind_host", default=None, metavar="HOST", help="Address the EGM endpoint binds to." + _dflt("runtime", "robot.bind_host")),
-    click.option("--robot", "robot_host", default=None, metavar="HOST", help="Accept EGM only from this host [default: the first sender whose feedback is at the scenario's start (within --start-tolerance)]."),
+    click.option("--robot", "robot_host", default=None, metavar="HOST", help="Accept robot feedback (EGM, RSI) only from this host [default: the first sender whose feedback is at the scenario's start (within --start-tolerance)]."),
     click.option("--extrapolation", type=click.Choice(["quadratic", "linear", "hold"]), default=None, help="Actual motion between EGM feedback messages." + _dflt("runtime", "extrapolation")),
     click.option("--force-limit", type=float, default=None, help="Safety stop above this measured force." + _dflt("runtime", "limits.force_limit", "N")),
     click.option("--moment-limit", type=float, default=None, help="Safety stop above this measured moment." + _dflt("runtime", "limits.moment_limit", "N m")),

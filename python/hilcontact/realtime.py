@@ -87,7 +87,7 @@ LEGACY_KEYS: dict[str, dict[str, tuple[str, str, str]]] = {
         "bias": ("sensor", "rdt", "bias"),
         "egm_bind_host": ("robot", "egm", "bind_host"),
         "egm_port": ("robot", "egm", "port"),
-        "robot_host": ("robot", "egm", "robot_host"),
+        "robot_host": ("robot", ANY_KIND, "robot_host"),
         "egm_offset_mm": ("robot", "egm", "offset_mm"),
         "egm_rotation": ("robot", "egm", "rotation"),
     },
