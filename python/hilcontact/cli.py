@@ -536,6 +536,14 @@ def _raise_keyboard_interrupt(_signum: int, _frame: Any) -> None:
     raise KeyboardInterrupt
 
 
+def _stop_on_signals() -> None:
+    """Ctrl-C (SIGINT) and SIGTERM stop a real-time command cleanly (hold, stop streaming, save),
+    even when the process was started with SIGINT ignored (a background job of a
+    non-interactive shell inherits SIG_IGN, and Python then keeps it)."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+
+
 def _hil_line(s: dict[str, Any]) -> str:
     return (
         f"{s['phase']}  t {s['time']:7.3f} s | F {s['force']:7.1f} N | E {s['energy'] * 1e3:8.3f} mJ | "
@@ -680,7 +688,7 @@ def facility_command(scenario: str, sets: tuple[str, ...], sensor_protocol: str 
             "silence_sensor_after": silence_sensor_after, "silence_robot_after": silence_robot_after,
         }
         facility = start_facility(resolved, options)
-    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    _stop_on_signals()
     a = facility.addresses
     f = resolved.facility
     click.echo(
@@ -789,6 +797,7 @@ def _runtime_options(sensor_protocol: str | None, robot_protocol: str | None, se
 def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots: bool, force: bool) -> None:
     from .realtime import exit_code, run_hil
 
+    _stop_on_signals()
     stderr = Console(stderr=True)
     with stderr.status(f"{escape(resolved.name)}: connecting to the sensor and the robot ...") as status:
         result = run_hil(resolved, options, on_status=lambda s: status.update(escape(_hil_line(s))))
