@@ -5,6 +5,7 @@ use hilcontact_core::Scenario;
 use hilcontact_rt::links::egm::{EgmEndpointOptions, EgmOptions};
 use hilcontact_rt::links::rdt::{RdtEndpointOptions, RdtOptions};
 use hilcontact_rt::links::{EmulatedRobotOptions, EmulatedSensorOptions};
+use hilcontact_rt::safety::SafetyLimits;
 use hilcontact_rt::{EmulatorOptions, RobotOptions, RuntimeOptions, SensorOptions};
 
 /// A preset scenario from `python/hilcontact/scenarios/<name>.toml`.
@@ -36,6 +37,12 @@ pub fn loopback_options() -> (EmulatorOptions, RuntimeOptions) {
         ..Default::default()
     };
     let runtime = RuntimeOptions {
+        // a generous watchdog: the emulator runs at normal priority and a busy machine can
+        // starve it for more than the default 50 ms (the watchdog's own tests set theirs)
+        limits: SafetyLimits {
+            watchdog_ms: 500.0,
+            ..Default::default()
+        },
         sensor: SensorOptions::Rdt(RdtOptions {
             port: sensor_port,
             counts_per_force: Some(sensor.counts_per_force),
