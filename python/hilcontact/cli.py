@@ -49,15 +49,17 @@ from .scenario import load_scenario, presets
 __all__ = ["cli", "main", "parse_set_options"]
 
 
-def parse_set_options(items: Sequence[str]) -> dict[str, Any]:
+def parse_set_options(items: Sequence[str], option: str = "--set",
+                      example: str = "facility.robot_delay=0.02") -> dict[str, Any]:
     """``KEY=VALUE`` strings to an overrides dict. VALUE is read as a TOML value
-    (``0.02``, ``true``, ``[0, 0, 1]``, ``"text"``) and, if that fails, kept as a string."""
+    (``0.02``, ``true``, ``[0, 0, 1]``, ``"text"``) and, if that fails, kept as a string.
+    ``option`` and ``example`` name the command-line option in the error."""
     overrides: dict[str, Any] = {}
     for item in items:
         key, sep, raw = item.partition("=")
         key = key.strip()
         if not sep or not key:
-            raise ScenarioError(f"--set {item!r}: expected KEY=VALUE, e.g. --set facility.robot_delay=0.02")
+            raise ScenarioError(f"{option} {item!r}: expected KEY=VALUE, e.g. {option} {example}")
         try:
             value: Any = tomllib.loads("v = " + raw.strip())["v"]
         except tomllib.TOMLDecodeError:
@@ -624,6 +626,44 @@ def _report_realtime(console: Console, run: Run) -> None:
         )
 
 
+#: Sensor protocols that stream over TCP (the others over UDP): SRI M812x boxes.
+_TCP_SENSORS = ("sri",)
+
+
+def _sensor_scheme(kind: str) -> str:
+    """``tcp`` or ``udp``: the transport of a sensor protocol, for addresses shown to the user."""
+    return "tcp" if kind.lower() in _TCP_SENSORS else "udp"
+
+
+def _link_option_flags(section: str) -> list[Any]:
+    """``--robot-port`` (any robot protocol) and ``--sensor-option``/``--robot-option
+    KEY=VALUE`` (any key of the protocol's options, e.g. the RSI element names: docs/realtime.md,
+    "Options of each protocol")."""
+    return [
+        click.option("--robot-port", type=click.IntRange(0, 65535), default=None, metavar="PORT",
+                     help="UDP port the robot sends its feedback to (the PC's port), any robot protocol [default: the protocol's: EGM 6510, RSI 59152]."),
+        click.option("--sensor-option", "sensor_options", multiple=True, metavar="KEY=VALUE",
+                     help=f"An option of the {section}'s sensor protocol (repeatable), e.g. sample_rate=1000 for SRI; keys per protocol in docs/realtime.md."),
+        click.option("--robot-option", "robot_options", multiple=True, metavar="KEY=VALUE",
+                     help=f"An option of the {section}'s robot protocol (repeatable), e.g. correction=relative or state_element=RIst for RSI; keys per protocol in docs/realtime.md."),
+    ]
+
+
+def _link_groups(sensor_protocol: str | None, robot_protocol: str | None, robot_port: int | None,
+                 sensor_options: Sequence[str], robot_options: Sequence[str]) -> dict[str, Any]:
+    """The ``sensor``/``robot`` option groups from the protocol, port and KEY=VALUE flags (None
+    where nothing was given: the defaults)."""
+    sensor = parse_set_options(sensor_options, "--sensor-option", "sample_rate=1000")
+    robot = parse_set_options(robot_options, "--robot-option", "correction=relative")
+    if sensor_protocol:
+        sensor["kind"] = sensor_protocol
+    if robot_protocol:
+        robot["kind"] = robot_protocol
+    if robot_port is not None:
+        robot["port"] = robot_port
+    return {"sensor": sensor or None, "robot": robot or None}
+
+
 _FACILITY_OPTIONS = [
     click.option("--bind-host", default=None, help="Address the sensor's RDT and HTTP servers bind to." + _dflt("facility", "bind_host")),
     click.option("--sensor-port", type=int, default=None, help="RDT (UDP) port of the sensor." + _dflt("facility", "sensor_port")),
@@ -654,16 +694,18 @@ _MAPPING_OPTIONS = [
 @cli.command(name="facility", short_help="Run the emulated facility (Net F/T sensor + ABB EGM robot) in real time.")
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
-@_with([_protocol_option("sensor", "facility"), _protocol_option("robot", "facility")] + _FACILITY_OPTIONS + _MAPPING_OPTIONS)
-@click.option("--silence-sensor-after", type=float, default=None, metavar="S", help="Fault injection: the sensor stops sending after S seconds.")
-@click.option("--silence-robot-after", type=float, default=None, metavar="S", help="Fault injection: the robot stops sending after S seconds.")
+@_with([_protocol_option("sensor", "facility"), _protocol_option("robot", "facility")] + _FACILITY_OPTIONS + _MAPPING_OPTIONS
+       + _link_option_flags("facility"))
+@click.option("--silence-sensor-after", type=float, default=None, metavar="S", help="Fault injection: the sensor stops sending S seconds after the robot's first command (the run's start).")
+@click.option("--silence-robot-after", type=float, default=None, metavar="S", help="Fault injection: the robot stops sending S seconds after its first command.")
 @click.option("--duration", type=float, default=None, metavar="S", help="Stop after S seconds [default: run until Ctrl-C].")
 def facility_command(scenario: str, sets: tuple[str, ...], sensor_protocol: str | None, robot_protocol: str | None,
                      bind_host: str | None, sensor_port: int | None,
                      http_port: int | None, egm_host: str | None, egm_port: int | None, egm_local_port: int | None,
                      counts_per_force: float | None, counts_per_torque: float | None, egm_offset: str | None,
-                     egm_rotation: str | None, silence_sensor_after: float | None, silence_robot_after: float | None,
-                     duration: float | None) -> None:
+                     egm_rotation: str | None, robot_port: int | None, sensor_options: tuple[str, ...],
+                     robot_options: tuple[str, ...], silence_sensor_after: float | None,
+                     silence_robot_after: float | None, duration: float | None) -> None:
     """Emulate the facility of SCENARIO in real time: an F/T sensor speaking ATI's Net F/T RDT
     protocol (UDP, 1 record per control period, /netftapi2.xml over HTTP) and a robot speaking
     ABB's EGM (UDP + protobuf, feedback every 4 ms to --egm-host:--egm-port, corrections back),
@@ -679,8 +721,7 @@ def facility_command(scenario: str, sets: tuple[str, ...], sensor_protocol: str 
         resolved = load_scenario(scenario, parse_set_options(sets))
         # the flags keep their flat keys; hilcontact.realtime.LEGACY_KEYS moves them into the devices
         options = {
-            "sensor": {"kind": sensor_protocol} if sensor_protocol else None,
-            "robot": {"kind": robot_protocol} if robot_protocol else None,
+            **_link_groups(sensor_protocol, robot_protocol, robot_port, sensor_options, robot_options),
             "bind_host": bind_host, "sensor_port": sensor_port, "http_port": http_port, "egm_host": egm_host,
             "egm_port": egm_port, "egm_local_port": egm_local_port, "counts_per_force": counts_per_force,
             "counts_per_torque": counts_per_torque, "egm_offset_mm": _numbers(egm_offset, 3, "--egm-offset"),
@@ -691,8 +732,9 @@ def facility_command(scenario: str, sets: tuple[str, ...], sensor_protocol: str 
     _stop_on_signals()
     a = facility.addresses
     f = resolved.facility
+    sensor = facility.status()["sensor_protocol"]
     click.echo(
-        f"ready: facility {resolved.name}: sensor {facility.status()['sensor_protocol']} udp://{a['sensor']}, "
+        f"ready: facility {resolved.name}: sensor {sensor} {_sensor_scheme(sensor)}://{a['sensor']}, "
         f"netftapi2.xml {'http://' + str(a['http']) + '/netftapi2.xml' if a['http'] else 'off'}, "
         f"robot {facility.status()['robot_protocol']} udp://{a['robot']} -> udp://{a['robot_peer']}; robot delay {f.robot_delay * 1e3:g} ms, "
         f"sensor delay {f.sensor_delay * 1e3:g} ms, noise {f.sensor_noise:g} N; Ctrl-C stops",
@@ -760,6 +802,7 @@ _HIL_OPTIONS = [
     click.option("--connect-timeout", type=float, default=None, help="Longest wait for the sensor and the robot." + _dflt("runtime", "connect_timeout", "s")),
     click.option("--start-tolerance", type=float, default=None, help="Largest distance of the robot from the initial pose at start." + _dflt("runtime", "start_tolerance", "m")),
     *_SCHEDULING_OPTIONS,
+    *_link_option_flags("runtime"),
 ]
 
 
@@ -771,7 +814,8 @@ def _runtime_options(sensor_protocol: str | None, robot_protocol: str | None, se
                      retreat_speed: float | None, retreat_distance: float | None, tracking_limit: float | None,
                      tracking_window: float | None, offset_mode: str | None, offset_time: float | None,
                      max_offset_force: float | None, max_offset_moment: float | None, connect_timeout: float | None, start_tolerance: float | None, egm_offset: str | None,
-                     egm_rotation: str | None, rt_priority: int | None, no_lock_memory: bool, cpu: int | None) -> dict[str, Any]:
+                     egm_rotation: str | None, rt_priority: int | None, no_lock_memory: bool, cpu: int | None,
+                     robot_port: int | None, sensor_options: tuple[str, ...], robot_options: tuple[str, ...]) -> dict[str, Any]:
     limits = {k: v for k, v in (("force_limit", force_limit), ("moment_limit", moment_limit),
                                 ("watchdog_ms", watchdog_ms), ("workspace", workspace),
                                 ("hold_deviation", hold_deviation), ("retreat_speed", retreat_speed),
@@ -783,8 +827,7 @@ def _runtime_options(sensor_protocol: str | None, robot_protocol: str | None, se
     return {
         "offset": offset or None,
         "scheduling": _scheduling_options(rt_priority, no_lock_memory, cpu),
-        "sensor": {"kind": sensor_protocol} if sensor_protocol else None,
-        "robot": {"kind": robot_protocol} if robot_protocol else None,
+        **_link_groups(sensor_protocol, robot_protocol, robot_port, sensor_options, robot_options),
         "sensor_host": sensor_host, "sensor_port": sensor_port, "http_port": http_port,
         "counts_per_force": counts_per_force, "counts_per_torque": counts_per_torque,
         "rdt_local_port": rdt_local_port, "bias": bias, "egm_port": egm_port, "egm_bind_host": egm_bind_host,
@@ -960,7 +1003,7 @@ def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tu
     defaults = _RT_DEFAULTS.get("facility", {})
     sensor_kind = sensor_protocol or defaults.get("sensor", {}).get("kind", "rdt")
     robot_kind = robot_protocol or defaults.get("robot", {}).get("kind", "egm")
-    sensor_socket = socket.SOCK_STREAM if sensor_kind == "sri" else socket.SOCK_DGRAM  # SRI M812x: TCP
+    sensor_socket = socket.SOCK_STREAM if _sensor_scheme(sensor_kind) == "tcp" else socket.SOCK_DGRAM
     sensor = {"kind": sensor_kind, "port": _free_port(sensor_socket)}
     robot = {"kind": robot_kind, "port": _free_port(socket.SOCK_DGRAM)}
     if sensor_kind == "rdt":
@@ -998,16 +1041,21 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
         overrides = parse_set_options(sets)
         overrides.setdefault("facility.robot_delay", robot_delay)
         overrides["compensator.kind"] = compensator
+        facility_options, runtime_options = _demo_options(sensor_protocol, robot_protocol)
+        kinds = _RT_DEFAULTS.get("kinds", {})
+        robot_kind = facility_options["robot"]["kind"]
+        if robot_kind in kinds.get("robot_paced", []) and "simulation.period" not in overrides:
+            # the robot's packets clock the loop (KUKA RSI): the scenario runs at its cycle
+            overrides["simulation.period"] = kinds["facility"]["robot"][robot_kind]["period"]
         resolved = load_scenario(scenario, overrides)
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-demo-rt", force)
-        facility_options, runtime_options = _demo_options(sensor_protocol, robot_protocol)
         scheduling = _scheduling_options(rt_priority, no_lock_memory, cpu)
         if scheduling:
             runtime_options["scheduling"] = scheduling
         with start_facility(resolved, facility_options) as facility:
             a = facility.addresses
             Console(stderr=True).print(
-                f"facility: sensor udp://{a['sensor']}{', http://' + str(a['http']) + '/netftapi2.xml' if a['http'] else ''}, "
+                f"facility: sensor {_sensor_scheme(facility_options['sensor']['kind'])}://{a['sensor']}{', http://' + str(a['http']) + '/netftapi2.xml' if a['http'] else ''}, "
                 f"robot udp://{a['robot']} -> udp://{a['robot_peer']}",
                 soft_wrap=True,
             )

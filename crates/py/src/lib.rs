@@ -344,8 +344,9 @@ fn start_facility(
 }
 
 /// The default options of the runtime and the emulator, and the device protocols, as JSON:
-/// `{"runtime": {...}, "facility": {...}, "protocols": {"sensor": [...], "robot": [...]}}`
-/// (the one place the defaults and the protocol lists live).
+/// `{"runtime": {...}, "facility": {...}, "protocols": {"sensor": [...], "robot": [...]},
+/// "kinds": {"runtime"|"facility": {"sensor"|"robot": {KIND: {...}}}}}` (`kinds`: every
+/// protocol's default options; the one place the defaults and the protocol lists live).
 #[pyfunction]
 fn realtime_defaults() -> PyResult<String> {
     let value = serde_json::json!({
@@ -355,6 +356,7 @@ fn realtime_defaults() -> PyResult<String> {
             "sensor": hilcontact_rt::links::SENSOR_KINDS,
             "robot": hilcontact_rt::links::ROBOT_KINDS,
         },
+        "kinds": hilcontact_rt::links::protocol_defaults(),
     });
     Ok(value.to_string())
 }

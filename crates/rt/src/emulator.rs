@@ -54,9 +54,11 @@ pub struct EmulatorOptions {
     pub sensor: EmulatedSensorOptions,
     /// The emulated robot: its protocol (`kind`) and that protocol's options.
     pub robot: EmulatedRobotOptions,
-    /// Fault injection: the sensor stops sending after this many seconds (None = never).
+    /// Fault injection: the sensor stops sending this many seconds after the first command
+    /// the robot received (the run's start, whenever the loop is started; None = never).
     pub silence_sensor_after: Option<f64>,
-    /// Fault injection: the robot stops sending after this many seconds (None = never).
+    /// Fault injection: the robot stops sending this many seconds after the first command it
+    /// received (None = never).
     pub silence_robot_after: Option<f64>,
     /// Fault injection: an offset added to every measured wrench (an unbiased sensor),
     /// `[Fx, Fy, Fz]` N then `[Mx, My, Mz]` N·m, sensor frame.
@@ -228,15 +230,16 @@ impl FacilityHandle {
 
         let facility = FacilityModel::new(&plan, &initial);
         let shared = Arc::new(Shared::default());
-        let silence = |after: Option<f64>| after.map_or(u64::MAX, |s| (s / period).round() as u64);
+        let silence = |after: Option<f64>| after.map(|s| (s / period).round() as u64);
         let mut state = Emulator {
             facility,
             sensor,
             robot,
             shared: shared.clone(),
             period_ns: (period * 1e9).round() as u64,
-            sensor_silent_from: silence(o.silence_sensor_after),
-            robot_silent_from: silence(o.silence_robot_after),
+            sensor_silent_after: silence(o.silence_sensor_after),
+            robot_silent_after: silence(o.silence_robot_after),
+            first_command: None,
             offset: Wrench {
                 force: Vector3::new(o.sensor_offset[0], o.sensor_offset[1], o.sensor_offset[2]),
                 moment: Vector3::new(o.sensor_offset[3], o.sensor_offset[4], o.sensor_offset[5]),
@@ -327,8 +330,11 @@ struct Emulator {
     robot: Box<dyn RobotEndpoint>,
     shared: Arc<Shared>,
     period_ns: u64,
-    sensor_silent_from: u64,
-    robot_silent_from: u64,
+    /// Fault injection: ticks after the first command when the sensor / the robot go silent.
+    sensor_silent_after: Option<u64>,
+    robot_silent_after: Option<u64>,
+    /// The tick the first command arrived (the run's start, as the facility sees it).
+    first_command: Option<u64>,
     /// Added to every measured wrench (fault injection), N and N·m.
     offset: Wrench,
     /// The command the robot follows (newest command, held), `t` frame.
@@ -366,6 +372,7 @@ impl Emulator {
         self.sensor.serve();
         if let Some(command) = self.robot.receive() {
             self.command = command;
+            self.first_command.get_or_insert(k);
         }
         if k > 0 {
             self.facility.advance(&self.command);
@@ -379,8 +386,15 @@ impl Emulator {
             force: m.force + self.offset.force,
             moment: m.moment + self.offset.moment,
         };
-        self.sensor.sample(&wrench, k < self.sensor_silent_from);
-        self.robot
-            .feedback(k, &m.actual, k < self.robot_silent_from);
+        let speaks = |after: Option<u64>| match (after, self.first_command) {
+            (Some(after), Some(first)) => k < first.saturating_add(after),
+            _ => true,
+        };
+        let (sensor_speaks, robot_speaks) = (
+            speaks(self.sensor_silent_after),
+            speaks(self.robot_silent_after),
+        );
+        self.sensor.sample(&wrench, sensor_speaks);
+        self.robot.feedback(k, &m.actual, robot_speaks);
     }
 }

@@ -307,3 +307,24 @@ fn the_robotware_generation_is_6_or_7() {
     assert!(matches!(err, RtError::Option { .. }), "{err:?}");
     assert!(err.to_string().contains("must be 6 or 7, got 5"), "{err}");
 }
+
+#[test]
+fn every_protocol_has_its_defaults_listed() {
+    let d = hilcontact_rt::links::protocol_defaults();
+    for side in ["runtime", "facility"] {
+        for (link, kinds) in [("sensor", SENSOR_KINDS), ("robot", ROBOT_KINDS)] {
+            let listed = d[side][link].as_object().expect("a table per link");
+            assert_eq!(listed.len(), kinds.len(), "{side}.{link}: {listed:?}");
+            for kind in kinds {
+                assert_eq!(listed[*kind]["kind"], *kind, "{side}.{link}.{kind}");
+                assert!(
+                    listed[*kind]["port"].is_u64(),
+                    "{side}.{link}.{kind} has a port"
+                );
+            }
+        }
+    }
+    // the RSI controller's cycle, used by demo-rt for the loop period of a robot-paced loop
+    assert_eq!(d["facility"]["robot"]["rsi"]["period"], 0.004);
+    assert_eq!(d["robot_paced"], serde_json::json!(["rsi"]));
+}

@@ -142,6 +142,11 @@ fn the_emulated_controller_takes_echoed_answers_and_stops_when_they_are_late() {
     let facility = FacilityHandle::start(&s, &emu).unwrap();
     let mut buf = [0u8; 4096];
     let mut encoder = AnswerEncoder::new(RsiNames::default());
+    // before the PC's first answer, unanswered messages are neither late nor a reason to stop
+    // (the KRL program starts RSI once the PC listens): 20 ignored, then answered
+    for _ in 0..20 {
+        pc.recv_from(&mut buf).unwrap();
+    }
     // answer 50 messages: the first with a wrong IPOC, then correctly, 1 mm along x
     let mut ipocs = Vec::new();
     let mut setpoint_x = Vec::new();
@@ -181,6 +186,7 @@ fn the_emulated_controller_takes_echoed_answers_and_stops_when_they_are_late() {
     assert_eq!(status.robot.accepted + status.robot.stale, 49, "{status:?}");
     assert!(status.robot.accepted >= 40, "{status:?}");
     assert!(status.robot.late >= 5, "{status:?}");
+    assert!(status.robot.sent >= 20 + 50 + more, "{status:?}");
 }
 
 /// RSI options in TOML, as `[robot] kind = "rsi"`.

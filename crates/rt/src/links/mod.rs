@@ -55,6 +55,44 @@ pub const SENSOR_KINDS: &[&str] = &["rdt", "sri"];
 /// options and the emulator's alike (the one list).
 pub const ROBOT_KINDS: &[&str] = &["egm", "rsi"];
 
+/// The default options of every protocol, keyed by kind, for the runtime's links and the
+/// emulator's devices: `{"runtime": {"sensor": {"rdt": {...}, "sri": {...}}, "robot": {...}},
+/// "facility": {...}, "robot_paced": [KIND, ...]}` (each kind's options as `{"kind": KIND}` deserializes them: the one
+/// place the defaults live).
+pub fn protocol_defaults() -> serde_json::Value {
+    fn each<T: Serialize + serde::de::DeserializeOwned>(
+        kinds: &[&str],
+    ) -> serde_json::Map<String, serde_json::Value> {
+        kinds
+            .iter()
+            .filter_map(|kind| {
+                let options: T =
+                    serde_json::from_value(serde_json::json!({ "kind": kind })).ok()?;
+                Some((kind.to_string(), serde_json::to_value(options).ok()?))
+            })
+            .collect()
+    }
+    let paced: Vec<&str> = ROBOT_KINDS
+        .iter()
+        .copied()
+        .filter(|kind| {
+            serde_json::from_value::<RobotOptions>(serde_json::json!({ "kind": kind }))
+                .is_ok_and(|o| o.pacing() == Pacing::Robot)
+        })
+        .collect();
+    serde_json::json!({
+        "robot_paced": paced,
+        "runtime": {
+            "sensor": each::<SensorOptions>(SENSOR_KINDS),
+            "robot": each::<RobotOptions>(ROBOT_KINDS),
+        },
+        "facility": {
+            "sensor": each::<EmulatedSensorOptions>(SENSOR_KINDS),
+            "robot": each::<EmulatedRobotOptions>(ROBOT_KINDS),
+        },
+    })
+}
+
 /// Packet counters of one link.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
 pub struct LinkStats {
@@ -250,6 +288,18 @@ pub enum RobotOptions {
 impl Default for RobotOptions {
     fn default() -> Self {
         RobotOptions::Egm(egm::EgmOptions::default())
+    }
+}
+
+impl RobotOptions {
+    /// What clocks the loop with this robot, known before it is opened (the opened link's
+    /// [`RobotLink::pacing`] says the same; with [`Pacing::Robot`] the scenario's period
+    /// must equal the robot's cycle).
+    pub fn pacing(&self) -> Pacing {
+        match self {
+            RobotOptions::Egm(_) => Pacing::Clock,
+            RobotOptions::Rsi(_) => Pacing::Robot,
+        }
     }
 }
 

@@ -457,7 +457,9 @@ const FIRST_IPOC: u64 = 1_000_000;
 /// the newest message (an older one is `stale`, another `invalid`), and its correction becomes
 /// the command. A cycle that begins with the previous message unanswered counts `late`; after
 /// `max_late` consecutive ones the controller stops sending, as a real one does (its `RSI
-/// stopped`), and the loop's watchdog ends the run.
+/// stopped`), and the loop's watchdog ends the run. Late cycles are counted only once the PC
+/// has answered once: on a real cell the operator starts the KRL program (`RSI_MOVECORR`)
+/// after the PC side is listening, so here the emulator and the PC may start in either order.
 pub struct RsiEndpoint {
     socket: UdpSocket,
     address: SocketAddr,
@@ -595,7 +597,7 @@ impl RobotEndpoint for RsiEndpoint {
         if !send || self.stopped || !k.is_multiple_of(self.every) {
             return;
         }
-        if self.outstanding.is_some() {
+        if self.outstanding.is_some() && self.stats.accepted > 0 {
             self.stats.late += 1;
             self.consecutive_late += 1;
             if self.consecutive_late >= self.max_late {
