@@ -276,16 +276,17 @@ def test_identification_figure_only_when_a_kind_identifies():
     assert set(figures) == {"compare_velocity", "compare_force", "compare_energy", "compare_cov_cof"}
 
 
-def test_save_writes_runs_report_and_figures(tmp_path):
+@pytest.mark.parametrize("run_plots", [False, True])
+def test_save_writes_runs_report_and_figures(tmp_path, run_plots):
     comparison = fake_comparison()
-    out = comparison.save(tmp_path / "cmp")
+    out = comparison.save(tmp_path / "cmp", run_plots=run_plots)
     assert out == tmp_path / "cmp"
     names = {p.name for p in out.iterdir()}
     assert names == {"none", "pic", "pida", "tdpa-impedance", "comparison.md", "comparison.csv", MARKER} | COMPARE_PLOTS
     for kind, run in comparison.runs.items():
         files = {p.name for p in (out / kind).iterdir()}
-        expected = RUN_FILES | RUN_PLOTS | ({"identification.png"} if kind in IDENTIFYING else set())
-        assert files == expected
+        plots = RUN_PLOTS | ({"identification.png"} if kind in IDENTIFYING else set())
+        assert files == RUN_FILES | (plots if run_plots else set())
         assert json.loads((out / kind / "metrics.json").read_text()) == run.metrics
         assert hc.load_scenario(out / kind / "scenario.toml").compensator.kind == kind
     for name in COMPARE_PLOTS:
@@ -400,7 +401,7 @@ def test_compare_tables_through_the_core(paper_comparison):
 
 
 def test_compare_save_through_the_core(paper_comparison, tmp_path):
-    out = paper_comparison.save(tmp_path / "paper-table1-compare")
+    out = paper_comparison.save(tmp_path / "paper-table1-compare", run_plots=True)
     assert {p.name for p in out.iterdir()} == set(KINDS) | {"comparison.md", "comparison.csv", MARKER} | COMPARE_PLOTS
     for kind in KINDS:
         files = {p.name for p in (out / kind).iterdir()}
@@ -503,7 +504,7 @@ def test_velocity_error_figure_only_for_6dof_comparisons():
 
 def test_compare_oblique_6dof_through_the_core(core, tmp_path):
     comparison = hc.compare("oblique-6dof", "none,pic", {"simulation.duration": 1.0})
-    out = comparison.save(tmp_path / "oblique")
+    out = comparison.save(tmp_path / "oblique", run_plots=True)
     assert {p.name for p in out.iterdir()} >= COMPARE_PLOTS | {"compare_velocity_error.png"}
     for kind in ("none", "pic"):
         files = {p.name for p in (out / kind).iterdir()}
@@ -512,3 +513,55 @@ def test_compare_oblique_6dof_through_the_core(core, tmp_path):
     expected = [100 * run.metrics["collisions"][0]["velocity_error"] for run in comparison.runs.values()]
     assert [bar.get_height() for bar in v_ax.patches[:2]] == pytest.approx(expected)
     assert "(compare_velocity_error.png)" in (out / "comparison.md").read_text()
+
+
+def test_a_saved_comparison_loads_back_equal(tmp_path):
+    comparison = fake_comparison()
+    comparison.save(tmp_path / "cmp", plots=False)
+    loaded = Comparison.load(tmp_path / "cmp")
+    assert loaded.kinds == comparison.kinds
+    for kind, run in comparison.runs.items():
+        back = loaded.runs[kind]
+        assert back.metrics == run.metrics and back.scenario == run.scenario
+        pd.testing.assert_frame_equal(back.timeseries, run.timeseries)
+        pd.testing.assert_frame_equal(back.reference, run.reference)
+    assert loaded.to_csv() == comparison.to_csv()
+    with pytest.raises(hc.ScenarioError, match="not a comparison folder"):
+        Comparison.load(tmp_path)
+
+
+def test_cli_plot_draws_a_comparison_and_a_run_folder_later(core, tmp_path):
+    out = tmp_path / "cmp"
+    assert invoke("compare", "paper-table1", "--compensators", "none,pida", "--no-plots", "--out", str(out)).exit_code == 0
+    result = invoke("plot", str(out / "pida"))
+    assert result.exit_code == 0, (result.output, result.stderr)
+    assert {p.name for p in (out / "pida").iterdir()} == RUN_FILES | RUN_PLOTS | {"identification.png"}
+    assert {p.name for p in out.iterdir() if p.suffix == ".png"} == set()
+    result = invoke("plot", str(out))
+    assert result.exit_code == 0, (result.output, result.stderr)
+    assert {p.name for p in out.iterdir() if p.suffix == ".png"} == COMPARE_PLOTS
+    assert {p.name for p in (out / "none").iterdir()} == RUN_FILES | RUN_PLOTS
+    for png in out.rglob("*.png"):
+        assert png.read_bytes()[:8] == PNG_MAGIC
+    assert result.stdout.strip() == f"drew {len(COMPARE_PLOTS) + 2 * len(RUN_PLOTS) + 1} figures in {out}/"
+
+
+@pytest.mark.parametrize(
+    ("setup", "fragment"),
+    [
+        (lambda d: None, "no such folder"),
+        (lambda d: d.mkdir(), "not written by hilcontact"),
+        (lambda d: (d.mkdir(), (d / MARKER).write_text('{"kind": "sweep"}')), "a sweep folder"),
+        (lambda d: (d.mkdir(), (d / MARKER).write_text('{"kind": "run"}'), (d / "metrics.json").write_text("{}")),
+         "not a run folder (missing timeseries.parquet"),
+        (lambda d: (d.mkdir(), (d / MARKER).write_text('{"kind": "comparison"}')), "not a comparison folder"),
+    ],
+)
+def test_cli_plot_refuses_what_it_cannot_draw_in_one_line(tmp_path, setup, fragment):
+    folder = tmp_path / "x"
+    setup(folder)
+    before = sorted(p.name for p in folder.iterdir()) if folder.is_dir() else None
+    result = invoke("plot", str(folder))
+    assert result.exit_code == 2, (result.output, result.stderr)
+    assert fragment in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert (sorted(p.name for p in folder.iterdir()) if folder.is_dir() else None) == before

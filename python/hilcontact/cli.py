@@ -148,6 +148,50 @@ def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, f
     _report(Console(), result, folder)
 
 
+@cli.command(short_help="Redraw the figures of a run or comparison folder.")
+@click.argument("folder", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--force", is_flag=True, help="Draw into a folder that hilcontact did not write (it has the run files but no .hilcontact.json).")
+def plot(folder: Path, force: bool) -> None:
+    """Redraw the PNG figures of FOLDER, a run folder (`run`, `hil`, a compensator of a
+    comparison) or a comparison folder (its compare_*.png and every compensator's figures),
+    from the data files in it: after `--no-plots`, after a compare without --run-figures, or
+    after an update of hilcontact. Only PNG files are written.
+
+    \b
+    Examples:
+      hilcontact plot runs/paper-table1
+      hilcontact plot runs/paper-table1-compare
+    """
+    from rich.progress import Progress
+
+    from .output import marker_kind
+
+    with _errors():
+        if not folder.is_dir():
+            raise ScenarioError(f"{folder}: no such folder")
+        kind = marker_kind(folder)
+        if kind is None and not force:
+            raise OutputError(f"{folder}: not written by hilcontact (no .hilcontact.json); --force draws into it anyway")
+        if kind not in (None, "run", "comparison"):
+            raise ScenarioError(f"{folder}: a {kind} folder; plot draws run and comparison folders")
+        if (folder / "metrics.json").is_file():
+            targets: list[tuple[Path, Any]] = [(folder, Run.load(folder))]
+        else:
+            comparison = Comparison.load(folder)
+            targets = [(folder, comparison)] + [(folder / k, r) for k, r in comparison.runs.items()]
+        written: list[Path] = []
+        with Progress(console=Console(stderr=True), transient=True) as progress:
+            task = progress.add_task("Drawing", total=len(targets))
+            for where, result in targets:
+                progress.update(task, description=f"Drawing {escape(str(where))}")
+                try:
+                    written += [where / f"{name}.png" for name in result.plot(where)]
+                except OSError as exc:
+                    raise OutputError(f"{where}: cannot write the figures: {exc.strerror or exc}") from None
+                progress.advance(task)
+    click.echo(f"drew {len(written)} figures in {folder}/")
+
+
 def _number(value: Any, fmt: str, scale: float = 1.0) -> str:
     if value is None:
         return "-"
@@ -217,11 +261,14 @@ def _report(console: Console, result: Run, folder: Path) -> None:
     "--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-compare]."
 )
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
+@click.option("--run-figures", is_flag=True, help="Also draw each compensator's own figures (slower; `hilcontact plot DIR` draws them later).")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
-def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool, force: bool) -> None:
+def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool,
+                    run_figures: bool, force: bool) -> None:
     """Simulate SCENARIO once per compensator and compare them.
 
-    Writes a run folder per compensator, comparison.md and comparison.csv (CoV, CoF, peak
+    Writes a run folder per compensator (data; its figures with --run-figures, or later with
+    `hilcontact plot DIR/<compensator>`), comparison.md and comparison.csv (CoV, CoF, peak
     force, rebound speed per collision; status and identification errors per compensator)
     and the compare_*.png figures.
     """
@@ -248,7 +295,7 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
 
             result = run_comparison(scenarios, progress=advance)
             progress.update(task, completed=len(scenarios), description="Writing files")
-            result.save(folder, plots=not no_plots, overwrite=force)
+            result.save(folder, plots=not no_plots, overwrite=force, run_plots=run_figures)
     _report_comparison(Console(), result, folder)
 
 

@@ -171,6 +171,19 @@ class Comparison:
         if not self.runs:
             raise HilContactError("a comparison needs at least one run")
 
+    @classmethod
+    def load(cls, directory: str | os.PathLike[str]) -> Comparison:
+        """A comparison from the folder :meth:`save` wrote: one run folder per compensator
+        (``<kind>/``), in the order of :data:`ALL_KINDS`. Raises ScenarioError naming the folder
+        when it holds no run folder."""
+        folder = Path(directory)
+        if not folder.is_dir():
+            raise ScenarioError(f"{folder}: not a folder")
+        runs = {kind: Run.load(folder / kind) for kind in ALL_KINDS if (folder / kind / "metrics.json").is_file()}
+        if not runs:
+            raise ScenarioError(f"{folder}: not a comparison folder (no <compensator>/metrics.json)")
+        return cls(runs)
+
     @property
     def scenario(self) -> Scenario:
         """The scenario of the first run (they differ only in ``[compensator]``)."""
@@ -310,18 +323,20 @@ class Comparison:
             save_figures(figures, directory, dpi=110)
         return figures
 
-    def save(self, directory: str | os.PathLike[str], plots: bool = True, overwrite: bool = False) -> Path:
+    def save(self, directory: str | os.PathLike[str], plots: bool = True, overwrite: bool = False,
+             run_plots: bool = False) -> Path:
         """Write the comparison to ``directory``, atomically (a temporary sibling folder that
         then replaces ``directory``; only a new or empty folder, or one hilcontact wrote,
         unless ``overwrite``: :mod:`hilcontact.output`).
 
-        Contents: ``<kind>/`` (a run folder per compensator, as :meth:`Run.save`),
-        ``comparison.md``, ``comparison.csv`` and, unless ``plots=False``, the run figures
-        and ``compare_*.png``. Returns the folder's path.
+        Contents: ``<kind>/`` (a run folder per compensator, as :meth:`Run.save`, with its
+        figures only if ``run_plots``: ``hilcontact plot DIR/<kind>`` draws them later),
+        ``comparison.md``, ``comparison.csv`` and, unless ``plots=False``,
+        ``compare_*.png``. Returns the folder's path.
         """
         def write(folder: Path) -> None:
             for kind, run in self.runs.items():
-                run.save(folder / kind, plots=plots)
+                run.save(folder / kind, plots=plots and run_plots)
             names = [f"{name}.png" for name in self.plot(folder)] if plots else []
             (folder / "comparison.csv").write_text(self.to_csv(), encoding="utf-8")
             (folder / "comparison.md").write_text(self.to_markdown(names), encoding="utf-8")

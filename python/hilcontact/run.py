@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from .errors import HilContactError
+from .errors import HilContactError, ScenarioError
 from .output import write_atomically
 from .scenario import Scenario, load_scenario
 
@@ -137,6 +137,28 @@ class Run:
         table = pd.DataFrame(rows, columns=columns)
         table[floats] = table[floats].astype(np.float64)
         return table.set_index("collision")
+
+    @classmethod
+    def load(cls, directory: str | os.PathLike[str]) -> Run:
+        """A run from the folder :meth:`save` wrote (its data files: :data:`DATA_FILES`).
+        Raises :class:`~hilcontact.errors.ScenarioError` naming the folder and the missing or
+        unreadable file."""
+        folder = Path(directory)
+        if not folder.is_dir():
+            raise ScenarioError(f"{folder}: not a folder")
+        missing = [name for name in DATA_FILES if not (folder / name).is_file()]
+        if missing:
+            raise ScenarioError(f"{folder}: not a run folder (missing {', '.join(missing)})")
+        try:
+            metrics = json.loads((folder / "metrics.json").read_text(encoding="utf-8"))
+            timeseries = pd.read_parquet(folder / "timeseries.parquet")
+            reference = pd.read_parquet(folder / "reference.parquet")
+        except (OSError, ValueError) as exc:
+            raise ScenarioError(f"{folder}: unreadable run data ({' '.join(str(exc).split())})") from None
+        if not isinstance(metrics, dict):
+            raise ScenarioError(f"{folder / 'metrics.json'}: expected a JSON object")
+        scenario = load_scenario(folder / "scenario.toml")
+        return cls(scenario=scenario, metrics=metrics, timeseries=timeseries, reference=reference)
 
     def plot(self, directory: str | os.PathLike[str] | None = None) -> dict[str, Figure]:
         """Make the figures (name -> matplotlib Figure); save them as ``<name>.png`` in
