@@ -1,14 +1,16 @@
 """The ``hilcontact`` command line.
 
     hilcontact run SCENARIO [--set KEY=VALUE ...] [--out DIR] [--no-plots]
-    hilcontact compare SCENARIO [--set KEY=VALUE ...] [--compensators LIST] [--out DIR] [--no-plots]
+    hilcontact compare SCENARIO [--set KEY=VALUE ...] [--compensators LIST] [--out DIR] [--no-plots] [--run-figures]
+    hilcontact plot RUN_OR_COMPARISON_DIR
     hilcontact sweep SCENARIO --grid KEY=START:STOP:COUNT|KEY=A,B,... [--compensators LIST]
                      [--seeds N] [--set KEY=VALUE ...] --out DIR [--resume] [--dask ADDRESS]
     hilcontact stability-map SWEEP_DIR [--out DIR] [--cov-tolerance 0.05] [--cof-limit 1.2]
     hilcontact presets
     hilcontact show SCENARIO [--set KEY=VALUE ...]
     hilcontact facility SCENARIO [--sensor-port 49152 --http-port 80 --egm-host H --egm-port 6510 ...]
-    hilcontact hil SCENARIO --sensor HOST [--egm-port 6510 --force-limit N --rt-priority 80 --cpu N ...] [--out DIR]
+    hilcontact hil SCENARIO --sensor HOST [--sensor-protocol rdt|sri --robot-protocol egm|rsi --robot-port N
+                   --robot-option KEY=VALUE --force-limit N --rt-priority 80 --cpu N ...] [--out DIR]
     hilcontact check SCENARIO --sensor HOST [the options of hil] [--duration 1] [--out DIR]
     hilcontact demo-rt [SCENARIO] [--compensator pida] [--rt-priority 80 --no-lock-memory --cpu N] [--out DIR]
     hilcontact --version
