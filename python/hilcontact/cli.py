@@ -7,6 +7,7 @@
                      [--seeds N] [--set KEY=VALUE ...] --out DIR [--resume] [--dask ADDRESS]
     hilcontact stability-map SWEEP_DIR [--out DIR] [--cov-tolerance 0.05] [--cof-limit 1.2]
     hilcontact presets
+    hilcontact init FILE.toml [--from PRESET] [--set KEY=VALUE ...]
     hilcontact show SCENARIO [--set KEY=VALUE ...]
     hilcontact facility SCENARIO [--sensor-port 49152 --http-port 80 --egm-host H --egm-port 6510 ...]
     hilcontact hil SCENARIO --sensor HOST [--sensor-protocol rdt|sri --robot-protocol egm|rsi --robot-port N
@@ -516,6 +517,30 @@ def presets_command() -> None:
     width = max((len(name) for name in listing), default=0)
     for name, description in listing.items():
         click.echo(f"{name:<{width}}  {description}")
+
+
+@cli.command(short_help="Write a scenario file to start from, every key commented.")
+@click.argument("file", type=click.Path(path_type=Path))
+@click.option("--from", "source", default="paper-table1", show_default=True, metavar="SCENARIO",
+              help="The preset (or TOML file) whose values the file takes.")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
+@click.option("--force", is_flag=True, help="Replace FILE if it exists.")
+def init(file: Path, source: str, sets: tuple[str, ...], force: bool) -> None:
+    """Write FILE, a scenario with every key, each with a comment giving its meaning, unit and
+    default, and the values of --from (a preset, paper-table1 by default). Edit it, then
+    `hilcontact run FILE`. An existing FILE is kept unless --force.
+
+    \b
+    Examples:
+      hilcontact init my.toml
+      hilcontact init oblique.toml --from oblique-6dof --set compensator.kind=pida
+    """
+    from .template import write_template
+
+    with _errors():
+        resolved = load_scenario(source, parse_set_options(sets))
+        written = write_template(file, resolved, overwrite=force)
+    click.echo(f"wrote {written} (from {resolved.name}); run it with: hilcontact run {written}")
 
 
 @cli.command(short_help="Print a scenario's resolved TOML.")
