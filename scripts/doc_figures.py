@@ -1,0 +1,196 @@
+#!/usr/bin/env python3
+"""The numbers the docs quote, computed by running the simulations they come from.
+
+Each figure is a region of a Markdown page between ``<!-- doc-figures: NAME -->`` and
+``<!-- /doc-figures -->`` (invisible when the page is rendered), and a function below that
+writes the region's text from fresh runs. ``--check`` (what tests/test_doc_figures.py runs)
+fails when a page differs; ``--write`` updates the pages.
+
+    python scripts/doc_figures.py            # print every figure
+    python scripts/doc_figures.py --check    # exit 1 and show the differences if a page is stale
+    python scripts/doc_figures.py --write    # update the pages
+
+Every run is deterministic (fixed seeds), so the text is reproducible to the last digit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import difflib
+import re
+import sys
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import hilcontact as hc
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: The noisy case of the compensator pages: 20 ms robot delay, 5 ms sensor delay, 0.2 N noise.
+NOISY = {"facility.robot_delay": 0.02, "facility.sensor_delay": 0.005, "facility.sensor_noise": 0.2}
+
+#: The rows of the compensator tables: (label, preset, overrides).
+CASES: list[tuple[str, str, dict[str, Any]]] = [
+    ("`paper-table1`, 10 ms", "paper-table1", {}),
+    ("20 ms", "paper-table1", {"facility.robot_delay": 0.02}),
+    ("40 ms", "paper-table1", {"facility.robot_delay": 0.04}),
+    ("60 ms", "paper-table1", {"facility.robot_delay": 0.06}),
+    ("noisy", "paper-table1", NOISY),
+    ("noisy, `--set compensator.delay_mode=lead`", "paper-table1", {**NOISY, "compensator.delay_mode": "lead"}),
+    ("`paper-exp-2.64hz`", "paper-exp-2.64hz", {}),
+    ("`paper-exp-1.93hz`", "paper-exp-1.93hz", {}),
+]
+
+_CACHE: dict[tuple[str, str, tuple[tuple[str, Any], ...]], hc.Run] = {}
+
+
+def run(preset: str, kind: str, overrides: Mapping[str, Any] | None = None) -> hc.Run:
+    """The run of ``preset`` with ``compensator.kind = kind`` and the overrides (cached)."""
+    items = dict(overrides or {})
+    key = (preset, kind, tuple(sorted(items.items())))
+    if key not in _CACHE:
+        _CACHE[key] = hc.simulate(hc.load_scenario(preset, {**items, "compensator.kind": kind}))
+    return _CACHE[key]
+
+
+def covs(r: hc.Run) -> str:
+    """The CoV of each collision, 3 decimals."""
+    return ", ".join(f"{c['cov']:.3f}" for c in r.metrics["collisions"] if c.get("cov") is not None)
+
+
+def worst_cof(r: hc.Run) -> str:
+    value = r.metrics["summary"].get("worst_cof")
+    return "-" if value is None else f"{value:.3f}"
+
+
+def first_cof(r: hc.Run) -> str:
+    collisions = [c for c in r.metrics["collisions"] if c.get("cof") is not None]
+    return f"{collisions[0]['cof']:.3f}" if collisions else "-"
+
+
+def dac_table() -> str:
+    lines = ["| case | CoV per collision | worst CoF | `none`, first CoF |", "|---|---|--:|--:|"]
+    for label, preset, overrides in CASES:
+        lead = overrides.get("compensator.delay_mode") == "lead"
+        none = "" if lead else first_cof(run(preset, "none", overrides))
+        r = run(preset, "dac", overrides)
+        lines.append(f"| {label} | {covs(r)} | {worst_cof(r)} | {none} |")
+    return "\n".join(lines)
+
+
+def pida_table() -> str:
+    lines = ["| case | CoV per collision | worst CoF | k error (%) | c error (N·s/m) |", "|---|---|--:|--:|--:|"]
+    for label, preset, overrides in CASES:
+        r = run(preset, "pida", overrides)
+        identification = r.metrics.get("identification") or {}
+        k = identification.get("stiffness_error")
+        c = identification.get("damping_error")
+        k_text = "-" if k is None else f"{100 * k:.3g}"
+        c_text = "-" if c is None else f"{c:.3g}"
+        lines.append(f"| {label} | {covs(r)} | {worst_cof(r)} | {k_text} | {c_text} |")
+    return "\n".join(lines)
+
+
+def lead_table() -> str:
+    """`align` against `lead` on the noisy case, per compensator that has `delay_mode`."""
+    lines = [
+        "| compensator | `align`: CoV per collision | `align`: worst CoF | `lead`: CoV per collision | `lead`: worst CoF |",
+        "|---|---|--:|---|--:|",
+    ]
+    for kind in ("pic", "dac", "pida"):
+        align = run("paper-table1", kind, NOISY)
+        lead = run("paper-table1", kind, {**NOISY, "compensator.delay_mode": "lead"})
+        lines.append(f"| `{kind}` | {covs(align)} | {worst_cof(align)} | {covs(lead)} | {worst_cof(lead)} |")
+    return "\n".join(lines)
+
+
+def zero_delay() -> str:
+    """The no-delay loop against the ideal reference on paper-table1: CoV and CoF ranges."""
+    r = run("paper-table1", "none", {"facility.robot_delay": 0.0})
+    cov = [c["cov"] for c in r.metrics["collisions"]]
+    cof = [c["cof"] for c in r.metrics["collisions"]]
+    return (
+        f"CoV {min(cov):.7f}–{max(cov):.7f} and CoF {min(cof):.6f}–{max(cof):.6f} on all "
+        f"{len(cov)} collisions of `paper-table1`"
+    )
+
+
+#: Every figure: name -> function writing its text.
+FIGURES: dict[str, Callable[[], str]] = {
+    "dac-table": dac_table,
+    "pida-table": pida_table,
+    "lead-table": lead_table,
+    "zero-delay": zero_delay,
+}
+
+#: Pages that hold figures.
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+
+_REGION = re.compile(r"(<!-- doc-figures: ([a-z0-9-]+) -->)(.*?)(<!-- /doc-figures -->)", re.S)
+
+
+def regions(text: str) -> list[tuple[str, str]]:
+    """The (name, current text) of each region of a page."""
+    return [(m.group(2), m.group(3)) for m in _REGION.finditer(text)]
+
+
+def _body(name: str, old: str, values: Mapping[str, str]) -> str:
+    """A region's new text: a table on lines of its own, an inline figure inline."""
+    value = values[name]
+    return f"\n{value}\n" if old.startswith("\n") else value
+
+
+def updated(text: str, values: Mapping[str, str]) -> str:
+    """The page with every region's text replaced by its figure."""
+    def replace(m: re.Match[str]) -> str:
+        name = m.group(2)
+        if name not in values:
+            raise KeyError(f"unknown doc figure {name!r}; known: {', '.join(FIGURES)}")
+        return m.group(1) + _body(name, m.group(3), values) + m.group(4)
+
+    return _REGION.sub(replace, text)
+
+
+def compute() -> dict[str, str]:
+    return {name: make() for name, make in FIGURES.items()}
+
+
+def stale_pages(values: Mapping[str, str]) -> dict[Path, tuple[str, str]]:
+    """Pages whose regions differ from the figures: path -> (current, updated)."""
+    out = {}
+    for page in PAGES:
+        text = page.read_text(encoding="utf-8")
+        new = updated(text, values)
+        if new != text:
+            out[page] = (text, new)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    mode = parser.add_mutually_exclusive_group()
+    mode.add_argument("--check", action="store_true", help="exit 1 if a page quotes other numbers")
+    mode.add_argument("--write", action="store_true", help="update the pages")
+    args = parser.parse_args(argv)
+    values = compute()
+    if not (args.check or args.write):
+        for name, value in values.items():
+            print(f"## {name}\n{value}\n")
+        return 0
+    stale = stale_pages(values)
+    for page, (old, new) in stale.items():
+        name = page.relative_to(ROOT)
+        if args.write:
+            page.write_text(new, encoding="utf-8")
+            print(f"updated {name}")
+        else:
+            sys.stdout.writelines(difflib.unified_diff(old.splitlines(True), new.splitlines(True), str(name), f"{name} (now)"))
+    if args.check and stale:
+        print(f"\n{len(stale)} page(s) quote stale figures: python scripts/doc_figures.py --write", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
