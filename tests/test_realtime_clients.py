@@ -1,6 +1,8 @@
 """Independent open-source clients against the emulated facility: the ``NetFT`` package as the
-F/T sensor's client (RDT, fixed port 49152), ``abb-robot-client`` as the PC side of EGM; plus
-the RDT sequence numbers and ``/netftapi2.xml`` as a real Net F/T keeps and serves them."""
+F/T sensor's client (RDT, fixed port 49152), ``pynetft`` as a second RDT client (it reads the
+calibration from ``/netftapi2.xml``), ``abb-robot-client`` as the PC side of EGM and ``rsipi``
+as the PC side of KUKA RSI; plus the RDT sequence numbers and ``/netftapi2.xml`` as a real
+Net F/T keeps and serves them."""
 
 from __future__ import annotations
 
@@ -155,3 +157,191 @@ def test_abb_robot_client_drives_the_emulated_robot(core):
             assert abs(status["egm_sent"] - status["time"] * 250) <= 2, status
     finally:
         client.close()
+
+
+# ---- pynetft: a second RDT client, with the calibration from /netftapi2.xml ------------------
+
+PRESSED_WRENCH = (881.375, 0.0, 0.0, 0.0, 132.20625, 0.0)  # N and N m: PRESSED_COUNTS / 1e6
+
+
+@pytest.mark.parametrize(
+    "units",
+    [
+        pytest.param({}, id="N-and-N-m"),
+        # a sensor configured in other units: pynetft reports in them, from the page's
+        # counts per unit (cfgcpf/cfgcpt) and unit names (scfgfu/scfgtu)
+        pytest.param({"force_unit": "lbf", "torque_unit": "lbf-in"}, id="lbf-and-lbf-in"),
+    ],
+)
+def test_pynetft_client_reads_the_emulated_sensor(core, units):
+    pynetft = pytest.importorskip("pynetft")
+
+    rdt_port, http_port = free_port(), free_port(socket.SOCK_STREAM)
+    scenario = hc.load_scenario("paper-table1", PRESSED)
+    options = {
+        "sensor": {"kind": "rdt", "port": rdt_port, "http_port": http_port, **units},
+        "robot": {"kind": "egm", "port": free_port()},
+    }
+    config = pynetft.Config(
+        sensor_host="127.0.0.1",
+        rdt_port=rdt_port,
+        http_port=http_port,
+        receive_timeout=2.0,  # generous: a busy 2-core machine
+        configuration_connect_timeout=5.0,
+        configuration_timeout=10.0,
+        recovery_policy=pynetft.RecoveryPolicy.FAIL_STOP,
+    )
+    lbf = "force_unit" in units
+    force_unit, torque_unit = (
+        (pynetft.ForceUnit.POUND_FORCE, pynetft.TorqueUnit.POUND_FORCE_INCH)
+        if lbf
+        else (pynetft.ForceUnit.NEWTON, pynetft.TorqueUnit.NEWTON_METER)
+    )
+    n_per_lbf, n_m_per_lbf_in = 4.4482216152605, 0.112984829027617
+    force_scale, torque_scale = (n_per_lbf, n_m_per_lbf_in) if lbf else (1.0, 1.0)
+    expected = [f / force_scale for f in PRESSED_WRENCH[:3]] + [m / torque_scale for m in PRESSED_WRENCH[3:]]
+    with start_facility(scenario, options) as facility:
+        with pynetft.Client(config) as client:
+            samples = client.samples(timeout=5.0)
+            sample = next(samples)
+            calibration = client.health().sensor_configuration
+            assert calibration.source == pynetft.CalibrationSource.SENSOR  # read from the page
+            assert calibration.calibration.counts_per_force_unit == 1e6
+            assert calibration.calibration.counts_per_torque_unit == 1e6
+            assert (sample.force_unit, sample.torque_unit) == (force_unit, torque_unit)
+            assert sample.status == 0
+            # counts of 1e6 per configured unit, rounded to integers as a real sensor's are
+            assert list(sample.raw_wrench) == pytest.approx([round(v * 1e6) for v in expected], abs=2)
+            assert list(sample.wrench) == pytest.approx(expected, abs=2e-6)
+            # back in N and N m, the emulator's wrench (r × F of the spring force k·d)
+            in_si = [f * force_scale for f in sample.force] + [m * torque_scale for m in sample.torque]
+            assert in_si == pytest.approx(PRESSED_WRENCH, abs=1e-5)
+            # it streams: the RDT sequence numbers advance, the wrench stays
+            later = [next(samples) for _ in range(50)]
+            assert all(b.rdt_sequence > a.rdt_sequence for a, b in zip([sample, *later], later))
+            assert all(list(s.wrench) == pytest.approx(expected, abs=2e-6) for s in later)
+            # the sensor's bias command (0x0042) zeroes the readings
+            client.bias()
+            deadline = time.monotonic() + 10.0
+            biased = None
+            while time.monotonic() < deadline:
+                biased = next(samples)
+                if all(abs(c) <= 2 for c in biased.raw_wrench):
+                    break
+            assert biased is not None and list(biased.raw_wrench) == pytest.approx([0] * 6, abs=2)
+            health = client.health()
+            assert health.malformed_count == 0 and health.out_of_order_count == 0
+            assert health.duplicate_count == 0 and health.device_error_count == 0
+        status = facility.status()
+    assert status["rdt_sent"] > 50
+    assert status["rdt_bad_requests"] == 0
+
+
+# ---- rsipi: the PC side of KUKA RSI ------------------------------------------------------------
+
+#: An RSI ETHERNET configuration file as the controller and the PC share it (the format of
+#: KUKA's RSI_EthernetConfig.xml), with the emulated controller's element names: it sends
+#: RIst, RSol, Delay and IPOC; it reads RKorr and IPOC in a <Sen Type="ImFree">.
+RSI_CONFIG = """<ROOT>
+  <CONFIG>
+    <IP_NUMBER>127.0.0.1</IP_NUMBER>
+    <PORT>{port}</PORT>
+    <SENTYPE>ImFree</SENTYPE>
+    <ONLYSEND>FALSE</ONLYSEND>
+  </CONFIG>
+  <SEND>
+    <ELEMENTS>
+      <ELEMENT TAG="DEF_RIst" TYPE="DOUBLE" INDX="INTERNAL" />
+      <ELEMENT TAG="DEF_RSol" TYPE="DOUBLE" INDX="INTERNAL" />
+      <ELEMENT TAG="DEF_Delay" TYPE="LONG" INDX="INTERNAL" />
+    </ELEMENTS>
+  </SEND>
+  <RECEIVE>
+    <ELEMENTS>
+      <ELEMENT TAG="RKorr.X" TYPE="DOUBLE" INDX="1" HOLDON="1" />
+      <ELEMENT TAG="RKorr.Y" TYPE="DOUBLE" INDX="2" HOLDON="1" />
+      <ELEMENT TAG="RKorr.Z" TYPE="DOUBLE" INDX="3" HOLDON="1" />
+      <ELEMENT TAG="RKorr.A" TYPE="DOUBLE" INDX="4" HOLDON="1" />
+      <ELEMENT TAG="RKorr.B" TYPE="DOUBLE" INDX="5" HOLDON="1" />
+      <ELEMENT TAG="RKorr.C" TYPE="DOUBLE" INDX="6" HOLDON="1" />
+    </ELEMENTS>
+  </RECEIVE>
+</ROOT>
+"""
+
+START_POSE = {"X": -995.0, "Y": 0.0, "Z": 0.0, "A": 0.0, "B": 0.0, "C": 0.0}  # mm, deg: the servicer in t
+
+
+def wait_until(predicate, timeout: float, interval: float = 0.01):
+    """Polls ``predicate`` until it returns a true value (returned) or ``timeout`` s pass
+    (None)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(interval)
+    return None
+
+
+def test_rsipi_drives_the_emulated_kuka_controller(core, tmp_path):
+    rsipi = pytest.importorskip("RSIPI")
+
+    port = free_port()
+    config = tmp_path / "RSI_EthernetConfig.xml"
+    config.write_text(RSI_CONFIG.format(port=port))
+    # RSI's 4 ms cycle; a robot delay of whole cycles (12 ms)
+    scenario = hc.load_scenario("paper-table1", {"simulation.period": 0.004, "facility.robot_delay": 0.012})
+    options = {
+        "sensor": {"kind": "rdt", "port": free_port(), "http_port": 0},
+        # max_late: the controller's tolerance for consecutive late answers; generous, since a
+        # Python PC side on a busy 2-core machine is not what this test measures
+        "robot": {"kind": "rsi", "port": port, "max_late": 2500},
+    }
+    # absolute corrections, as the emulated controller's correction object (its default); the
+    # client's network process is forked here, before the facility's threads exist
+    api = rsipi.RSIAPI(str(config), rsi_mode="absolute")
+    try:
+        api.start()  # binds 127.0.0.1:port and answers every state message from then on
+        with start_facility(scenario, options) as facility:
+            assert api.wait_for_connection(timeout=20.0), "rsipi never heard from the controller"
+            sent = api.client.send_variables
+            state = wait_until(lambda: sent.copy() if sent.get("IPOC", 0) > 0 else None, 20.0)
+            assert state is not None
+            # the controller's state as rsipi parsed it: RIst (actual), RSol (setpoint), Delay
+            assert state["RIst"] == pytest.approx(START_POSE, abs=1e-4)
+            assert state["RSol"] == pytest.approx(START_POSE, abs=1e-4)
+            assert state["IPOC"] >= 1_000_000  # the emulator's IPOC: ms of controller uptime
+
+            # answers echo each message's IPOC: the controller accepts them
+            assert wait_until(lambda: facility.status()["robot"]["accepted"] >= 50, 30.0), facility.status()
+            assert api.client.current_ipoc() > 0
+
+            # a 3 mm correction sideways (parallel to the walls): the setpoint follows, then the
+            # robot after its response lag
+            api.motion.update_cartesian(Y=3.0)
+            target = {**START_POSE, "Y": 3.0}
+
+            def moved():
+                s = sent.copy()
+                done = all(s[name]["Y"] == pytest.approx(3.0, abs=1e-4) for name in ("RSol", "RIst"))
+                return s if done else None
+
+            state = wait_until(moved, 30.0)
+            assert state is not None, sent.copy()
+            assert state["RSol"] == pytest.approx(target, abs=1e-4)
+            assert state["RIst"] == pytest.approx(target, abs=1e-4)
+            status = facility.status()
+            robot = status["robot"]
+            assert robot["accepted"] > 50
+            # every answer was well-formed, from the PC, with the configured Type and IPOC;
+            # answers that came after the next message (stale) are counted as the controller does
+            assert robot["malformed"] == 0 and robot["invalid"] == 0 and robot["foreign"] == 0
+            assert robot["accepted"] + robot["stale"] <= robot["received"]
+            # the controller reports its late cycles in <Delay D=...>: rsipi reads them
+            assert 0 <= state["Delay"]["D"] <= robot["late"]
+            # the controller was still running: fewer than max_late consecutive late cycles
+            assert wait_until(lambda: facility.status()["robot"]["sent"] > robot["sent"], 10.0)
+            assert status["io_errors"] == 0
+    finally:
+        api.stop()
