@@ -565,3 +565,28 @@ def test_cli_plot_refuses_what_it_cannot_draw_in_one_line(tmp_path, setup, fragm
     assert result.exit_code == 2, (result.output, result.stderr)
     assert fragment in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert (sorted(p.name for p in folder.iterdir()) if folder.is_dir() else None) == before
+
+
+def test_figures_drawn_in_two_processes_survive_a_failing_child(tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    from hilcontact.plots import draw_in_two_processes
+
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    parent = os.getpid()
+
+    def maker(name: str, fail_in_child: bool = False):
+        def make():
+            if fail_in_child and os.getpid() != parent:
+                raise RuntimeError("the child fails")
+            figure = Figure(figsize=(2, 2))
+            figure.add_subplot().plot([0, 1], [0, 1])
+            return figure
+        return make
+
+    makers = {"a": maker("a"), "b": maker("b", fail_in_child=True), "c": maker("c"), "none": lambda: None, "e": maker("e")}
+    saved = draw_in_two_processes(makers, tmp_path, dpi=50)
+    assert saved == ["a", "b", "c", "e"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png", "b.png", "c.png", "e.png"]
+    for png in tmp_path.iterdir():
+        assert png.read_bytes()[:8] == PNG_MAGIC

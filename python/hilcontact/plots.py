@@ -774,18 +774,60 @@ def compare_velocity_error_figure(runs: Mapping[str, Run]) -> Figure:
     )
 
 
+def comparison_figure_makers(runs: Mapping[str, Run]) -> dict[str, Callable[[], Figure | None]]:
+    """Each comparison figure's maker by file stem (a maker may return None: no such figure
+    for these runs)."""
+    makers: dict[str, Callable[[], Figure | None]] = {
+        "compare_velocity": lambda: compare_velocity_figure(runs),
+        "compare_force": lambda: compare_force_figure(runs),
+        "compare_energy": lambda: compare_energy_figure(runs),
+        "compare_identification": lambda: compare_identification_figure(runs),
+        "compare_cov_cof": lambda: compare_cov_cof_figure(runs),
+    }
+    if not all(moves_in_1d(run) for run in runs.values()):
+        makers["compare_velocity_error"] = lambda: compare_velocity_error_figure(runs)
+    return makers
+
+
 def comparison_figures(runs: Mapping[str, Run]) -> dict[str, Figure]:
     """The comparison figures by file stem (compare_identification only if a compensator
     identifies the contact, compare_velocity_error only if the motion is not 1-D)."""
-    figures: dict[str, Figure] = {
-        "compare_velocity": compare_velocity_figure(runs),
-        "compare_force": compare_force_figure(runs),
-        "compare_energy": compare_energy_figure(runs),
-    }
-    identification = compare_identification_figure(runs)
-    if identification is not None:
-        figures["compare_identification"] = identification
-    figures["compare_cov_cof"] = compare_cov_cof_figure(runs)
-    if not all(moves_in_1d(run) for run in runs.values()):
-        figures["compare_velocity_error"] = compare_velocity_error_figure(runs)
-    return figures
+    figures = {name: make() for name, make in comparison_figure_makers(runs).items()}
+    return {name: figure for name, figure in figures.items() if figure is not None}
+
+
+def draw_in_two_processes(makers: Mapping[str, Callable[[], Figure | None]], directory: str | os.PathLike[str],
+                          dpi: int) -> list[str]:
+    """Make and save the figures (``<name>.png`` in ``directory``), half of them in a forked
+    child process when the machine has two cores or more: drawing is most of a comparison's
+    time and matplotlib draws on one core. A child that fails leaves its figures to this
+    process, which then draws them itself (a figure is never lost). Returns the names saved,
+    in the makers' order."""
+    folder = Path(directory)
+    folder.mkdir(parents=True, exist_ok=True)
+    names = list(makers)
+
+    def draw(subset: list[str]) -> list[str]:
+        saved = []
+        for name in subset:
+            figure = makers[name]()
+            if figure is not None:
+                figure.savefig(folder / f"{name}.png", dpi=dpi)
+                saved.append(name)
+        return saved
+
+    child_names = names[1::2] if len(names) > 1 and (os.cpu_count() or 1) > 1 and hasattr(os, "fork") else []
+    pid = os.fork() if child_names else -1
+    if pid == 0:  # the child: draw its half, report by exit code only, never return
+        code = 1
+        try:
+            draw(child_names)
+            code = 0
+        finally:
+            os._exit(code)
+    mine = draw([n for n in names if n not in child_names])
+    if pid > 0:
+        _, status = os.waitpid(pid, 0)
+        if not (os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0):
+            mine += draw(child_names)  # the child failed: draw its figures here
+    return [n for n in names if n in mine or (n in child_names and (folder / f"{n}.png").is_file())]
