@@ -57,16 +57,17 @@ def facility_process(tmp_path: Path, *extra: str) -> Iterator[dict[str, str]]:
 
 
 def run_hil(
-    ports: dict[str, str], out: Path, *sets: str, timeout: float = 90, watchdog_ms: float = 500.0
+    ports: dict[str, str], out: Path, *sets: str, timeout: float = 90, watchdog_ms: float = 500.0,
+    extra: tuple[str, ...] = (),
 ) -> subprocess.CompletedProcess[str]:
-    """Runs `hilcontact hil` against the facility; the watchdog (500 ms) and the connect timeout
-    (30 s) are generous so that a busy test machine's pauses do not stop a run whose subject is
-    something else."""
+    """Runs `hilcontact hil` against the facility (``extra``: more arguments); the watchdog
+    (500 ms) and the connect timeout (30 s) are generous so that a busy test machine's pauses do
+    not stop a run whose subject is something else."""
     cmd = [
         sys.executable, "-m", "hilcontact", "hil", "paper-table1", *(a for s in sets for a in ("--set", s)),
         "--sensor", "127.0.0.1", "--sensor-port", ports["sensor"], "--http-port", ports["http"],
         "--egm-port", ports["egm"], "--egm-bind", "127.0.0.1", "--out", str(out), "--no-plots",
-        "--watchdog-ms", str(watchdog_ms), "--connect-timeout", "30",
+        "--watchdog-ms", str(watchdog_ms), "--connect-timeout", "30", *extra,
     ]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
 

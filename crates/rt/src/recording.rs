@@ -618,9 +618,9 @@ pub struct McapRecorder {
 }
 
 impl McapRecorder {
-    /// Creates the file (its folder too) and writes the header, the schemas, the channels, the
-    /// run's metadata (`hilcontact`: kind, scenario, compensator, period, the resolved scenario
-    /// as JSON) and `/tf_static`, as a first chunk written out at once. Fails, naming the path,
+    /// Creates the file (its folder too) and writes the header, the run's metadata
+    /// (`hilcontact`: kind, scenario, compensator, period, duration, the resolved scenario as
+    /// JSON, the wall-clock time of creation), the schemas, the channels and `/tf_static`, as a first chunk written out at once. Fails, naming the path,
     /// when the file exists (unless `overwrite`) or cannot be created.
     pub fn create(options: &McapOptions, info: &RunInfo) -> Result<Self> {
         options.validate()?;
@@ -665,6 +665,9 @@ impl McapRecorder {
             return Err("no writer".into());
         };
         // the metadata first: outside the chunks, before the first one
+        let created = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0.0, |d| d.as_secs_f64());
         let metadata = Metadata {
             name: "hilcontact".into(),
             metadata: BTreeMap::from([
@@ -680,6 +683,7 @@ impl McapRecorder {
                 ),
                 ("scenario_json".to_string(), info.scenario_json.clone()),
                 ("version".to_string(), env!("CARGO_PKG_VERSION").to_string()),
+                ("created_unix_time".to_string(), format!("{created:.3}")),
             ]),
         };
         writer
