@@ -203,6 +203,11 @@ def test_an_existing_mcap_file_is_refused_unless_forced(core, tmp_path):
                     "--mcap", str(tmp_path / "r" / "run.mcap"))
     assert_one_error_line(result, "inside --out")
     assert not (tmp_path / "r").exists()
+    # hil and demo-rt refuse it too, before anything is opened or started
+    for command in (["demo-rt"], ["hil", "paper-table1", "--sensor", "127.0.0.1"]):
+        result = invoke(*command, "--out", str(tmp_path / "rt"), "--mcap", str(path))
+        assert_one_error_line(result, f"--mcap {path}", "exists", "--force")
+    assert path.read_text() == "my own file" and not (tmp_path / "rt").exists()
     # --force replaces it
     result = invoke("run", "paper-table1", "--out", str(tmp_path / "r"), "--no-plots", "--mcap", str(path), "--force")
     assert result.exit_code == 0, result.output

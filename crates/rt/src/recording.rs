@@ -1211,6 +1211,23 @@ mod tests {
     }
 
     #[test]
+    fn recording_options_parse_with_their_defaults() {
+        let o: crate::RuntimeOptions =
+            toml::from_str("[mcap]\npath = \"runs/rt1.mcap\"\n").expect("toml");
+        assert_eq!(o.mcap, Some(McapOptions::new("runs/rt1.mcap")));
+        assert_eq!(crate::RuntimeOptions::default().mcap, None);
+        let o: crate::RuntimeOptions = serde_json::from_str(
+            r#"{"mcap": {"path": "a.mcap", "overwrite": true, "chunk_interval": 1.0}}"#,
+        )
+        .expect("json");
+        let m = o.mcap.expect("mcap");
+        assert!(m.overwrite && m.chunk_interval == 1.0);
+        assert!(
+            serde_json::from_str::<crate::RuntimeOptions>(r#"{"mcap": {"file": "a"}}"#).is_err()
+        );
+    }
+
+    #[test]
     fn recording_cut_after_a_chunk_reads_up_to_it() {
         // what a SIGKILL leaves: the bytes written out so far, without summary or footer
         let plan = plan("none");
