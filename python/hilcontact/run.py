@@ -194,7 +194,8 @@ def simulate(
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
     options = None if mcap is None else json.dumps({"path": os.fspath(mcap), "overwrite": bool(overwrite)})
-    result = _core().simulate(scenario.to_json(), options)
+    core = _core()
+    result = core.simulate(scenario.to_json()) if options is None else core.simulate(scenario.to_json(), options)
     metrics = json.loads(result["metrics"])
     recorded = result.get("mcap")
     return Run(
