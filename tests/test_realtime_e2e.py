@@ -79,11 +79,12 @@ def facility_process(tmp_path: Path, *extra: str, sensor: str = "rdt", robot: st
 
 
 def run_hil(
-    ports: dict[str, str], out: Path, *sets: str, timeout: float = 90, watchdog_ms: float = 500.0
+    ports: dict[str, str], out: Path, *sets: str, timeout: float = 90, watchdog_ms: float = 500.0,
+    extra: tuple[str, ...] = (),
 ) -> subprocess.CompletedProcess[str]:
-    """Runs `hilcontact hil` against the facility, with its protocols; the watchdog (500 ms)
-    and the connect timeout (30 s) are generous so that a busy test machine's pauses do not
-    stop a run whose subject is something else."""
+    """Runs `hilcontact hil` against the facility, with its protocols (``extra``: more
+    arguments); the watchdog (500 ms) and the connect timeout (30 s) are generous so that a busy
+    test machine's pauses do not stop a run whose subject is something else."""
     sensor, robot = ports["sensor_protocol"], ports["robot_protocol"]
     sets = protocol_sets(sensor, robot) + sets
     cmd = [
@@ -91,7 +92,7 @@ def run_hil(
         "--sensor-protocol", sensor, "--robot-protocol", robot,
         "--sensor", "127.0.0.1", "--sensor-port", ports["sensor"], "--robot-port", ports["egm"],
         "--robot-option", "bind_host=127.0.0.1", "--out", str(out), "--no-plots",
-        "--watchdog-ms", str(watchdog_ms), "--connect-timeout", "30",
+        "--watchdog-ms", str(watchdog_ms), "--connect-timeout", "30", *extra,
     ]
     if sensor == "rdt":
         cmd += ["--http-port", ports["http"]]

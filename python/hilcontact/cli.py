@@ -1,6 +1,6 @@
 """The ``hilcontact`` command line.
 
-    hilcontact run SCENARIO [--set KEY=VALUE ...] [--out DIR] [--no-plots]
+    hilcontact run SCENARIO [--set KEY=VALUE ...] [--out DIR] [--no-plots] [--mcap FILE]
     hilcontact compare SCENARIO [--set KEY=VALUE ...] [--compensators LIST] [--out DIR] [--no-plots] [--run-figures]
     hilcontact plot RUN_OR_COMPARISON_DIR
     hilcontact sweep SCENARIO --grid KEY=START:STOP:COUNT|KEY=A,B,... [--compensators LIST]
@@ -11,9 +11,9 @@
     hilcontact show SCENARIO [--set KEY=VALUE ...]
     hilcontact facility SCENARIO [--sensor-port 49152 --http-port 80 --egm-host H --egm-port 6510 ...]
     hilcontact hil SCENARIO --sensor HOST [--sensor-protocol rdt|sri --robot-protocol egm|rsi --robot-port N
-                   --robot-option KEY=VALUE --force-limit N --rt-priority 80 --cpu N ...] [--out DIR]
+                   --robot-option KEY=VALUE --force-limit N --rt-priority 80 --cpu N ...] [--out DIR] [--mcap FILE]
     hilcontact check SCENARIO --sensor HOST [the options of hil] [--duration 1] [--out DIR]
-    hilcontact demo-rt [SCENARIO] [--compensator pida] [--rt-priority 80 --no-lock-memory --cpu N] [--out DIR]
+    hilcontact demo-rt [SCENARIO] [--compensator pida] [--rt-priority 80 --no-lock-memory --cpu N] [--out DIR] [--mcap FILE]
     hilcontact --version
 
 Bad input (scenario, override, option, output folder) prints one ``error: ...`` line on stderr
@@ -96,6 +96,49 @@ def _out_folder(out: str | None, default: Path, force: bool) -> Path:
     return folder
 
 
+_MCAP_HELP = (
+    "Also record the run as an MCAP file (ROS 2 messages that Foxglove, Lichtblick and "
+    "PlotJuggler open): measured and applied wrench, commanded and actual rod tip, velocities, "
+    "energy, estimates, events; written in chunks, so a killed run keeps all but its last "
+    "0.5 s. An existing FILE is refused unless --force."
+)
+
+
+def _mcap_file(mcap: str | None, folder: Path, force: bool) -> Path | None:
+    """The --mcap file, checked before anything runs: never a user's file replaced silently
+    (``--force`` allows it), never a directory, never inside --out (replaced as a whole)."""
+    if mcap is None:
+        return None
+    path = Path(mcap)
+    if path.is_dir():
+        raise OutputError(f"--mcap {mcap}: is a directory; give a file name, e.g. --mcap run.mcap")
+    if path.exists() and not force:
+        raise OutputError(f"--mcap {mcap}: exists; choose another file, or add --force to replace it")
+    target, out = path.absolute(), folder.absolute()
+    if target == out or out in target.parents:
+        raise OutputError(
+            f"--mcap {mcap}: is inside --out {folder}, which is replaced as a whole when the run is saved; "
+            "write it elsewhere"
+        )
+    return path
+
+
+def _report_mcap(console: Console, recorded: dict[str, Any] | None) -> None:
+    """One line on the run's MCAP file (and its write errors, if any)."""
+    if not recorded:
+        return
+    line = (
+        f"mcap: {escape(str(recorded.get('path')))} ({recorded.get('messages')} messages in "
+        f"{recorded.get('chunks')} chunks, {_number(recorded.get('bytes'), '.1f', 1e-6)} MB)"
+    )
+    if recorded.get("write_errors") or not recorded.get("complete"):
+        line += (
+            f" [bold yellow]incomplete: {recorded.get('write_errors')} write errors: "
+            f"{escape(str(recorded.get('error')))}[/bold yellow]"
+        )
+    console.print(line, soft_wrap=True)
+
+
 def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
     if not value or ctx.resilient_parsing:
         return
@@ -139,16 +182,20 @@ _SET_HELP = (
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>].")
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
-@click.option("--force", is_flag=True, help=_FORCE_HELP)
-def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, force: bool) -> None:
+@click.option("--mcap", "mcap", metavar="FILE", default=None, help=_MCAP_HELP)
+@click.option("--force", is_flag=True, help=_FORCE_HELP + " Replace --mcap FILE.")
+def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool) -> None:
     """Simulate SCENARIO (a preset name or a TOML file) and save the results."""
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
         folder = _out_folder(out, Path("runs") / resolved.name, force)
+        mcap_path = _mcap_file(mcap, folder, force)
         with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
-            result = simulate(resolved)
+            result = simulate(resolved, mcap=mcap_path, overwrite=force)
         result.save(folder, plots=not no_plots, overwrite=force)
-    _report(Console(), result, folder)
+    console = Console()
+    _report(console, result, folder)
+    _report_mcap(console, result.mcap)
 
 
 @cli.command(short_help="Redraw the figures of a run or comparison folder.")
@@ -911,9 +958,12 @@ def _runtime_options(sensor_protocol: str | None, robot_protocol: str | None, se
     }
 
 
-def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots: bool, force: bool) -> None:
+def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots: bool, force: bool,
+                  mcap: Path | None = None) -> None:
     from .realtime import exit_code, run_hil
 
+    if mcap is not None:
+        options = {**options, "mcap": {"path": str(mcap), "overwrite": force}}
     _stop_on_signals()
     stderr = Console(stderr=True)
     with stderr.status(f"{escape(resolved.name)}: connecting to the sensor and the robot ...") as status:
@@ -922,6 +972,7 @@ def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots
     console = Console()
     _report(console, result, folder)
     _report_realtime(console, result)
+    _report_mcap(console, result.mcap)
     code = exit_code(result)
     if code:
         raise click.exceptions.Exit(code)
@@ -933,8 +984,10 @@ def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots
 @_with(_HIL_OPTIONS + _MAPPING_OPTIONS)
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-rt].")
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
-@click.option("--force", is_flag=True, help=_FORCE_HELP)
-def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, force: bool, **kw: Any) -> None:
+@click.option("--mcap", "mcap", metavar="FILE", default=None, help=_MCAP_HELP)
+@click.option("--force", is_flag=True, help=_FORCE_HELP + " Replace --mcap FILE.")
+def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool,
+                **kw: Any) -> None:
     """Run the HIL loop of SCENARIO in real time: RDT client of the F/T sensor at --sensor,
     EGM endpoint on UDP --egm-port for the robot controller, the scenario's compensator and
     virtual dynamics in a Rust real-time thread. Shows a live line; writes the same files as
@@ -953,7 +1006,8 @@ def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots:
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-rt", force)
-        _run_realtime(resolved, _runtime_options(**kw), folder, no_plots, force)
+        mcap_path = _mcap_file(mcap, folder, force)
+        _run_realtime(resolved, _runtime_options(**kw), folder, no_plots, force, mcap_path)
 
 
 def _vector(values: Sequence[float] | None, scale: float = 1.0, fmt: str = ".2f") -> str:
@@ -1097,10 +1151,11 @@ def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tu
 @_with(_SCHEDULING_OPTIONS)
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-demo-rt].")
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
-@click.option("--force", is_flag=True, help=_FORCE_HELP)
+@click.option("--mcap", "mcap", metavar="FILE", default=None, help=_MCAP_HELP)
+@click.option("--force", is_flag=True, help=_FORCE_HELP + " Replace --mcap FILE.")
 def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay: float, sensor_protocol: str | None,
             robot_protocol: str | None, rt_priority: int | None, no_lock_memory: bool, cpu: int | None,
-            out: str | None, no_plots: bool, force: bool) -> None:
+            out: str | None, no_plots: bool, mcap: str | None, force: bool) -> None:
     """Run the emulated facility and the real-time HIL loop on loopback in one process (free
     ports, HTTP included): `hilcontact facility` and `hilcontact hil` together.
 
@@ -1123,6 +1178,7 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
             overrides["simulation.period"] = kinds["facility"]["robot"][robot_kind]["period"]
         resolved = load_scenario(scenario, overrides)
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-demo-rt", force)
+        mcap_path = _mcap_file(mcap, folder, force)
         scheduling = _scheduling_options(rt_priority, no_lock_memory, cpu)
         if scheduling:
             runtime_options["scheduling"] = scheduling
@@ -1134,7 +1190,7 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
                 soft_wrap=True,
             )
             try:
-                _run_realtime(resolved, runtime_options, folder, no_plots, force)
+                _run_realtime(resolved, runtime_options, folder, no_plots, force, mcap_path)
             finally:
                 final = facility.stop()
                 if final.get("io_errors"):

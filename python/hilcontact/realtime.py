@@ -29,6 +29,7 @@ flushes its log, and the run is returned with status ``interrupted`` (exit code 
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -123,7 +124,9 @@ def _options(options: Mapping[str, Any] | None, section: str) -> str:
     for key, value in (options or {}).items():
         if value is None:
             continue
-        if key in legacy:
+        if key == "mcap" and isinstance(value, (str, os.PathLike)):
+            clean[key] = {"path": os.fspath(value)}  # a file name alone: the defaults otherwise
+        elif key in legacy:
             link, kind, inner = legacy[key]
             links.setdefault(link, {})[inner] = value
             if kind != ANY_KIND:
@@ -175,6 +178,11 @@ def run_hil(
     loop's status dict (phase, time, force, energy, timing and packet counters) every
     ``poll_interval`` seconds. Raises :class:`~hilcontact.errors.RealtimeError` if the sensor or
     the robot cannot be reached, ScenarioError/RealtimeOptionError for invalid input.
+
+    ``options["mcap"]`` (a file name, or ``{"path", "overwrite", "chunk_interval"}``) records
+    the run as MCAP from the writer thread (docs/realtime.md, "MCAP recordings"); an existing
+    file is refused unless ``overwrite``; ``Run.mcap`` (and ``metrics["realtime"]["mcap"]``)
+    says what was written.
     """
     scenario = _scenario(scenario)
     core = _core()
@@ -188,9 +196,11 @@ def run_hil(
         while not handle.wait(poll_interval):
             pass
     result = handle.finish()
+    metrics = json.loads(result["metrics"])
     return Run(
         scenario=scenario,
-        metrics=json.loads(result["metrics"]),
+        metrics=metrics,
+        mcap=metrics.get("realtime", {}).get("mcap"),
         timeseries=_frame(result["timeseries"], TIMESERIES_COLUMNS + OPTIONAL_TIMESERIES_COLUMNS + REALTIME_COLUMNS),
         reference=_frame(result["reference"], REFERENCE_COLUMNS),
     )

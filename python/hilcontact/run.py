@@ -95,12 +95,16 @@ class Run:
             (see ``hilcontact._core.simulate``).
         timeseries: the HIL loop, one row per control period (SI units).
         reference: the ideal reference (true contact law, no delay).
+        mcap: what the run's MCAP recording wrote, when it was recorded (``simulate(...,
+            mcap=FILE)``, a real-time run with the ``mcap`` option): ``path``, ``messages``,
+            ``chunks``, ``bytes``, ``write_errors``, ``error``, ``complete``; else None.
     """
 
     scenario: Scenario
     metrics: dict[str, Any]
     timeseries: pd.DataFrame
     reference: pd.DataFrame
+    mcap: dict[str, Any] | None = None
 
     @property
     def status(self) -> str:
@@ -194,19 +198,32 @@ class Run:
             self.plot(folder)
 
 
-def simulate(scenario: Scenario | str | os.PathLike[str]) -> Run:
+def simulate(
+    scenario: Scenario | str | os.PathLike[str],
+    mcap: str | os.PathLike[str] | None = None,
+    overwrite: bool = False,
+) -> Run:
     """Simulate a scenario (a :class:`Scenario`, a preset name or a TOML path).
+
+    ``mcap``: also write the run to this MCAP file (ROS 2 messages that Foxglove, Lichtblick and
+    PlotJuggler open; the channels are in docs/realtime.md, "MCAP recordings"), with the same
+    recorder as a real-time run; the file is created before the run, and an existing one is
+    refused (RealtimeOptionError) unless ``overwrite``. ``Run.mcap`` then says what was written.
 
     Raises ScenarioError for an invalid scenario. A diverging loop is not an error: the run's
     ``status`` is ``"diverged"`` and ``metrics["reason"]`` says why.
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
-    result = _core().simulate(scenario.to_json())
+    options = None if mcap is None else json.dumps({"path": os.fspath(mcap), "overwrite": bool(overwrite)})
+    core = _core()
+    result = core.simulate(scenario.to_json()) if options is None else core.simulate(scenario.to_json(), options)
     metrics = json.loads(result["metrics"])
+    recorded = result.get("mcap")
     return Run(
         scenario=scenario,
         metrics=metrics,
         timeseries=_frame(result["timeseries"], TIMESERIES_COLUMNS + OPTIONAL_TIMESERIES_COLUMNS),
         reference=_frame(result["reference"], REFERENCE_COLUMNS),
+        mcap=json.loads(recorded) if recorded else None,
     )

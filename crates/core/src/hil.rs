@@ -132,10 +132,17 @@ pub struct HilRecord {
     pub tip_velocity: Vector3<f64>,
     /// Desired (virtual) angular velocity of the servicer relative to the target, `t`, rad/s.
     pub angular_velocity: Vector3<f64>,
+    /// Desired (virtual) attitude of the servicer relative to the target (servicer to `t`);
+    /// the rod tip's attitude too, the rod being fixed in the servicer.
+    pub orientation: UnitQuaternion<f64>,
     /// Actual (robot) rod tip, `t` frame, m.
     pub actual_tip_position: Vector3<f64>,
     /// Actual (robot) rod tip velocity, `t` frame, m/s.
     pub actual_tip_velocity: Vector3<f64>,
+    /// Actual (robot) attitude of the servicer relative to the target (servicer to `t`).
+    pub actual_orientation: UnitQuaternion<f64>,
+    /// Actual (robot) angular velocity of the servicer relative to the target, `t`, rad/s.
+    pub actual_angular_velocity: Vector3<f64>,
     /// Physical contact force on the rod, `t` frame, N (on a real facility, where it is not
     /// observable: the force on the rod that the sensor reports).
     pub contact_force: Vector3<f64>,
@@ -235,8 +242,11 @@ impl HilStep {
             tip_position: desired.point(&rod),
             tip_velocity: desired.point_velocity(&rod),
             angular_velocity: desired.angular_velocity,
+            orientation: desired.orientation,
             actual_tip_position: m.actual.point(&rod),
             actual_tip_velocity: m.actual.point_velocity(&rod),
+            actual_orientation: m.actual.orientation,
+            actual_angular_velocity: m.actual.angular_velocity,
             contact_force: contact_force.unwrap_or_else(|| -(sensor_to_t * m.force)),
             measured_force: m.force,
             measured_moment: m.moment,

@@ -219,16 +219,23 @@ pub fn simulate(s: &Scenario) -> Result<SimulationOutput> {
 
 /// Runs the reference and the HIL loop of a resolved plan and computes the metrics.
 pub fn simulate_plan(plan: &Plan) -> SimulationOutput {
+    simulate_plan_with_records(plan).0
+}
+
+/// As [`simulate_plan`], also handing back the HIL loop's records, one per tick (what a
+/// recording such as an MCAP file is written from).
+pub fn simulate_plan_with_records(plan: &Plan) -> (SimulationOutput, Vec<HilRecord>) {
     let Runs {
         reference,
         hil,
         metrics,
     } = run(plan, true);
-    SimulationOutput {
+    let output = SimulationOutput {
         timeseries: hil_table(&hil.rows, hil.estimates_contact, hil.observes_energy),
         reference: reference_table(&reference),
         metrics,
-    }
+    };
+    (output, hil.rows)
 }
 
 /// How a table's field reads a record: one value, or a vector (three columns `_x`, `_y`, `_z`).

@@ -4,6 +4,7 @@
 use std::time::Duration;
 
 use hilcontact_core::{CoreError, Plan, Scenario, Table};
+use hilcontact_rt::recording::{McapOptions, McapRecorder, RunInfo};
 use hilcontact_rt::{EmulatorOptions, FacilityHandle, HilHandle, RtError, RuntimeOptions};
 use numpy::IntoPyArray;
 use pyo3::exceptions::{PyException, PyOSError, PyValueError};
@@ -370,17 +371,53 @@ fn table_to_dict<'py>(py: Python<'py>, table: Table) -> PyResult<Bound<'py, PyDi
 }
 
 /// Runs a scenario (its fully resolved form as JSON): the ideal reference and the HIL loop.
-/// Returns `{"timeseries": {column: ndarray}, "reference": {column: ndarray}, "metrics": str}`.
+/// Returns `{"timeseries": {column: ndarray}, "reference": {column: ndarray}, "metrics": str,
+/// "mcap": str | None}`.
+///
+/// `mcap`: JSON of the recording's options (`{"path": ..., "overwrite": false,
+/// "chunk_interval": 0.5}`, the runtime's `mcap` option): the run is also written as MCAP by
+/// the real-time runtime's recorder, from its records; `"mcap"` is then what was written
+/// (JSON: path, messages, chunks, bytes, write_errors, error, complete). The file is created
+/// before the simulation runs: an existing file (without `overwrite`) raises
+/// RealtimeOptionError, a path that cannot be created RealtimeError, both naming it.
 #[pyfunction]
-fn simulate<'py>(py: Python<'py>, scenario_json: &str) -> PyResult<Bound<'py, PyDict>> {
+#[pyo3(signature = (scenario_json, mcap=None))]
+fn simulate<'py>(
+    py: Python<'py>,
+    scenario_json: &str,
+    mcap: Option<&str>,
+) -> PyResult<Bound<'py, PyDict>> {
     let plan = parse_scenario(py, scenario_json)?;
-    let output = py.allow_threads(|| hilcontact_core::sim::simulate_plan(&plan));
+    let recorder = match mcap {
+        Some(json) => {
+            let options: McapOptions = parse_options(py, json)?;
+            let info = RunInfo::new(&plan, false);
+            let recorder = py
+                .allow_threads(|| McapRecorder::create(&options, &info))
+                .map_err(|e| rt_err(py, e))?;
+            Some(recorder)
+        }
+        None => None,
+    };
+    let (output, stats) = py.allow_threads(|| match recorder {
+        Some(recorder) => {
+            let (output, records) = hilcontact_core::sim::simulate_plan_with_records(&plan);
+            let stats = recorder.record_run(&records, &output.metrics);
+            (output, Some(stats))
+        }
+        None => (hilcontact_core::sim::simulate_plan(&plan), None),
+    });
     let metrics =
         serde_json::to_string(&output.metrics).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let stats = stats
+        .map(|s| serde_json::to_string(&s))
+        .transpose()
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
     let result = PyDict::new(py);
     result.set_item("timeseries", table_to_dict(py, output.timeseries)?)?;
     result.set_item("reference", table_to_dict(py, output.reference)?)?;
     result.set_item("metrics", metrics)?;
+    result.set_item("mcap", stats)?;
     Ok(result)
 }
 

@@ -14,6 +14,7 @@
 //!   those protocols;
 //! - [`runtime`]: the HIL loop thread (the core's [`hilcontact_core::hil::VirtualDynamics`]) on a
 //!   monotonic clock, with [`safety`] limits, a lock-free sample log and timing statistics;
+//! - [`recording`]: MCAP recordings of a run (ROS 2 messages, crash-safe chunks) for robotics viewers;
 //! - [`report`]: time series and metrics of a real-time run, as a simulation writes them;
 //! - [`check`]: a dry run (`hilcontact check`): both links opened as a run opens them, listened
 //!   to, and the run's start checks applied, with nothing commanded to the robot.
@@ -34,6 +35,7 @@ pub mod mapping;
 pub mod netftapi;
 pub mod offset;
 pub mod rdt;
+pub mod recording;
 pub mod report;
 pub mod rsi;
 pub mod runtime;

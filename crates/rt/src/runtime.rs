@@ -51,6 +51,7 @@ use crate::links::{
     SensorOptions, StartRegion, Wrench,
 };
 use crate::offset::{OffsetMode, OffsetOptions, WrenchStats};
+use crate::recording::{start_text, EventLevel, McapOptions, McapRecorder, RunInfo};
 use crate::report::{build_output, HilOutput};
 pub use crate::report::{RunOutcome, Sample};
 use crate::safety::{
@@ -84,6 +85,10 @@ pub struct RuntimeOptions {
     /// Real-time scheduling of the loop thread (`SCHED_FIFO` priority, locked memory, CPU); a
     /// refusal by the OS is reported in `metrics.json` (`realtime.scheduling`), not an error.
     pub scheduling: SchedulingOptions,
+    /// An MCAP recording of the run (`--mcap FILE`), written by the writer thread: None, or
+    /// the file and its chunk interval ([`crate::recording`]). The file is created before
+    /// anything is opened or started; `metrics.json` reports it in `realtime.mcap`.
+    pub mcap: Option<McapOptions>,
 }
 
 impl Default for RuntimeOptions {
@@ -98,6 +103,7 @@ impl Default for RuntimeOptions {
             hold_time: 0.1,
             offset: OffsetOptions::default(),
             scheduling: SchedulingOptions::default(),
+            mcap: None,
         }
     }
 }
@@ -159,7 +165,7 @@ pub struct StatusSnapshot {
 pub struct HilHandle {
     shared: Arc<SharedStatus>,
     thread: Option<JoinHandle<Result<RunOutcome>>>,
-    writer: Option<JoinHandle<Vec<Sample>>>,
+    writer: Option<JoinHandle<(Vec<Sample>, Option<McapRecorder>)>>,
     plan: Plan,
     options: RuntimeOptions,
     period: f64,
@@ -169,15 +175,25 @@ pub struct HilHandle {
 const RING_CAPACITY: usize = 8192;
 
 impl HilHandle {
-    /// Validates, opens the links of `options` (binds the sockets, reads the sensor's counts
-    /// per unit over HTTP unless given), computes the ideal reference's energy bound, and
-    /// starts the writer and loop threads.
+    /// Validates, creates the MCAP file if asked for, opens the links of `options` (binds the
+    /// sockets, reads the sensor's counts per unit over HTTP unless given), computes the ideal
+    /// reference's energy bound, and starts the writer and loop threads. A start that fails
+    /// after the MCAP file was created removes it.
     pub fn start(scenario: &Scenario, options: &RuntimeOptions) -> Result<Self> {
         let plan = Self::validate(scenario, options)?;
+        let recorder = open_recorder(&plan, options)?;
         let context = link_context(&plan, options);
-        let sensor = open_sensor(&options.sensor, &context)?;
-        let robot = open_robot(&options.robot, &context)?;
-        Self::start_inner(plan, options, sensor, robot)
+        let links = open_sensor(&options.sensor, &context)
+            .and_then(|sensor| Ok((sensor, open_robot(&options.robot, &context)?)));
+        match links {
+            Ok((sensor, robot)) => Self::start_inner(plan, options, sensor, robot, recorder),
+            Err(e) => {
+                if let Some(r) = recorder {
+                    r.discard();
+                }
+                Err(e)
+            }
+        }
     }
 
     /// As [`HilHandle::start`], with links opened by the caller (a protocol outside the
@@ -190,7 +206,8 @@ impl HilHandle {
         robot: Box<dyn RobotLink>,
     ) -> Result<Self> {
         let plan = Self::validate(scenario, options)?;
-        Self::start_inner(plan, options, sensor, robot)
+        let recorder = open_recorder(&plan, options)?;
+        Self::start_inner(plan, options, sensor, robot, recorder)
     }
 
     /// The scenario's plan, once the options are checked too, and that the scenario can start
@@ -208,6 +225,9 @@ impl HilHandle {
         o.limits.validate()?;
         o.offset.validate()?;
         o.scheduling.validate()?;
+        if let Some(mcap) = &o.mcap {
+            mcap.validate()?;
+        }
         for (key, v) in [
             ("connect_timeout", o.connect_timeout),
             ("start_tolerance", o.start_tolerance),
@@ -233,9 +253,15 @@ impl HilHandle {
         options: &RuntimeOptions,
         sensor: Box<dyn SensorLink>,
         robot: Box<dyn RobotLink>,
+        mut recorder: Option<McapRecorder>,
     ) -> Result<Self> {
         let o = options;
-        check_pacing(robot.as_ref(), plan.period)?;
+        if let Err(e) = check_pacing(robot.as_ref(), plan.period) {
+            if let Some(r) = recorder {
+                r.discard();
+            }
+            return Err(e);
+        }
         let pacing = robot.pacing();
         let feedback_period = robot.feedback_period();
 
@@ -251,21 +277,34 @@ impl HilHandle {
 
         let shared = Arc::new(SharedStatus::default());
         let (producer, mut consumer) = rtrb::RingBuffer::<Sample>::new(RING_CAPACITY);
+        let mut events = EventWatch::new(shared.clone(), start_text(&RunInfo::new(&plan, true)));
+        // the writer thread: drains the ring into the run's samples and, with --mcap, feeds
+        // the recording (messages, the loop's events, chunks written out as run time passes)
         let writer = std::thread::Builder::new()
             .name("hil-writer".into())
             .spawn(move || {
                 let mut samples = Vec::with_capacity(ticks as usize + 1);
                 loop {
                     let abandoned = consumer.is_abandoned();
+                    // read before draining: every sample up to the stop is in the ring then
+                    let stop_code = events.shared.stop_code.load(Ordering::Acquire);
+                    let new = samples.len();
                     while let Ok(s) = consumer.pop() {
                         samples.push(s);
+                    }
+                    if let Some(recorder) = recorder.as_mut() {
+                        for s in &samples[new..] {
+                            events.before_sample(recorder);
+                            recorder.sample(s);
+                        }
+                        events.after_drain(recorder, stop_code);
                     }
                     if abandoned {
                         break; // drained after the producer was dropped: complete
                     }
                     std::thread::sleep(Duration::from_millis(5));
                 }
-                samples
+                (samples, recorder)
             })
             .map_err(|e| RtError::io("writer thread", &e))?;
 
@@ -381,17 +420,42 @@ impl HilHandle {
         true
     }
 
-    /// Waits for the loop and the writer, and builds the time series, reference and metrics.
+    /// Waits for the loop and the writer, and builds the time series, reference and metrics;
+    /// with a recording, writes its end events, summary and footer (`realtime.mcap` in the
+    /// metrics). A run that never started (a peer did not answer) removes its recording.
     pub fn finish(mut self) -> Result<HilOutput> {
         let outcome = match self.thread.take().map(|t| t.join()) {
             Some(Ok(outcome)) => outcome,
             _ => Err(RtError::io_other("loop thread", "panicked")),
         };
-        let samples = match self.writer.take().map(|t| t.join()) {
-            Some(Ok(samples)) => samples,
+        let (samples, recorder) = match self.writer.take().map(|t| t.join()) {
+            Some(Ok(drained)) => drained,
             _ => return Err(RtError::io_other("writer thread", "panicked")),
         };
-        build_output(&self.plan, &self.options, &samples, &outcome?)
+        let outcome = match outcome {
+            Ok(outcome) => outcome,
+            Err(e) => {
+                if let Some(r) = recorder {
+                    r.discard();
+                }
+                return Err(e);
+            }
+        };
+        let mut output = build_output(&self.plan, &self.options, &samples, &outcome)?;
+        if let Some(recorder) = recorder {
+            let stats = end_recording(recorder, &outcome, &output.metrics);
+            if let Some(realtime) = output
+                .metrics
+                .get_mut("realtime")
+                .and_then(|v| v.as_object_mut())
+            {
+                realtime.insert(
+                    "mcap".into(),
+                    serde_json::to_value(&stats).unwrap_or_default(),
+                );
+            }
+        }
+        Ok(output)
     }
 }
 
@@ -405,6 +469,176 @@ impl Drop for HilHandle {
             let _ = t.join();
         }
     }
+}
+
+/// The run's MCAP recorder, if `options.mcap` asks for one: the file created (or the start
+/// refused, naming it) before anything else is opened.
+fn open_recorder(plan: &Plan, options: &RuntimeOptions) -> Result<Option<McapRecorder>> {
+    options
+        .mcap
+        .as_ref()
+        .map(|mcap| McapRecorder::create(mcap, &RunInfo::new(plan, true)))
+        .transpose()
+}
+
+/// Run time between two fault events on `/hil/events`, ns: faults that keep coming are
+/// summed up, not reported once per tick.
+const FAULT_EVENT_INTERVAL_NS: u64 = 500_000_000;
+
+/// The loop's live events for the recording, read by the writer thread from the shared
+/// status: the start (before the first sample), faults (the loop's counters that grew: lost
+/// packets, dropped datagrams, socket errors, overruns) and the stop as it happens.
+struct EventWatch {
+    shared: Arc<SharedStatus>,
+    start_text: String,
+    started: bool,
+    /// The fault counters last reported: overruns, sensor lost, robot lost, dropped, io errors.
+    reported: [u64; 5],
+    /// Run time of the last fault event, ns.
+    last_fault_ns: Option<u64>,
+    stop_reported: bool,
+}
+
+impl EventWatch {
+    fn new(shared: Arc<SharedStatus>, start_text: String) -> Self {
+        EventWatch {
+            shared,
+            start_text,
+            started: false,
+            reported: [0; 5],
+            last_fault_ns: None,
+            stop_reported: false,
+        }
+    }
+
+    fn counters(&self) -> [u64; 5] {
+        let s = &self.shared;
+        [
+            s.overruns.load(Ordering::Relaxed),
+            s.sensor_lost.load(Ordering::Relaxed),
+            s.robot_lost.load(Ordering::Relaxed),
+            s.dropped.load(Ordering::Relaxed),
+            s.io_errors.load(Ordering::Relaxed),
+        ]
+    }
+
+    /// The start event, before the first sample.
+    fn before_sample(&mut self, recorder: &mut McapRecorder) {
+        if !self.started {
+            self.started = true;
+            recorder.event(0.0, EventLevel::Info, &self.start_text);
+        }
+    }
+
+    /// After a drain: a fault event if counters grew (at most one per
+    /// [`FAULT_EVENT_INTERVAL_NS`] of run time), and the stop once `stop_code` is set.
+    fn after_drain(&mut self, recorder: &mut McapRecorder, stop_code: u8) {
+        let now_ns = crate::recording::time_ns(recorder.last_time());
+        let due = self
+            .last_fault_ns
+            .is_none_or(|t| now_ns >= t + FAULT_EVENT_INTERVAL_NS);
+        let counters = self.counters();
+        if self.started && due && counters != self.reported {
+            const NAMES: [&str; 5] = [
+                "overruns",
+                "sensor records lost",
+                "robot feedback lost",
+                "datagrams dropped",
+                "socket errors",
+            ];
+            let parts: Vec<String> = NAMES
+                .iter()
+                .zip(counters.iter().zip(self.reported))
+                .filter(|(_, (now, before))| **now > *before)
+                .map(|(name, (now, before))| format!("{name} +{} ({now} in all)", now - before))
+                .collect();
+            recorder.event(recorder.last_time(), EventLevel::Warn, &parts.join(", "));
+            self.reported = counters;
+            self.last_fault_ns = Some(now_ns);
+        }
+        if let (false, Some(kind)) = (self.stop_reported, StopKind::from_code(stop_code)) {
+            self.stop_reported = true;
+            let level = match kind {
+                StopKind::Completed => EventLevel::Info,
+                StopKind::User => EventLevel::Warn,
+                _ => EventLevel::Error,
+            };
+            let name = serde_json::to_value(kind)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_string))
+                .unwrap_or_default();
+            let what = if kind.is_safety_stop() {
+                "safety stop"
+            } else {
+                "stop"
+            };
+            recorder.event(
+                recorder.last_time(),
+                level,
+                &format!(
+                    "{what}: {name} at {:.3} s; the robot is commanded to hold",
+                    recorder.last_time()
+                ),
+            );
+        }
+    }
+}
+
+/// The recording's end: the run's status and reason and the loop's counters as events at the
+/// stop's time, then the summary and footer; returns what was written.
+fn end_recording(
+    mut recorder: McapRecorder,
+    outcome: &RunOutcome,
+    metrics: &serde_json::Value,
+) -> crate::recording::RecordingStats {
+    let stop = &outcome.stop;
+    let status = metrics["status"].as_str().unwrap_or("?");
+    let reason = metrics["reason"]
+        .as_str()
+        .unwrap_or("ran its whole duration");
+    let level = match stop.kind {
+        StopKind::Completed if status == "ok" => EventLevel::Info,
+        StopKind::Completed | StopKind::User => EventLevel::Warn,
+        _ => EventLevel::Error,
+    };
+    recorder.event(
+        stop.time,
+        level,
+        &format!(
+            "run ended at {:.3} s: status {status}; {reason}; exit code {}",
+            stop.time,
+            stop.kind.exit_code()
+        ),
+    );
+    let (sensor, robot) = (&outcome.sensor, &outcome.robot);
+    recorder.event(
+        stop.time,
+        EventLevel::Info,
+        &format!(
+            "loop: {} ticks, wake latency p50/p99/max {:.0}/{:.0}/{:.0} µs, overruns {}, samples dropped {}; \
+             {} sensor: accepted {}, lost {}, late {}, dropped {}, socket errors {}; \
+             {} robot: accepted {}, lost {}, late {}, dropped {}, socket errors {}",
+            outcome.ticks,
+            outcome.wake_latency.p50,
+            outcome.wake_latency.p99,
+            outcome.wake_latency.max,
+            outcome.overruns,
+            outcome.samples_dropped,
+            outcome.sensor_name,
+            sensor.accepted,
+            sensor.lost,
+            sensor.late,
+            sensor.dropped(),
+            sensor.io_errors,
+            outcome.robot_name,
+            robot.accepted,
+            robot.lost,
+            robot.late,
+            robot.dropped(),
+            robot.io_errors,
+        ),
+    );
+    recorder.finish()
 }
 
 /// What the links of a run of `plan` are told when they are opened: the period, the connect

@@ -355,3 +355,83 @@ fn the_loop_reports_its_scheduling() {
         assert!(error.to_string().starts_with(key), "{error}");
     }
 }
+
+/// The MCAP file of a real-time run: every per-tick channel with one message per sample, in
+/// time order, the start and end events, and `realtime.mcap` in the metrics.
+#[test]
+fn a_real_time_run_is_recorded_as_mcap() {
+    let dir = std::env::temp_dir().join(format!("hilcontact-loopback-mcap-{}", std::process::id()));
+    let path = dir.join("rt.mcap");
+    let _ = std::fs::remove_file(&path);
+    let mut s = preset("paper-table1");
+    s.facility.robot_delay = 0.02;
+    s.simulation.duration = 1.2;
+    s.compensator = CompensatorConfig::Pida(ModelParams::default());
+    let (emu, rt) = loopback_options();
+    let rt = RuntimeOptions {
+        mcap: Some(hilcontact_rt::recording::McapOptions::new(&path)),
+        ..rt
+    };
+    let facility = FacilityHandle::start(&s, &emu).unwrap();
+    let hil = HilHandle::start(&s, &rt).unwrap();
+    assert!(hil.wait(Duration::from_secs(60)));
+    let out = hil.finish().unwrap();
+    facility.join();
+    let samples = out.metrics["realtime"]["samples"].as_u64().unwrap();
+    let stats = &out.metrics["realtime"]["mcap"];
+    assert_eq!(stats["complete"], true, "{stats}");
+    assert_eq!(stats["write_errors"], 0, "{stats}");
+    let bytes = std::fs::read(&path).unwrap();
+    let mut counts = std::collections::BTreeMap::<String, u64>::new();
+    let mut events = Vec::new();
+    let mut last = 0;
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        let message = message.unwrap();
+        assert!(message.log_time >= last);
+        last = message.log_time;
+        *counts.entry(message.channel.topic.clone()).or_default() += 1;
+        if message.channel.topic == "/hil/events" {
+            events.push(String::from_utf8_lossy(&message.data).to_string());
+        }
+    }
+    for spec in hilcontact_rt::recording::CHANNELS {
+        use hilcontact_rt::recording::ChannelScope;
+        match spec.scope {
+            ChannelScope::Always | ChannelScope::Estimates | ChannelScope::Realtime => {
+                assert_eq!(counts.get(spec.topic), Some(&samples), "{}", spec.topic)
+            }
+            ChannelScope::Once => assert_eq!(counts.get(spec.topic), Some(&1)),
+            ChannelScope::Events => {}
+        }
+    }
+    assert_eq!(stats["messages"].as_u64(), Some(counts.values().sum()));
+    assert!(events
+        .first()
+        .unwrap()
+        .contains("realtime run of paper-table1 started"));
+    assert!(events
+        .iter()
+        .any(|e| e.contains("run ended at 1.200 s: status")));
+    assert!(events.iter().any(|e| e.contains("stop: completed")));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A run that never starts (no facility answers) leaves no MCAP file behind.
+#[test]
+fn a_run_that_never_starts_removes_its_mcap_file() {
+    let dir =
+        std::env::temp_dir().join(format!("hilcontact-loopback-nomcap-{}", std::process::id()));
+    let path = dir.join("none.mcap");
+    let (_, rt) = loopback_options();
+    let rt = RuntimeOptions {
+        connect_timeout: 0.3,
+        mcap: Some(hilcontact_rt::recording::McapOptions::new(&path)),
+        ..rt
+    };
+    let hil = HilHandle::start(&preset("paper-table1"), &rt).unwrap();
+    assert!(path.exists(), "created before the run");
+    assert!(hil.wait(Duration::from_secs(30)));
+    assert!(hil.finish().is_err());
+    assert!(!path.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
