@@ -8,8 +8,9 @@
 //! (written on the fields as `#[schemars(range(min = ...))]` or
 //! `#[schemars(extend("exclusiveMinimum" = ...))]`). Vectors, quaternions and inertias carry
 //! the extension key `x-value` (`"vec3"`, `"quaternion"`, `"inertia"`) so that a reader of the
-//! schema knows their shape; their other checks (non-zero, symmetric positive definite) are
-//! semantic and live in [`crate::plan::Plan::resolve`].
+//! schema knows their shape, and `x-magnitude`, the largest `|x|` of each of their numbers
+//! (checked here); their other checks (non-zero, symmetric positive definite) are semantic
+//! and live in [`crate::plan::Plan::resolve`].
 
 use std::collections::BTreeSet;
 use std::fmt;
@@ -106,6 +107,18 @@ fn walk(
             }
         }
     }
+    if let (Some(limit), Node::List(_)) = (schema.get("x-magnitude").and_then(Value::as_f64), node)
+    {
+        let mut numbers = Vec::new();
+        node.numbers(&mut numbers);
+        if let Some(x) = numbers.iter().find(|x| !(x.abs() <= limit)) {
+            issues.push(
+                path,
+                format!("every number must be finite with |x| <= {limit:e}, got {x}"),
+            );
+            failed.insert(path.to_string());
+        }
+    }
     if let Some(target) = schema.get("$ref").and_then(Value::as_str) {
         let name = target.trim_start_matches("#/$defs/");
         if let Some(def) = root.get("$defs").and_then(|d| d.get(name)) {
@@ -162,6 +175,17 @@ enum Node {
     Other,
     List(Vec<Node>),
     Table(Vec<(String, Node)>),
+}
+
+impl Node {
+    /// Every number in this node and its lists, in order.
+    fn numbers(&self, out: &mut Vec<f64>) {
+        match self {
+            Node::Number(x) => out.push(*x),
+            Node::List(items) => items.iter().for_each(|item| item.numbers(out)),
+            _ => {}
+        }
+    }
 }
 
 #[derive(Debug)]
