@@ -65,17 +65,28 @@ fn range_of(schema: &Value, x: f64) -> Option<(String, bool)> {
         && max.is_none_or(|b| x <= b)
         && emax.is_none_or(|b| x < b);
     let words = match (min, emin, max, emax) {
-        (None, Some(lo), None, Some(hi)) => format!("between {lo} and {hi} (exclusive)"),
-        (Some(lo), None, Some(hi), None) => format!("between {lo} and {hi}"),
+        (None, Some(lo), None, Some(hi)) => {
+            format!("between {} and {} (exclusive)", short(lo), short(hi))
+        }
+        (Some(lo), None, Some(hi), None) => format!("between {} and {}", short(lo), short(hi)),
         _ => {
             let parts: Vec<String> = [(">=", min), (">", emin), ("<=", max), ("<", emax)]
                 .iter()
-                .filter_map(|(op, b)| b.map(|b| format!("{op} {b}")))
+                .filter_map(|(op, b)| b.map(|b| format!("{op} {}", short(b))))
                 .collect();
             parts.join(" and ")
         }
     };
     Some((words, ok))
+}
+
+/// A range's bound, short: `0`, `0.001`, `86400`, `1e-6`, `1e11`.
+fn short(x: f64) -> String {
+    if x == 0.0 || (1e-3..1e6).contains(&x.abs()) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
 }
 
 fn join(path: &str, key: &str) -> String {
@@ -114,7 +125,10 @@ fn walk(
         if let Some(x) = numbers.iter().find(|x| !(x.abs() <= limit)) {
             issues.push(
                 path,
-                format!("every number must be finite with |x| <= {limit:e}, got {x}"),
+                format!(
+                    "every number must be finite with |x| <= {}, got {x}",
+                    short(limit)
+                ),
             );
             failed.insert(path.to_string());
         }

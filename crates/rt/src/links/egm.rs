@@ -24,8 +24,7 @@ use hilcontact_core::world::RelativeMotion;
 
 use super::{
     bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EndpointContext,
-    LinkContext,
-    LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
+    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
 };
 use crate::egm::{
     CorrectionDecoder, CorrectionEncoder, EgmError, FeedbackEncoder, RobotDecoder, EGM_PERIOD,

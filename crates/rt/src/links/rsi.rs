@@ -39,8 +39,7 @@ use hilcontact_core::world::RelativeMotion;
 
 use super::{
     bind_udp, check_host, local_addr, recv_counted, resolve, wait_readable, EndpointContext,
-    LinkContext,
-    LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
+    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
 };
 use crate::clock::{now_ns, Histogram};
 use crate::error::{Result, RtError};
