@@ -167,6 +167,9 @@ def _errors() -> Iterator[None]:
         _fail(str(exc), 2)
     except HilContactError as exc:
         _fail(str(exc), 1)
+    except OSError as exc:  # a disk or permission error that no command turned into an OutputError
+        where = f"{exc.filename}: " if exc.filename else ""
+        _fail(f"{where}{exc.strerror or exc}", 2)
 
 
 _FORCE_HELP = "Replace --out even if it holds files hilcontact did not write."

@@ -682,7 +682,10 @@ def run_plan(
     everything = list(plan.runs())
     order = [r[0] for r in everything]
     folder = Path(out) if out is not None else None
-    done: set[str] = _prepare_folder(folder, plan, resume) if folder is not None else set()
+    try:
+        done: set[str] = _prepare_folder(folder, plan, resume) if folder is not None else set()
+    except OSError as exc:
+        raise OutputError(f"--out {folder}: cannot write {exc.filename or folder}: {exc.strerror or exc}") from None
     pending = [r for r in everything if r[0] not in done]
     finished = len(everything) - len(pending)
     kept: list[pd.DataFrame] = []  # rows when there is no folder
@@ -709,11 +712,14 @@ def run_plan(
     if progress is not None:
         progress(finished, len(everything))
     try:
-        _execute(plan, pending, emit, threads, chunk_size, dask)
-    finally:
-        if folder is not None:
-            flush()
-            _merge(folder, order)
+        try:
+            _execute(plan, pending, emit, threads, chunk_size, dask)
+        finally:
+            if folder is not None:
+                flush()
+                _merge(folder, order)
+    except OSError as exc:
+        raise OutputError(f"--out {folder}: cannot write {exc.filename or folder}: {exc.strerror or exc}") from None
     if folder is not None:
         return load_results(folder)
     frame = pd.concat(kept, ignore_index=True) if kept else _rows(plan, [], {c: [] for c in _CORE_COLUMNS})

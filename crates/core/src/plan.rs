@@ -158,6 +158,20 @@ impl Plan {
             }),
         };
 
+        let resolvable = [
+            "servicer.mass",
+            "target.mass",
+            "contact.stiffness",
+            "contact.damping",
+            "simulation.period",
+            "simulation.reference_substeps",
+        ]
+        .iter()
+        .all(|key| in_range(key));
+        if resolvable && c.model == ContactModelKind::Linear {
+            check_resolution(&mut issues, r);
+        }
+
         let (period, duration) = (r.simulation.period, r.simulation.duration);
         let round = r.facility.round_delays;
         let f = &mut r.facility;
@@ -358,6 +372,44 @@ fn run_ticks(issues: &mut Issues, duration: f64, period: f64) -> Option<usize> {
         return None;
     }
     Some(ratio as usize)
+}
+
+/// A linear contact that the ideal reference's RK4 steps (`simulation.period /
+/// simulation.reference_substeps`) resolve: `ω·h <= 1` with `ω = √(k/μ)` (μ the reduced mass),
+/// and `(c/μ)·h <= 2`. A stiffer contact would make the reference, and so every metric,
+/// meaningless or non-finite.
+fn check_resolution(issues: &mut Issues, s: &Scenario) {
+    let (ms, mt) = (s.servicer.mass, s.target.mass);
+    let mu = ms * mt / (ms + mt);
+    let h = s.simulation.period / f64::from(s.simulation.reference_substeps);
+    let (k, c) = (s.contact.stiffness, s.contact.damping);
+    let omega = (k / mu).sqrt();
+    let step = format!(
+        "simulation.period / simulation.reference_substeps = {} s",
+        show(h)
+    );
+    if omega * h > 1.0 {
+        let hz = |w: f64| show(w / (2.0 * std::f64::consts::PI));
+        issues.push(
+            "contact.stiffness",
+            format!(
+                "{} N/m with the reduced mass {} kg is a contact frequency of {} Hz, above the {} Hz the ideal reference resolves with {step}: lower it, or raise simulation.reference_substeps",
+                show(k),
+                show(mu),
+                hz(omega),
+                hz(1.0 / h)
+            ),
+        );
+    } else if c / mu * h > 2.0 {
+        issues.push(
+            "contact.damping",
+            format!(
+                "{} N·s/m with the reduced mass {} kg damps faster than the ideal reference resolves with {step} (c/μ·h <= 2): lower it, or raise simulation.reference_substeps",
+                show(c),
+                show(mu)
+            ),
+        );
+    }
 }
 
 /// Whether every number of `v` is finite; records the problem unless `key` failed its range

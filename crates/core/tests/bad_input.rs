@@ -141,6 +141,21 @@ fn a_resolved_delay_is_the_whole_periods_it_runs_as() {
 }
 
 #[test]
+fn a_contact_the_reference_cannot_resolve_is_refused() {
+    let mut s = table1(0.0, 0.0);
+    s.servicer.mass = 0.001;
+    s.contact.stiffness = 1e11;
+    assert_eq!(rejected(&s), ["contact.stiffness"], "{}", message(&s));
+    s.simulation.reference_substeps = 1000;
+    s.simulation.period = 1e-6;
+    s.resolve().expect("resolved with 1 ns steps");
+    let mut s = table1(0.0, 0.0);
+    s.servicer.mass = 10.0;
+    s.contact.damping = 1e9;
+    assert_eq!(rejected(&s), ["contact.damping"], "{}", message(&s));
+}
+
+#[test]
 fn names_must_be_valid_folder_names() {
     for name in ["a/b", "a\0b", ".", "..", "", " ", "tab\there"] {
         let mut s = table1(0.0, 0.0);
