@@ -97,7 +97,8 @@ def describe(scenario: Any) -> str:
 
 
 def _size(memory: float) -> str:
-    return f"{memory / 1e9:.3g} GB"
+    gb = memory / 1e9
+    return f"{gb:.3g} GB" if gb < 1000 else f"{gb / 1000:.3g} TB"
 
 
 def _duration(seconds: float) -> str:
