@@ -28,6 +28,7 @@ import math
 import signal
 import socket
 import sys
+import threading
 import time
 import tomllib
 from collections.abc import Iterator, Sequence
@@ -134,12 +135,15 @@ class _Number(click.ParamType):
 NUMBER = _Number()
 POSITIVE = _Number(min=0.0, min_open=True)
 NON_NEGATIVE = _Number(min=0.0)
+PORT = click.IntRange(0, 65535)
 
 
 def _stop_on_sigterm() -> None:
     """SIGTERM (``kill``) stops a batch command as Ctrl-C does: whatever it was writing is
-    removed (hilcontact.output) and nothing is left half-written."""
-    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    removed (hilcontact.output) and nothing is left half-written. Only in the main thread (the
+    only one Python lets set a handler)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
 
 
 def _with(options: list[Any]) -> Any:
@@ -416,7 +420,7 @@ def _report_comparison(console: Console, result: Comparison, folder: Path) -> No
     default=None,
     help="Run on a Dask cluster: a scheduler address (tcp://host:8786) or 'local' (a LocalCluster).",
 )
-@click.option("--threads", type=int, default=None, help="Rust threads for a local sweep [default: one per core].")
+@click.option("--threads", type=click.IntRange(1, 1024), default=None, help="Rust threads for a local sweep [default: one per core].")
 @_with(_LIMIT_OPTIONS)
 def sweep_command(
     scenario: str,
@@ -448,8 +452,6 @@ def sweep_command(
 
     from .sweep import check_sweep_folder, plan_sweep, run_plan
 
-    if threads is not None and threads < 1:
-        _fail("--threads: expected a whole number >= 1", 2)
     _stop_on_sigterm()
     with _errors():
         overrides = parse_set_options(sets)
@@ -732,11 +734,11 @@ def _report_realtime(console: Console, run: Run) -> None:
 
 _FACILITY_OPTIONS = [
     click.option("--bind-host", default=None, help="Address the sensor's RDT and HTTP servers bind to." + _dflt("facility", "bind_host")),
-    click.option("--sensor-port", type=int, default=None, help="RDT (UDP) port of the sensor." + _dflt("facility", "sensor_port")),
-    click.option("--http-port", type=int, default=None, help="HTTP port of /netftapi2.xml (0 = none)." + _dflt("facility", "http_port")),
+    click.option("--sensor-port", type=PORT, default=None, help="RDT (UDP) port of the sensor." + _dflt("facility", "sensor_port")),
+    click.option("--http-port", type=PORT, default=None, help="HTTP port of /netftapi2.xml (0 = none)." + _dflt("facility", "http_port")),
     click.option("--egm-host", default=None, help="Host the robot sends EGM feedback to (the PC)." + _dflt("facility", "egm_host")),
-    click.option("--egm-port", type=int, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("facility", "egm_port")),
-    click.option("--egm-local-port", type=int, default=None, help="The robot's own UDP port (0 = any)." + _dflt("facility", "egm_local_port")),
+    click.option("--egm-port", type=PORT, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("facility", "egm_port")),
+    click.option("--egm-local-port", type=PORT, default=None, help="The robot's own UDP port (0 = any)." + _dflt("facility", "egm_local_port")),
     click.option("--counts-per-force", type=NUMBER, default=None, help="RDT counts per N (cfgcpf)." + _dflt("facility", "counts_per_force")),
     click.option("--counts-per-torque", type=NUMBER, default=None, help="RDT counts per N m (cfgcpt)." + _dflt("facility", "counts_per_torque")),
 ]
@@ -831,13 +833,13 @@ _HIL_OPTIONS = [
     _protocol_option("sensor", "runtime"),
     _protocol_option("robot", "runtime"),
     click.option("--sensor", "sensor_host", default=None, metavar="HOST", help="Host of the F/T sensor (Net F/T)." + _dflt("runtime", "sensor.host")),
-    click.option("--sensor-port", type=int, default=None, help="RDT port of the sensor." + _dflt("runtime", "sensor.port")),
-    click.option("--http-port", type=int, default=None, help="HTTP port of the sensor's /netftapi2.xml." + _dflt("runtime", "sensor.http_port")),
+    click.option("--sensor-port", type=PORT, default=None, help="RDT port of the sensor." + _dflt("runtime", "sensor.port")),
+    click.option("--http-port", type=PORT, default=None, help="HTTP port of the sensor's /netftapi2.xml." + _dflt("runtime", "sensor.http_port")),
     click.option("--counts-per-force", type=NUMBER, default=None, help="Counts per N; with --counts-per-torque, /netftapi2.xml is not read."),
     click.option("--counts-per-torque", type=NUMBER, default=None, help="Counts per N m."),
-    click.option("--rdt-local-port", type=int, default=None, help="Local UDP port of the RDT client (0 = any)." + _dflt("runtime", "sensor.local_port")),
+    click.option("--rdt-local-port", type=PORT, default=None, help="Local UDP port of the RDT client (0 = any)." + _dflt("runtime", "sensor.local_port")),
     click.option("--bias", is_flag=True, default=None, help="Bias the sensor (RDT 0x0042) before streaming; the rod must be free."),
-    click.option("--egm-port", type=int, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("runtime", "robot.port")),
+    click.option("--egm-port", type=PORT, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("runtime", "robot.port")),
     click.option("--egm-bind", "egm_bind_host", default=None, metavar="HOST", help="Address the EGM endpoint binds to." + _dflt("runtime", "robot.bind_host")),
     click.option("--robot", "robot_host", default=None, metavar="HOST", help="Accept robot feedback (EGM, RSI) only from this host [default: the first sender whose feedback is at the scenario's start (within --start-tolerance)]."),
     click.option("--extrapolation", type=click.Choice(["quadratic", "linear", "hold"]), default=None, help="Actual motion between EGM feedback messages." + _dflt("runtime", "extrapolation")),
@@ -914,7 +916,9 @@ def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-rt].")
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
-def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, force: bool, **kw: Any) -> None:
+@_with(_LIMIT_OPTIONS)
+def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, force: bool,
+                max_memory: float, max_time: float, **kw: Any) -> None:
     """Run the HIL loop of SCENARIO in real time: RDT client of the F/T sensor at --sensor,
     EGM endpoint on UDP --egm-port for the robot controller, the scenario's compensator and
     virtual dynamics in a Rust real-time thread. Shows a live line; writes the same files as
@@ -932,6 +936,7 @@ def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots:
     """
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
+        check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-rt", force)
         _run_realtime(resolved, _runtime_options(**kw), folder, no_plots, force)
 
@@ -1078,9 +1083,10 @@ def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tu
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-demo-rt].")
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
+@_with(_LIMIT_OPTIONS)
 def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay: float, sensor_protocol: str | None,
             robot_protocol: str | None, rt_priority: int | None, no_lock_memory: bool, cpu: int | None,
-            out: str | None, no_plots: bool, force: bool) -> None:
+            out: str | None, no_plots: bool, force: bool, max_memory: float, max_time: float) -> None:
     """Run the emulated facility and the real-time HIL loop on loopback in one process (free
     ports, HTTP included): `hilcontact facility` and `hilcontact hil` together.
 
@@ -1096,6 +1102,7 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
         overrides.setdefault("facility.robot_delay", robot_delay)
         overrides["compensator.kind"] = compensator
         resolved = load_scenario(scenario, overrides)
+        check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-demo-rt", force)
         facility_options, runtime_options = _demo_options(sensor_protocol, robot_protocol)
         scheduling = _scheduling_options(rt_priority, no_lock_memory, cpu)

@@ -142,28 +142,28 @@ def write_atomically(
     (``kind``: ``run``, ``comparison``, ...), then swap it into place. Checks ``directory``
     first (:func:`check_output_folder`). Returns ``directory`` as a Path."""
     target = check_output_folder(directory, overwrite)
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        remove_stale(target.parent, target.name)
-        # os.mkdir (not tempfile.mkdtemp) so that the folder gets the usual permissions
-        staging = target.parent / staging_name(target.name)
-        os.mkdir(staging)
-    except OSError as exc:
-        raise OutputError(f"--out {directory}: cannot create it: {exc.strerror or exc}") from None
-    try:
-        write(staging)
-        (staging / MARKER).write_text(json.dumps({"written_by": "hilcontact", "kind": kind}) + "\n", encoding="utf-8")
-    except OSError as exc:
-        shutil.rmtree(staging, ignore_errors=True)
-        where = exc.filename if exc.filename else directory
-        raise OutputError(f"--out {directory}: cannot write {where}: {exc.strerror or exc}") from None
+    # os.mkdir (not tempfile.mkdtemp) so that the folder gets the usual permissions
+    staging = target.parent / staging_name(target.name)
+    try:  # one try from mkdir to swap: whatever stops it (an error, Ctrl-C, SIGTERM) removes staging
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            remove_stale(target.parent, target.name)
+            os.mkdir(staging)
+        except OSError as exc:
+            raise OutputError(f"--out {directory}: cannot create it: {exc.strerror or exc}") from None
+        try:
+            write(staging)
+            (staging / MARKER).write_text(json.dumps({"written_by": "hilcontact", "kind": kind}) + "\n", encoding="utf-8")
+        except OSError as exc:
+            where = exc.filename if exc.filename else directory
+            raise OutputError(f"--out {directory}: cannot write {where}: {exc.strerror or exc}") from None
+        try:
+            _swap_into_place(staging, target)
+        except OSError as exc:
+            raise OutputError(f"--out {directory}: cannot replace it: {exc.strerror or exc}") from None
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    try:
-        _swap_into_place(staging, target)
-    except OSError as exc:
-        raise OutputError(f"--out {directory}: cannot replace it: {exc.strerror or exc}") from None
     return Path(directory)
 
 

@@ -261,7 +261,9 @@ impl HilHandle {
         let writer = std::thread::Builder::new()
             .name("hil-writer".into())
             .spawn(move || {
-                let mut samples = Vec::with_capacity(ticks as usize + 1);
+                // room for the whole run, up to 2^20 ticks (17 min at 1 kHz): a longer run
+                // grows the log as it goes rather than reserving it all at the start
+                let mut samples = Vec::with_capacity((ticks as usize).min(1 << 20) + 1);
                 loop {
                     let abandoned = consumer.is_abandoned();
                     while let Ok(s) = consumer.pop() {
