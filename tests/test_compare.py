@@ -105,14 +105,14 @@ def test_compensator_parameter_overrides_go_to_the_kinds_that_have_them():
 def test_comparison_rejects_a_kind_override_and_bad_input():
     with pytest.raises(hc.ScenarioError, match=r"^compensator\.kind: .*--compensators"):
         comparison_scenarios("paper-table1", None, {"compensator.kind": "pida"})
-    with pytest.raises(hc.ScenarioError, match=r"^servicer\.mass: must be > 0"):
+    with pytest.raises(hc.ScenarioError, match=r"^servicer\.mass: must be between 0\.001"):
         comparison_scenarios("paper-table1", None, {"servicer.mass": -1.0})
 
 
 def test_compare_validates_everything_before_running(monkeypatch):
     calls = []
     monkeypatch.setattr("hilcontact.comparison.simulate", lambda scenario: calls.append(scenario))
-    with pytest.raises(hc.ScenarioError, match="compensator.noise_std: must be > 0"):
+    with pytest.raises(hc.ScenarioError, match="compensator.noise_std: must be > 0 and <= 1e6"):
         hc.compare("paper-table1", overrides={"compensator.noise_std": 0.0})
     assert calls == []
 
@@ -455,7 +455,7 @@ def test_cli_compare_default_folder_and_sets(core, tmp_path):
     [
         (["--compensators", "none,magic"], "compensators: unknown compensator 'magic'"),
         (["--set", "compensator.kind=pida"], "compensator.kind: "),
-        (["--set", "servicer.mass=0"], "servicer.mass: must be > 0"),
+        (["--set", "servicer.mass=0"], "servicer.mass: must be between 0.001 and 1e7"),
         (["--set", "compensator.forgetting=2"], "compensator.forgetting: must be between 0 and 1 (exclusive), got 2"),
     ],
 )

@@ -312,21 +312,21 @@ BAD_INPUT = [
     ({"walls[1].colour": "red"}, ("walls[1].colour", "allowed keys in [[walls]]: name, point, normal")),
     ({"compensator.gain": 1.0}, ("compensator.gain", "allowed keys in [compensator] with kind = 'none': kind")),
     ({"extra_table.x": 1}, ("extra_table", "unknown top-level key; allowed: name, description, simulation")),
-    ({"servicer.mass": 0}, "servicer.mass: must be > 0, got 0"),
-    ({"target.mass": -4000.0}, "target.mass: must be > 0, got -4000.0"),
-    ({"simulation.period": 0.0}, "simulation.period: must be > 0, got 0.0"),
-    ({"simulation.duration": -1}, "simulation.duration: must be > 0, got -1"),
-    ({"contact.stiffness": 0}, "contact.stiffness: must be > 0, got 0"),
-    ({"contact.damping": -1.0}, "contact.damping: must be >= 0, got -1.0"),
-    ({"facility.robot_delay": -0.001}, "facility.robot_delay: must be >= 0, got -0.001"),
-    ({"simulation.plant_substeps": 0}, "simulation.plant_substeps: must be >= 1, got 0"),
-    ({"simulation.divergence_energy_ratio": 1.0}, "simulation.divergence_energy_ratio: must be > 1, got 1.0"),
+    ({"servicer.mass": 0}, "servicer.mass: must be between 0.001 and 1e7, got 0"),
+    ({"target.mass": -4000.0}, "target.mass: must be between 0.001 and 1e7, got -4000.0"),
+    ({"simulation.period": 0.0}, "simulation.period: must be between 1e-6 and 1, got 0.0"),
+    ({"simulation.duration": -1}, "simulation.duration: must be > 0 and <= 86400, got -1"),
+    ({"contact.stiffness": 0}, "contact.stiffness: must be > 0 and <= 1e11, got 0"),
+    ({"contact.damping": -1.0}, "contact.damping: must be between 0 and 1e9, got -1.0"),
+    ({"facility.robot_delay": -0.001}, "facility.robot_delay: must be between 0 and 60, got -0.001"),
+    ({"simulation.plant_substeps": 0}, "simulation.plant_substeps: must be between 1 and 1000, got 0"),
+    ({"simulation.divergence_energy_ratio": 1.0}, "simulation.divergence_energy_ratio: must be > 1 and <= 1e12, got 1.0"),
     ({"walls[1].normal": [0, 0, 0]}, ("walls[1].normal", "nonzero")),
     ({"walls[0].normal": [0.0, 0.0]}, "walls[0].normal: expected 3 numbers [x, y, z], got [0.0, 0.0]"),
     ({"simulation.duration": "abc"}, "simulation.duration: expected a number, got 'abc'"),
     ({"servicer.mass": True}, "servicer.mass: expected a number, got true"),
     ({"facility.seed": 1.5}, "facility.seed: expected an integer, got 1.5"),
-    ({"facility.seed": -1}, "facility.seed: must be >= 0, got -1"),
+    ({"facility.seed": -1}, "facility.seed: must be between 0 and 18446744073709551615, got -1"),
     ({"facility.round_delays": "yes"}, "facility.round_delays: expected true or false, got 'yes'"),
     ({"name": 42}, "name: expected a string, got 42"),
     ({"name": "a/b"}, ("name", "without '/'")),
@@ -335,7 +335,7 @@ BAD_INPUT = [
     ({"facility.sensor_noise": float("inf")}, "facility.sensor_noise: must be a finite number, got inf"),
     ({"servicer.orientation": [0, 0, 0, 0]}, ("servicer.orientation", "nonzero quaternion")),
     ({"facility.sensor_orientation": [1, 0, 0]}, ("facility.sensor_orientation", "quaternion [w, x, y, z]")),
-    ({"servicer.inertia": [98.0, 0.0, 98.0]}, ("servicer.inertia", "principal moments must all be > 0")),
+    ({"servicer.inertia": [98.0, 0.0, 98.0]}, ("servicer.inertia", "principal moments must all be >= 1e-6")),
     ({"servicer.inertia": [[1, 2, 0], [0, 1, 0], [0, 0, 1]]}, ("servicer.inertia", "symmetric")),
     ({"servicer.inertia": [[1, 2, 0], [2, 1, 0], [0, 0, 1]]}, ("servicer.inertia", "positive definite")),
     ({"servicer.inertia": "big"}, ("servicer.inertia", "3 principal moments")),
@@ -364,8 +364,8 @@ def test_bad_values_give_one_clear_line(overrides, expected):
 @pytest.mark.parametrize(
     ("table", "key", "expected"),
     [
-        ("servicer", "mass", "servicer.mass: missing required value (kg, > 0)"),
-        ("simulation", "period", "simulation.period: missing required value (control period T in s, > 0)"),
+        ("servicer", "mass", "servicer.mass: missing required value (kg, 0.001 to 1e7)"),
+        ("simulation", "period", "simulation.period: missing required value (control period T in s, 1 µs to 1 s)"),
         ("contact", "stiffness", "contact.stiffness: missing required value"),
         ("rod", "tip", "rod.tip: missing required value"),
         (None, "name", "name: missing required value"),
@@ -391,7 +391,7 @@ def test_missing_wall_field_names_the_index():
 
 def test_several_problems_are_summarised_on_one_line():
     message = error_of(PRESET, {"servicer.mass": -1, "target.mass": "x", "contact.bogus": 1})
-    assert message.startswith("servicer.mass: must be > 0, got -1 (and 2 more: target.mass, contact.bogus)")
+    assert message.startswith("servicer.mass: must be between 0.001 and 1e7, got -1 (and 2 more: target.mass, contact.bogus)")
 
 
 def test_invalid_toml_names_file_and_line(scenario_file):
@@ -512,19 +512,19 @@ def test_integers_are_accepted_for_compensator_numbers():
 
 
 MODEL_RANGE_ERRORS = [
-    ("contact_force", 0.0, "must be > 0, got 0.0"),
-    ("stiffness_initial", -1.0, "must be > 0, got -1.0"),
-    ("damping_initial", -0.5, "must be >= 0, got -0.5"),
-    ("stiffness_std", 0, "must be > 0, got 0"),
-    ("damping_std", 0.0, "must be > 0, got 0.0"),
-    ("stiffness_walk", -1.0, "must be >= 0, got -1.0"),
-    ("damping_walk", -0.1, "must be >= 0, got -0.1"),
-    ("noise_std", 0.0, "must be > 0, got 0.0"),
+    ("contact_force", 0.0, "must be > 0 and <= 1e6, got 0.0"),
+    ("stiffness_initial", -1.0, "must be > 0 and <= 1e11, got -1.0"),
+    ("damping_initial", -0.5, "must be between 0 and 1e9, got -0.5"),
+    ("stiffness_std", 0, "must be > 0 and <= 1e11, got 0"),
+    ("damping_std", 0.0, "must be > 0 and <= 1e9, got 0.0"),
+    ("stiffness_walk", -1.0, "must be between 0 and 1e11, got -1.0"),
+    ("damping_walk", -0.1, "must be between 0 and 1e9, got -0.1"),
+    ("noise_std", 0.0, "must be > 0 and <= 1e6, got 0.0"),
     ("forgetting", 1.5, "must be between 0 and 1 (exclusive), got 1.5"),
     ("forgetting", 1.0, "must be between 0 and 1 (exclusive), got 1.0"),
     ("forgetting", 0.0, "must be between 0 and 1 (exclusive), got 0.0"),
     ("forgetting", float("nan"), "must be a finite number, got nan"),
-    ("alpha_max", -2000.0, "must be > 0, got -2000.0"),
+    ("alpha_max", -2000.0, "must be > 0 and <= 1e12, got -2000.0"),
     ("alpha_max", float("inf"), "must be a finite number, got inf"),
     ("alpha_max", "big", "expected a number, got 'big'"),
     ("delay_mode", "predict", "must be one of 'align' or 'lead', got 'predict'"),
@@ -540,11 +540,11 @@ def test_model_params_range_errors_name_the_key(kind, key, value, expected):
 
 
 TDPA_RANGE_ERRORS = [
-    ("contact_force", -3.0, "must be > 0, got -3.0"),
-    ("alpha_max", 0.0, "must be > 0, got 0.0"),
-    ("beta_max", 0.0, "must be > 0, got 0.0"),
-    ("velocity_floor", -1e-3, "must be > 0, got -0.001"),
-    ("force_floor", 0, "must be > 0, got 0"),
+    ("contact_force", -3.0, "must be > 0 and <= 1e6, got -3.0"),
+    ("alpha_max", 0.0, "must be > 0 and <= 1e12, got 0.0"),
+    ("beta_max", 0.0, "must be > 0 and <= 1000, got 0.0"),
+    ("velocity_floor", -1e-3, "must be > 0 and <= 1000, got -0.001"),
+    ("force_floor", 0, "must be > 0 and <= 1e6, got 0"),
     ("beta_max", float("nan"), "must be a finite number, got nan"),
 ]
 

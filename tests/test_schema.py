@@ -5,6 +5,7 @@ core's resolution of a scenario is Python's."""
 from __future__ import annotations
 
 import json
+import re
 import typing
 
 import pytest
@@ -84,6 +85,8 @@ def test_python_models_are_the_core_schema(label, schema, model):
             for key, op in (("minimum", "ge"), ("exclusiveMinimum", "gt"), ("maximum", "le"), ("exclusiveMaximum", "lt"))
             if key in prop
         }
+        if prop.get("type") == "integer" and "maximum" not in prop and prop.get("format") in ("uint32", "uint64"):
+            expected["le"] = 2 ** int(prop["format"][4:]) - 1  # the core's unsigned type
         assert bounds(field) == expected, where
         choices = [v["const"] for v in prop.get("oneOf", []) if "const" in v] or prop.get("enum")
         if choices and prop.get("type", "string") == "string" and name != "kind":
@@ -123,7 +126,7 @@ def test_python_range_errors_carry_issues():
     with pytest.raises(hc.ScenarioError) as info:
         hc.load_scenario("paper-table1", {"servicer.mass": -1, "compensator.kind": "pic", "compensator.forgetting": 2})
     assert info.value.issues == [
-        ("servicer.mass", "must be > 0, got -1"),
+        ("servicer.mass", "must be between 0.001 and 1e7, got -1"),
         ("compensator.forgetting", "must be between 0 and 1 (exclusive), got 2"),
     ]
 
@@ -139,3 +142,27 @@ def test_docs_table_names_every_key():
         if not any(form in text for form in (f"| `{name}` |", f"`[{name}]`", f"`[[{name}]]`"))
     ]
     assert not missing, f"docs/scenario.md does not describe {missing}"
+
+
+def test_docs_table_lists_every_upper_bound():
+    """Each key's row in docs/scenario.md says its schema's upper bound (``maximum``, and the
+    ``x-magnitude`` of vectors, quaternions and inertias)."""
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "scenario.md").read_text(encoding="utf-8")
+
+    def forms(x: float) -> set[str]:
+        mantissa, exponent = f"{x:e}".split("e")
+        return {f"{x:g}", f"{mantissa.rstrip('0').rstrip('.')}e{int(exponent)}"}
+
+    missing = []
+    for label, schema, _ in tables():
+        for name, prop in schema["properties"].items():
+            prop = deref(prop)
+            for key in ("maximum", "x-magnitude"):
+                if key not in prop:
+                    continue
+                rows = [re.split(r"(?<!\\)\|", line)[4] for line in text.splitlines() if line.startswith(f"| `{name}` |")]
+                if not any(form in row for row in rows for form in forms(prop[key])):
+                    missing.append(f"{label}.{name} {key} {prop[key]}")
+    assert not missing, f"docs/scenario.md does not state {missing}"

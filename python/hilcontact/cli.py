@@ -30,6 +30,8 @@ import json
 import math
 import signal
 import socket
+import sys
+import threading
 import time
 import tomllib
 from collections.abc import Iterator, Sequence
@@ -45,6 +47,7 @@ from rich.table import Table
 from . import __version__
 from .comparison import ALL_KINDS, Comparison, comparison_scenarios, run_comparison
 from .errors import HilContactError, RealtimeOptionError, ScenarioError
+from .limits import Limits, check_run
 from .output import OutputError, check_output_folder
 from .run import Run, core_version, simulate
 from .scenario import load_scenario, presets
@@ -67,13 +70,102 @@ def parse_set_options(items: Sequence[str], option: str = "--set",
             value: Any = tomllib.loads("v = " + raw.strip())["v"]
         except tomllib.TOMLDecodeError:
             value = raw.strip()
+        except RecursionError:
+            raise ScenarioError(f"--set {key}: the value is nested too deeply") from None
         overrides[key] = value
     return overrides
 
 
+def _one_line(message: str) -> str:
+    return "error: " + " ".join(message.split("\n"))
+
+
 def _fail(message: str, code: int) -> None:
-    click.echo("error: " + " ".join(message.split("\n")), err=True)
+    click.echo(_one_line(message), err=True)
     raise click.exceptions.Exit(code)
+
+
+class _Cli(click.Group):
+    """The command group; a usage error (an unknown option, a bad option value, a missing
+    argument) is one ``error: ...`` line on stderr and exit code 2, like every bad input."""
+
+    def main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
+        if not standalone_mode:
+            return super().main(*args, standalone_mode=False, **kwargs)
+        try:
+            code = super().main(*args, standalone_mode=False, **kwargs)
+        except click.UsageError as exc:
+            command = exc.ctx.command_path + ": " if exc.ctx is not None and exc.ctx.parent is not None else ""
+            click.echo(_one_line(command + exc.format_message()), err=True)
+            sys.exit(exc.exit_code)
+        except click.ClickException as exc:
+            click.echo(_one_line(exc.format_message()), err=True)
+            sys.exit(exc.exit_code)
+        except (click.Abort, KeyboardInterrupt, EOFError):
+            click.echo("Aborted!", err=True)
+            sys.exit(1)
+        sys.exit(code if isinstance(code, int) else 0)
+
+
+class _Number(click.ParamType):
+    """A finite number in a range (NaN, ±inf and values out of range refused, naming the
+    option): ``_Number(min=0, min_open=True)`` is > 0."""
+
+    name = "number"
+
+    def __init__(self, min: float | None = None, max: float | None = None, min_open: bool = False) -> None:
+        self.min, self.max, self.min_open = min, max, min_open
+
+    def _allowed(self) -> str:
+        parts = []
+        if self.min is not None:
+            parts.append(f"{'>' if self.min_open else '>='} {self.min:g}")
+        if self.max is not None:
+            parts.append(f"<= {self.max:g}")
+        return "a finite number" + (" " + " and ".join(parts) if parts else "")
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> float:
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"expected {self._allowed()}, got {value!r}", param, ctx)
+        below = self.min is not None and (number <= self.min if self.min_open else number < self.min)
+        above = self.max is not None and number > self.max
+        if not math.isfinite(number) or below or above:
+            self.fail(f"expected {self._allowed()}, got {value!r}", param, ctx)
+        return number
+
+
+#: Option types: any finite number, a positive one, one >= 0.
+NUMBER = _Number()
+POSITIVE = _Number(min=0.0, min_open=True)
+NON_NEGATIVE = _Number(min=0.0)
+PORT = click.IntRange(0, 65535)
+
+
+def _stop_on_sigterm() -> None:
+    """SIGTERM (``kill``) stops a batch command as Ctrl-C does: whatever it was writing is
+    removed (hilcontact.output) and nothing is left half-written. Only in the main thread (the
+    only one Python lets set a handler)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+
+
+def _with(options: list[Any]) -> Any:
+    def decorate(f: Any) -> Any:
+        for option in reversed(options):
+            f = option(f)
+        return f
+
+    return decorate
+
+
+_LIMIT_OPTIONS = [
+    click.option("--max-memory", type=POSITIVE, default=Limits.max_memory, show_default=True, metavar="GB",
+                 help="Refuse to start when the estimated memory is above this, GB."),
+    click.option("--max-time", type=POSITIVE, default=Limits.max_time, show_default=True, metavar="S",
+                 help="Refuse to start when the estimated time (on one core) is above this, s."),
+]
 
 
 @contextmanager
@@ -84,6 +176,9 @@ def _errors() -> Iterator[None]:
         _fail(str(exc), 2)
     except HilContactError as exc:
         _fail(str(exc), 1)
+    except OSError as exc:  # a disk or permission error that no command turned into an OutputError
+        where = f"{exc.filename}: " if exc.filename else ""
+        _fail(f"{where}{exc.strerror or exc}", 2)
 
 
 _FORCE_HELP = "Replace --out even if it holds files hilcontact did not write."
@@ -146,7 +241,7 @@ def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> 
     ctx.exit()
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=_Cli, context_settings={"help_option_names": ["-h", "--help"]})
 @click.option(
     "--version",
     is_flag=True,
@@ -184,10 +279,14 @@ _SET_HELP = (
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
 @click.option("--mcap", "mcap", metavar="FILE", default=None, help=_MCAP_HELP)
 @click.option("--force", is_flag=True, help=_FORCE_HELP + " Replace --mcap FILE.")
-def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool) -> None:
+@_with(_LIMIT_OPTIONS)
+def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool,
+        max_memory: float, max_time: float) -> None:
     """Simulate SCENARIO (a preset name or a TOML file) and save the results."""
+    _stop_on_sigterm()
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
+        check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / resolved.name, force)
         mcap_path = _mcap_file(mcap, folder, force)
         with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
@@ -313,8 +412,9 @@ def _report(console: Console, result: Run, folder: Path) -> None:
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
 @click.option("--run-figures", is_flag=True, help="Also draw each compensator's own figures (slower; `hilcontact plot DIR` draws them later).")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
+@_with(_LIMIT_OPTIONS)
 def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool,
-                    run_figures: bool, force: bool) -> None:
+                    run_figures: bool, force: bool, max_memory: float, max_time: float) -> None:
     """Simulate SCENARIO once per compensator and compare them.
 
     Writes a run folder per compensator (data; its figures with --run-figures, or later with
@@ -324,9 +424,11 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    _stop_on_sigterm()
     with _errors():
         overrides = parse_set_options(sets)
         scenarios = comparison_scenarios(scenario, kinds, overrides)  # validate all before running
+        check_run(next(iter(scenarios.values())), Limits(max_memory, max_time), runs=len(scenarios))
         name = next(iter(scenarios.values())).name
         folder = _out_folder(out, Path("runs") / f"{name}-compare", force)
         stderr = Console(stderr=True)
@@ -416,7 +518,8 @@ def _report_comparison(console: Console, result: Comparison, folder: Path) -> No
     default=None,
     help="Run on a Dask cluster: a scheduler address (tcp://host:8786) or 'local' (a LocalCluster).",
 )
-@click.option("--threads", type=int, default=None, help="Rust threads for a local sweep [default: one per core].")
+@click.option("--threads", type=click.IntRange(1, 1024), default=None, help="Rust threads for a local sweep [default: one per core].")
+@_with(_LIMIT_OPTIONS)
 def sweep_command(
     scenario: str,
     grids: tuple[str, ...],
@@ -427,6 +530,8 @@ def sweep_command(
     resume: bool,
     dask: str | None,
     threads: int | None,
+    max_memory: float,
+    max_time: float,
 ) -> None:
     """Run SCENARIO at every point of the grid, with every compensator and seed.
 
@@ -445,12 +550,14 @@ def sweep_command(
 
     from .sweep import check_sweep_folder, plan_sweep, run_plan
 
-    if threads is not None and threads < 1:
-        _fail("--threads: expected a whole number >= 1", 2)
+    _stop_on_sigterm()
     with _errors():
         overrides = parse_set_options(sets)
-        plan = plan_sweep(scenario, list(grids), kinds, seeds, overrides)  # validate before anything runs
-        check_sweep_folder(Path(out), plan, resume)
+        # validate before anything runs
+        plan = plan_sweep(scenario, list(grids), kinds, seeds, overrides, limits=Limits(max_memory, max_time),
+                          threads=threads)
+        for note in check_sweep_folder(Path(out), plan, resume):
+            click.echo("note: " + note, err=True)
         stderr = Console(stderr=True)
         where = f"on Dask ({dask})" if dask else f"on {threads or 'all'} core(s)"
         stderr.print(
@@ -526,8 +633,8 @@ def _report_sweep(console: Console, rows: Any, out: str) -> None:
 @cli.command(name="stability-map", short_help="Map where each compensator stays faithful in a sweep.")
 @click.argument("sweep_dir", metavar="SWEEP_DIR")
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: SWEEP_DIR].")
-@click.option("--cov-tolerance", default=0.05, show_default=True, type=float, help="Faithful: |CoV - 1| <= this.")
-@click.option("--cof-limit", default=1.2, show_default=True, type=float, help="Faithful: CoF <= this.")
+@click.option("--cov-tolerance", default=0.05, show_default=True, type=NON_NEGATIVE, help="Faithful: |CoV - 1| <= this.")
+@click.option("--cof-limit", default=1.2, show_default=True, type=POSITIVE, help="Faithful: CoF <= this.")
 def stability_map_command(sweep_dir: str, out: str | None, cov_tolerance: float, cof_limit: float) -> None:
     """Draw, per compensator, the (contact frequency, robot delay) region where every run is
     faithful, heat maps of the worst CoV and CoF, and print the maximal faithful delay per
@@ -787,23 +894,14 @@ def _link_groups(sensor_protocol: str | None, robot_protocol: str | None, robot_
 
 _FACILITY_OPTIONS = [
     click.option("--bind-host", default=None, help="Address the sensor's RDT and HTTP servers bind to." + _dflt("facility", "bind_host")),
-    click.option("--sensor-port", type=int, default=None, help="RDT (UDP) port of the sensor." + _dflt("facility", "sensor_port")),
-    click.option("--http-port", type=int, default=None, help="HTTP port of /netftapi2.xml (0 = none)." + _dflt("facility", "http_port")),
+    click.option("--sensor-port", type=PORT, default=None, help="RDT (UDP) port of the sensor." + _dflt("facility", "sensor_port")),
+    click.option("--http-port", type=PORT, default=None, help="HTTP port of /netftapi2.xml (0 = none)." + _dflt("facility", "http_port")),
     click.option("--egm-host", default=None, help="Host the robot sends EGM feedback to (the PC)." + _dflt("facility", "egm_host")),
-    click.option("--egm-port", type=int, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("facility", "egm_port")),
-    click.option("--egm-local-port", type=int, default=None, help="The robot's own UDP port (0 = any)." + _dflt("facility", "egm_local_port")),
-    click.option("--counts-per-force", type=float, default=None, help="RDT counts per N (cfgcpf)." + _dflt("facility", "counts_per_force")),
-    click.option("--counts-per-torque", type=float, default=None, help="RDT counts per N m (cfgcpt)." + _dflt("facility", "counts_per_torque")),
+    click.option("--egm-port", type=PORT, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("facility", "egm_port")),
+    click.option("--egm-local-port", type=PORT, default=None, help="The robot's own UDP port (0 = any)." + _dflt("facility", "egm_local_port")),
+    click.option("--counts-per-force", type=NUMBER, default=None, help="RDT counts per N (cfgcpf)." + _dflt("facility", "counts_per_force")),
+    click.option("--counts-per-torque", type=NUMBER, default=None, help="RDT counts per N m (cfgcpt)." + _dflt("facility", "counts_per_torque")),
 ]
-
-
-def _with(options: list[Any]) -> Any:
-    def decorate(f: Any) -> Any:
-        for option in reversed(options):
-            f = option(f)
-        return f
-
-    return decorate
 
 
 _MAPPING_OPTIONS = [
@@ -817,9 +915,9 @@ _MAPPING_OPTIONS = [
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @_with([_protocol_option("sensor", "facility"), _protocol_option("robot", "facility")] + _FACILITY_OPTIONS + _MAPPING_OPTIONS
        + _link_option_flags("facility"))
-@click.option("--silence-sensor-after", type=float, default=None, metavar="S", help="Fault injection: the sensor stops sending S seconds after the robot's first command (the run's start).")
-@click.option("--silence-robot-after", type=float, default=None, metavar="S", help="Fault injection: the robot stops sending S seconds after its first command.")
-@click.option("--duration", type=float, default=None, metavar="S", help="Stop after S seconds [default: run until Ctrl-C].")
+@click.option("--silence-sensor-after", type=NON_NEGATIVE, default=None, metavar="S", help="Fault injection: the sensor stops sending S seconds after the robot's first command (the run's start).")
+@click.option("--silence-robot-after", type=NON_NEGATIVE, default=None, metavar="S", help="Fault injection: the robot stops sending S seconds after its first command.")
+@click.option("--duration", type=POSITIVE, default=None, metavar="S", help="Stop after S seconds [default: run until Ctrl-C].")
 def facility_command(scenario: str, sets: tuple[str, ...], sensor_protocol: str | None, robot_protocol: str | None,
                      bind_host: str | None, sensor_port: int | None,
                      http_port: int | None, egm_host: str | None, egm_port: int | None, egm_local_port: int | None,
@@ -897,31 +995,31 @@ _HIL_OPTIONS = [
     _protocol_option("sensor", "runtime"),
     _protocol_option("robot", "runtime"),
     click.option("--sensor", "sensor_host", default=None, metavar="HOST", help="Host of the F/T sensor (Net F/T)." + _dflt("runtime", "sensor.host")),
-    click.option("--sensor-port", type=int, default=None, help="RDT port of the sensor." + _dflt("runtime", "sensor.port")),
-    click.option("--http-port", type=int, default=None, help="HTTP port of the sensor's /netftapi2.xml." + _dflt("runtime", "sensor.http_port")),
-    click.option("--counts-per-force", type=float, default=None, help="Counts per N; with --counts-per-torque, /netftapi2.xml is not read."),
-    click.option("--counts-per-torque", type=float, default=None, help="Counts per N m."),
-    click.option("--rdt-local-port", type=int, default=None, help="Local UDP port of the RDT client (0 = any)." + _dflt("runtime", "sensor.local_port")),
+    click.option("--sensor-port", type=PORT, default=None, help="RDT port of the sensor." + _dflt("runtime", "sensor.port")),
+    click.option("--http-port", type=PORT, default=None, help="HTTP port of the sensor's /netftapi2.xml." + _dflt("runtime", "sensor.http_port")),
+    click.option("--counts-per-force", type=NUMBER, default=None, help="Counts per N; with --counts-per-torque, /netftapi2.xml is not read."),
+    click.option("--counts-per-torque", type=NUMBER, default=None, help="Counts per N m."),
+    click.option("--rdt-local-port", type=PORT, default=None, help="Local UDP port of the RDT client (0 = any)." + _dflt("runtime", "sensor.local_port")),
     click.option("--bias", is_flag=True, default=None, help="Bias the sensor (RDT 0x0042) before streaming; the rod must be free."),
-    click.option("--egm-port", type=int, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("runtime", "robot.port")),
+    click.option("--egm-port", type=PORT, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("runtime", "robot.port")),
     click.option("--egm-bind", "egm_bind_host", default=None, metavar="HOST", help="Address the EGM endpoint binds to." + _dflt("runtime", "robot.bind_host")),
     click.option("--robot", "robot_host", default=None, metavar="HOST", help="Accept robot feedback (EGM, RSI) only from this host [default: the first sender whose feedback is at the scenario's start (within --start-tolerance)]."),
     click.option("--extrapolation", type=click.Choice(["quadratic", "linear", "hold"]), default=None, help="Actual motion between EGM feedback messages." + _dflt("runtime", "extrapolation")),
-    click.option("--force-limit", type=float, default=None, help="Safety stop above this measured force." + _dflt("runtime", "limits.force_limit", "N")),
-    click.option("--moment-limit", type=float, default=None, help="Safety stop above this measured moment." + _dflt("runtime", "limits.moment_limit", "N m")),
-    click.option("--watchdog-ms", type=float, default=None, help="Safety stop after this long without sensor records or robot feedback." + _dflt("runtime", "limits.watchdog_ms", "ms")),
-    click.option("--workspace", type=float, default=None, help="Safety stop when the commanded rod tip is this far from its start." + _dflt("runtime", "limits.workspace", "m")),
-    click.option("--hold-deviation", type=float, default=None, help="A stop holds the robot at its fed-back pose only within this distance of the last command (else at the last command)." + _dflt("runtime", "limits.hold_deviation", "m")),
-    click.option("--retreat-speed", type=float, default=None, help="After a force or moment stop, back away to the last contact-free pose at this speed." + _dflt("runtime", "limits.retreat_speed", "m/s")),
-    click.option("--retreat-distance", type=float, default=None, help="Longest retreat after a force or moment stop." + _dflt("runtime", "limits.retreat_distance", "m")),
-    click.option("--tracking-limit", type=float, default=None, help="Safety stop when the fed-back rod tip is this far from every command of the tracking window (frozen feedback, a robot that does not follow)." + _dflt("runtime", "limits.tracking_limit", "m")),
-    click.option("--tracking-window", type=float, default=None, help="How far back commands are compared with the feedback (longer than the robot's delay)." + _dflt("runtime", "limits.tracking_window", "s")),
+    click.option("--force-limit", type=NUMBER, default=None, help="Safety stop above this measured force." + _dflt("runtime", "limits.force_limit", "N")),
+    click.option("--moment-limit", type=NUMBER, default=None, help="Safety stop above this measured moment." + _dflt("runtime", "limits.moment_limit", "N m")),
+    click.option("--watchdog-ms", type=NUMBER, default=None, help="Safety stop after this long without sensor records or robot feedback." + _dflt("runtime", "limits.watchdog_ms", "ms")),
+    click.option("--workspace", type=NUMBER, default=None, help="Safety stop when the commanded rod tip is this far from its start." + _dflt("runtime", "limits.workspace", "m")),
+    click.option("--hold-deviation", type=NUMBER, default=None, help="A stop holds the robot at its fed-back pose only within this distance of the last command (else at the last command)." + _dflt("runtime", "limits.hold_deviation", "m")),
+    click.option("--retreat-speed", type=NUMBER, default=None, help="After a force or moment stop, back away to the last contact-free pose at this speed." + _dflt("runtime", "limits.retreat_speed", "m/s")),
+    click.option("--retreat-distance", type=NUMBER, default=None, help="Longest retreat after a force or moment stop." + _dflt("runtime", "limits.retreat_distance", "m")),
+    click.option("--tracking-limit", type=NUMBER, default=None, help="Safety stop when the fed-back rod tip is this far from every command of the tracking window (frozen feedback, a robot that does not follow)." + _dflt("runtime", "limits.tracking_limit", "m")),
+    click.option("--tracking-window", type=NUMBER, default=None, help="How far back commands are compared with the feedback (longer than the robot's delay)." + _dflt("runtime", "limits.tracking_window", "s")),
     click.option("--offset", "offset_mode", type=click.Choice(["measure", "off"]), default=None, help="The sensor's offset at start: measured with the rod free (nothing commanded) and subtracted, or used as it comes." + _dflt("runtime", "offset.mode")),
-    click.option("--offset-time", type=float, default=None, help="How long the offset is averaged at start." + _dflt("runtime", "offset.time", "s")),
-    click.option("--max-offset-force", type=float, default=None, help="Refuse the start when the force offset is larger (the rod may touch something)." + _dflt("runtime", "offset.max_force", "N")),
-    click.option("--max-offset-moment", type=float, default=None, help="Refuse the start when the moment offset is larger." + _dflt("runtime", "offset.max_moment", "N m")),
-    click.option("--connect-timeout", type=float, default=None, help="Longest wait for the sensor and the robot." + _dflt("runtime", "connect_timeout", "s")),
-    click.option("--start-tolerance", type=float, default=None, help="Largest distance of the robot from the initial pose at start." + _dflt("runtime", "start_tolerance", "m")),
+    click.option("--offset-time", type=NUMBER, default=None, help="How long the offset is averaged at start." + _dflt("runtime", "offset.time", "s")),
+    click.option("--max-offset-force", type=NUMBER, default=None, help="Refuse the start when the force offset is larger (the rod may touch something)." + _dflt("runtime", "offset.max_force", "N")),
+    click.option("--max-offset-moment", type=NUMBER, default=None, help="Refuse the start when the moment offset is larger." + _dflt("runtime", "offset.max_moment", "N m")),
+    click.option("--connect-timeout", type=_Number(min=0.0, max=3600.0, min_open=True), default=None, help="Longest wait for the sensor and the robot." + _dflt("runtime", "connect_timeout", "s")),
+    click.option("--start-tolerance", type=NUMBER, default=None, help="Largest distance of the robot from the initial pose at start." + _dflt("runtime", "start_tolerance", "m")),
     *_SCHEDULING_OPTIONS,
     *_link_option_flags("runtime"),
 ]
@@ -986,8 +1084,9 @@ def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
 @click.option("--mcap", "mcap", metavar="FILE", default=None, help=_MCAP_HELP)
 @click.option("--force", is_flag=True, help=_FORCE_HELP + " Replace --mcap FILE.")
+@_with(_LIMIT_OPTIONS)
 def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool,
-                **kw: Any) -> None:
+                max_memory: float, max_time: float, **kw: Any) -> None:
     """Run the HIL loop of SCENARIO in real time: RDT client of the F/T sensor at --sensor,
     EGM endpoint on UDP --egm-port for the robot controller, the scenario's compensator and
     virtual dynamics in a Rust real-time thread. Shows a live line; writes the same files as
@@ -1005,6 +1104,7 @@ def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots:
     """
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
+        check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-rt", force)
         mcap_path = _mcap_file(mcap, folder, force)
         _run_realtime(resolved, _runtime_options(**kw), folder, no_plots, force, mcap_path)
@@ -1086,7 +1186,7 @@ def _report_check(console: Console, report: dict[str, Any]) -> None:
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @_with(_HIL_OPTIONS + _MAPPING_OPTIONS)
-@click.option("--duration", type=float, default=1.0, show_default=True, metavar="S", help="How long to listen to the sensor and the robot, s.")
+@click.option("--duration", type=_Number(min=0.0, max=3600.0, min_open=True), default=1.0, show_default=True, metavar="S", help="How long to listen to the sensor and the robot, s.")
 @click.option("--out", "out", metavar="DIR", default=None, help="Write check.json (the report) to this folder.")
 def check_command(scenario: str, sets: tuple[str, ...], duration: float, out: str | None, **kw: Any) -> None:
     """Check that `hilcontact hil SCENARIO` with the same options would start, commanding
@@ -1145,7 +1245,7 @@ def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tu
 @click.argument("scenario", default="paper-table1")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @click.option("--compensator", default="pida", show_default=True, help="Compensator kind of the loop (none shows the safety stop).")
-@click.option("--robot-delay", type=float, default=0.02, show_default=True, help="The emulated robot's response delay, s.")
+@click.option("--robot-delay", type=NON_NEGATIVE, default=0.02, show_default=True, help="The emulated robot's response delay, s.")
 @_protocol_option("sensor", "facility")
 @_protocol_option("robot", "facility")
 @_with(_SCHEDULING_OPTIONS)
@@ -1153,9 +1253,10 @@ def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tu
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
 @click.option("--mcap", "mcap", metavar="FILE", default=None, help=_MCAP_HELP)
 @click.option("--force", is_flag=True, help=_FORCE_HELP + " Replace --mcap FILE.")
+@_with(_LIMIT_OPTIONS)
 def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay: float, sensor_protocol: str | None,
             robot_protocol: str | None, rt_priority: int | None, no_lock_memory: bool, cpu: int | None,
-            out: str | None, no_plots: bool, mcap: str | None, force: bool) -> None:
+            out: str | None, no_plots: bool, mcap: str | None, force: bool, max_memory: float, max_time: float) -> None:
     """Run the emulated facility and the real-time HIL loop on loopback in one process (free
     ports, HTTP included): `hilcontact facility` and `hilcontact hil` together.
 
@@ -1177,6 +1278,7 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
             # the robot's packets clock the loop (KUKA RSI): the scenario runs at its cycle
             overrides["simulation.period"] = kinds["facility"]["robot"][robot_kind]["period"]
         resolved = load_scenario(scenario, overrides)
+        check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-demo-rt", force)
         mcap_path = _mcap_file(mcap, folder, force)
         scheduling = _scheduling_options(rt_priority, no_lock_memory, cpu)

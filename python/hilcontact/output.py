@@ -14,12 +14,19 @@ file, :data:`MARKER`, saying so. An output folder (``--out``) may be:
 
 A symbolic link to a folder is followed: the folder it points to is checked and replaced, the
 link stays. Disk and permission errors become a :class:`OutputError` naming the path.
+
+Temporary names carry the writing process's id (``.NAME.tmp-<pid>-<hex>``,
+``.NAME.old-<pid>-<hex>``). A process stopped by SIGTERM or Ctrl-C removes its own; one that
+was killed outright (SIGKILL, a power cut) cannot, so the next write next to them removes the
+temporary folders and files of processes that no longer run (:func:`remove_stale`), and
+puts back an ``.old-`` folder whose swap was cut short.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import uuid
 from collections.abc import Callable
@@ -27,7 +34,7 @@ from pathlib import Path
 
 from .errors import HilContactError
 
-__all__ = ["MARKER", "OutputError", "check_output_folder", "write_atomically"]
+__all__ = ["MARKER", "OutputError", "check_output_folder", "remove_stale", "staging_name", "write_atomically"]
 
 #: Name of the marker file in every folder hilcontact writes.
 MARKER = ".hilcontact.json"
@@ -37,6 +44,50 @@ class OutputError(HilContactError, ValueError):
     """An output folder that hilcontact will not write (it holds a user's files, it is the
     current folder, it is a file), or a disk or permission error while writing; the message is
     one line naming the path."""
+
+
+def staging_name(name: str, kind: str = "tmp") -> str:
+    """A hidden temporary name next to ``name``, with this process's id: ``.NAME.tmp-<pid>-<hex>``."""
+    return f".{name}.{kind}-{os.getpid()}-{uuid.uuid4().hex[:12]}"
+
+
+_TEMPORARY = re.compile(r"^\.(?P<name>.+)\.(?P<kind>tmp|old)-(?P<pid>\d+)-[0-9a-f]+$")
+
+
+def _running(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # e.g. another user's process
+        return True
+    return True
+
+
+def remove_stale(folder: Path, name: str | None = None) -> None:
+    """Remove the temporary folders and files in ``folder`` (of ``name`` only, if given) that
+    processes no longer running left behind; an ``.old-`` folder whose target is missing (its
+    swap was cut short) is put back instead. Errors are ignored: this only tidies."""
+    try:
+        entries = list(folder.iterdir())
+    except OSError:
+        return
+    for entry in entries:
+        match = _TEMPORARY.match(entry.name)
+        if match is None or (name is not None and match["name"] != name) or _running(int(match["pid"])):
+            continue
+        target = folder / match["name"]
+        try:
+            if match["kind"] == "old" and not target.exists():
+                os.rename(entry, target)
+            elif entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry, ignore_errors=True)
+            else:
+                entry.unlink()
+        except OSError:
+            pass
 
 
 def _describe(folder: Path, limit: int = 3) -> str:
@@ -91,27 +142,28 @@ def write_atomically(
     (``kind``: ``run``, ``comparison``, ...), then swap it into place. Checks ``directory``
     first (:func:`check_output_folder`). Returns ``directory`` as a Path."""
     target = check_output_folder(directory, overwrite)
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        # os.mkdir (not tempfile.mkdtemp) so that the folder gets the usual permissions
-        staging = target.parent / f".{target.name}.tmp-{uuid.uuid4().hex[:12]}"
-        os.mkdir(staging)
-    except OSError as exc:
-        raise OutputError(f"--out {directory}: cannot create it: {exc.strerror or exc}") from None
-    try:
-        write(staging)
-        (staging / MARKER).write_text(json.dumps({"written_by": "hilcontact", "kind": kind}) + "\n", encoding="utf-8")
-    except OSError as exc:
-        shutil.rmtree(staging, ignore_errors=True)
-        where = exc.filename if exc.filename else directory
-        raise OutputError(f"--out {directory}: cannot write {where}: {exc.strerror or exc}") from None
+    # os.mkdir (not tempfile.mkdtemp) so that the folder gets the usual permissions
+    staging = target.parent / staging_name(target.name)
+    try:  # one try from mkdir to swap: whatever stops it (an error, Ctrl-C, SIGTERM) removes staging
+        try:
+            target.parent.mkdir(parents=True, exist_ok=True)
+            remove_stale(target.parent, target.name)
+            os.mkdir(staging)
+        except OSError as exc:
+            raise OutputError(f"--out {directory}: cannot create it: {exc.strerror or exc}") from None
+        try:
+            write(staging)
+            (staging / MARKER).write_text(json.dumps({"written_by": "hilcontact", "kind": kind}) + "\n", encoding="utf-8")
+        except OSError as exc:
+            where = exc.filename if exc.filename else directory
+            raise OutputError(f"--out {directory}: cannot write {where}: {exc.strerror or exc}") from None
+        try:
+            _swap_into_place(staging, target)
+        except OSError as exc:
+            raise OutputError(f"--out {directory}: cannot replace it: {exc.strerror or exc}") from None
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    try:
-        _swap_into_place(staging, target)
-    except OSError as exc:
-        raise OutputError(f"--out {directory}: cannot replace it: {exc.strerror or exc}") from None
     return Path(directory)
 
 
@@ -119,7 +171,7 @@ def _swap_into_place(staging: Path, target: Path) -> None:
     """Replace ``target`` by ``staging`` (same parent folder) with renames only."""
     old: Path | None = None
     if target.exists():
-        old = target.parent / f".{target.name}.old-{uuid.uuid4().hex[:12]}"
+        old = target.parent / staging_name(target.name, "old")
         os.rename(target, old)
     try:
         os.rename(staging, target)

@@ -91,7 +91,9 @@ def _show(value: Any, limit: int = 60) -> str:
 
 
 def _fmt(value: float) -> str:
-    """A float as a short decimal, for messages and rounded values."""
+    """A float as a short decimal, for messages and rounded values (an int as it is)."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return str(value)
     return f"{value:.12g}"
 
 
@@ -150,11 +152,29 @@ def _inertia(value: Any) -> list[float] | list[list[float]]:
 
 # The values of the schema's `x-value` marker: the shape check of each (the core checks the
 # rest: non-zero normals and quaternions, symmetric positive-definite inertia).
-_VALUE_TYPES: dict[str, Any] = {
-    "vec3": Annotated[list[float], BeforeValidator(_vec3)],
-    "quaternion": Annotated[list[float], BeforeValidator(_quaternion)],
-    "inertia": Annotated[Any, BeforeValidator(_inertia)],
-}
+_VALUE_CHECKS: dict[str, Any] = {"vec3": _vec3, "quaternion": _quaternion, "inertia": _inertia}
+
+
+def _flat(value: Any) -> list[float]:
+    return [x for item in value for x in _flat(item)] if isinstance(value, list) else [value]
+
+
+def _value_type(marker: str, magnitude: float | None) -> Any:
+    """The annotation of an `x-value` field: its shape check, and with the schema's
+    `x-magnitude` the largest ``|x|`` of each of its numbers."""
+    shape = _VALUE_CHECKS[marker]
+
+    def check(value: Any) -> Any:
+        checked = shape(value)
+        if magnitude is not None and not all(abs(x) <= magnitude for x in _flat(checked)):
+            raise ValueError(f"every number must be finite with |x| <= {_bound(magnitude)}, got {_show(value)}")
+        return checked
+
+    return Annotated[Any if marker == "inertia" else list[float], BeforeValidator(check)]
+
+
+#: The largest value of the schema's unsigned integer formats (the core's u32, u64).
+_UINT_MAX = {"uint32": 2**32 - 1, "uint64": 2**64 - 1}
 
 
 # --------------------------------------------------------------------------------------
@@ -215,7 +235,7 @@ def _field(prop: Mapping[str, Any], required: bool) -> tuple[Any, Any]:
     choices = _choices(schema)
     factory: Any = None
     if marker is not None:
-        annotation = _VALUE_TYPES[marker]
+        annotation = _value_type(marker, schema.get("x-magnitude"))
     elif choices is not None:
         annotation = Literal[tuple(choices)]  # type: ignore[valid-type]
     elif _is_tagged_union(schema):
@@ -239,10 +259,16 @@ def _field(prop: Mapping[str, Any], required: bool) -> tuple[Any, Any]:
         for key, name in (("minimum", "ge"), ("exclusiveMinimum", "gt"), ("maximum", "le"), ("exclusiveMaximum", "lt")):
             if key in schema:
                 kwargs[name] = schema[key]
+        if annotation is int and "maximum" not in schema and schema.get("format") in _UINT_MAX:
+            kwargs["le"] = _UINT_MAX[schema["format"]]
     elif schema.get("type") == "boolean":
         annotation = bool
     elif schema.get("type") == "string":
         annotation = str
+        if "minLength" in schema:
+            kwargs["min_length"] = schema["minLength"]
+        if "maxLength" in schema:
+            kwargs["max_length"] = schema["maxLength"]
     else:  # pragma: no cover - a schema shape this module does not know
         raise ImportError(f"hilcontact.scenario cannot read the core's schema {schema!r}")
     if factory is not None:
@@ -350,6 +376,8 @@ class _ScenarioBase(_Table):
             checked = cls.model_validate(_plain(data))
         except ValidationError as exc:
             raise _scenario_error(exc) from None
+        except RecursionError:
+            raise ScenarioError("scenario: a value is nested too deeply (a scenario's values are numbers, strings, lists of numbers and tables)") from None
         try:
             resolved = _core.resolve_scenario(checked.to_json())
         except ScenarioError as exc:
@@ -532,6 +560,10 @@ def _error_line(err: Mapping[str, Any]) -> str:
         return at(f"expected true or false, got {_show(value)}")
     if kind in ("string_type", "string_sub_type"):
         return at(f"expected a string, got {_show(value)}")
+    if kind == "string_too_long":
+        return at(f"must be at most {ctx.get('max_length')} characters, got {len(value)}: {_show(value)}")
+    if kind == "string_too_short":
+        return at(f"must be at least {ctx.get('min_length')} character(s), got {_show(value)}")
     if kind == "finite_number":
         return at(f"must be a finite number, got {_show(value)}")
     if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
@@ -562,6 +594,16 @@ def _hint(description: str) -> str:
     return first
 
 
+def _bound(value: float) -> str:
+    """A range's bound, short: ``0``, ``0.001``, ``86400``, ``1e-6``, ``1e11``."""
+    if isinstance(value, int) and not isinstance(value, bool):
+        return str(value)
+    if value == 0 or 1e-3 <= abs(value) < 1e6:
+        return _fmt(value)
+    mantissa, exponent = f"{value:.11e}".split("e")
+    return f"{mantissa.rstrip('0').rstrip('.')}e{int(exponent)}"
+
+
 def _range_words(field: Any) -> str:
     """The range of a field in the core's words: ``> 0``, ``>= 1``, ``between 0 and 1
     (exclusive)``."""
@@ -571,11 +613,11 @@ def _range_words(field: Any) -> str:
             if getattr(item, name, None) is not None:
                 bounds[name] = getattr(item, name)
     if "gt" in bounds and "lt" in bounds and len(bounds) == 2:
-        return f"between {_fmt(bounds['gt'])} and {_fmt(bounds['lt'])} (exclusive)"
+        return f"between {_bound(bounds['gt'])} and {_bound(bounds['lt'])} (exclusive)"
     if "ge" in bounds and "le" in bounds and len(bounds) == 2:
-        return f"between {_fmt(bounds['ge'])} and {_fmt(bounds['le'])}"
+        return f"between {_bound(bounds['ge'])} and {_bound(bounds['le'])}"
     ops = {"ge": ">=", "gt": ">", "le": "<=", "lt": "<"}
-    return " and ".join(f"{ops[name]} {_fmt(bound)}" for name, bound in bounds.items())
+    return " and ".join(f"{ops[name]} {_bound(bound)}" for name, bound in bounds.items())
 
 
 def _scenario_error(exc: ValidationError) -> ScenarioError:
@@ -626,6 +668,8 @@ def _parse_toml(text: str, source: str) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{source}: invalid TOML: {exc}") from None
+    except RecursionError:
+        raise ScenarioError(f"{source}: invalid TOML: arrays or tables nested too deeply") from None
 
 
 _SEGMENT = re.compile(r"^([A-Za-z_][A-Za-z0-9_-]*)((?:\[\d+\])*)$")
@@ -694,12 +738,12 @@ def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any] | None)
                 raise ScenarioError(f"{key}: {here} is not a table, it is {_show(child)}")
             node = child
         last = steps[-1]
-        if isinstance(last, int):
-            if last >= len(node):
-                raise ScenarioError(f"{key}: {_dotted(steps[:-1])} has only {len(node)} item(s)")
+        if isinstance(last, int) and last >= len(node):
+            raise ScenarioError(f"{key}: {_dotted(steps[:-1])} has only {len(node)} item(s)")
+        try:
             node[last] = _plain(value)
-        else:
-            node[last] = _plain(value)
+        except RecursionError:
+            raise ScenarioError(f"{key}: the value is nested too deeply") from None
     return data
 
 

@@ -8,7 +8,14 @@ A sweep's folder holds:
 - ``results.parquet``: one row per finished run (see :data:`RESULT_COLUMNS`);
 - ``parts/``: while the sweep runs, finished rows in small Parquet files, each written
   atomically; they are merged into ``results.parquet`` at the end or on interruption, so an
-  interrupted sweep keeps every finished row and ``--resume`` skips them.
+  interrupted sweep keeps every finished row and ``--resume`` skips them. A part that cannot
+  be read (truncated, not Parquet, without the result columns) is skipped and reported, renamed
+  ``*.unreadable``, and its runs are run again by ``--resume``; an unreadable ``sweep.json`` or
+  ``results.parquet`` is one line of error naming the file.
+
+Before anything runs, a sweep whose estimated memory or time is above its limits
+(:class:`~hilcontact.limits.Limits`) is refused, as is a grid of more than
+:data:`MAX_GRID_VALUES` values per key or :data:`MAX_SEEDS` seeds.
 
 Time series are never kept: a run is reduced to its summary in the core
 (``_core.simulate_batch``), so memory does not grow with the number of runs beyond one small
@@ -31,10 +38,21 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 
 from .comparison import comparison_scenarios, parse_kinds
 from .errors import HilContactError, ScenarioError
-from .output import OutputError, mark_folder, marker_kind
+from .limits import (
+    SWEEP_BYTES_PER_RUN,
+    SWEEP_SECONDS_PER_RUN,
+    Estimate,
+    Limits,
+    check_estimate,
+    cores,
+    describe,
+    run_estimate,
+)
+from .output import OutputError, mark_folder, marker_kind, remove_stale, staging_name
 from .run import _core
 from .scenario import Scenario, load_scenario
 
@@ -53,6 +71,11 @@ __all__ = [
 RESULTS_FILE = "results.parquet"
 SPEC_FILE = "sweep.json"
 PARTS_DIR = "parts"
+
+#: Most values of one ``--grid`` key.
+MAX_GRID_VALUES = 100_000
+#: Most noise seeds per grid point (``--seeds``).
+MAX_SEEDS = 100_000
 
 #: Columns of a result row, after the swept keys (one column per ``--grid`` key, named by the
 #: key), in this order. ``run_key`` identifies the run (grid values, compensator, seed) for
@@ -100,6 +123,8 @@ def _toml_value(text: str) -> Any:
         return tomllib.loads("v = " + text)["v"]
     except tomllib.TOMLDecodeError:
         return text
+    except RecursionError:
+        raise ScenarioError(f"--grid value {text[:40]!r}...: nested too deeply") from None
 
 
 def parse_grid(spec: str) -> GridAxis:
@@ -131,13 +156,15 @@ def parse_grid(spec: str) -> GridAxis:
             raise ScenarioError(f"--grid {key}: range {body!r}: COUNT must be a whole number") from None
         if not (math.isfinite(start) and math.isfinite(stop)):
             raise ScenarioError(f"--grid {key}: range {body!r}: START and STOP must be finite")
-        if count < 1:
-            raise ScenarioError(f"--grid {key}: range {body!r}: COUNT must be >= 1")
+        if count < 1 or count > MAX_GRID_VALUES:
+            raise ScenarioError(f"--grid {key}: range {body!r}: COUNT must be 1 to {MAX_GRID_VALUES}")
         if count == 1 and start != stop:
             raise ScenarioError(f"--grid {key}: range {body!r}: one value needs START == STOP")
         values: tuple[Any, ...] = tuple(_tidy(v) for v in np.linspace(start, stop, count))
     else:
         items = [item.strip() for item in body.split(",")]
+        if len(items) > MAX_GRID_VALUES:
+            raise ScenarioError(f"--grid {key}: {len(items)} values; at most {MAX_GRID_VALUES} per key")
         if any(not item for item in items):
             raise ScenarioError(f"--grid {key}: list {body!r} has an empty item")
         values = tuple(_toml_value(item) for item in items)
@@ -240,31 +267,61 @@ def run_key(values: Mapping[str, Any], kind: str, seed: int) -> str:
     return json.dumps({"grid": dict(values), "compensator": kind, "seed": seed}, sort_keys=True)
 
 
+def _sweep_estimate(runs: int, per_run: Estimate, threads: int | None) -> Estimate:
+    """A sweep's estimate: its runs' time plus their validation, and the memory of the runs
+    that run at once (one per thread) plus what the plan keeps per run."""
+    parallel = min(runs, threads or cores())
+    return Estimate(
+        memory=parallel * per_run.memory + runs * SWEEP_BYTES_PER_RUN,
+        time=runs * (per_run.time + SWEEP_SECONDS_PER_RUN),
+    )
+
+
 def plan_sweep(
     scenario: Any,
     grid: Mapping[str, Any] | Iterable[str | GridAxis] | None = None,
     compensators: str | Iterable[str] | None = None,
     seeds: int = 1,
     overrides: Mapping[str, Any] | None = None,
+    *,
+    limits: Limits | None = None,
+    threads: int | None = None,
 ) -> SweepPlan:
     """Resolve and validate every run of a sweep (see :func:`sweep` for the arguments).
 
     Raises ScenarioError naming the key and value for a bad grid, a bad override or a grid
-    point that is not a valid scenario.
+    point that is not a valid scenario, and for a sweep whose estimated memory or time is
+    above ``limits`` (checked before the grid is built: first with the base scenario's
+    runs, then with each swept key's most demanding value).
     """
-    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
-        raise ScenarioError(f"--seeds: expected a whole number >= 1, got {seeds!r}")
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= MAX_SEEDS:
+        raise ScenarioError(f"--seeds: expected a whole number from 1 to {MAX_SEEDS}, got {seeds!r}")
     axes = _axes(grid)
     kinds = parse_kinds(compensators)
     base_scenario = load_scenario(scenario, overrides)
     base = base_scenario.to_dict()
-    # each value alone first, so that a bad value is reported with its key
+    runs = math.prod(len(axis.values) for axis in axes) * len(kinds) * seeds
+    shape = " x ".join([*(f"{len(a.values)} {a.key}" for a in axes), f"{len(kinds)} compensator(s)", f"{seeds} seed(s)"])
+    per_run = run_estimate(base_scenario, saved=False)
+    what = f"the sweep of {runs} runs ({shape}; each {describe(base_scenario)})"
+    check_estimate(_sweep_estimate(runs, per_run, threads), limits, what)
+    # each value alone first, so that a bad value is reported with its key; the most
+    # demanding value of each key scales the estimate
+    memory_factor = time_factor = 1.0
     for axis in axes:
+        worst = Estimate(0.0, 0.0)
         for value in axis.values:
             try:
-                load_scenario(base, {axis.key: value})
+                alone = run_estimate(load_scenario(base, {axis.key: value}), saved=False)
             except ScenarioError as exc:
                 raise ScenarioError(f"--grid {axis.key}={value!r}: {exc}") from None
+            worst = Estimate(max(worst.memory, alone.memory), max(worst.time, alone.time))
+        memory_factor *= worst.memory / per_run.memory
+        time_factor *= worst.time / per_run.time
+    if memory_factor > 1.0 or time_factor > 1.0:
+        scaled = per_run.scaled(max(memory_factor, 1.0), max(time_factor, 1.0))
+        what = f"the sweep of {runs} runs ({shape}; at its most demanding grid values)"
+        check_estimate(_sweep_estimate(runs, scaled, threads), limits, what)
     points = [dict(zip([a.key for a in axes], combo)) for combo in itertools.product(*[a.values for a in axes])]
     scenarios: dict[tuple[int, str], dict[str, Any]] = {}
     frequencies: dict[int, float] = {}
@@ -293,7 +350,7 @@ def plan_sweep(
 
 
 def _write_parquet_atomically(frame: pd.DataFrame, path: Path) -> None:
-    staging = path.with_name(f".{path.name}.tmp-{uuid.uuid4().hex[:12]}")
+    staging = path.with_name(staging_name(path.name))
     try:
         frame.to_parquet(staging, engine="pyarrow", index=False)
         os.replace(staging, path)
@@ -302,29 +359,68 @@ def _write_parquet_atomically(frame: pd.DataFrame, path: Path) -> None:
             staging.unlink()
 
 
+#: Columns without which a file of rows is not a sweep's.
+_KEY_COLUMNS = ("run_key", "point", "compensator", "seed", "status")
+
+
+def _read_rows(path: Path) -> pd.DataFrame | str:
+    """The rows of a results or part file, or why they cannot be read."""
+    try:
+        frame = pd.read_parquet(path, engine="pyarrow")
+    except (OSError, ValueError, pa.ArrowException) as exc:
+        return " ".join(str(exc).split()) or type(exc).__name__
+    missing = [c for c in _KEY_COLUMNS if c not in frame.columns]
+    if missing:
+        return f"no {missing[0]!r} column"
+    return frame
+
+
+def _parts(folder: Path) -> list[Path]:
+    return sorted((folder / PARTS_DIR).glob("part-*.parquet")) if (folder / PARTS_DIR).is_dir() else []
+
+
+def unreadable_parts(directory: str | os.PathLike[str]) -> list[tuple[Path, str]]:
+    """The part files of a sweep folder that cannot be read, with the reason."""
+    out = []
+    for part in _parts(Path(directory)):
+        rows = _read_rows(part)
+        if isinstance(rows, str):
+            out.append((part, rows))
+    return out
+
+
 def load_results(directory: str | os.PathLike[str]) -> pd.DataFrame:
-    """Every finished row of a sweep folder (``results.parquet`` and any unmerged parts)."""
+    """Every finished row of a sweep folder (``results.parquet`` and the unmerged parts that
+    can be read; an unreadable part is left out, its runs are not finished). Raises
+    :class:`~hilcontact.output.OutputError` (one line) if ``results.parquet`` cannot be read."""
     folder = Path(directory)
-    files = ([folder / RESULTS_FILE] if (folder / RESULTS_FILE).is_file() else []) + sorted(
-        (folder / PARTS_DIR).glob("part-*.parquet") if (folder / PARTS_DIR).is_dir() else []
-    )
-    if not files:
+    frames = []
+    if (folder / RESULTS_FILE).is_file():
+        rows = _read_rows(folder / RESULTS_FILE)
+        if isinstance(rows, str):
+            raise OutputError(
+                f"{folder / RESULTS_FILE}: cannot be read ({rows[:200]}); move it away (its runs are then "
+                "run again by --resume) or choose another folder"
+            )
+        frames.append(rows)
+    frames += [rows for rows in map(_read_rows, _parts(folder)) if not isinstance(rows, str)]
+    if not frames:
         raise HilContactError(f"{folder}: no sweep results ({RESULTS_FILE}) here")
-    frames = [pd.read_parquet(f, engine="pyarrow") for f in files]
     frame = pd.concat(frames, ignore_index=True) if len(frames) > 1 else frames[0]
     return frame.drop_duplicates(subset="run_key", keep="first").reset_index(drop=True)
 
 
 def _merge(folder: Path, order: Sequence[str]) -> pd.DataFrame | None:
-    """Merge ``results.parquet`` and the parts into ``results.parquet`` (rows in plan order),
-    then remove the parts. Returns the merged rows (None if there are none)."""
-    parts = sorted((folder / PARTS_DIR).glob("part-*.parquet")) if (folder / PARTS_DIR).is_dir() else []
+    """Merge ``results.parquet`` and the readable parts into ``results.parquet`` (the plan's
+    rows, in plan order), then remove those parts. Returns the merged rows (None if there
+    are none)."""
+    parts = [part for part in _parts(folder) if not isinstance(_read_rows(part), str)]
     if not parts and not (folder / RESULTS_FILE).is_file():
         return None
     frame = load_results(folder)
     rank = {key: i for i, key in enumerate(order)}
-    frame = frame.assign(_rank=frame["run_key"].map(rank)).sort_values("_rank", kind="stable").drop(columns="_rank")
-    frame = frame.reset_index(drop=True)
+    frame = frame.assign(_rank=frame["run_key"].map(rank)).dropna(subset="_rank")
+    frame = frame.sort_values("_rank", kind="stable").drop(columns="_rank").reset_index(drop=True)
     _write_parquet_atomically(frame, folder / RESULTS_FILE)
     for part in parts:
         part.unlink()
@@ -370,14 +466,33 @@ def _chunks(items: list[Any], size: int) -> Iterator[list[Any]]:
         yield items[start : start + size]
 
 
-def check_sweep_folder(folder: Path, plan: SweepPlan, resume: bool) -> bool:
+def _has_results(folder: Path) -> bool:
+    return (folder / RESULTS_FILE).is_file() or bool(_parts(folder))
+
+
+def _recorded_spec(spec_path: Path) -> dict[str, Any]:
+    """The sweep recorded in ``sweep.json``; OutputError (one line) if it cannot be read."""
+    try:
+        recorded = json.loads(spec_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError, RecursionError) as exc:
+        reason = getattr(exc, "strerror", None) or " ".join(str(exc).split()) or type(exc).__name__
+        raise OutputError(
+            f"--resume {spec_path.parent}: {SPEC_FILE} cannot be read ({reason}); choose another --out"
+        ) from None
+    if not isinstance(recorded, dict):
+        raise OutputError(f"--resume {spec_path.parent}: {SPEC_FILE} does not describe a sweep; choose another --out")
+    return recorded
+
+
+def check_sweep_folder(folder: Path, plan: SweepPlan, resume: bool) -> list[str]:
     """Check, writing nothing, that ``folder`` can take this sweep: new, empty, or (with
-    ``resume``) a folder of the same sweep; returns whether it holds results already. Raises
-    ScenarioError or OutputError (one line)."""
+    ``resume``) a folder of the same sweep whose ``sweep.json`` and ``results.parquet`` can be
+    read. Returns notes for the user (the unreadable part files that will be skipped, their
+    runs run again). Raises ScenarioError or OutputError (one line)."""
     spec_path = folder / SPEC_FILE
     if folder.exists() and not folder.is_dir():
         raise ScenarioError(f"--out {folder}: exists and is not a directory")
-    has_results = (folder / RESULTS_FILE).is_file() or any((folder / PARTS_DIR).glob("part-*.parquet"))
+    has_results = _has_results(folder)
     kind = marker_kind(folder)
     is_sweep = kind == "sweep" or spec_path.is_file() or has_results
     if folder.is_dir() and not is_sweep and any(folder.iterdir()):
@@ -385,7 +500,7 @@ def check_sweep_folder(folder: Path, plan: SweepPlan, resume: bool) -> bool:
         raise OutputError(f"--out {folder}: holds {what}; a sweep needs a new or empty folder (or its own, with --resume)")
     if resume:
         if spec_path.is_file():
-            recorded = json.loads(spec_path.read_text(encoding="utf-8"))
+            recorded = _recorded_spec(spec_path)
             wanted = json.loads(json.dumps(plan.spec()))
             for field in ("scenario", "grid", "compensators", "seeds"):
                 if recorded.get(field) != wanted.get(field):
@@ -396,18 +511,29 @@ def check_sweep_folder(folder: Path, plan: SweepPlan, resume: bool) -> bool:
                     )
         elif has_results:
             raise ScenarioError(f"--resume {folder}: results without {SPEC_FILE}; choose another --out")
+        if (folder / RESULTS_FILE).is_file():
+            load_results(folder)  # one line if results.parquet cannot be read
     elif has_results:
         raise ScenarioError(
             f"--out {folder}: already holds sweep results; add --resume to continue that sweep "
             "(its finished runs are skipped), or choose another --out"
         )
-    return has_results
+    return [
+        f"{part}: cannot be read ({reason[:200]}); skipped (renamed {part.name}.unreadable), its runs are run again"
+        for part, reason in unreadable_parts(folder)
+    ]
 
 
 def _prepare_folder(folder: Path, plan: SweepPlan, resume: bool) -> set[str]:
-    """Check (:func:`check_sweep_folder`) and create the sweep folder; returns the keys of the
-    runs already done."""
-    has_results = check_sweep_folder(folder, plan, resume)
+    """Check (:func:`check_sweep_folder`) and create the sweep folder; set unreadable parts
+    aside (``*.unreadable``) and remove the temporary files of a sweep that was killed;
+    returns the keys of the runs already done."""
+    check_sweep_folder(folder, plan, resume)
+    for part, _ in unreadable_parts(folder):
+        os.replace(part, part.with_name(part.name + ".unreadable"))
+    remove_stale(folder)
+    remove_stale(folder / PARTS_DIR)
+    has_results = _has_results(folder)
     spec_path = folder / SPEC_FILE
     (folder / PARTS_DIR).mkdir(parents=True, exist_ok=True)
     mark_folder(folder, "sweep")
@@ -497,6 +623,7 @@ def sweep(
     chunk_size: int | None = None,
     progress: Progress | None = None,
     flush_seconds: float = 5.0,
+    limits: Limits | None = None,
 ) -> pd.DataFrame:
     """Run a scenario over a grid, compensators and seeds; one summary row per run.
 
@@ -518,6 +645,7 @@ def sweep(
         chunk_size: runs per core call (local) or per Dask task (default 16 per thread, 200).
         progress: called with (runs done, total) after each chunk.
         flush_seconds: how often finished rows are written to ``out``.
+        limits: refuse a sweep estimated above these (default :class:`Limits`).
 
     Returns the rows (see :data:`RESULT_COLUMNS`; one column per swept key after ``point``),
     in grid order. Identical inputs give identical rows (but for ``wall_time``), locally or
@@ -525,7 +653,7 @@ def sweep(
     finished rows are in ``out`` before the exception propagates.
     """
     return run_plan(
-        plan_sweep(scenario, grid, compensators, seeds, overrides),
+        plan_sweep(scenario, grid, compensators, seeds, overrides, limits=limits, threads=threads),
         out,
         resume=resume,
         dask=dask,
@@ -554,7 +682,10 @@ def run_plan(
     everything = list(plan.runs())
     order = [r[0] for r in everything]
     folder = Path(out) if out is not None else None
-    done: set[str] = _prepare_folder(folder, plan, resume) if folder is not None else set()
+    try:
+        done: set[str] = _prepare_folder(folder, plan, resume) if folder is not None else set()
+    except OSError as exc:
+        raise OutputError(f"--out {folder}: cannot write {exc.filename or folder}: {exc.strerror or exc}") from None
     pending = [r for r in everything if r[0] not in done]
     finished = len(everything) - len(pending)
     kept: list[pd.DataFrame] = []  # rows when there is no folder
@@ -581,11 +712,14 @@ def run_plan(
     if progress is not None:
         progress(finished, len(everything))
     try:
-        _execute(plan, pending, emit, threads, chunk_size, dask)
-    finally:
-        if folder is not None:
-            flush()
-            _merge(folder, order)
+        try:
+            _execute(plan, pending, emit, threads, chunk_size, dask)
+        finally:
+            if folder is not None:
+                flush()
+                _merge(folder, order)
+    except OSError as exc:
+        raise OutputError(f"--out {folder}: cannot write {exc.filename or folder}: {exc.strerror or exc}") from None
     if folder is not None:
         return load_results(folder)
     frame = pd.concat(kept, ignore_index=True) if kept else _rows(plan, [], {c: [] for c in _CORE_COLUMNS})

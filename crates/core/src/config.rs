@@ -10,12 +10,23 @@ use serde::{Deserialize, Serialize};
 use crate::compensator::CompensatorConfig;
 use crate::metrics::Tolerances;
 
+/// Longest scenario name, characters (it names the output folder).
+pub const MAX_NAME_LENGTH: usize = 100;
+/// Smallest principal moment of inertia, kg·m² (of a principal moment, or the smallest
+/// eigenvalue of a tensor).
+pub const MIN_INERTIA: f64 = 1e-6;
+/// Most control ticks of a run (`simulation.duration / simulation.period`): past it the core
+/// refuses the scenario rather than allocate its records.
+pub const MAX_TICKS: f64 = 1e9;
+
 /// A complete scenario: two satellites, the collision geometry, the contact, the facility,
 /// the compensator and the metric settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Scenario {
-    /// Short name (used for the output folder).
+    /// Short name (used for the output folder): 1 to 100 characters, not `.` or `..`, without
+    /// `/`, `\\` or control characters.
+    #[schemars(length(min = 1, max = MAX_NAME_LENGTH))]
     pub name: String,
     /// One line for humans.
     #[serde(default)]
@@ -48,25 +59,25 @@ pub struct Scenario {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SimulationConfig {
-    /// Simulated duration, s (> 0).
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// Simulated duration, s (> 0, at most a day).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 86400.0))]
     pub duration: f64,
-    /// Control period T in s, > 0.
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// Control period T in s, 1 µs to 1 s.
+    #[schemars(range(min = 1e-6, max = 1.0))]
     pub period: f64,
-    /// Facility sub-steps per control period (>= 1).
+    /// Facility sub-steps per control period (1 to 1000).
     #[serde(default = "default_substeps")]
-    #[schemars(range(min = 1))]
+    #[schemars(range(min = 1, max = 1000))]
     pub plant_substeps: u32,
-    /// RK4 steps per control period for the ideal reference while in contact (>= 1); free
-    /// flight takes one step per period.
+    /// RK4 steps per control period for the ideal reference while in contact (1 to 1000);
+    /// free flight takes one step per period.
     #[serde(default = "default_reference_substeps")]
-    #[schemars(range(min = 1))]
+    #[schemars(range(min = 1, max = 1000))]
     pub reference_substeps: u32,
     /// The run is `diverged` once its energy exceeds this many times the larger of the
-    /// initial energy and the reference's largest energy (> 1).
+    /// initial energy and the reference's largest energy (> 1, <= 1e12).
     #[serde(default = "default_divergence_ratio")]
-    #[schemars(extend("exclusiveMinimum" = 1.0))]
+    #[schemars(extend("exclusiveMinimum" = 1.0), range(max = 1e12))]
     pub divergence_energy_ratio: f64,
 }
 
@@ -84,27 +95,28 @@ fn default_divergence_ratio() -> f64 {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct BodyConfig {
-    /// kg, > 0.
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// kg, 0.001 to 1e7.
+    #[schemars(range(min = 1e-3, max = 1e7))]
     pub mass: f64,
     /// Inertia about the centre of mass in the body frame, kg·m²: principal moments or a
-    /// symmetric positive-definite tensor.
+    /// symmetric positive-definite tensor (every moment >= 1e-6, every entry |I| <= 1e10).
+    #[schemars(extend("x-magnitude" = 1e10))]
     pub inertia: Inertia,
     /// Initial centre-of-mass position, m (world frame).
     #[serde(default)]
-    #[schemars(extend("x-value" = "vec3"))]
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e3))]
     pub position: [f64; 3],
     /// Initial attitude, unit quaternion [w, x, y, z], body to world.
     #[serde(default = "identity_quaternion")]
-    #[schemars(extend("x-value" = "quaternion"))]
+    #[schemars(extend("x-value" = "quaternion", "x-magnitude" = 1e6))]
     pub orientation: [f64; 4],
     /// Initial centre-of-mass velocity, m/s (world frame).
     #[serde(default)]
-    #[schemars(extend("x-value" = "vec3"))]
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e3))]
     pub velocity: [f64; 3],
     /// Initial angular velocity, rad/s (body frame).
     #[serde(default)]
-    #[schemars(extend("x-value" = "vec3"))]
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e3))]
     pub angular_velocity: [f64; 3],
 }
 
@@ -128,7 +140,7 @@ fn identity_quaternion() -> [f64; 4] {
 #[serde(deny_unknown_fields)]
 pub struct RodConfig {
     /// Rod tip (the contact point) in the servicer body frame, m.
-    #[schemars(extend("x-value" = "vec3"))]
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e3))]
     pub tip: [f64; 3],
 }
 
@@ -140,10 +152,10 @@ pub struct WallConfig {
     #[serde(default)]
     pub name: String,
     /// A point of the wall, m (target frame).
-    #[schemars(extend("x-value" = "vec3"))]
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e3))]
     pub point: [f64; 3],
     /// Normal from the wall into free space (non-zero; normalised by the core).
-    #[schemars(extend("x-value" = "vec3"))]
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e6))]
     pub normal: [f64; 3],
 }
 
@@ -165,16 +177,16 @@ pub struct ContactConfig {
     /// Contact law.
     #[serde(default)]
     pub model: ContactModelKind,
-    /// Stiffness k: N/m (linear) or N/m^n (Hunt-Crossley), > 0.
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// Stiffness k: N/m (linear) or N/m^n (Hunt-Crossley), > 0, <= 1e11.
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e11))]
     pub stiffness: f64,
-    /// Damping c: N·s/m (linear) or N·s/m^(n+1) (Hunt-Crossley), >= 0.
+    /// Damping c: N·s/m (linear) or N·s/m^(n+1) (Hunt-Crossley), 0 to 1e9.
     #[serde(default)]
-    #[schemars(range(min = 0.0))]
+    #[schemars(range(min = 0.0, max = 1e9))]
     pub damping: f64,
-    /// Hunt-Crossley exponent n (> 0); unused by the linear law.
+    /// Hunt-Crossley exponent n (> 0, <= 5); unused by the linear law.
     #[serde(default = "default_exponent")]
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 5.0))]
     pub exponent: f64,
 }
 
@@ -186,47 +198,49 @@ fn default_exponent() -> f64 {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FacilityConfig {
-    /// Pure delay of the robot's response, s (a whole number of periods).
+    /// Pure delay of the robot's response, s (a whole number of periods, 0 to 60, at most
+    /// the run's duration).
     #[serde(default)]
-    #[schemars(range(min = 0.0))]
+    #[schemars(range(min = 0.0, max = 60.0))]
     pub robot_delay: f64,
-    /// Pure delay of the sensor, s (a whole number of periods).
+    /// Pure delay of the sensor, s (a whole number of periods, 0 to 60, at most the run's
+    /// duration).
     #[serde(default)]
-    #[schemars(range(min = 0.0))]
+    #[schemars(range(min = 0.0, max = 60.0))]
     pub sensor_delay: f64,
-    /// Natural frequency of the robot's second-order servo lag, Hz (0 = no lag).
+    /// Natural frequency of the robot's second-order servo lag, Hz (0 = no lag, <= 1e4).
     #[serde(default)]
-    #[schemars(range(min = 0.0))]
+    #[schemars(range(min = 0.0, max = 1e4))]
     pub servo_frequency: f64,
-    /// Damping ratio of the servo lag (> 0).
+    /// Damping ratio of the servo lag (> 0, <= 100).
     #[serde(default = "default_servo_damping")]
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 100.0))]
     pub servo_damping: f64,
-    /// Gaussian noise on each force axis, N (standard deviation).
+    /// Gaussian noise on each force axis, N (standard deviation, 0 to 1e6).
     #[serde(default)]
-    #[schemars(range(min = 0.0))]
+    #[schemars(range(min = 0.0, max = 1e6))]
     pub sensor_noise: f64,
-    /// Gaussian noise on each moment axis, N·m (standard deviation).
+    /// Gaussian noise on each moment axis, N·m (standard deviation, 0 to 1e6).
     #[serde(default)]
-    #[schemars(range(min = 0.0))]
+    #[schemars(range(min = 0.0, max = 1e6))]
     pub torque_noise: f64,
-    /// Force quantisation step, N (0 = none).
+    /// Force quantisation step, N (0 = none, <= 1e6).
     #[serde(default)]
-    #[schemars(range(min = 0.0))]
+    #[schemars(range(min = 0.0, max = 1e6))]
     pub force_resolution: f64,
-    /// Moment quantisation step, N·m (0 = none).
+    /// Moment quantisation step, N·m (0 = none, <= 1e6).
     #[serde(default)]
-    #[schemars(range(min = 0.0))]
+    #[schemars(range(min = 0.0, max = 1e6))]
     pub torque_resolution: f64,
     /// Sensor origin in the target frame, m.
     #[serde(default)]
-    #[schemars(extend("x-value" = "vec3"))]
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e3))]
     pub sensor_position: [f64; 3],
     /// Sensor attitude in the target frame, unit quaternion [w, x, y, z] (sensor to target).
     #[serde(default = "identity_quaternion")]
-    #[schemars(extend("x-value" = "quaternion"))]
+    #[schemars(extend("x-value" = "quaternion", "x-magnitude" = 1e6))]
     pub sensor_orientation: [f64; 4],
-    /// Seed of the sensor-noise generator.
+    /// Seed of the sensor-noise generator (integer, 0 to 2^64 - 1).
     #[serde(default)]
     pub seed: u64,
     /// Round delays to whole periods instead of rejecting them (the Python layer applies it).
@@ -261,28 +275,32 @@ impl Default for FacilityConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MetricsConfig {
-    /// A collision is an interval where the physical contact force exceeds this, N (> 0).
+    /// A collision is an interval where the physical contact force exceeds this, N (> 0,
+    /// <= 1e9).
     #[serde(default = "default_contact_threshold")]
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e9))]
     pub contact_threshold: f64,
-    /// Largest `|CoV − 1|` of a faithful collision (fraction, >= 0).
+    /// Largest `|CoV − 1|` of a faithful collision (fraction, 0 to 1e6).
     #[serde(default = "default_cov_tolerance")]
-    #[schemars(range(min = 0.0))]
+    #[schemars(range(min = 0.0, max = 1e6))]
     pub cov_tolerance: f64,
-    /// Largest CoF of a faithful collision (> 0).
+    /// Largest CoF of a faithful collision (> 0, <= 1e6).
     #[serde(default = "default_max_cof")]
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e6))]
     pub max_cof: f64,
     /// Largest rebound velocity error `|v − v_ref| / |v_ref|` of a faithful collision
-    /// (fraction, >= 0).
+    /// (fraction, 0 to 1e6).
     #[serde(default = "default_max_velocity_error")]
-    #[schemars(range(min = 0.0))]
+    #[schemars(range(min = 0.0, max = 1e6))]
     pub max_velocity_error: f64,
-    /// How many reference collisions a faithful run may lose (integer >= 0).
+    /// How many reference collisions a faithful run may lose (integer, 0 to 1e6).
     #[serde(default)]
+    #[schemars(range(max = 1000000))]
     pub max_lost_collisions: u32,
-    /// How many collisions without a reference collision a faithful run may have (>= 0).
+    /// How many collisions without a reference collision a faithful run may have (integer,
+    /// 0 to 1e6).
     #[serde(default)]
+    #[schemars(range(max = 1000000))]
     pub max_extra_collisions: u32,
 }
 

@@ -11,11 +11,15 @@
 //! filled in, quaternions and normals normalised, the inertia symmetrised, wall names set and
 //! delays rounded; writing it out and resolving it again gives the same plan.
 
+use std::collections::BTreeSet;
+
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 
 use crate::body::{BodyState, MassProperties};
 use crate::compensator::CompensatorConfig;
-use crate::config::{BodyConfig, ContactModelKind, Inertia, Scenario};
+use crate::config::{
+    BodyConfig, ContactModelKind, Inertia, Scenario, MAX_NAME_LENGTH, MAX_TICKS, MIN_INERTIA,
+};
 use crate::contact::{ContactGeometry, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
 use crate::error::{CoreError, Issues, Result};
 use crate::metrics::Tolerances;
@@ -87,23 +91,20 @@ impl Plan {
         check_name(&mut issues, &r.name);
         // every number against the range of the schema (`crate::schema`)
         let out_of_range = check_ranges(scenario, &mut issues);
+        let failed = &out_of_range;
         let in_range = |key: &str| !out_of_range.contains(key);
         let sim = &r.simulation;
         let period_ok = in_range("simulation.period");
-        if period_ok && in_range("simulation.duration") && sim.duration < sim.period {
-            issues.push(
-                "simulation.duration",
-                format!(
-                    "{} s is shorter than one period (simulation.period = {} s)",
-                    g12(sim.duration),
-                    g12(sim.period)
-                ),
-            );
-        }
+        let duration_ok = in_range("simulation.duration");
+        let ticks = if period_ok && duration_ok {
+            run_ticks(&mut issues, sim.duration, sim.period)
+        } else {
+            None
+        };
 
-        let servicer = body(&mut issues, "servicer", &mut r.servicer);
-        let target = body(&mut issues, "target", &mut r.target);
-        finite(&mut issues, "rod.tip", &r.rod.tip);
+        let servicer = body(&mut issues, failed, "servicer", &mut r.servicer);
+        let target = body(&mut issues, failed, "target", &mut r.target);
+        finite(&mut issues, failed, "rod.tip", &r.rod.tip);
 
         if r.walls.is_empty() {
             issues.push("walls", "at least one [[walls]] table is required");
@@ -123,8 +124,18 @@ impl Plan {
                 );
             }
             let wall = &mut r.walls[i];
-            let point_ok = finite(&mut issues, &format!("walls[{i}].point"), &wall.point);
-            let normal = unit_vector(&mut issues, &format!("walls[{i}].normal"), wall.normal);
+            let point_ok = finite(
+                &mut issues,
+                failed,
+                &format!("walls[{i}].point"),
+                &wall.point,
+            );
+            let normal = unit_vector(
+                &mut issues,
+                failed,
+                &format!("walls[{i}].normal"),
+                wall.normal,
+            );
             if let (true, Some(n)) = (point_ok, normal) {
                 wall.normal = n;
                 walls.push(Wall {
@@ -147,19 +158,45 @@ impl Plan {
             }),
         };
 
-        let period = r.simulation.period;
+        let resolvable = [
+            "servicer.mass",
+            "target.mass",
+            "contact.stiffness",
+            "contact.damping",
+            "simulation.period",
+            "simulation.reference_substeps",
+        ]
+        .iter()
+        .all(|key| in_range(key));
+        if resolvable && c.model == ContactModelKind::Linear {
+            check_resolution(&mut issues, r);
+        }
+
+        let (period, duration) = (r.simulation.period, r.simulation.duration);
         let round = r.facility.round_delays;
         let f = &mut r.facility;
         let mut delay_of = |name: &str, value: &mut f64| {
             let key = format!("facility.{name}");
-            let ok = period_ok && in_range(&key);
-            delay(&mut issues, &key, value, ok.then_some(period), round)
+            let ok = ticks.is_some() && in_range(&key);
+            delay(
+                &mut issues,
+                &key,
+                value,
+                ok.then_some((period, duration)),
+                round,
+            )
         };
         let robot_delay_ticks = delay_of("robot_delay", &mut f.robot_delay);
         let sensor_delay_ticks = delay_of("sensor_delay", &mut f.sensor_delay);
-        finite(&mut issues, "facility.sensor_position", &f.sensor_position);
+        finite(
+            &mut issues,
+            failed,
+            "facility.sensor_position",
+            &f.sensor_position,
+        );
         let sensor_orientation = unit_quaternion(
             &mut issues,
+            failed,
             "facility.sensor_orientation",
             f.sensor_orientation,
         );
@@ -169,12 +206,13 @@ impl Plan {
 
         issues.finish()?;
         // every check passed, so every part is there
-        let (Some(servicer), Some(target), Some(robot), Some(sensor), Some(q)) = (
+        let (Some(servicer), Some(target), Some(robot), Some(sensor), Some(q), Some(ticks)) = (
             servicer,
             target,
             robot_delay_ticks,
             sensor_delay_ticks,
             sensor_orientation,
+            ticks,
         ) else {
             return Err(CoreError::invalid("scenario", "could not be resolved"));
         };
@@ -182,7 +220,7 @@ impl Plan {
         let sim = &resolved.simulation;
         Ok(Plan {
             period: sim.period,
-            ticks: (sim.duration / sim.period).round() as usize,
+            ticks,
             plant_substeps: sim.plant_substeps,
             reference_substeps: sim.reference_substeps,
             divergence_energy_ratio: sim.divergence_energy_ratio,
@@ -268,22 +306,118 @@ pub fn g12(x: f64) -> f64 {
     format!("{x:.11e}").parse().unwrap_or(x)
 }
 
+/// `x` for a message: [`g12`], in exponent form when very small or large (`1e-320`, not 320
+/// zeros).
+fn show(x: f64) -> String {
+    let x = g12(x);
+    if x != 0.0 && !(1e-4..1e15).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
+/// A name that is a valid folder name everywhere: 1 to [`MAX_NAME_LENGTH`] characters, not
+/// `.` or `..`, without `/`, `\\` or control characters (NUL included).
 fn check_name(issues: &mut Issues, name: &str) {
     let trimmed = name.trim();
+    let length = name.chars().count();
     if trimmed.is_empty()
         || trimmed == "."
         || trimmed == ".."
+        || length > MAX_NAME_LENGTH
         || name.contains('/')
         || name.contains('\\')
+        || name.chars().any(char::is_control)
     {
+        let shown: String = name.chars().take(40).collect();
+        let shown = if length > 40 {
+            format!("{shown:?}... ({length} characters)")
+        } else {
+            format!("{shown:?}")
+        };
         issues.push(
             "name",
-            format!("must be a non-empty name without '/' or '\\' (it names the output folder), got '{name}'"),
+            format!(
+                "must be 1 to {MAX_NAME_LENGTH} characters without '/', '\\' or control characters, not '.' or '..' (it names the output folder), got {shown}"
+            ),
         );
     }
 }
 
-fn finite(issues: &mut Issues, key: &str, v: &[f64]) -> bool {
+/// The run's control ticks after the initial one, `duration / period` rounded, checked: a
+/// duration of at least one period, at most [`MAX_TICKS`] ticks.
+fn run_ticks(issues: &mut Issues, duration: f64, period: f64) -> Option<usize> {
+    let ratio = (duration / period).round();
+    if !(duration >= period) {
+        issues.push(
+            "simulation.duration",
+            format!(
+                "{} s is shorter than one period (simulation.period = {} s)",
+                show(duration),
+                show(period)
+            ),
+        );
+        return None;
+    }
+    if !(ratio <= MAX_TICKS) {
+        issues.push(
+            "simulation.duration",
+            format!(
+                "{} s at simulation.period = {} s is {ratio:e} control periods; at most {MAX_TICKS:e} are allowed",
+                show(duration),
+                show(period)
+            ),
+        );
+        return None;
+    }
+    Some(ratio as usize)
+}
+
+/// A linear contact that the ideal reference's RK4 steps (`simulation.period /
+/// simulation.reference_substeps`) resolve: `ω·h <= 1` with `ω = √(k/μ)` (μ the reduced mass),
+/// and `(c/μ)·h <= 2`. A stiffer contact would make the reference, and so every metric,
+/// meaningless or non-finite.
+fn check_resolution(issues: &mut Issues, s: &Scenario) {
+    let (ms, mt) = (s.servicer.mass, s.target.mass);
+    let mu = ms * mt / (ms + mt);
+    let h = s.simulation.period / f64::from(s.simulation.reference_substeps);
+    let (k, c) = (s.contact.stiffness, s.contact.damping);
+    let omega = (k / mu).sqrt();
+    let step = format!(
+        "simulation.period / simulation.reference_substeps = {} s",
+        show(h)
+    );
+    if omega * h > 1.0 {
+        let hz = |w: f64| show(w / (2.0 * std::f64::consts::PI));
+        issues.push(
+            "contact.stiffness",
+            format!(
+                "{} N/m with the reduced mass {} kg is a contact frequency of {} Hz, above the {} Hz the ideal reference resolves with {step}: lower it, or raise simulation.reference_substeps",
+                show(k),
+                show(mu),
+                hz(omega),
+                hz(1.0 / h)
+            ),
+        );
+    } else if c / mu * h > 2.0 {
+        issues.push(
+            "contact.damping",
+            format!(
+                "{} N·s/m with the reduced mass {} kg damps faster than the ideal reference resolves with {step} (c/μ·h <= 2): lower it, or raise simulation.reference_substeps",
+                show(c),
+                show(mu)
+            ),
+        );
+    }
+}
+
+/// Whether every number of `v` is finite; records the problem unless `key` failed its range
+/// check already (`failed`, which reported it).
+fn finite(issues: &mut Issues, failed: &BTreeSet<String>, key: &str, v: &[f64]) -> bool {
+    if failed.contains(key) {
+        return false;
+    }
     let ok = v.iter().all(|x| x.is_finite());
     if !ok {
         issues.push(key, format!("must contain finite numbers, got {v:?}"));
@@ -301,8 +435,13 @@ fn normalised<const N: usize>(v: [f64; N], norm: f64) -> [f64; N] {
     }
 }
 
-fn unit_vector(issues: &mut Issues, key: &str, v: [f64; 3]) -> Option<[f64; 3]> {
-    if !finite(issues, key, &v) {
+fn unit_vector(
+    issues: &mut Issues,
+    failed: &BTreeSet<String>,
+    key: &str,
+    v: [f64; 3],
+) -> Option<[f64; 3]> {
+    if !finite(issues, failed, key, &v) {
         return None;
     }
     let norm = Vector3::from(v).norm();
@@ -321,8 +460,13 @@ fn quaternion_norm(q: &[f64; 4]) -> f64 {
 }
 
 /// A unit quaternion `[w, x, y, z]` from a nonzero finite one.
-fn unit_quaternion(issues: &mut Issues, key: &str, q: [f64; 4]) -> Option<[f64; 4]> {
-    if !finite(issues, key, &q) {
+fn unit_quaternion(
+    issues: &mut Issues,
+    failed: &BTreeSet<String>,
+    key: &str,
+    q: [f64; 4],
+) -> Option<[f64; 4]> {
+    if !finite(issues, failed, key, &q) {
         return None;
     }
     let norm = quaternion_norm(&q);
@@ -342,21 +486,29 @@ fn to_unit(q: [f64; 4]) -> UnitQuaternion<f64> {
 }
 
 /// The inertia as a symmetric positive-definite tensor (symmetrised exactly), or a problem.
-fn inertia(issues: &mut Issues, key: &str, inertia: &Inertia) -> Option<Matrix3<f64>> {
+fn inertia(
+    issues: &mut Issues,
+    failed: &BTreeSet<String>,
+    key: &str,
+    inertia: &Inertia,
+) -> Option<Matrix3<f64>> {
     let rows = match *inertia {
         Inertia::Principal(d) => {
-            if !finite(issues, key, &d) {
+            if !finite(issues, failed, key, &d) {
                 return None;
             }
-            if d.iter().any(|&m| m <= 0.0) {
-                issues.push(key, format!("principal moments must all be > 0, got {d:?}"));
+            if d.iter().any(|&m| m < MIN_INERTIA) {
+                issues.push(
+                    key,
+                    format!("principal moments must all be >= {MIN_INERTIA:e}, got {d:?}"),
+                );
                 return None;
             }
             [[d[0], 0.0, 0.0], [0.0, d[1], 0.0], [0.0, 0.0, d[2]]]
         }
         Inertia::Tensor(rows) => rows,
     };
-    if !finite(issues, key, &rows.concat()) {
+    if !finite(issues, failed, key, &rows.concat()) {
         return None;
     }
     let m = Matrix3::from_fn(|i, j| rows[i][j]);
@@ -375,10 +527,13 @@ fn inertia(issues: &mut Issues, key: &str, inertia: &Inertia) -> Option<Matrix3<
             0.5 * (m[(i, j)] + m[(j, i)])
         }
     });
-    if symmetric.cholesky().is_none() {
+    let smallest = symmetric.symmetric_eigenvalues().min();
+    if symmetric.cholesky().is_none() || !(smallest >= MIN_INERTIA) {
         issues.push(
             key,
-            format!("the 3x3 matrix must be positive definite, got {rows:?}"),
+            format!(
+                "the 3x3 matrix must be positive definite with principal moments >= {MIN_INERTIA:e}, got {rows:?}"
+            ),
         );
         return None;
     }
@@ -389,11 +544,17 @@ fn inertia(issues: &mut Issues, key: &str, inertia: &Inertia) -> Option<Matrix3<
 /// symmetrises its inertia in `config`.
 fn body(
     issues: &mut Issues,
+    failed: &BTreeSet<String>,
     key: &str,
     config: &mut BodyConfig,
 ) -> Option<(MassProperties, BodyState)> {
-    let tensor = inertia(issues, &format!("{key}.inertia"), &config.inertia);
-    let q = unit_quaternion(issues, &format!("{key}.orientation"), config.orientation);
+    let tensor = inertia(issues, failed, &format!("{key}.inertia"), &config.inertia);
+    let q = unit_quaternion(
+        issues,
+        failed,
+        &format!("{key}.orientation"),
+        config.orientation,
+    );
     let vectors_ok = [
         ("position", config.position),
         ("velocity", config.velocity),
@@ -401,7 +562,7 @@ fn body(
     ]
     .iter()
     .fold(true, |ok, (name, v)| {
-        finite(issues, &format!("{key}.{name}"), v) && ok
+        finite(issues, failed, &format!("{key}.{name}"), v) && ok
     });
     let (Some(tensor), Some(q), true) = (tensor, q, vectors_ok) else {
         return None;
@@ -420,34 +581,51 @@ fn body(
     ))
 }
 
-/// A delay in whole periods: `key` (s, in its range) rounded to the nearest period if `round`
-/// (and written back rounded), else rejected unless it is a whole number of periods; nothing
-/// without a valid `period`.
+/// A delay in whole periods: `key` (s, in its range) rounded to the nearest period if `round`,
+/// else rejected unless it is a whole number of periods (a positive delay below half a period
+/// included); longer than the run's `duration` rejected. Written back as the whole periods
+/// it runs as. Nothing without a valid `(period, duration)`.
 fn delay(
     issues: &mut Issues,
     key: &str,
     delay: &mut f64,
-    period: Option<f64>,
+    run: Option<(f64, f64)>,
     round: bool,
 ) -> Option<usize> {
-    let period = period?;
+    let (period, duration) = run?;
+    if *delay > duration {
+        issues.push(
+            key,
+            format!(
+                "{} s is longer than the run (simulation.duration = {} s)",
+                show(*delay),
+                show(duration)
+            ),
+        );
+        return None;
+    }
     let ratio = *delay / period;
     let n = (ratio + 0.5).floor();
-    if round {
-        *delay = g12(n * period);
-    } else if (ratio - n).abs() > 1e-9 * ratio.max(1.0) {
+    let whole = (ratio - n).abs() <= 1e-9 * ratio.max(1.0) && (n > 0.0 || *delay == 0.0);
+    if !round && !whole {
         let lo = ratio.floor();
         issues.push(
             key,
             format!(
                 "{} s is not a whole number of periods (simulation.period = {} s): use {} or {}, or set facility.round_delays = true",
-                g12(*delay),
-                g12(period),
-                g12(lo * period),
-                g12((lo + 1.0) * period)
+                show(*delay),
+                show(period),
+                show(lo * period),
+                show((lo + 1.0) * period)
             ),
         );
         return None;
     }
+    // within [0, duration / period] <= MAX_TICKS (checked by `run_ticks` and above)
+    if !(n >= 0.0 && n <= MAX_TICKS) {
+        issues.push(key, format!("{} s is not a usable delay", show(*delay)));
+        return None;
+    }
+    *delay = g12(n * period);
     Some(n as usize)
 }

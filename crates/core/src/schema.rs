@@ -8,8 +8,9 @@
 //! (written on the fields as `#[schemars(range(min = ...))]` or
 //! `#[schemars(extend("exclusiveMinimum" = ...))]`). Vectors, quaternions and inertias carry
 //! the extension key `x-value` (`"vec3"`, `"quaternion"`, `"inertia"`) so that a reader of the
-//! schema knows their shape; their other checks (non-zero, symmetric positive definite) are
-//! semantic and live in [`crate::plan::Plan::resolve`].
+//! schema knows their shape, and `x-magnitude`, the largest `|x|` of each of their numbers
+//! (checked here); their other checks (non-zero, symmetric positive definite) are semantic
+//! and live in [`crate::plan::Plan::resolve`].
 
 use std::collections::BTreeSet;
 use std::fmt;
@@ -64,17 +65,28 @@ fn range_of(schema: &Value, x: f64) -> Option<(String, bool)> {
         && max.is_none_or(|b| x <= b)
         && emax.is_none_or(|b| x < b);
     let words = match (min, emin, max, emax) {
-        (None, Some(lo), None, Some(hi)) => format!("between {lo} and {hi} (exclusive)"),
-        (Some(lo), None, Some(hi), None) => format!("between {lo} and {hi}"),
+        (None, Some(lo), None, Some(hi)) => {
+            format!("between {} and {} (exclusive)", short(lo), short(hi))
+        }
+        (Some(lo), None, Some(hi), None) => format!("between {} and {}", short(lo), short(hi)),
         _ => {
             let parts: Vec<String> = [(">=", min), (">", emin), ("<=", max), ("<", emax)]
                 .iter()
-                .filter_map(|(op, b)| b.map(|b| format!("{op} {b}")))
+                .filter_map(|(op, b)| b.map(|b| format!("{op} {}", short(b))))
                 .collect();
             parts.join(" and ")
         }
     };
     Some((words, ok))
+}
+
+/// A range's bound, short: `0`, `0.001`, `86400`, `1e-6`, `1e11`.
+fn short(x: f64) -> String {
+    if x == 0.0 || (1e-3..1e6).contains(&x.abs()) {
+        format!("{x}")
+    } else {
+        format!("{x:e}")
+    }
 }
 
 fn join(path: &str, key: &str) -> String {
@@ -104,6 +116,21 @@ fn walk(
                 issues.push(path, format!("must be {allowed}, got {x}"));
                 failed.insert(path.to_string());
             }
+        }
+    }
+    if let (Some(limit), Node::List(_)) = (schema.get("x-magnitude").and_then(Value::as_f64), node)
+    {
+        let mut numbers = Vec::new();
+        node.numbers(&mut numbers);
+        if let Some(x) = numbers.iter().find(|x| !(x.abs() <= limit)) {
+            issues.push(
+                path,
+                format!(
+                    "every number must be finite with |x| <= {}, got {x}",
+                    short(limit)
+                ),
+            );
+            failed.insert(path.to_string());
         }
     }
     if let Some(target) = schema.get("$ref").and_then(Value::as_str) {
@@ -162,6 +189,17 @@ enum Node {
     Other,
     List(Vec<Node>),
     Table(Vec<(String, Node)>),
+}
+
+impl Node {
+    /// Every number in this node and its lists, in order.
+    fn numbers(&self, out: &mut Vec<f64>) {
+        match self {
+            Node::Number(x) => out.push(*x),
+            Node::List(items) => items.iter().for_each(|item| item.numbers(out)),
+            _ => {}
+        }
+    }
 }
 
 #[derive(Debug)]

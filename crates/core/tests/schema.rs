@@ -39,13 +39,22 @@ fn every_range_problem_is_reported_in_the_core_wording() {
     assert_eq!(
         issues(&s),
         vec![
-            issue("simulation.plant_substeps", "must be >= 1, got 0"),
-            issue("simulation.divergence_energy_ratio", "must be > 1, got 1"),
-            issue("servicer.mass", "must be > 0, got -1"),
+            issue(
+                "simulation.plant_substeps",
+                "must be between 1 and 1000, got 0"
+            ),
+            issue(
+                "simulation.divergence_energy_ratio",
+                "must be > 1 and <= 1e12, got 1"
+            ),
+            issue("servicer.mass", "must be between 0.001 and 1e7, got -1"),
             issue("contact.stiffness", "must be a finite number, got inf"),
-            issue("contact.damping", "must be >= 0, got -0.5"),
+            issue("contact.damping", "must be between 0 and 1e9, got -0.5"),
             issue("facility.sensor_noise", "must be a finite number, got NaN"),
-            issue("compensator.stiffness_walk", "must be >= 0, got -1"),
+            issue(
+                "compensator.stiffness_walk",
+                "must be between 0 and 1e11, got -1"
+            ),
             issue(
                 "compensator.forgetting",
                 "must be between 0 and 1 (exclusive), got 1.5"
@@ -67,7 +76,7 @@ fn range_problems_and_semantic_problems_are_reported_together() {
     let err = s.resolve().unwrap_err().to_string();
     assert!(
         err.starts_with(
-            "target.mass: must be > 0, got 0 (and 2 more: walls[1].normal, facility.robot_delay)"
+            "target.mass: must be between 0.001 and 1e7, got 0 (and 2 more: walls[1].normal, facility.robot_delay)"
         ),
         "{err}"
     );
@@ -78,7 +87,10 @@ fn a_negative_delay_is_a_range_problem_only() {
     let s = table1(-0.001, 0.0);
     assert_eq!(
         issues(&s),
-        vec![issue("facility.robot_delay", "must be >= 0, got -0.001")]
+        vec![issue(
+            "facility.robot_delay",
+            "must be between 0 and 60, got -0.001"
+        )]
     );
 }
 

@@ -140,10 +140,10 @@ fn six(w: &Wrench) -> [f64; 6] {
 /// port in use, the sensor's counts per unit unreadable); everything else is in the report.
 pub fn check(scenario: &Scenario, options: &RuntimeOptions, duration: f64) -> Result<CheckReport> {
     let plan = HilHandle::validate_options(scenario, options)?;
-    if !(duration.is_finite() && duration > 0.0) {
+    if !(duration.is_finite() && duration > 0.0 && duration <= 3600.0) {
         return Err(RtError::option(
             "duration",
-            format!("must be a positive number of seconds, got {duration}"),
+            format!("must be a number of seconds > 0 and <= 3600, got {duration}"),
         ));
     }
     let context = link_context(&plan, options);

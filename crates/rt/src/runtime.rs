@@ -174,6 +174,9 @@ pub struct HilHandle {
 /// Capacity of the sample ring buffer (8 s at 1 kHz; the writer drains it every 5 ms).
 const RING_CAPACITY: usize = 8192;
 
+/// Longest `connect_timeout`, s (an hour).
+pub const MAX_CONNECT_TIMEOUT: f64 = 3600.0;
+
 impl HilHandle {
     /// Validates, creates the MCAP file if asked for, opens the links of `options` (binds the
     /// sockets, reads the sensor's counts per unit over HTTP unless given), computes the ideal
@@ -228,15 +231,19 @@ impl HilHandle {
         if let Some(mcap) = &o.mcap {
             mcap.validate()?;
         }
-        for (key, v) in [
-            ("connect_timeout", o.connect_timeout),
-            ("start_tolerance", o.start_tolerance),
+        o.sensor.validate()?;
+        o.robot.validate()?;
+        for (key, v, max) in [
+            ("connect_timeout", o.connect_timeout, MAX_CONNECT_TIMEOUT),
+            ("start_tolerance", o.start_tolerance, f64::MAX),
         ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(RtError::option(
-                    key,
-                    format!("must be a positive number, got {v}"),
-                ));
+            if !(v.is_finite() && v > 0.0 && v <= max) {
+                let allowed = if max < f64::MAX {
+                    format!("a number > 0 and <= {max}")
+                } else {
+                    "a positive number".to_string()
+                };
+                return Err(RtError::option(key, format!("must be {allowed}, got {v}")));
             }
         }
         if !(o.hold_time.is_finite() && o.hold_time >= 0.0) {
@@ -283,7 +290,9 @@ impl HilHandle {
         let writer = std::thread::Builder::new()
             .name("hil-writer".into())
             .spawn(move || {
-                let mut samples = Vec::with_capacity(ticks as usize + 1);
+                // room for the whole run, up to 2^20 ticks (17 min at 1 kHz): a longer run
+                // grows the log as it goes rather than reserving it all at the start
+                let mut samples = Vec::with_capacity((ticks as usize).min(1 << 20) + 1);
                 loop {
                     let abandoned = consumer.is_abandoned();
                     // read before draining: every sample up to the stop is in the ring then

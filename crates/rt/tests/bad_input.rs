@@ -548,3 +548,92 @@ fn a_300_mm_feedback_jump_is_counted_and_never_held() {
         );
     }
 }
+
+/// Options that are bad input are refused as such (an option error naming the key) before any
+/// socket is opened or any peer is asked: not as a connection error after trying to connect.
+#[test]
+fn bad_options_are_refused_before_any_socket_is_opened() {
+    use hilcontact_rt::links::rsi::RsiOptions;
+    use hilcontact_rt::RtError;
+
+    let s = preset("paper-table1");
+    let egm = |rotation: [f64; 4], robot_host: Option<&str>| {
+        RobotOptions::Egm(EgmOptions {
+            rotation,
+            robot_host: robot_host.map(String::from),
+            ..Default::default()
+        })
+    };
+    let rdt = |host: &str| {
+        SensorOptions::Rdt(RdtOptions {
+            host: host.into(),
+            ..Default::default()
+        })
+    };
+    let cases = [
+        (
+            RuntimeOptions {
+                robot: egm([0.0; 4], None),
+                ..Default::default()
+            },
+            "egm_rotation",
+        ),
+        (
+            RuntimeOptions {
+                robot: egm([1.0, 0.0, 0.0, 0.0], Some("1.2.3.999")),
+                ..Default::default()
+            },
+            "robot_host",
+        ),
+        (
+            RuntimeOptions {
+                sensor: rdt("999.1.1.1"),
+                ..Default::default()
+            },
+            "sensor host",
+        ),
+        (
+            RuntimeOptions {
+                sensor: rdt("bad host"),
+                ..Default::default()
+            },
+            "sensor host",
+        ),
+        (
+            RuntimeOptions {
+                connect_timeout: 1e308,
+                ..Default::default()
+            },
+            "connect_timeout",
+        ),
+        (
+            RuntimeOptions {
+                connect_timeout: f64::NAN,
+                ..Default::default()
+            },
+            "connect_timeout",
+        ),
+        (
+            RuntimeOptions {
+                robot: RobotOptions::Rsi(RsiOptions {
+                    rotation: [0.0; 4],
+                    ..Default::default()
+                }),
+                ..Default::default()
+            },
+            "egm_rotation",
+        ),
+    ];
+    for (options, key) in cases {
+        match HilHandle::start(&s, &options) {
+            Err(RtError::Option { key: k, message }) => assert_eq!(k, key, "{message}"),
+            Err(other) => panic!("{key}: not an option error: {other}"),
+            Ok(_) => panic!("{key}: started"),
+        }
+        match hilcontact_rt::check(&s, &options, 0.1) {
+            Err(RtError::Option { key: k, .. }) => assert_eq!(k, key),
+            Err(other) => panic!("{key}: check: not an option error: {other}"),
+            Ok(_) => panic!("{key}: check ran"),
+        }
+    }
+}

@@ -47,44 +47,44 @@ pub enum ControllerMode {
 pub struct ModelParams {
     /// Measurement-delay compensation: `align` or `lead`.
     pub delay_mode: DelayMode,
-    /// In contact while the force magnitude exceeds this, N (> 0; above the noise).
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// In contact while the force magnitude exceeds this, N (> 0, <= 1e6; above the noise).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e6))]
     pub contact_force: f64,
-    /// Initial stiffness estimate k̂₀, N/m (> 0).
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// Initial stiffness estimate k̂₀, N/m (> 0, <= 1e11).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e11))]
     pub stiffness_initial: f64,
-    /// Initial damping estimate ĉ₀, N·s/m (>= 0).
-    #[schemars(range(min = 0.0))]
+    /// Initial damping estimate ĉ₀, N·s/m (>= 0, <= 1e9).
+    #[schemars(range(min = 0.0, max = 1e9))]
     pub damping_initial: f64,
-    /// Initial standard deviation of k̂ (√P₀₀), N/m (> 0).
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// Initial standard deviation of k̂ (√P₀₀), N/m (> 0, <= 1e11).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e11))]
     pub stiffness_std: f64,
-    /// Initial standard deviation of ĉ (√P₁₁), N·s/m (> 0).
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// Initial standard deviation of ĉ (√P₁₁), N·s/m (> 0, <= 1e9).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e9))]
     pub damping_std: f64,
-    /// Random walk of k per update (√Q₀₀), N/m (>= 0).
-    #[schemars(range(min = 0.0))]
+    /// Random walk of k per update (√Q₀₀), N/m (>= 0, <= 1e11).
+    #[schemars(range(min = 0.0, max = 1e11))]
     pub stiffness_walk: f64,
-    /// Random walk of c per update (√Q₁₁), N·s/m (>= 0).
-    #[schemars(range(min = 0.0))]
+    /// Random walk of c per update (√Q₁₁), N·s/m (>= 0, <= 1e9).
+    #[schemars(range(min = 0.0, max = 1e9))]
     pub damping_walk: f64,
-    /// Initial measurement noise of a force increment (√R₀), N (> 0).
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// Initial measurement noise of a force increment (√R₀), N (> 0, <= 1e6).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e6))]
     pub noise_std: f64,
     /// Forgetting factor b of the Sage-Husa noise estimate (0 < b < 1).
     #[schemars(extend("exclusiveMinimum" = 0.0, "exclusiveMaximum" = 1.0))]
     pub forgetting: f64,
-    /// Largest amendment damping α of the energy controller, N·s/m (> 0).
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// Largest amendment damping α of the energy controller, N·s/m (> 0, <= 1e12).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e12))]
     pub alpha_max: f64,
     /// Energy observer: `work` or `paper`.
     pub observer: ObserverMode,
     /// Energy controller: `normal` or `paper`.
     pub controller: ControllerMode,
     /// Largest amendment force of the `normal` controller, as a multiple of the compensated
-    /// contact force `|F_comp|` (and at least of `contact_force`) (> 0); what it cannot
+    /// contact force `|F_comp|` (and at least of `contact_force`) (> 0, <= 1e6); what it cannot
     /// dissipate in one tick is carried to the next.
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e6))]
     pub force_ratio_max: f64,
 }
 
@@ -113,21 +113,21 @@ impl Default for ModelParams {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TdpaParams {
-    /// In contact while the force magnitude exceeds this, N (> 0); the observer restarts at
+    /// In contact while the force magnitude exceeds this, N (> 0, <= 1e6); the observer restarts at
     /// each contact (a windowed observer).
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e6))]
     pub contact_force: f64,
-    /// Largest damping α of the impedance-type controller, N·s/m (> 0).
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// Largest damping α of the impedance-type controller, N·s/m (> 0, <= 1e12).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e12))]
     pub alpha_max: f64,
-    /// Largest admittance β of the admittance-type controller, m/(N·s) (> 0).
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// Largest admittance β of the admittance-type controller, m/(N·s) (> 0, <= 1e3).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e3))]
     pub beta_max: f64,
-    /// Floor on |v| in the impedance controller's division, m/s (> 0).
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// Floor on |v| in the impedance controller's division, m/s (> 0, <= 1e3).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e3))]
     pub velocity_floor: f64,
-    /// Floor on |f| in the admittance controller's division, N (> 0).
-    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    /// Floor on |f| in the admittance controller's division, N (> 0, <= 1e6).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e6))]
     pub force_floor: f64,
 }
 

@@ -23,8 +23,8 @@ use serde::{Deserialize, Serialize};
 use hilcontact_core::world::RelativeMotion;
 
 use super::{
-    bind_udp, local_addr, recv_counted, resolve, sequence_counted, EndpointContext, LinkContext,
-    LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
+    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EndpointContext,
+    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
 };
 use crate::egm::{
     CorrectionDecoder, CorrectionEncoder, EgmError, FeedbackEncoder, RobotDecoder, EGM_PERIOD,
@@ -80,8 +80,18 @@ pub struct EgmRobot {
 }
 
 impl EgmRobot {
+    /// Checks the options without opening anything (hosts, mapping).
+    pub fn validate(o: &EgmOptions) -> Result<()> {
+        check_host("egm_bind_host", &o.bind_host)?;
+        if let Some(host) = &o.robot_host {
+            check_host("robot_host", host)?;
+        }
+        PoseMapping::new(o.offset_mm, o.rotation).map(|_| ())
+    }
+
     /// Validates the mapping and binds the EGM endpoint.
     pub fn open(o: &EgmOptions, context: &LinkContext) -> Result<Self> {
+        Self::validate(o)?;
         let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
         let socket = bind_udp(
             "EGM endpoint",

@@ -431,6 +431,46 @@ impl RobotIdentity {
     }
 }
 
+impl SensorOptions {
+    /// Checks the options that need no socket (the host's form), so that bad input is
+    /// refused before any socket is opened.
+    pub fn validate(&self) -> Result<()> {
+        match self {
+            SensorOptions::Rdt(o) => check_host("sensor host", &o.host),
+            SensorOptions::Sri(o) => check_host("sensor host", &o.host),
+        }
+    }
+}
+
+impl RobotOptions {
+    /// Checks the options that need no socket (hosts, pose mapping, the protocol's own
+    /// values), so that bad input is refused before any socket is opened.
+    pub fn validate(&self) -> Result<()> {
+        match self {
+            RobotOptions::Egm(o) => egm::EgmRobot::validate(o),
+            RobotOptions::Rsi(o) => rsi::RsiRobot::validate(o),
+        }
+    }
+}
+
+/// The form of a host option, checked without a lookup: an IP address or a host name (at most
+/// 253 characters without spaces or control characters; one of digits and dots only must be
+/// an IPv4 address, so `999.1.1.1` is refused). `key` names the option for the message.
+pub(crate) fn check_host(key: &str, host: &str) -> Result<()> {
+    let numeric = host.chars().all(|c| c.is_ascii_digit() || c == '.');
+    let bad = host.is_empty()
+        || host.len() > 253
+        || host.chars().any(|c| c.is_whitespace() || c.is_control())
+        || (numeric && host.parse::<std::net::Ipv4Addr>().is_err());
+    if bad {
+        return Err(RtError::option(
+            key,
+            format!("{host:?} is not an IP address (IPv4: four numbers 0-255) or a host name"),
+        ));
+    }
+    Ok(())
+}
+
 /// Opens the sensor link of `options` (binds, reads what it needs before the loop starts).
 pub fn open_sensor(options: &SensorOptions, context: &LinkContext) -> Result<Box<dyn SensorLink>> {
     Ok(match options {

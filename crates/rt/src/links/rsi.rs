@@ -38,8 +38,8 @@ use serde::{Deserialize, Serialize};
 use hilcontact_core::world::RelativeMotion;
 
 use super::{
-    bind_udp, local_addr, recv_counted, resolve, wait_readable, EndpointContext, LinkContext,
-    LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
+    bind_udp, check_host, local_addr, recv_counted, resolve, wait_readable, EndpointContext,
+    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
 };
 use crate::clock::{now_ns, Histogram};
 use crate::error::{Result, RtError};
@@ -198,8 +198,12 @@ pub struct RsiRobot {
 }
 
 impl RsiRobot {
-    /// Validates the options and binds the PC's RSI socket.
-    pub fn open(o: &RsiOptions, context: &LinkContext) -> Result<Self> {
+    /// Checks the options without opening anything (hosts, cycle, deadline, names, mapping).
+    pub fn validate(o: &RsiOptions) -> Result<()> {
+        check_host("rsi bind_host", &o.bind_host)?;
+        if let Some(host) = &o.robot_host {
+            check_host("robot_host", host)?;
+        }
         check_period("rsi.period", o.period)?;
         if !(o.deadline.is_finite() && o.deadline > 0.0 && o.deadline <= o.period) {
             return Err(RtError::option(
@@ -210,6 +214,13 @@ impl RsiRobot {
                 ),
             ));
         }
+        PoseMapping::new(o.offset_mm, o.rotation)?;
+        Ok(())
+    }
+
+    /// Validates the options and binds the PC's RSI socket.
+    pub fn open(o: &RsiOptions, context: &LinkContext) -> Result<Self> {
+        Self::validate(o)?;
         let names = checked_names(RsiNames {
             sen_type: o.sen_type.clone(),
             state: o.state_element.clone(),
