@@ -1155,7 +1155,7 @@ _LOG_HELP = ("LOG: a run folder, a .csv or .parquet file with the recording's co
 def _recording_options(f: Any) -> Any:
     for option in reversed([
         click.option("--scenario", "scenario", metavar="FILE", default=None,
-                     help="Scenario (preset or TOML) for the geometry and the compensator [default: a run folder's own, else the defaults]."),
+                     help="Scenario (preset or TOML) for the geometry and the compensator [default: a run folder's own, else paper-table1]."),
         click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP),
         click.option("--wrench-topic", default=None, help="ROS 2 bag: the geometry_msgs/WrenchStamped topic (sensor frame)."),
         click.option("--pose-topic", default=None, help="ROS 2 bag: the geometry_msgs/PoseStamped topic of the rod tip (frame t)."),

@@ -16,7 +16,7 @@ column                        unit   frame    meaning
 ============================  =====  =======  ===================================================
 
 The rest (sensor pose and delay, period, the compensator's parameters) comes from a scenario:
-a run folder's own ``scenario.toml``, else ``--scenario FILE`` or the defaults; the period is
+a run folder's own ``scenario.toml``, else ``--scenario FILE``, else the ``paper-table1`` preset; the period is
 taken from the recording's time steps when they differ from the scenario's.
 """
 
@@ -55,6 +55,8 @@ IDENTIFY_COLUMNS: list[str] = [
 ]
 #: The desired (virtual) rod tip, for replay.
 DESIRED_COLUMNS: list[str] = [*_vec("tip_position"), *_vec("tip_velocity")]
+#: The scenario of a recording that is not a run folder, without ``--scenario``.
+DEFAULT_SCENARIO = "paper-table1"
 #: Forgetting factor of the noise estimate used by ``identify`` unless told otherwise (the
 #: core's ``identify::OFFLINE_FORGETTING``; see docs/identification.md).
 OFFLINE_FORGETTING = 0.9
@@ -92,13 +94,14 @@ def _read_table(path: Path) -> pd.DataFrame:
         raise RecordingError(f"{path}: unreadable ({' '.join(str(exc).split())})") from None
 
 
-def _stamp(msg: Any, fallback_ns: int) -> float:
+def _stamp(msg: Any, fallback_ns: int) -> int:
+    """The message's header stamp in integer ns (the bag's receive time if it has none)."""
     header = getattr(msg, "header", None)
     if header is not None:
-        t = header.stamp.sec + header.stamp.nanosec * 1e-9
-        if t > 0:
-            return float(t)
-    return fallback_ns * 1e-9
+        ns = int(header.stamp.sec) * 10**9 + int(header.stamp.nanosec)
+        if ns > 0:
+            return ns
+    return int(fallback_ns)
 
 
 def _read_bag(path: Path, wrench_topic: str | None, pose_topic: str | None,
@@ -143,7 +146,7 @@ def _read_bag(path: Path, wrench_topic: str | None, pose_topic: str | None,
                 rows.append(get(msg))
             if not rows:
                 raise RecordingError(f"{path}: topic {topic} has no messages")
-            return np.asarray(times, dtype=np.float64), np.asarray(rows, dtype=np.float64)
+            return np.asarray(times, dtype=np.int64), np.asarray(rows, dtype=np.float64)
 
         tw, w = series(wrench, lambda m: [m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
                                           m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z])
@@ -153,14 +156,19 @@ def _read_bag(path: Path, wrench_topic: str | None, pose_topic: str | None,
         else:
             if len(tp) < 2:
                 raise RecordingError(f"{path}: topic {pose} has fewer than 2 messages")
-            tv, v = tp, np.stack([np.gradient(p[:, i], tp) for i in range(3)], axis=1)
+            tv, v = tp, None
     finally:
         reader_cm.__exit__(None, None, None)
+    # seconds from the first wrench, exact in integer ns before the conversion
+    start = tw[0]
+    tw, tp, tv = ((t - start).astype(np.float64) * 1e-9 for t in (tw, tp, tv))
+    if v is None:  # no twist topic: differentiate the pose
+        v = np.stack([np.gradient(p[:, i], tp) for i in range(3)], axis=1)
     for name, t in ((wrench, tw), (pose, tp)):
         if np.any(np.diff(t) <= 0):
             i = int(np.argmax(np.diff(t) <= 0)) + 1
             raise RecordingError(f"{path}: topic {name}: time is not strictly increasing at message {i}")
-    data: dict[str, np.ndarray] = {"time": tw - tw[0]}
+    data: dict[str, np.ndarray] = {"time": tw}
     for i, a in enumerate(_AXES):
         data[f"measured_force_{a}"] = w[:, i]
         data[f"measured_moment_{a}"] = w[:, 3 + i]
@@ -175,7 +183,7 @@ def read_recording(log: str | os.PathLike[str], scenario: str | None = None,
                    need: list[str] | None = None) -> Recording:
     """Read a recording: a run folder, a ``.csv`` or ``.parquet`` file, or a ROS 2 bag folder
     (with ``metadata.yaml``). ``scenario`` (preset or TOML) gives the geometry and the
-    compensator (a run folder's own ``scenario.toml`` by default, else the defaults);
+    compensator (a run folder's own ``scenario.toml`` by default, else :data:`DEFAULT_SCENARIO`);
     ``overrides`` are ``--set`` keys. ``need``: columns that must be present (named if
     missing). Raises :class:`RecordingError` or ScenarioError."""
     path = Path(log)
@@ -196,7 +204,7 @@ def read_recording(log: str | os.PathLike[str], scenario: str | None = None,
     missing = [c for c in (need or IDENTIFY_COLUMNS) if c not in data.columns]
     if missing:
         raise RecordingError(f"{path}: missing columns: {', '.join(missing)}")
-    source: Any = scenario if scenario is not None else (own_scenario if own_scenario is not None else {"name": "recording"})
+    source: Any = scenario if scenario is not None else (own_scenario if own_scenario is not None else DEFAULT_SCENARIO)
     overrides = dict(overrides or {})
     if own_scenario is None or scenario is not None:
         t = data["time"].to_numpy(dtype=np.float64)
@@ -205,7 +213,7 @@ def read_recording(log: str | os.PathLike[str], scenario: str | None = None,
             period = float(np.median(steps))
             base = load_scenario(source, overrides)
             if "simulation.period" not in overrides and not math.isclose(period, base.simulation.period, rel_tol=1e-6):
-                overrides["simulation.period"] = round(period, 12)
+                overrides["simulation.period"] = round(period, 9)
     return Recording(source=str(path), data=data, scenario=load_scenario(source, overrides))
 
 
