@@ -1170,10 +1170,11 @@ def _recording_options(f: Any) -> Any:
 @cli.command(name="replay", short_help="Run a compensator on a recording's measurements and poses.")
 @click.argument("log")
 @click.option("--compensator", "compensator", default=None, metavar="KIND", help="Compensator kind [default: the scenario's].")
+@click.option("--desired-pose-topic", default=None, help="ROS 2 bag: a geometry_msgs/PoseStamped topic of the desired (virtual) rod tip (frame t).")
 @_recording_options
-def replay_command(log: str, compensator: str | None, scenario: str | None, sets: tuple[str, ...],
-                   wrench_topic: str | None, pose_topic: str | None, twist_topic: str | None,
-                   out: str, force: bool) -> None:
+def replay_command(log: str, compensator: str | None, desired_pose_topic: str | None, scenario: str | None,
+                   sets: tuple[str, ...], wrench_topic: str | None, pose_topic: str | None,
+                   twist_topic: str | None, out: str, force: bool) -> None:
     """Replay LOG through a compensator (open loop) and write what it would have applied at
     each tick: replay.parquet (time, applied_force_*, applied_moment_* in the sensor frame,
     velocity_correction_*, stiffness_estimate, damping_estimate, observed_energy),
@@ -1192,7 +1193,7 @@ def replay_command(log: str, compensator: str | None, scenario: str | None, sets
             overrides["compensator.kind"] = compensator
         check_output_folder(out, overwrite=force)
         recording = read_recording(log, scenario, overrides, wrench_topic, pose_topic, twist_topic,
-                                   need=IDENTIFY_COLUMNS + DESIRED_COLUMNS)
+                                   need=IDENTIFY_COLUMNS + DESIRED_COLUMNS, desired_pose_topic=desired_pose_topic)
         summary = save_replay(recording, replay(recording), out, force)
     diff = summary.get("max_relative_difference_to_recorded")
     click.echo(f"{summary['compensator']}: {summary['samples']} ticks replayed -> {out}"

@@ -105,9 +105,11 @@ def _stamp(msg: Any, fallback_ns: int) -> int:
 
 
 def _read_bag(path: Path, wrench_topic: str | None, pose_topic: str | None,
-              twist_topic: str | None) -> pd.DataFrame:
+              twist_topic: str | None, desired_pose_topic: str | None = None) -> pd.DataFrame:
     """A ROS 2 bag's WrenchStamped and PoseStamped (and TwistStamped) topics, on the wrench's
-    time base (pose linearly interpolated, velocity by differentiation if no twist topic)."""
+    time base (pose linearly interpolated, velocity by differentiation if no twist topic);
+    ``desired_pose_topic``: a PoseStamped topic of the desired (virtual) rod tip, for replay
+    (its velocity by differentiation)."""
     try:
         from rosbags.highlevel import AnyReader
     except ImportError:
@@ -136,6 +138,7 @@ def _read_bag(path: Path, wrench_topic: str | None, pose_topic: str | None,
         wrench = pick(wrench_topic, "WrenchStamped", "--wrench-topic")
         pose = pick(pose_topic, "PoseStamped", "--pose-topic")
         twist = pick(twist_topic, "TwistStamped", "--twist-topic")
+        desired = pick(desired_pose_topic, "PoseStamped", "--desired-pose-topic") if desired_pose_topic else None
 
         def series(topic: str, get: Any) -> tuple[np.ndarray, np.ndarray]:
             conns = [c for c in reader.connections if c.topic == topic]
@@ -157,6 +160,10 @@ def _read_bag(path: Path, wrench_topic: str | None, pose_topic: str | None,
             if len(tp) < 2:
                 raise RecordingError(f"{path}: topic {pose} has fewer than 2 messages")
             tv, v = tp, None
+        if desired is not None:
+            td, d = series(desired, lambda m: [m.pose.position.x, m.pose.position.y, m.pose.position.z])
+            if len(td) < 2:
+                raise RecordingError(f"{path}: topic {desired} has fewer than 2 messages")
     finally:
         reader_cm.__exit__(None, None, None)
     # seconds from the first wrench, exact in integer ns before the conversion
@@ -164,6 +171,9 @@ def _read_bag(path: Path, wrench_topic: str | None, pose_topic: str | None,
     tw, tp, tv = ((t - start).astype(np.float64) * 1e-9 for t in (tw, tp, tv))
     if v is None:  # no twist topic: differentiate the pose
         v = np.stack([np.gradient(p[:, i], tp) for i in range(3)], axis=1)
+    if desired is not None:
+        td = (td - start).astype(np.float64) * 1e-9
+        dv = np.stack([np.gradient(d[:, i], td) for i in range(3)], axis=1)
     for name, t in ((wrench, tw), (pose, tp)):
         if np.any(np.diff(t) <= 0):
             i = int(np.argmax(np.diff(t) <= 0)) + 1
@@ -174,13 +184,16 @@ def _read_bag(path: Path, wrench_topic: str | None, pose_topic: str | None,
         data[f"measured_moment_{a}"] = w[:, 3 + i]
         data[f"actual_tip_position_{a}"] = np.interp(tw, tp, p[:, i])
         data[f"actual_tip_velocity_{a}"] = np.interp(tw, tv, v[:, i])
+        if desired is not None:
+            data[f"tip_position_{a}"] = np.interp(tw, td, d[:, i])
+            data[f"tip_velocity_{a}"] = np.interp(tw, td, dv[:, i])
     return pd.DataFrame(data)
 
 
 def read_recording(log: str | os.PathLike[str], scenario: str | None = None,
                    overrides: dict[str, Any] | None = None, wrench_topic: str | None = None,
                    pose_topic: str | None = None, twist_topic: str | None = None,
-                   need: list[str] | None = None) -> Recording:
+                   need: list[str] | None = None, desired_pose_topic: str | None = None) -> Recording:
     """Read a recording: a run folder, a ``.csv`` or ``.parquet`` file, or a ROS 2 bag folder
     (with ``metadata.yaml``). ``scenario`` (preset or TOML) gives the geometry and the
     compensator (a run folder's own ``scenario.toml`` by default, else :data:`DEFAULT_SCENARIO`);
@@ -193,7 +206,7 @@ def read_recording(log: str | os.PathLike[str], scenario: str | None = None,
         if (path / "scenario.toml").is_file():
             own_scenario = path / "scenario.toml"
     elif path.is_dir() and (path / "metadata.yaml").is_file():
-        data = _read_bag(path, wrench_topic, pose_topic, twist_topic)
+        data = _read_bag(path, wrench_topic, pose_topic, twist_topic, desired_pose_topic)
     elif path.is_file() and path.suffix.lower() in (".csv", ".parquet", ".pq"):
         data = _read_table(path)
     elif not path.exists():
