@@ -144,7 +144,10 @@ pub fn identify(
     };
     let kinematics = |k: usize| {
         let j = k.saturating_sub(lag);
-        let (p, v) = (&recording.actual_tip_position, &recording.actual_tip_velocity);
+        let (p, v) = (
+            &recording.actual_tip_position,
+            &recording.actual_tip_velocity,
+        );
         (
             Vector3::new(p[0][j], p[1][j], p[2][j]),
             Vector3::new(v[0][j], v[1][j], v[2][j]),
@@ -223,7 +226,10 @@ pub fn identify(
 
 /// [`identify`] with a plan's identification parameters ([`model_params`]), context and
 /// sensor attitude.
-pub fn identify_plan(plan: &Plan, recording: &Recording<'_>) -> Result<Identification, RecordingError> {
+pub fn identify_plan(
+    plan: &Plan,
+    recording: &Recording<'_>,
+) -> Result<Identification, RecordingError> {
     identify(
         &model_params(&plan.compensator),
         &compensator_context(plan),
@@ -269,7 +275,12 @@ mod tests {
                     .iter()
                     .max_by(|a, b| a.normal.dot(&c.normal).total_cmp(&b.normal.dot(&c.normal)))
                     .expect("wall");
-                let angle = wall.normal.dot(&c.normal).clamp(-1.0, 1.0).acos().to_degrees();
+                let angle = wall
+                    .normal
+                    .dot(&c.normal)
+                    .clamp(-1.0, 1.0)
+                    .acos()
+                    .to_degrees();
                 let distance = (c.point - wall.point).dot(&wall.normal);
                 println!(
                     "delay {delay} #{} k {:.1}±{:.1} c {:.2}±{:.2} angle {angle:.4}° ±{:.4} plane {:.4} mm ±{:.4}",

@@ -339,6 +339,9 @@ pub(crate) mod tests {
             }
         }
         let err = Recording::from_table(&table, true).unwrap_err();
-        assert!(err.to_string().contains("actual_tip_velocity_z: sample 9"), "{err}");
+        assert!(
+            err.to_string().contains("actual_tip_velocity_z: sample 9"),
+            "{err}"
+        );
     }
 }
