@@ -156,3 +156,21 @@ def check(scenario_json: str, options_json: str, duration: float) -> str:
 
 def realtime_defaults() -> str:
     """The default runtime and facility options as JSON: ``{"runtime": {...}, "facility": {...}}``."""
+
+
+def replay(scenario_json: str, columns: dict[str, Any]) -> dict[str, Any]:
+    """Replay a recording (``{column: 1-D float array}``: time, measured_force_*,
+    measured_moment_* in the sensor frame, actual_tip_position_*, actual_tip_velocity_*,
+    tip_position_*, tip_velocity_* in ``t``) through the scenario's compensator, built as the
+    live loop builds it. Returns ``{column: ndarray}``: time, applied_force_*, applied_moment_*
+    (sensor frame), velocity_correction_*, stiffness_estimate, damping_estimate,
+    observed_energy. Raises ``ScenarioError`` (a bad recording's message starts with
+    ``recording: ``)."""
+
+
+def identify(scenario_json: str, columns: dict[str, Any]) -> dict[str, Any]:
+    """Identify a recording's contacts (columns as :func:`replay`'s, without the desired tip)
+    with the scenario compensator's identification front end. Returns ``{"timeseries":
+    {column: ndarray}, "collisions": [dict]}`` (index, start, end, samples, updates,
+    stiffness, stiffness_std, damping, damping_std, normal, normal_std (rad), point,
+    offset_std (m), peak_force). Raises like :func:`replay`."""

@@ -3,6 +3,8 @@
     hilcontact run SCENARIO [--set KEY=VALUE ...] [--out DIR] [--no-plots] [--mcap FILE]
     hilcontact compare SCENARIO [--set KEY=VALUE ...] [--compensators LIST] [--out DIR] [--no-plots] [--run-figures]
     hilcontact plot RUN_OR_COMPARISON_DIR
+    hilcontact identify LOG --out DIR [--scenario FILE] [--wrench-topic T --pose-topic T ...]
+    hilcontact replay LOG --compensator KIND [--set compensator.KEY=VALUE ...] --out DIR
     hilcontact sweep SCENARIO --grid KEY=START:STOP:COUNT|KEY=A,B,... [--compensators LIST]
                      [--seeds N] [--set KEY=VALUE ...] --out DIR [--resume] [--dask ADDRESS]
     hilcontact stability-map SWEEP_DIR [--out DIR] [--cov-tolerance 0.05] [--cof-limit 1.2]
@@ -1302,3 +1304,100 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
 def main(argv: Sequence[str] | None = None) -> None:
     """Console-script entry point."""
     cli.main(args=list(argv) if argv is not None else None, prog_name="hilcontact")
+
+
+# ---- your own data: replay and identify (hilcontact.recording) ------------------------------
+
+_LOG_HELP = ("LOG: a run folder, a .csv or .parquet file with the recording's columns, or a ROS 2 bag "
+             "folder (metadata.yaml). See README, 'Your own data'.")
+
+
+def _recording_options(f: Any) -> Any:
+    for option in reversed([
+        click.option("--scenario", "scenario", metavar="FILE", default=None,
+                     help="Scenario (preset or TOML) for the geometry and the compensator [default: a run folder's own, else paper-table1]."),
+        click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP),
+        click.option("--wrench-topic", default=None, help="ROS 2 bag: the geometry_msgs/WrenchStamped topic (sensor frame)."),
+        click.option("--pose-topic", default=None, help="ROS 2 bag: the geometry_msgs/PoseStamped topic of the rod tip (frame t)."),
+        click.option("--twist-topic", default=None, help="ROS 2 bag: a geometry_msgs/TwistStamped topic of the rod tip [default: differentiate the pose]."),
+        click.option("--out", "out", metavar="DIR", required=True, help="Output folder."),
+        click.option("--force", is_flag=True, help=_FORCE_HELP),
+    ]):
+        f = option(f)
+    return f
+
+
+@cli.command(name="replay", short_help="Run a compensator on a recording's measurements and poses.")
+@click.argument("log")
+@click.option("--compensator", "compensator", default=None, metavar="KIND", help="Compensator kind [default: the scenario's].")
+@click.option("--desired-pose-topic", default=None, help="ROS 2 bag: a geometry_msgs/PoseStamped topic of the desired (virtual) rod tip (frame t).")
+@_recording_options
+def replay_command(log: str, compensator: str | None, desired_pose_topic: str | None, scenario: str | None,
+                   sets: tuple[str, ...], wrench_topic: str | None, pose_topic: str | None,
+                   twist_topic: str | None, out: str, force: bool) -> None:
+    """Replay LOG through a compensator (open loop) and write what it would have applied at
+    each tick: replay.parquet (time, applied_force_*, applied_moment_* in the sensor frame,
+    velocity_correction_*, stiffness_estimate, damping_estimate, observed_energy),
+    summary.json, scenario.toml. Tune with --set compensator.KEY=VALUE.
+
+    \b
+    Example:
+      hilcontact run paper-table1 --set compensator.kind=pida --out runs/p
+      hilcontact replay runs/p --out runs/p-replay --set compensator.forgetting=0.95
+    """
+    from .recording import DESIRED_COLUMNS, IDENTIFY_COLUMNS, read_recording, replay, save_replay
+
+    with _errors():
+        overrides = parse_set_options(sets)
+        if compensator is not None:
+            overrides["compensator.kind"] = compensator
+        check_output_folder(out, overwrite=force)
+        recording = read_recording(log, scenario, overrides, wrench_topic, pose_topic, twist_topic,
+                                   need=IDENTIFY_COLUMNS + DESIRED_COLUMNS, desired_pose_topic=desired_pose_topic)
+        summary = save_replay(recording, replay(recording), out, force)
+    diff = summary.get("max_relative_difference_to_recorded")
+    click.echo(f"{summary['compensator']}: {summary['samples']} ticks replayed -> {out}"
+               + (f" (largest difference to the recorded applied wrench: {diff:.3g} of its peak)" if diff is not None else ""))
+
+
+@cli.command(name="identify", short_help="Identify each collision's stiffness, damping and wall from a recording.")
+@click.argument("log")
+@click.option("--forgetting", type=float, default=0.9, show_default=True,
+              help="Forgetting factor b of the filter's noise estimate (the compensators use 0.98; see docs/identification.md).")
+@_recording_options
+def identify_command(log: str, forgetting: float, scenario: str | None, sets: tuple[str, ...],
+                     wrench_topic: str | None, pose_topic: str | None, twist_topic: str | None,
+                     out: str, force: bool) -> None:
+    """Identify, per collision of LOG, the contact stiffness and damping (the compensators'
+    identification: the Sage-Husa filter with the sensor-delay alignment, restarted per
+    collision) and the wall (point and normal), each with an uncertainty. Writes
+    identification.parquet (per tick), collisions.csv, collisions.json, scenario.toml.
+
+    \b
+    Example:
+      hilcontact identify runs/p --out runs/p-id
+      hilcontact identify log.csv --scenario my.toml --out id
+      hilcontact identify bag/ --wrench-topic /ft --pose-topic /tip --out id
+    """
+    from .recording import identify, read_recording, save_identification
+
+    if not 0.0 < forgetting < 1.0:
+        _fail(f"--forgetting {forgetting}: must be between 0 and 1 (exclusive)", 2)
+    with _errors():
+        check_output_folder(out, overwrite=force)
+        recording = read_recording(log, scenario, parse_set_options(sets), wrench_topic, pose_topic, twist_topic)
+        ticks, collisions = identify(recording, forgetting)
+        save_identification(recording, ticks, collisions, out, force)
+    console = Console()
+    table = Table(title=f"{log}: {len(collisions)} collision(s)")
+    for name in ("#", "start s", "k N/mm", "c N·s/mm", "normal", "±deg", "point mm", "±mm"):
+        table.add_column(name, justify="right")
+    for _, c in collisions.iterrows():
+        table.add_row(
+            str(int(c["index"])), f"{c['start']:.3f}",
+            f"{c['stiffness'] / 1e3:.3f} ± {c['stiffness_std'] / 1e3:.3f}",
+            f"{c['damping'] / 1e3:.4f} ± {c['damping_std'] / 1e3:.4f}",
+            f"({c['normal_x']:.4f}, {c['normal_y']:.4f}, {c['normal_z']:.4f})", f"{c['normal_std_deg']:.3g}",
+            f"({c['point_x'] * 1e3:.2f}, {c['point_y'] * 1e3:.2f}, {c['point_z'] * 1e3:.2f})", f"{c['offset_std'] * 1e3:.3g}",
+        )
+    console.print(table)

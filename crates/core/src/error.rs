@@ -95,3 +95,50 @@ impl Issues {
 
 /// Result type of the core.
 pub type Result<T> = std::result::Result<T, CoreError>;
+
+/// A recording (a logged run or a user's data) that cannot be replayed or identified: what is
+/// wrong, naming the column and the sample.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum RecordingError {
+    /// A column the computation needs is absent.
+    #[error("missing columns: {}", .0.join(", "))]
+    MissingColumns(Vec<String>),
+    /// A column's length differs from the time column's.
+    #[error("column {name} has {len} samples, time has {expected}")]
+    Length {
+        /// The column.
+        name: String,
+        /// Its number of samples.
+        len: usize,
+        /// The time column's number of samples.
+        expected: usize,
+    },
+    /// Fewer samples than the computation needs.
+    #[error("too short: {len} samples, at least {min} needed")]
+    TooShort {
+        /// Number of samples.
+        len: usize,
+        /// Minimum.
+        min: usize,
+    },
+    /// Time does not strictly increase.
+    #[error("time is not strictly increasing at sample {index} ({before} s, then {after} s)")]
+    NonMonotonic {
+        /// Index of the offending sample.
+        index: usize,
+        /// The previous time, s.
+        before: f64,
+        /// The offending time, s.
+        after: f64,
+    },
+    /// A sample is NaN or infinite.
+    #[error("column {name}: sample {index} is not finite ({value})")]
+    NonFinite {
+        /// The column.
+        name: String,
+        /// Index of the sample.
+        index: usize,
+        /// Its value.
+        value: f64,
+    },
+}

@@ -19,6 +19,17 @@ use crate::metrics::{Stop, StopKind};
 use crate::plan::Plan;
 use crate::world::{TwoBodyState, TwoBodySystem};
 
+/// The facts a plan's compensator is built with: period, sensor delay (ticks), sensor origin
+/// (`t`, m), reduced mass (kg). The one place they are gathered (live loop and replay).
+pub fn compensator_context(plan: &Plan) -> CompensatorContext {
+    CompensatorContext {
+        period: plan.period,
+        sensor_delay_ticks: plan.facility.sensor_delay_ticks,
+        sensor_origin: plan.system.sensor_origin,
+        reduced_mass: plan.system.reduced_mass(),
+    }
+}
+
 /// Compensator plus virtual satellite dynamics.
 pub struct VirtualDynamics {
     system: TwoBodySystem,
@@ -35,12 +46,7 @@ impl VirtualDynamics {
     /// The virtual side of a plan, at its initial state (allocates the compensator once).
     pub fn new(plan: &Plan) -> Self {
         let system = &plan.system;
-        let context = CompensatorContext {
-            period: plan.period,
-            sensor_delay_ticks: plan.facility.sensor_delay_ticks,
-            sensor_origin: system.sensor_origin,
-            reduced_mass: system.reduced_mass(),
-        };
+        let context = compensator_context(plan);
         VirtualDynamics {
             system: system.clone(),
             command: system.relative_motion(&plan.initial),

@@ -22,13 +22,15 @@ pub mod error;
 pub mod facility;
 pub mod frames;
 pub mod hil;
+pub mod identify;
 pub mod metrics;
 pub mod plan;
+pub mod replay;
 pub mod schema;
 pub mod sim;
 pub mod world;
 
 pub use config::Scenario;
-pub use error::{CoreError, Result, ScenarioIssue};
+pub use error::{CoreError, RecordingError, Result, ScenarioIssue};
 pub use plan::Plan;
 pub use sim::{simulate, simulate_metrics, SimulationOutput, Table};

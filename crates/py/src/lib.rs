@@ -590,6 +590,82 @@ fn version() -> &'static str {
     env!("CARGO_PKG_VERSION")
 }
 
+/// A recording given as `{column: 1-D float array}` (names as in a run's timeseries.parquet).
+fn recording_table(columns: &Bound<'_, PyDict>) -> PyResult<Table> {
+    let mut table = Table::default();
+    for (name, values) in columns.iter() {
+        let name: String = name.extract()?;
+        let values: Vec<f64> = values.extract()?;
+        table.columns.push((name, values));
+    }
+    Ok(table)
+}
+
+/// A bad recording: `ScenarioError` with the core's one-line message.
+fn recording_err(py: Python<'_>, error: hilcontact_core::RecordingError) -> PyErr {
+    raise(py, |c| &c.scenario, format!("recording: {error}"))
+}
+
+/// Replays a recording (`{column: array}`: time, measured_force_*, measured_moment_* in the
+/// sensor frame, actual_tip_position_*, actual_tip_velocity_*, tip_position_*, tip_velocity_*
+/// in `t`) through the compensator of a scenario (resolved JSON), built as the live loop
+/// builds it. Returns `{column: ndarray}`: time, applied_force_*, applied_moment_* (sensor
+/// frame), velocity_correction_*, stiffness_estimate, damping_estimate, observed_energy.
+/// Raises ScenarioError for a bad scenario or recording.
+#[pyfunction]
+fn replay<'py>(
+    py: Python<'py>,
+    scenario_json: &str,
+    columns: &Bound<'py, PyDict>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let plan = parse_scenario(py, scenario_json)?;
+    let table = recording_table(columns)?;
+    let out = py.allow_threads(|| -> Result<Table, hilcontact_core::RecordingError> {
+        let recording = hilcontact_core::replay::Recording::from_table(&table, true)?;
+        hilcontact_core::replay::replay_plan(&plan, &recording)
+    });
+    table_to_dict(py, out.map_err(|e| recording_err(py, e))?)
+}
+
+/// Identifies the contacts of a recording (columns as `replay`'s, the desired tip not needed)
+/// with the identification front end of a scenario's compensator (its parameters, sensor delay
+/// and attitude). Returns `{"timeseries": {column: ndarray}, "collisions": [dict]}`, each
+/// collision with index, start, end (s), samples, updates, stiffness, stiffness_std (N/m),
+/// damping, damping_std (N s/m), normal (unit, `t`), normal_std (rad), point (`t`, m),
+/// offset_std (m), peak_force (N).
+#[pyfunction]
+fn identify<'py>(
+    py: Python<'py>,
+    scenario_json: &str,
+    columns: &Bound<'py, PyDict>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let plan = parse_scenario(py, scenario_json)?;
+    let table = recording_table(columns)?;
+    let out = py.allow_threads(|| {
+        let recording = hilcontact_core::replay::Recording::from_table(&table, false)?;
+        hilcontact_core::identify::identify_plan(&plan, &recording)
+    });
+    let id = out.map_err(|e| recording_err(py, e))?;
+    let collisions = id
+        .collisions
+        .iter()
+        .map(|c| {
+            serde_json::json!({
+                "index": c.index, "start": c.start, "end": c.end, "samples": c.samples,
+                "updates": c.updates, "stiffness": c.stiffness, "stiffness_std": c.stiffness_std,
+                "damping": c.damping, "damping_std": c.damping_std,
+                "normal": [c.normal.x, c.normal.y, c.normal.z], "normal_std": c.normal_std,
+                "point": [c.point.x, c.point.y, c.point.z], "offset_std": c.offset_std,
+                "peak_force": c.peak_force,
+            })
+        })
+        .collect::<Vec<_>>();
+    let result = PyDict::new(py);
+    result.set_item("timeseries", table_to_dict(py, id.timeseries)?)?;
+    result.set_item("collisions", json_to_py(py, &collisions)?)?;
+    Ok(result)
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
@@ -605,6 +681,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(start_facility, m)?)?;
     m.add_function(wrap_pyfunction!(check, m)?)?;
     m.add_function(wrap_pyfunction!(realtime_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(replay, m)?)?;
+    m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_class::<PyHilHandle>()?;
     m.add_class::<PyFacilityHandle>()?;
     let errors = error_classes(m.py())?;
