@@ -19,7 +19,7 @@ def run_example(name: str, *args: str) -> subprocess.CompletedProcess[str]:
 
 
 def test_every_example_is_tested():
-    tested = {"compare_your_scenario.py", "sweep_stability_map.py"}
+    tested = {"compare_your_scenario.py", "sweep_stability_map.py", "identify_a_recording.py"}
     assert {p.name for p in EXAMPLES.glob("*.py")} == tested
 
 
@@ -39,3 +39,14 @@ def test_sweep_stability_map(core, tmp_path):
     assert len(rows) == 2 * 2 * 2  # delays × stiffnesses × compensators
     assert (out / "stability" / "stability_map.png").is_file()
     assert "largest faithful robot delay" in result.stdout
+
+
+def test_identify_a_recording(core, tmp_path):
+    result = run_example("identify_a_recording.py", str(tmp_path / "id"))
+    lines = [line for line in result.stdout.splitlines() if line.startswith("collision ")]
+    assert len(lines) >= 2, result.stdout
+    for line in lines:  # the truth is known: within 1 % on k, 0.5° and 0.5 mm on the wall
+        k, true_k = (float(v) for v in (line.split("k = ")[1].split(" ")[0], line.split("(true ")[1].split(")")[0]))
+        assert abs(k / true_k - 1) < 0.01, line
+        assert float(line.split("normal off by ")[1].split("°")[0]) < 0.5, line
+        assert abs(float(line.split("plane off by ")[1].split(" mm")[0])) < 0.5, line
