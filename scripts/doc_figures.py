@@ -116,6 +116,50 @@ def zero_delay() -> str:
     )
 
 
+#: The cases without the `lead` row (the compensators without `delay_mode`, and pic's table).
+PLAIN_CASES = [case for case in CASES if "compensator.delay_mode" not in case[2]]
+
+
+def cov_range(r: hc.Run) -> str:
+    """The CoV of the collisions as a range, 3 decimals: ``1.001-1.005``, or ``1.000 ×5``."""
+    values = [f"{c['cov']:.3f}" for c in r.metrics["collisions"] if c.get("cov") is not None]
+    if not values:
+        return "-"
+    low, high = min(values, key=float), max(values, key=float)
+    return f"{low} ×{len(values)}" if low == high else f"{low}-{high}"
+
+
+def status(r: hc.Run) -> str:
+    at = r.metrics.get("diverged_at")
+    return f"{r.status} at {at:.3f} s" if r.status == "diverged" and at is not None else r.status
+
+
+def pic_table() -> str:
+    lines = ["| case | status | CoV per collision | worst CoF | k error (%) |", "|---|---|---|--:|--:|"]
+    for label, preset, overrides in PLAIN_CASES:
+        r = run(preset, "pic", overrides)
+        k = (r.metrics.get("identification") or {}).get("stiffness_error")
+        lines.append(f"| {label} | {status(r)} | {covs(r)} | {worst_cof(r)} | {'-' if k is None else f'{100 * k:.3g}'} |")
+    return "\n".join(lines)
+
+
+def tdpa_impedance_table() -> str:
+    lines = ["| case | `tdpa-impedance` CoV per collision | worst CoF | `dac` CoV | `pida` CoV (worst CoF) |",
+             "|---|---|--:|---|---|"]
+    for label, preset, overrides in PLAIN_CASES:
+        r, dac, pida = (run(preset, kind, overrides) for kind in ("tdpa-impedance", "dac", "pida"))
+        lines.append(f"| {label} | {covs(r)} | {worst_cof(r)} | {cov_range(dac)} | {cov_range(pida)} ({worst_cof(pida)}) |")
+    return "\n".join(lines)
+
+
+def tdpa_admittance_table() -> str:
+    lines = ["| case | `tdpa-admittance` CoV per collision | worst CoF | `pida` CoV (worst CoF) |", "|---|---|--:|---|"]
+    for label, preset, overrides in PLAIN_CASES:
+        r, pida = run(preset, "tdpa-admittance", overrides), run(preset, "pida", overrides)
+        lines.append(f"| {label} | {covs(r)} | {worst_cof(r)} | {cov_range(pida)} ({worst_cof(pida)}) |")
+    return "\n".join(lines)
+
+
 def pida_damped() -> str:
     """pida on `paper-exp-2.64hz`: the range of its CoV, then its worst CoF in brackets."""
     r = run("paper-exp-2.64hz", "pida")
@@ -130,6 +174,9 @@ FIGURES: dict[str, Callable[[], str]] = {
     "lead-table": lead_table,
     "zero-delay": zero_delay,
     "pida-damped": pida_damped,
+    "pic-table": pic_table,
+    "tdpa-impedance-table": tdpa_impedance_table,
+    "tdpa-admittance-table": tdpa_admittance_table,
 }
 
 #: Pages that hold figures.
