@@ -200,20 +200,12 @@ def model_table() -> str:
     return "\n".join(lines)
 
 
-def pida_damped() -> str:
-    """pida on `paper-exp-2.64hz`: the range of its CoV, then its worst CoF in brackets."""
-    r = run("paper-exp-2.64hz", "pida")
-    cov = [c["cov"] for c in r.metrics["collisions"] if c.get("cov") is not None]
-    return f"{min(cov):.3f}-{max(cov):.3f} ({worst_cof(r)})"
-
-
 #: Every figure: name -> function writing its text.
 FIGURES: dict[str, Callable[[], str]] = {
     "dac-table": dac_table,
     "pida-table": pida_table,
     "lead-table": lead_table,
     "zero-delay": zero_delay,
-    "pida-damped": pida_damped,
     "pic-table": pic_table,
     "tdpa-impedance-table": tdpa_impedance_table,
     "tdpa-admittance-table": tdpa_admittance_table,
