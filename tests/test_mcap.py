@@ -24,7 +24,7 @@ rosbags_typesys = pytest.importorskip("rosbags.typesys")
 from mcap.exceptions import McapError  # noqa: E402
 
 from test_cli import assert_one_error_line, invoke  # noqa: E402
-from test_realtime_e2e import ROBOT_DELAY, facility_process, run_hil  # noqa: E402
+from test_realtime_e2e import ROBOT_DELAY, facility_process, hil_command, run_hil  # noqa: E402
 
 #: The channels written once per tick by every run (the Rust `recording::CHANNELS`).
 PER_TICK = [
@@ -273,13 +273,8 @@ def test_a_real_time_run_across_processes_records_every_channel(core, tmp_path):
 def test_a_run_killed_with_sigkill_reads_up_to_its_last_complete_chunk(core, tmp_path):
     path = tmp_path / "killed.mcap"
     with facility_process(tmp_path) as ports:
-        cmd = [
-            sys.executable, "-m", "hilcontact", "hil", "paper-table1", "--set", ROBOT_DELAY,
-            "--set", "compensator.kind=pida", "--set", "simulation.duration=60",
-            "--sensor", "127.0.0.1", "--sensor-port", ports["sensor"], "--http-port", ports["http"],
-            "--egm-port", ports["egm"], "--egm-bind", "127.0.0.1", "--out", str(tmp_path / "never"), "--no-plots",
-            "--watchdog-ms", "2000", "--connect-timeout", "30", "--mcap", str(path),
-        ]
+        cmd = hil_command(ports, tmp_path / "never", ROBOT_DELAY, "compensator.kind=pida", "simulation.duration=60",
+                          watchdog_ms=2000, extra=("--mcap", str(path)))
         process = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         try:
             # about 0.55 MB per 0.5 s chunk at 1 kHz: wait for a few chunks, then kill

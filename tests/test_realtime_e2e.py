@@ -78,13 +78,11 @@ def facility_process(tmp_path: Path, *extra: str, sensor: str = "rdt", robot: st
     assert out.startswith("stopped: facility"), out
 
 
-def run_hil(
-    ports: dict[str, str], out: Path, *sets: str, timeout: float = 90, watchdog_ms: float = 500.0,
-    extra: tuple[str, ...] = (),
-) -> subprocess.CompletedProcess[str]:
-    """Runs `hilcontact hil` against the facility, with its protocols (``extra``: more
-    arguments); the watchdog (500 ms) and the connect timeout (30 s) are generous so that a busy
-    test machine's pauses do not stop a run whose subject is something else."""
+def hil_command(ports: dict[str, str], out: Path, *sets: str, watchdog_ms: float = 500.0,
+                extra: tuple[str, ...] = ()) -> list[str]:
+    """`hilcontact hil` against the facility, with its protocols (``extra``: more arguments);
+    the watchdog (500 ms) and the connect timeout (30 s) are generous so that a busy test
+    machine's pauses do not stop a run whose subject is something else."""
     sensor, robot = ports["sensor_protocol"], ports["robot_protocol"]
     sets = protocol_sets(sensor, robot) + sets
     cmd = [
@@ -96,6 +94,15 @@ def run_hil(
     ]
     if sensor == "rdt":
         cmd += ["--http-port", ports["http"]]
+    return cmd
+
+
+def run_hil(
+    ports: dict[str, str], out: Path, *sets: str, timeout: float = 90, watchdog_ms: float = 500.0,
+    extra: tuple[str, ...] = (),
+) -> subprocess.CompletedProcess[str]:
+    """Runs :func:`hil_command` to its end."""
+    cmd = hil_command(ports, out, *sets, watchdog_ms=watchdog_ms, extra=extra)
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
 
 
@@ -212,14 +219,8 @@ def test_ctrl_c_stops_cleanly_and_keeps_what_was_recorded(core, tmp_path):
 
     out = tmp_path / "rt-ctrl-c"
     with facility_process(tmp_path) as ports:
-        cmd = [
-            sys.executable, "-m", "hilcontact", "hil", "paper-table1", "--set", ROBOT_DELAY,
-            "--set", "compensator.kind=pida", "--set", "simulation.duration=20",
-            "--sensor", "127.0.0.1", "--sensor-port", ports["sensor"], "--http-port", ports["http"],
-            "--egm-port", ports["egm"], "--egm-bind", "127.0.0.1", "--out", str(out), "--no-plots",
-            # this test is about Ctrl-C: a busy test machine's pauses must not trip the watchdog
-            "--watchdog-ms", "2000",
-        ]
+        # this test is about Ctrl-C: a busy test machine's pauses must not trip the watchdog
+        cmd = hil_command(ports, out, ROBOT_DELAY, "compensator.kind=pida", "simulation.duration=20", watchdog_ms=2000)
         process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         time.sleep(4.0)
         process.send_signal(signal.SIGINT)
