@@ -8,7 +8,6 @@ import json
 import math
 import signal
 import subprocess
-import sys
 import time
 from collections import Counter, defaultdict
 from pathlib import Path
