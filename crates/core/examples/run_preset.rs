@@ -1,7 +1,7 @@
 //! Runs a preset scenario file and prints its collisions:
 //! `cargo run --release --example run_preset -- python/hilcontact/scenarios/paper-table1.toml [key=value ...]`
 //! with keys `robot_delay`, `sensor_delay`, `round_delays` (true|false), `noise` (N), `seed`, `kind` (compensator), `mode` (align|lead),
-//! `observer` (work|paper), `controller` (normal|paper), `ratio` (force_ratio_max), `duration` (s), `repeat` (more runs, metrics only as a sweep runs them, for profiling: `perf record -g`
+//! `observer` (work|paper), `controller` (normal|paper), `ratio` (force_ratio_max), `duration` (s), `servo` (Hz), `law` (linear|hunt-crossley), `stiffness`, `damping`, `exponent`, `repeat` (more runs, metrics only as a sweep runs them, for profiling: `perf record -g`
 //! on this example).
 
 use hilcontact_core::compensator::{
@@ -33,6 +33,16 @@ fn main() {
             "repeat" => repeat = value.parse().expect("integer"),
             "ratio" => ratio = value.parse().expect("force_ratio_max"),
             "duration" => s.simulation.duration = value.parse().expect("s"),
+            "servo" => s.facility.servo_frequency = value.parse().expect("Hz"),
+            "stiffness" => s.contact.stiffness = value.parse().expect("N/m or N/m^n"),
+            "damping" => s.contact.damping = value.parse().expect("N s/m"),
+            "exponent" => s.contact.exponent = value.parse().expect("n"),
+            "law" => {
+                s.contact.model = match value {
+                    "hunt-crossley" => hilcontact_core::config::ContactModelKind::HuntCrossley,
+                    _ => hilcontact_core::config::ContactModelKind::Linear,
+                }
+            }
             "controller" => {
                 controller = if value == "paper" {
                     ControllerMode::Paper
@@ -68,6 +78,8 @@ fn main() {
         Some(CompensatorConfig::Pic(_)) => CompensatorConfig::Pic(model),
         Some(CompensatorConfig::Dac(_)) => CompensatorConfig::Dac(model),
         Some(CompensatorConfig::Pida(_)) => CompensatorConfig::Pida(model),
+        // the file's own table when it is of this kind (e.g. model-mediated prior walls)
+        Some(other) if other.kind() == s.compensator.kind() => s.compensator.clone(),
         Some(other) => other,
         None => panic!("unknown compensator {kind}"),
     };

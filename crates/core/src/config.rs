@@ -8,6 +8,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::compensator::CompensatorConfig;
+pub use crate::contact::WallConfig;
 use crate::metrics::Tolerances;
 
 /// Longest scenario name, characters (it names the output folder).
@@ -142,21 +143,6 @@ pub struct RodConfig {
     /// Rod tip (the contact point) in the servicer body frame, m.
     #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e3))]
     pub tip: [f64; 3],
-}
-
-/// A planar wall of the collision frame, fixed in the target frame.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct WallConfig {
-    /// Name for reports.
-    #[serde(default)]
-    pub name: String,
-    /// A point of the wall, m (target frame).
-    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e3))]
-    pub point: [f64; 3],
-    /// Normal from the wall into free space (non-zero; normalised by the core).
-    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e6))]
-    pub normal: [f64; 3],
 }
 
 /// Which contact law.

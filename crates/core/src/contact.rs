@@ -6,6 +6,8 @@
 //! The force on the rod is `max(0, f(d, ḋ))·n` while `d > 0`: a contact never pulls.
 
 use nalgebra::Vector3;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 
 /// A contact law: the normal force magnitude from penetration and penetration rate.
 pub trait ContactLaw {
@@ -64,6 +66,22 @@ impl ContactLaw for ContactModel {
             ContactModel::HuntCrossley(law) => law.normal_force(d, d_dot),
         }
     }
+}
+
+/// A planar wall as a scenario file gives it (`[[walls]]`, and a compensator's prior walls):
+/// checked and normalised into a [`Wall`] by the plan.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct WallConfig {
+    /// Name for reports.
+    #[serde(default)]
+    pub name: String,
+    /// A point of the wall, m (target frame).
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e3))]
+    pub point: [f64; 3],
+    /// Normal from the wall into free space (non-zero; normalised by the core).
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e6))]
+    pub normal: [f64; 3],
 }
 
 /// A planar wall fixed in the target frame.

@@ -367,14 +367,20 @@ pub fn compare(
             let (w, w_ref) = (hil.angular_velocity[hi_i], reference.angular_velocity[ri]);
             let peak =
                 |t: &Trace, s: &Span| t.force[s.start..=s.end].iter().cloned().fold(0.0, f64::max);
-            let impulse = |t: &Trace, s: &Span, to: usize| {
+            // from the middle of the free flight before the collision: a compensator may make
+            // the virtual dynamics feel the contact before the robot does (model-mediated)
+            let from = |spans: &[Span], j: usize| match j {
+                0 => 0,
+                _ => (spans[j - 1].end + spans[j].start) / 2,
+            };
+            let impulse = |t: &Trace, from: usize, to: usize| {
                 (
-                    t.integral(&t.wrench_force, s.start, to),
-                    t.integral(&t.wrench_moment, s.start, to),
+                    t.integral(&t.wrench_force, from, to),
+                    t.integral(&t.wrench_moment, from, to),
                 )
             };
-            let (j_h, m_h) = impulse(hil, h, hi_i);
-            let (j_r, m_r) = impulse(reference, r, ri);
+            let (j_h, m_h) = impulse(hil, from(&hs, j), hi_i);
+            let (j_r, m_r) = impulse(reference, from(&rs, i), ri);
             c.rebound_time = Some(hil.time[hi_i]);
             c.cov = ratio(v.norm(), v_ref.norm());
             c.velocity_error = ratio((v - v_ref).norm(), v_ref.norm());

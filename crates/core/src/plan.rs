@@ -16,7 +16,7 @@ use std::collections::BTreeSet;
 use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 
 use crate::body::{BodyState, MassProperties};
-use crate::compensator::CompensatorConfig;
+use crate::compensator::{CompensatorConfig, MAX_SURFACES};
 use crate::config::{
     BodyConfig, ContactModelKind, Inertia, Scenario, MAX_NAME_LENGTH, MAX_TICKS, MIN_INERTIA,
 };
@@ -142,6 +142,28 @@ impl Plan {
                     point: Vector3::from(wall.point),
                     normal: Vector3::from(n),
                 });
+            }
+        }
+
+        if let CompensatorConfig::ModelMediated(p) = &mut r.compensator {
+            if p.prior_walls.len() > MAX_SURFACES {
+                issues.push(
+                    "compensator.prior_walls",
+                    format!(
+                        "at most {MAX_SURFACES} prior walls, got {}",
+                        p.prior_walls.len()
+                    ),
+                );
+            }
+            for (i, wall) in p.prior_walls.iter_mut().enumerate() {
+                if wall.name.is_empty() {
+                    wall.name = format!("prior{i}");
+                }
+                let key = format!("compensator.prior_walls[{i}]");
+                finite(&mut issues, failed, &format!("{key}.point"), &wall.point);
+                if let Some(n) = unit_vector(&mut issues, failed, &format!("{key}.normal"), wall.normal) {
+                    wall.normal = n;
+                }
             }
         }
 

@@ -10,6 +10,7 @@ mod delay;
 pub mod detect;
 mod energy;
 mod force;
+mod model_mediated;
 mod none;
 mod params;
 mod pic;
@@ -22,7 +23,10 @@ pub use delay::{ContactEstimator, ContactView};
 pub use energy::{DampingAmendment, EnergyController, EnergyObserver};
 pub use force::{compensate_force, CompensatedWrench};
 pub use none::{NoParams, PassThrough};
-pub use params::{ControllerMode, DelayMode, ModelParams, ObserverMode, TdpaParams};
+pub use model_mediated::{fit_contact, Fit, ModelMediated, Sample, Surface, MAX_SURFACES};
+pub use params::{
+    ControllerMode, DelayMode, LawForm, ModelMediatedParams, ModelParams, ObserverMode, TdpaParams,
+};
 pub use pic::Pic;
 pub use pida::Pida;
 pub use tdpa::{TdpaAdmittance, TdpaImpedance};
@@ -186,6 +190,8 @@ registry! {
     TdpaImpedance = "tdpa-impedance", TdpaParams, TdpaImpedance, "tab:purple";
     /// Time-domain passivity, admittance type (a damper on the velocity command).
     TdpaAdmittance = "tdpa-admittance", TdpaParams, TdpaAdmittance, "tab:brown";
+    /// Model-mediated rendering: the identified contact (surfaces and law) at the virtual tip, the residual fed back.
+    ModelMediated = "model-mediated", ModelMediatedParams, ModelMediated, "tab:cyan";
 }
 
 impl Default for CompensatorConfig {

@@ -142,3 +142,84 @@ impl Default for TdpaParams {
         }
     }
 }
+
+/// Which contact law `model-mediated` identifies and renders.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum LawForm {
+    /// Linear spring-damper `f = k·d + c·ḋ` (eq. 5).
+    Linear,
+    /// Hunt-Crossley `f = dⁿ·(k + c·ḋ)`, the exponent identified too.
+    HuntCrossley,
+    /// Both fitted at each contact; Hunt-Crossley is kept when it explains the force clearly
+    /// better (residual below 0.7 of the linear fit's) (default).
+    #[default]
+    Auto,
+}
+
+/// Parameters of the `model-mediated` compensator.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct ModelMediatedParams {
+    /// The contact law to identify: `linear`, `hunt-crossley` or `auto`.
+    pub law: LawForm,
+    /// Prior contact geometry (a CAD model), in the `[[walls]]` format: each surface the rod may
+    /// touch, its point (m) and its normal into free space, target frame. It may be off by
+    /// millimetres and degrees: each contact corrects it. Empty: every surface is learned at
+    /// its first contact.
+    #[schemars(length(max = 8))]
+    pub prior_walls: Vec<crate::contact::WallConfig>,
+    /// Whether the contacts correct the surfaces' geometry and law (true); false renders the
+    /// prior walls as they are (with the law of the first contact).
+    pub identify: bool,
+    /// Largest angle between a contact's force and a surface's normal for the contact to
+    /// belong to that surface, degrees (> 0, <= 90).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 90.0))]
+    pub match_angle: f64,
+    /// How far the robot's rod tip may still be from a modelled surface (m) when a force
+    /// appears for the contact to count as that surface's (the residual corrects the rest);
+    /// farther, the contact is not explained by the model and `pida` handles it (>= 0, <= 1).
+    #[schemars(range(min = 0.0, max = 1.0))]
+    pub gap_tolerance: f64,
+    /// Fewest samples in contact for a contact to update a surface (>= 3, <= 1e6).
+    #[schemars(range(min = 3, max = 1_000_000))]
+    pub min_samples: u32,
+    /// Samples of one contact kept for its fit; memory allocated once (>= 16, <= 1e7; 20000:
+    /// 20 s of contact at 1 kHz, 1 MB).
+    #[schemars(range(min = 16, max = 10_000_000))]
+    pub max_samples: u32,
+    /// Weight of a surface's past contacts against a new one, in samples (>= 0, <= 1e9): the
+    /// estimate is the sample-weighted mean of the past (weight at most this) and the new fit.
+    #[schemars(range(min = 0, max = 1_000_000_000))]
+    pub memory: u32,
+    /// Share of the residual fed back into the virtual dynamics (0 to 1; default 0, the model
+    /// alone): 1 corrects the force level of a wrong model, but late by the loop's delay, which
+    /// loses more rebound than it saves (docs/compensators/model-mediated.md).
+    #[schemars(range(min = 0.0, max = 1.0))]
+    pub residual_gain: f64,
+    /// Largest damping force of the residual's energy controller, as a multiple of the force
+    /// applied (and at least of `fallback.contact_force`) (> 0, <= 1e6).
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e6))]
+    pub force_ratio_max: f64,
+    /// Contact detection, and the `pida` that handles contacts the model does not explain
+    /// (every contact before the first is identified), `[compensator.fallback]`.
+    pub fallback: ModelParams,
+}
+
+impl Default for ModelMediatedParams {
+    fn default() -> Self {
+        ModelMediatedParams {
+            law: LawForm::Auto,
+            prior_walls: Vec::new(),
+            identify: true,
+            match_angle: 30.0,
+            gap_tolerance: 1e-3,
+            min_samples: 20,
+            max_samples: 20_000,
+            memory: 2_000,
+            residual_gain: 0.0,
+            force_ratio_max: 2.0,
+            fallback: ModelParams::default(),
+        }
+    }
+}

@@ -1,0 +1,723 @@
+//! `model-mediated` — model-mediated rendering with online identification of the contact's
+//! geometry and law. See docs/compensators/model-mediated.md.
+//!
+//! The virtual dynamics feel an identified model of the contact evaluated at the *virtual*
+//! rod tip, from the moment the virtual tip reaches an identified surface; the robot,
+//! `τ` behind, then reproduces the ideal motion `τ` later and produces the ideal force, late.
+//! The measured force identifies the model and, through its residual against the model at
+//! the robot's own (aligned) pose, corrects what the model gets wrong:
+//! ```text
+//! f_s(d, ḋ)      the law of surface s (linear k·d + c·ḋ, or Hunt-Crossley dⁿ(k + c·ḋ))
+//! d_s(p)         = max(0, −(p − p_s)·n_s)                 penetration of surface s
+//! F_m(p, v)      = −Σ_s f_s(d_s(p), −v·n_s)·n_s            model force on the frame
+//! r              = F_mea(k) − F_m(p_act(k−τ_p), v_act(k−τ_p))  residual (in physical contact)
+//! F              = F_m(p_des, v_des) + r + F_α             applied force
+//! M              = (p_des − p_s0) × F + M_mea − (p_then − p_s0) × (F_m(then) + r)
+//! ```
+//! `F_α` dissipates what the residual, a delayed force, injects: the residual's work on the
+//! virtual motion is observed over each contact (the force held over the step, as the `work`
+//! observer does) and, while positive, a damping along the contact normal takes it out,
+//! at most `force_ratio_max` times the applied force; what it cannot take in one tick it
+//! carries to the next.
+//!
+//! A contact belongs to a surface when its force direction is within `match_angle` of the
+//! surface's normal and the robot is within `gap_tolerance` of it; a contact that no surface
+//! explains (every first contact without a prior) is handled by an internal `pida`, stepped at
+//! every tick so that its state is current. The model changes only between contacts (the
+//! updated surfaces are adopted once the virtual tip is outside them), so an update never
+//! makes a force step. A modelled contact during which the robot measures no force at all
+//! drops the surface (a phantom). No allocation per tick: the samples' buffer is allocated
+//! once.
+
+use nalgebra::{Matrix2, Matrix3, Matrix4, Vector2, Vector3, Vector4};
+
+use super::detect::ContactDetector;
+use super::params::{LawForm, ModelMediatedParams};
+use super::pida::Pida;
+use super::{
+    Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
+};
+use crate::contact::{ContactLaw, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
+use crate::delay_line::DelayLine;
+use crate::frames::FrameWrench;
+
+/// Most surfaces the compensator models.
+pub const MAX_SURFACES: usize = 8;
+/// Hunt-Crossley is kept by `auto` when its RMS residual is below this share of the linear
+/// fit's.
+pub const HUNT_CROSSLEY_PREFERENCE: f64 = 0.7;
+
+/// A modelled contact surface.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Surface {
+    /// The plane: point (m) and unit normal into free space, target frame.
+    pub wall: Wall,
+    /// Its own identified law; `None` for a prior not touched yet (it uses the shared law).
+    pub law: Option<ContactModel>,
+    /// Contact samples behind the estimate (0 for a prior).
+    pub weight: f64,
+}
+
+/// One identification sample: a measured force and the robot kinematics that produced it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    /// Measured force on the frame, `t`, N.
+    pub force: Vector3<f64>,
+    /// Robot rod tip `τ_p` earlier, `t`, m.
+    pub position: Vector3<f64>,
+    /// Robot rod-tip velocity `τ_p` earlier, `t`, m/s.
+    pub velocity: Vector3<f64>,
+}
+
+/// A surface and law fitted to one contact's samples.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fit {
+    /// The plane, point (m) and normal into free space.
+    pub wall: Wall,
+    /// The law.
+    pub law: ContactModel,
+    /// RMS of the force residual, N.
+    pub rms: f64,
+    /// Samples used.
+    pub samples: usize,
+}
+
+/// How the current contact is rendered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    /// No contact.
+    Free,
+    /// The identified model at the virtual tip, plus the residual.
+    Model,
+    /// The internal `pida` (the model does not explain the contact).
+    Fallback,
+}
+
+/// Model-mediated rendering with online identification.
+#[derive(Debug, Clone)]
+pub struct ModelMediated {
+    params: ModelMediatedParams,
+    context: CompensatorContext,
+    fallback: Pida,
+    detector: ContactDetector,
+    period: f64,
+    delay_ticks: usize,
+    sensor_origin: Vector3<f64>,
+    /// Robot tip position and velocity of the last `τ_p/T + 1` ticks.
+    kinematics: DelayLine<(Vector3<f64>, Vector3<f64>)>,
+    started: bool,
+    surfaces: [Option<Surface>; MAX_SURFACES],
+    /// The law of the latest identified contact, for surfaces without their own.
+    shared_law: Option<ContactModel>,
+    /// Surface updates waiting for the virtual tip to leave the model.
+    pending: [Option<Surface>; MAX_SURFACES],
+    /// Shared-law update waiting likewise.
+    pending_law: Option<ContactModel>,
+    /// This contact's samples (capacity `max_samples`, allocated once).
+    samples: Vec<Sample>,
+    /// Sum of this contact's measured forces, N (its mean direction).
+    force_sum: Vector3<f64>,
+    mode: Mode,
+    /// Ticks of this contact with the robot in physical contact.
+    physical_ticks: usize,
+    /// The surface the model rendered in this contact, if one.
+    rendered: Option<usize>,
+    /// Energy the residual (and its damping) put into the virtual motion in this contact, J.
+    residual_energy: f64,
+    /// Residual plus damping force held over the last step, and the velocity then.
+    previous: Option<(Vector3<f64>, Vector3<f64>)>,
+}
+
+impl ModelMediated {
+    /// A model-mediated compensator (allocates its samples' buffer once).
+    pub fn new(p: &ModelMediatedParams, context: &CompensatorContext) -> Self {
+        let mut surfaces = [None; MAX_SURFACES];
+        for (slot, w) in surfaces.iter_mut().zip(&p.prior_walls) {
+            let normal = Vector3::from(w.normal);
+            if normal.norm() > 0.0 {
+                *slot = Some(Surface {
+                    wall: Wall {
+                        point: Vector3::from(w.point),
+                        normal: normal.normalize(),
+                    },
+                    law: None,
+                    weight: 0.0,
+                });
+            }
+        }
+        ModelMediated {
+            params: p.clone(),
+            context: *context,
+            fallback: Pida::new(&p.fallback, context),
+            detector: ContactDetector::new(p.fallback.contact_force, context.period),
+            period: context.period,
+            delay_ticks: context.sensor_delay_ticks,
+            sensor_origin: context.sensor_origin,
+            kinematics: DelayLine::new(
+                context.sensor_delay_ticks,
+                (Vector3::zeros(), Vector3::zeros()),
+            ),
+            started: false,
+            surfaces,
+            shared_law: None,
+            pending: [None; MAX_SURFACES],
+            pending_law: None,
+            samples: Vec::with_capacity(p.max_samples as usize),
+            force_sum: Vector3::zeros(),
+            mode: Mode::Free,
+            physical_ticks: 0,
+            rendered: None,
+            residual_energy: 0.0,
+            previous: None,
+        }
+    }
+
+    /// The modelled surfaces (prior, identified or both).
+    pub fn surfaces(&self) -> impl Iterator<Item = &Surface> {
+        self.surfaces.iter().flatten()
+    }
+
+    /// The law a surface is rendered with, if it has one.
+    fn law_of(&self, s: &Surface) -> Option<ContactModel> {
+        s.law.or(self.shared_law)
+    }
+
+    /// Model force on the rod at a tip pose (`t`, N), and the index of the deepest surface
+    /// penetrated (any surface with a law whose plane the tip is behind).
+    fn model_force(
+        &self,
+        tip: &Vector3<f64>,
+        velocity: &Vector3<f64>,
+    ) -> (Vector3<f64>, Option<usize>) {
+        let mut force = Vector3::zeros();
+        let mut deepest: Option<(usize, f64)> = None;
+        for (i, s) in self.surfaces.iter().enumerate() {
+            let Some(s) = s else { continue };
+            let Some(law) = self.law_of(s) else { continue };
+            let d = s.wall.penetration(tip);
+            if d > 0.0 {
+                force += s.wall.normal * law.normal_force(d, s.wall.penetration_rate(velocity));
+                if deepest.is_none_or(|(_, dd)| d > dd) {
+                    deepest = Some((i, d));
+                }
+            }
+        }
+        (force, deepest.map(|(i, _)| i))
+    }
+
+    /// The surface that explains a measured force (frame convention) at the robot's tip:
+    /// normal within `match_angle` of the force's reaction, tip within `gap_tolerance`.
+    fn explaining_surface(&self, force: &Vector3<f64>, tip: &Vector3<f64>) -> Option<usize> {
+        let cos_max = self.params.match_angle.to_radians().cos();
+        let direction = -force.normalize(); // the reaction on the rod: along the normal
+        let mut best: Option<(usize, f64)> = None;
+        for (i, s) in self.surfaces.iter().enumerate() {
+            let Some(s) = s else { continue };
+            if self.law_of(s).is_none() {
+                continue;
+            }
+            let cos = direction.dot(&s.wall.normal);
+            let clearance = (tip - s.wall.point).dot(&s.wall.normal);
+            if cos >= cos_max
+                && clearance <= self.params.gap_tolerance
+                && best.is_none_or(|(_, c)| cos > c)
+            {
+                best = Some((i, cos));
+            }
+        }
+        best.map(|(i, _)| i)
+    }
+
+    /// Ends a contact: fits its samples and queues the surface update.
+    fn end_contact(&mut self) {
+        if self.params.identify {
+            if self.physical_ticks == 0 {
+                // the model rendered a contact the robot never felt: a phantom surface
+                if let Some(i) = self.rendered {
+                    self.surfaces[i] = None;
+                    self.pending[i] = None;
+                }
+            } else if self.samples.len() >= self.params.min_samples as usize {
+                if let Some(fit) = fit_contact(&self.samples, &self.force_sum, self.params.law) {
+                    self.merge(fit);
+                }
+            }
+        }
+        self.samples.clear();
+        self.force_sum = Vector3::zeros();
+        self.physical_ticks = 0;
+        self.rendered = None;
+        self.residual_energy = 0.0;
+        self.previous = None;
+        self.mode = Mode::Free;
+    }
+
+    /// Merges a contact's fit into the surface it belongs to (or a new one): queued, adopted
+    /// once the virtual tip is outside it.
+    fn merge(&mut self, fit: Fit) {
+        self.pending_law = Some(fit.law);
+        let cos_max = self.params.match_angle.to_radians().cos();
+        let matched = (0..MAX_SURFACES)
+            .filter_map(|i| {
+                let s = self.pending[i].or(self.surfaces[i])?;
+                Some((i, s, s.wall.normal.dot(&fit.wall.normal)))
+            })
+            .filter(|(_, _, cos)| *cos >= cos_max)
+            .max_by(|a, b| a.2.total_cmp(&b.2));
+        let new_weight = fit.samples as f64;
+        let surface = match matched {
+            Some((_, old, _)) if old.weight > 0.0 => {
+                // sample-weighted mean of the past (capped) and the new fit
+                let w_old = old.weight.min(self.params.memory as f64);
+                let total = w_old + new_weight;
+                let normal = (old.wall.normal * w_old + fit.wall.normal * new_weight).normalize();
+                let offset = (old.wall.point.dot(&normal) * w_old
+                    + fit.wall.point.dot(&normal) * new_weight)
+                    / total;
+                Surface {
+                    wall: Wall {
+                        point: normal * offset,
+                        normal,
+                    },
+                    law: Some(match (old.law, fit.law) {
+                        (Some(a), b) => blend_laws(&a, w_old, &b, new_weight),
+                        (None, b) => b,
+                    }),
+                    weight: total,
+                }
+            }
+            // a prior (weight 0) is replaced by the first fit
+            _ => Surface {
+                wall: fit.wall,
+                law: Some(fit.law),
+                weight: new_weight,
+            },
+        };
+        let slot = matched.map(|(i, _, _)| i).or_else(|| {
+            (0..MAX_SURFACES).find(|&i| self.surfaces[i].is_none() && self.pending[i].is_none())
+        });
+        let slot = slot.unwrap_or_else(|| {
+            // all slots taken: replace the surface with the least evidence
+            (0..MAX_SURFACES)
+                .min_by(|&a, &b| {
+                    let w = |i: usize| self.surfaces[i].map_or(0.0, |s| s.weight);
+                    w(a).total_cmp(&w(b))
+                })
+                .unwrap_or(0)
+        });
+        self.pending[slot] = Some(surface);
+    }
+
+    /// Adopts the queued updates (surfaces and shared law) together, once the virtual tip is
+    /// outside every modelled surface both before and after: the model then never changes
+    /// under the virtual tip (no force step).
+    fn adopt_pending(&mut self, tip: &Vector3<f64>) {
+        if self.pending.iter().all(Option::is_none) && self.pending_law.is_none() {
+            return;
+        }
+        let inside = |surfaces: &[Option<Surface>; MAX_SURFACES], shared: Option<ContactModel>| {
+            surfaces
+                .iter()
+                .flatten()
+                .any(|s| s.law.or(shared).is_some() && s.wall.penetration(tip) > 0.0)
+        };
+        let mut next = self.surfaces;
+        for (slot, p) in next.iter_mut().zip(&self.pending) {
+            if p.is_some() {
+                *slot = *p;
+            }
+        }
+        let next_law = self.pending_law.or(self.shared_law);
+        if !inside(&self.surfaces, self.shared_law) && !inside(&next, next_law) {
+            self.surfaces = next;
+            self.shared_law = next_law;
+            self.pending = [None; MAX_SURFACES];
+            self.pending_law = None;
+        }
+    }
+
+    /// The estimate reported: the law of the surface being rendered, else the shared law.
+    fn estimate(&self) -> Option<ContactEstimate> {
+        let law = self
+            .rendered
+            .and_then(|i| self.surfaces[i])
+            .and_then(|s| self.law_of(&s))
+            .or(self.shared_law)?;
+        Some(match law {
+            ContactModel::Linear(l) => ContactEstimate {
+                stiffness: l.stiffness,
+                damping: l.damping,
+            },
+            ContactModel::HuntCrossley(h) => ContactEstimate {
+                stiffness: h.stiffness,
+                damping: h.damping,
+            },
+        })
+    }
+}
+
+/// Sample-weighted mean of two laws of the same form; a different form: the newer.
+fn blend_laws(a: &ContactModel, wa: f64, b: &ContactModel, wb: f64) -> ContactModel {
+    let mean = |x: f64, y: f64| (x * wa + y * wb) / (wa + wb);
+    match (a, b) {
+        (ContactModel::Linear(a), ContactModel::Linear(b)) => {
+            ContactModel::Linear(LinearSpringDamper {
+                stiffness: mean(a.stiffness, b.stiffness),
+                damping: mean(a.damping, b.damping),
+            })
+        }
+        (ContactModel::HuntCrossley(a), ContactModel::HuntCrossley(b)) => {
+            ContactModel::HuntCrossley(HuntCrossley {
+                stiffness: mean(a.stiffness, b.stiffness),
+                damping: mean(a.damping, b.damping),
+                exponent: mean(a.exponent, b.exponent),
+            })
+        }
+        (_, b) => *b,
+    }
+}
+
+/// Fits a plane and a law to one contact's samples: the normal is the mean reaction's
+/// direction, `n̂ = −ΣF/|ΣF|`; along it `f = −F·n̂`, `s = p·n̂`, `ḋ = −v·n̂`, and the law's
+/// parameters and the plane's offset `h` (penetration `d = h − s`) by least squares. `None`
+/// if the samples do not determine a law that pushes (k ≤ 0).
+pub fn fit_contact(samples: &[Sample], force_sum: &Vector3<f64>, form: LawForm) -> Option<Fit> {
+    if samples.len() < 3 || force_sum.norm() == 0.0 {
+        return None;
+    }
+    let normal = -force_sum.normalize();
+    let linear = fit_linear(samples, &normal);
+    match form {
+        LawForm::Linear => linear,
+        LawForm::HuntCrossley => fit_hunt_crossley(samples, &normal, linear.as_ref()),
+        LawForm::Auto => match (linear, fit_hunt_crossley(samples, &normal, linear.as_ref())) {
+            (Some(l), Some(h)) if h.rms < HUNT_CROSSLEY_PREFERENCE * l.rms => Some(h),
+            (Some(l), _) => Some(l),
+            (None, h) => h,
+        },
+    }
+}
+
+/// Linear law: `f = k·(h − s) + c·ḋ` = `a − k·s + c·ḋ` with `a = k·h`, least squares on
+/// centred regressors; a negative `c` is refitted with `c = 0` (a law that never creates
+/// energy).
+fn fit_linear(samples: &[Sample], normal: &Vector3<f64>) -> Option<Fit> {
+    let n = samples.len() as f64;
+    let (mut s_mean, mut r_mean) = (0.0, 0.0);
+    for x in samples {
+        s_mean += x.position.dot(normal) / n;
+        r_mean += -x.velocity.dot(normal) / n;
+    }
+    // f = a' − k·(s − s̄) + c·(ḋ − ḋ̄)
+    let mut a = Matrix3::zeros();
+    let mut b = Vector3::zeros();
+    let mut a2 = Matrix2::zeros();
+    let mut b2 = Vector2::zeros();
+    for x in samples {
+        let f = -x.force.dot(normal);
+        let row = Vector3::new(1.0, -(x.position.dot(normal) - s_mean), -x.velocity.dot(normal) - r_mean);
+        a += row * row.transpose();
+        b += row * f;
+        let row2 = Vector2::new(row[0], row[1]);
+        a2 += row2 * row2.transpose();
+        b2 += row2 * f;
+    }
+    let (a0, k, c) = match a.cholesky().map(|ch| ch.solve(&b)) {
+        Some(th) if th[2] >= 0.0 => (th[0], th[1], th[2]),
+        _ => {
+            let th = a2.cholesky()?.solve(&b2);
+            (th[0], th[1], 0.0)
+        }
+    };
+    if !(k > 0.0 && k.is_finite() && a0.is_finite()) {
+        return None;
+    }
+    // a' = k·(h − s̄) + c·ḋ̄  ⇒  h = s̄ + (a' − c·ḋ̄)/k
+    let h = s_mean + (a0 - c * r_mean) / k;
+    let law = ContactModel::Linear(LinearSpringDamper {
+        stiffness: k,
+        damping: c,
+    });
+    Some(finish_fit(samples, normal, h, law))
+}
+
+/// The fit's plane `p·n̂ = h` as a wall and its RMS force residual.
+fn finish_fit(samples: &[Sample], normal: &Vector3<f64>, h: f64, law: ContactModel) -> Fit {
+    let wall = Wall {
+        point: normal * h,
+        normal: *normal,
+    };
+    let mut sq = 0.0;
+    for x in samples {
+        let d = wall.penetration(&x.position);
+        let model = if d > 0.0 {
+            law.normal_force(d, wall.penetration_rate(&x.velocity))
+        } else {
+            0.0
+        };
+        sq += (-x.force.dot(normal) - model).powi(2);
+    }
+    Fit {
+        wall,
+        law,
+        rms: (sq / samples.len() as f64).sqrt(),
+        samples: samples.len(),
+    }
+}
+
+/// Hunt-Crossley law `f = dⁿ·(k + c·ḋ)`, `d = h − s`: Levenberg-Marquardt on (h, ln k, c/k, n)
+/// from the start `n = 1.5`, `h` just beyond the sample that pressed least. `None` if it does
+/// not converge to a law that pushes.
+fn fit_hunt_crossley(
+    samples: &[Sample],
+    normal: &Vector3<f64>,
+    linear: Option<&Fit>,
+) -> Option<Fit> {
+    // residuals f_i − dᵢⁿ·k·(1 + q·ḋᵢ) with θ = (h, ln k, q = c/k, n)
+    let data = |x: &Sample| {
+        (
+            -x.force.dot(normal),
+            x.position.dot(normal),
+            -x.velocity.dot(normal),
+        )
+    };
+    let (mut s_least, mut f_least, mut f_most) = (0.0, f64::INFINITY, 0.0_f64);
+    let mut s_min = f64::INFINITY;
+    for x in samples {
+        let (f, s, _) = data(x);
+        if f < f_least {
+            (f_least, s_least) = (f, s);
+        }
+        f_most = f_most.max(f);
+        s_min = s_min.min(s);
+    }
+    // depth scale: the samples' spread along the normal
+    let depth = samples
+        .iter()
+        .map(|x| data(x).1 - s_min)
+        .fold(0.0, f64::max)
+        .max(1e-9);
+    let n0 = 1.5;
+    let h0 = match linear {
+        Some(l) => l.wall.point.dot(normal).min(s_least + 0.05 * depth).max(s_least),
+        None => s_least,
+    }
+    .max(s_min + 1e-3 * depth);
+    let d_max = (h0 - s_min).max(1e-12);
+    let k0 = f_most / d_max.powf(n0);
+    let mut theta = Vector4::new(h0, k0.ln(), 0.0, n0);
+    let cost = |t: &Vector4<f64>| {
+        let mut sq = 0.0;
+        for x in samples {
+            let (f, s, rate) = data(x);
+            let d = (t[0] - s).max(0.0);
+            sq += (f - d.powf(t[3]) * t[1].exp() * (1.0 + t[2] * rate)).powi(2);
+        }
+        sq
+    };
+    let mut current = cost(&theta);
+    let mut lambda = 1e-3;
+    for _ in 0..100 {
+        let mut jtj = Matrix4::zeros();
+        let mut jtr = Vector4::zeros();
+        for x in samples {
+            let (f, s, rate) = data(x);
+            let d = (theta[0] - s).max(0.0);
+            if d <= 0.0 {
+                continue; // no force predicted here: no gradient
+            }
+            let k = theta[1].exp();
+            let dn = d.powf(theta[3]);
+            let g = 1.0 + theta[2] * rate;
+            let model = dn * k * g;
+            let r = f - model;
+            // ∂model/∂θ
+            let j = Vector4::new(
+                theta[3] * model / d,
+                model,
+                dn * k * rate,
+                model * d.ln(),
+            );
+            jtj += j * j.transpose();
+            jtr += j * r;
+        }
+        let mut improved = false;
+        for _ in 0..10 {
+            let mut damped = jtj;
+            for i in 0..4 {
+                damped[(i, i)] *= 1.0 + lambda;
+                damped[(i, i)] += 1e-30;
+            }
+            let Some(ch) = damped.cholesky() else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut next = theta + ch.solve(&jtr);
+            next[3] = next[3].clamp(0.5, 3.0);
+            let c = cost(&next);
+            if c.is_finite() && c < current {
+                let gain = (current - c) / current.max(1e-300);
+                theta = next;
+                current = c;
+                lambda = (lambda * 0.3).max(1e-12);
+                improved = gain > 1e-12;
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    let (h, k, q, n) = (theta[0], theta[1].exp(), theta[2], theta[3]);
+    if !(k.is_finite() && k > 0.0 && h.is_finite() && q.is_finite()) {
+        return None;
+    }
+    let law = ContactModel::HuntCrossley(HuntCrossley {
+        stiffness: k,
+        damping: (k * q).max(0.0),
+        exponent: n,
+    });
+    Some(finish_fit(samples, normal, h, law))
+}
+
+impl Compensator for ModelMediated {
+    fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
+        let (f_mea, m_mea) = (input.measured.force, input.measured.moment);
+        let (p_act, v_act) = (input.tip_position_actual, input.tip_velocity_actual);
+        let (p_des, v_des) = (input.tip_position_desired, input.tip_velocity_desired);
+        if !self.started {
+            self.kinematics.fill((p_act, v_act));
+            self.started = true;
+        }
+        self.kinematics.push((p_act, v_act));
+        // the robot kinematics that produced this measurement
+        let (p_then, v_then) = self.kinematics.delayed(self.delay_ticks);
+        let physical = self.detector.update(&f_mea);
+        let fallback = self.fallback.step(input); // kept current at every tick
+
+        if self.mode == Mode::Free {
+            self.adopt_pending(&p_des);
+        }
+        let (rod_des, surface_des) = self.model_force(&p_des, &v_des);
+        let (rod_then, _) = self.model_force(&p_then, &v_then);
+        let model_des = surface_des.is_some();
+        let model_then = rod_then != Vector3::zeros();
+
+        // a contact starts with the first force or model contact, ends when neither is left
+        if self.mode == Mode::Free && (physical || model_des) {
+            self.mode = if model_des {
+                Mode::Model
+            } else {
+                match self.explaining_surface(&f_mea, &p_then) {
+                    Some(_) => Mode::Model,
+                    None => Mode::Fallback,
+                }
+            };
+        } else if self.mode != Mode::Free && !physical && !model_des && !model_then {
+            self.end_contact();
+        }
+        if self.mode == Mode::Model
+            && physical
+            && !model_then
+            && self.explaining_surface(&f_mea, &p_then).is_none()
+        {
+            // a force that no surface explains (none there): `pida` takes the contact. A force
+            // that a surface explains but at the wrong level stays with the model (handing a
+            // contact to `pida` midway loses more than it saves; see the doc page)
+            self.mode = Mode::Fallback;
+        }
+
+        if self.mode != Mode::Free && physical {
+            self.physical_ticks += 1;
+            if self.samples.len() < self.samples.capacity() {
+                self.samples.push(Sample {
+                    force: f_mea,
+                    position: p_then,
+                    velocity: v_then,
+                });
+                self.force_sum += f_mea;
+            }
+        }
+        if let Some(i) = surface_des {
+            self.rendered.get_or_insert(i);
+        }
+
+        let applied = match self.mode {
+            Mode::Free => FrameWrench::default(),
+            Mode::Fallback => fallback.applied,
+            Mode::Model => {
+                let s = self.sensor_origin;
+                let f_model = -rod_des; // on the frame
+                let f_model_then = -rod_then;
+                let residual = if physical {
+                    (f_mea - f_model_then) * self.params.residual_gain
+                } else {
+                    Vector3::zeros()
+                };
+                // the residual's (and its damping's) work on the virtual motion over the
+                // last step, force held: −T·F(k−1)·(v(k−1) + v(k))/2
+                if let Some((f_prev, v_prev)) = self.previous {
+                    self.residual_energy -= 0.5 * self.period * f_prev.dot(&(v_prev + v_des));
+                }
+                let base = f_model + residual;
+                let direction = if base.norm() > 0.0 {
+                    base.normalize()
+                } else {
+                    Vector3::zeros()
+                };
+                let along = v_des.dot(&direction);
+                let mut damping = Vector3::zeros();
+                if self.residual_energy > 0.0 && along.abs() > 0.0 {
+                    // F_α = β·(v·e)·e takes T·β·(v·e)² per tick: β for the whole excess,
+                    // bounded by force_ratio_max × |F| (the rest waits for the next tick)
+                    let wanted = self.residual_energy / (self.period * along * along);
+                    let cap = self.params.force_ratio_max
+                        * base.norm().max(self.params.fallback.contact_force);
+                    let beta = wanted.min(cap / along.abs());
+                    damping = direction * (beta * along);
+                }
+                self.previous = Some((residual + damping, v_des));
+                let force = base + damping;
+                // the measured moment that the measured force at the robot's tip does not make
+                let unexplained = m_mea - (p_then - s).cross(&f_mea);
+                let moment = if physical {
+                    unexplained * self.params.residual_gain
+                } else {
+                    Vector3::zeros()
+                };
+                FrameWrench {
+                    force,
+                    moment: (p_des - s).cross(&force) + moment,
+                }
+            }
+        };
+        let observed = if self.mode == Mode::Model {
+            self.residual_energy
+        } else {
+            fallback.observed_energy
+        };
+        CompensatorOutput {
+            applied,
+            velocity_correction: Vector3::zeros(),
+            estimate: self.estimate().or(fallback.estimate),
+            observed_energy: observed,
+        }
+    }
+
+    fn reset(&mut self) {
+        let fresh = ModelMediated::new(&self.params, &self.context);
+        // keep the allocated buffer
+        let mut samples = std::mem::take(&mut self.samples);
+        samples.clear();
+        *self = ModelMediated { samples, ..fresh };
+    }
+
+    fn estimates_contact(&self) -> bool {
+        true
+    }
+
+    fn observes_energy(&self) -> bool {
+        true
+    }
+}
