@@ -230,17 +230,15 @@ impl ModelMediated {
 
     /// Ends a contact: fits its samples and queues the surface update.
     fn end_contact(&mut self) {
-        if self.params.identify {
-            if self.physical_ticks == 0 {
-                // the model rendered a contact the robot never felt: a phantom surface
-                if let Some(i) = self.rendered {
-                    self.surfaces[i] = None;
-                    self.pending[i] = None;
-                }
-            } else if self.samples.len() >= self.params.min_samples as usize {
-                if let Some(fit) = fit_contact(&self.samples, &self.force_sum, self.params.law) {
-                    self.merge(fit);
-                }
+        if self.physical_ticks == 0 {
+            // the model rendered a contact the robot never felt: a phantom surface
+            if let (Some(i), true) = (self.rendered, self.params.correct_priors) {
+                self.surfaces[i] = None;
+                self.pending[i] = None;
+            }
+        } else if self.samples.len() >= self.params.min_samples as usize {
+            if let Some(fit) = fit_contact(&self.samples, &self.force_sum, self.params.law) {
+                self.merge(fit);
             }
         }
         self.samples.clear();
@@ -265,6 +263,16 @@ impl ModelMediated {
             .filter(|(_, _, cos)| *cos >= cos_max)
             .max_by(|a, b| a.2.total_cmp(&b.2));
         let new_weight = fit.samples as f64;
+        if let (Some((i, old, _)), false) = (matched, self.params.correct_priors) {
+            if old.weight == 0.0 {
+                // a prior kept as given: only its law is learned
+                self.pending[i] = Some(Surface {
+                    law: Some(fit.law),
+                    ..old
+                });
+                return;
+            }
+        }
         let surface = match matched {
             Some((_, old, _)) if old.weight > 0.0 => {
                 // sample-weighted mean of the past (capped) and the new fit
@@ -644,7 +652,8 @@ impl Compensator for ModelMediated {
         }
 
         let applied = match self.mode {
-            Mode::Free => FrameWrench::default(),
+            // free flight as pida has it: the measured force below the detection level passes
+            Mode::Free => fallback.applied,
             Mode::Fallback => fallback.applied,
             Mode::Model => {
                 let s = self.sensor_origin;

@@ -169,9 +169,9 @@ pub struct ModelMediatedParams {
     /// its first contact.
     #[schemars(length(max = 8))]
     pub prior_walls: Vec<crate::contact::WallConfig>,
-    /// Whether the contacts correct the surfaces' geometry and law (true); false renders the
-    /// prior walls as they are (with the law of the first contact).
-    pub identify: bool,
+    /// Whether contacts correct the prior walls' geometry (true), or the priors are rendered as
+    /// given (false; the law is identified all the same, and surfaces without a prior learned).
+    pub correct_priors: bool,
     /// Largest angle between a contact's force and a surface's normal for the contact to
     /// belong to that surface, degrees (> 0, <= 90).
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 90.0))]
@@ -211,7 +211,7 @@ impl Default for ModelMediatedParams {
         ModelMediatedParams {
             law: LawForm::Auto,
             prior_walls: Vec::new(),
-            identify: true,
+            correct_priors: true,
             match_angle: 30.0,
             gap_tolerance: 1e-3,
             min_samples: 20,
