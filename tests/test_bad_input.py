@@ -18,6 +18,7 @@ import pytest
 
 import hilcontact as hc
 from hilcontact.output import MARKER, write_atomically
+from hilcontact.registry import KINDS
 from test_cli import assert_one_error_line, invoke
 
 SHORT = ("--set", "simulation.duration=0.3", "--no-plots")
@@ -90,7 +91,7 @@ def test_a_run_above_the_memory_limit_is_refused_with_the_estimate_and_the_limit
     assert_one_error_line(result, "simulation.duration = 5500 s", "5.5 GB", "limit of 2 GB", "--max-memory")
     assert time.monotonic() - start < 20 and list(tmp_path.iterdir()) == []
     result = invoke("compare", "paper-table1", "--set", "simulation.duration=1000", "--out", str(tmp_path / "o"))
-    assert_one_error_line(result, "6 runs of simulation.duration = 1000 s", "--max-memory")
+    assert_one_error_line(result, f"{len(KINDS)} runs of simulation.duration = 1000 s", "--max-memory")
     result = invoke("run", "paper-table1", *SHORT, "--max-time", "0.001", "--out", str(tmp_path / "o"))
     assert_one_error_line(result, "takes about", "limit of 0.001 s", "--max-time")
     # the option raises the limit

@@ -430,7 +430,7 @@ def test_public_api():
 
 # ---- [compensator] parameters ---------------------------------------------------------------
 
-KINDS = ["none", "pic", "dac", "pida", "tdpa-impedance", "tdpa-admittance"]
+KINDS = ["none", "pic", "dac", "pida", "tdpa-impedance", "tdpa-admittance", "model-mediated"]
 
 MODEL_DEFAULTS = {
     "delay_mode": "align",
@@ -569,7 +569,7 @@ def test_unknown_kind_lists_the_allowed_kinds(scenario_file):
     message = error_of(PRESET, {"compensator.kind": "pid"})
     assert message == (
         "compensator.kind: unknown compensator kind 'pid'; allowed: 'none', 'pic', 'dac', 'pida', "
-        "'tdpa-impedance', 'tdpa-admittance'"
+        "'tdpa-impedance', 'tdpa-admittance', 'model-mediated'"
     )
     text = tomllib.loads(hc.load_scenario(PRESET).to_toml())
     text["compensator"] = {"kind": "smith-predictor", "alpha_max": 1.0}

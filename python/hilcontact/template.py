@@ -11,9 +11,11 @@ from __future__ import annotations
 import os
 import re
 import textwrap
+import typing
 from pathlib import Path
 from typing import Any
 
+from pydantic import BaseModel
 from pydantic_core import PydanticUndefined
 
 from .errors import ScenarioError
@@ -23,7 +25,7 @@ from .scenario import COMPENSATOR_MODELS, Scenario, _TABLES
 __all__ = ["commented_toml", "write_template"]
 
 #: ``[table]`` or ``[[table]]`` header lines of the resolved TOML.
-_HEADER = re.compile(r"^\[\[?([A-Za-z_]+)\]\]?\s*$")
+_HEADER = re.compile(r"^\[\[?([A-Za-z_][A-Za-z0-9_.]*)\]\]?\s*$")
 #: ``key = value`` lines (a value's continuation lines start with a space or a bracket).
 _KEY = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*) = ")
 
@@ -31,6 +33,8 @@ _KEY = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*) = ")
 def _default_text(value: Any) -> str:
     if value is PydanticUndefined:
         return "required"
+    if isinstance(value, BaseModel):
+        return "a table of its own, below"
     if isinstance(value, bool):
         return f"default {'true' if value else 'false'}"
     if isinstance(value, str):
@@ -45,9 +49,21 @@ def _comment(description: str | None, default: Any) -> list[str]:
 
 
 def _models(table: str | None, compensator: str) -> Any:
-    """The pydantic model of a table (the scenario's top level for None)."""
+    """The pydantic model of a table (the scenario's top level for None); a dotted name
+    (``compensator.fallback``, ``compensator.prior_walls``) is a table inside a table."""
     if table is None:
         return Scenario
+    if "." in table:
+        parent, _, name = table.rpartition(".")
+        owner = _models(parent, compensator)
+        field = owner.model_fields.get(name) if owner is not None else None
+        if field is None:
+            return None
+        annotation = field.annotation
+        for inner in (annotation, *typing.get_args(annotation)):  # a model, or list[model]
+            if isinstance(inner, type) and issubclass(inner, BaseModel):
+                return inner
+        return None
     model = _TABLES.get(table)
     if isinstance(model, dict):  # the compensator's table: the chosen kind's model
         return model[compensator]
@@ -88,7 +104,7 @@ def commented_toml(scenario: Scenario) -> str:
         model = _models(table, compensator)
         if key and model is not None and key.group(1) in model.model_fields:
             field = model.model_fields[key.group(1)]
-            lines += _comment(field.description, field.default)
+            lines += _comment(field.description, field.get_default(call_default_factory=True))
         if line.strip() or (lines and lines[-1].strip()):
             lines.append(line)
     return "\n".join(lines).rstrip("\n") + "\n"

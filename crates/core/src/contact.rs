@@ -68,8 +68,9 @@ impl ContactLaw for ContactModel {
     }
 }
 
-/// A planar wall as a scenario file gives it (`[[walls]]`, and a compensator's prior walls):
-/// checked and normalised into a [`Wall`] by the plan.
+/// A planar wall of the collision frame, fixed in the target frame, as a scenario gives it
+/// (`[[walls]]`, and the prior walls of `model-mediated`); the core checks it and normalises
+/// its normal.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct WallConfig {

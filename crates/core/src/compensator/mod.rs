@@ -190,7 +190,7 @@ registry! {
     TdpaImpedance = "tdpa-impedance", TdpaParams, TdpaImpedance, "tab:purple";
     /// Time-domain passivity, admittance type (a damper on the velocity command).
     TdpaAdmittance = "tdpa-admittance", TdpaParams, TdpaAdmittance, "tab:brown";
-    /// Model-mediated rendering: the identified contact (surfaces and law) at the virtual tip, the residual fed back.
+    /// Model-mediated rendering: the identified contact (surfaces and law) at the virtual tip; `pida` where the model does not explain a contact.
     ModelMediated = "model-mediated", ModelMediatedParams, ModelMediated, "tab:cyan";
 }
 

@@ -177,8 +177,9 @@ pub struct ModelMediatedParams {
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 90.0))]
     pub match_angle: f64,
     /// How far the robot's rod tip may still be from a modelled surface (m) when a force
-    /// appears for the contact to count as that surface's (the residual corrects the rest);
-    /// farther, the contact is not explained by the model and `pida` handles it (>= 0, <= 1).
+    /// appears for the contact to count as that surface's (the model renders it; the surface's
+    /// error shows in the peak force); farther, the model does not explain the contact and
+    /// `pida` handles it (>= 0, <= 1).
     #[schemars(range(min = 0.0, max = 1.0))]
     pub gap_tolerance: f64,
     /// Fewest samples in contact for a contact to update a surface (>= 3, <= 1e6).
