@@ -32,7 +32,7 @@ from hilcontact.comparison import (
 from hilcontact.run import OPTIONAL_TIMESERIES_COLUMNS, REFERENCE_COLUMNS, TIMESERIES_COLUMNS
 
 KINDS = ["none", "pic", "dac", "pida", "tdpa-impedance", "tdpa-admittance", "model-mediated"]
-IDENTIFYING = {"pic", "dac", "pida"}
+IDENTIFYING = {"pic", "dac", "pida", "model-mediated"}
 RUN_FILES = {"timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml", MARKER}
 RUN_PLOTS = {"contact_velocity.png", "contact_force.png", "energy.png"}
 COMPARE_PLOTS = {

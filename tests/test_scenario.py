@@ -341,7 +341,7 @@ BAD_INPUT = [
     ({"servicer.inertia": "big"}, ("servicer.inertia", "3 principal moments")),
     ({"contact.model": "hertz"}, "contact.model: must be one of 'linear' or 'hunt-crossley', got 'hertz'"),
     ({"compensator.kind": "magic"}, "compensator.kind: unknown compensator kind 'magic'; allowed: 'none', 'pic', "
-                                     "'dac', 'pida', 'tdpa-impedance', 'tdpa-admittance'"),
+                                     "'dac', 'pida', 'tdpa-impedance', 'tdpa-admittance', 'model-mediated'"),
     ({"walls": []}, "walls: at least one [[walls]] table is required"),
     ({"walls": "front"}, ("walls", "expected one or more [[walls]] tables")),
     ({"servicer": 3}, "servicer: expected a table, got 3"),
@@ -462,6 +462,19 @@ DEFAULTS = {
     "pida": MODEL_DEFAULTS,
     "tdpa-impedance": TDPA_DEFAULTS,
     "tdpa-admittance": TDPA_DEFAULTS,
+    "model-mediated": {
+        "law": "auto",
+        "prior_walls": [],
+        "correct_priors": True,
+        "match_angle": 30.0,
+        "gap_tolerance": 1e-3,
+        "min_samples": 20,
+        "max_samples": 20000,
+        "memory": 2000,
+        "residual_gain": 0.0,
+        "force_ratio_max": 2.0,
+        "fallback": MODEL_DEFAULTS,
+    },
 }
 
 
@@ -488,6 +501,7 @@ NON_DEFAULT = {
     "pida": {"stiffness_initial": 2e5, "stiffness_std": 5e4, "damping_std": 100.0, "damping_walk": 0.0},
     "tdpa-impedance": {"alpha_max": 100.0, "velocity_floor": 5e-4},
     "tdpa-admittance": {"beta_max": 2e-5, "force_floor": 0.5, "contact_force": 1.0},
+    "model-mediated": {"law": "linear", "match_angle": 20.0, "residual_gain": 0.5, "correct_priors": False},
 }
 
 
@@ -675,3 +689,14 @@ def test_kind_switch_in_apply_overrides_does_not_mutate_the_input():
 def test_public_api_has_compare():
     for name in ("compare", "Comparison"):
         assert name in hc.__all__ and hasattr(hc, name)
+
+
+def test_model_mediated_prior_walls_are_checked_and_normalised():
+    walls = [{"name": "cad-front", "point": [0.0101, 0.0, 0.0], "normal": [-2.0, 0.0, 0.0]}]
+    s = hc.load_scenario(PRESET, {"compensator": {"kind": "model-mediated", "prior_walls": walls}})
+    assert s.compensator.prior_walls[0].normal == [-1.0, 0.0, 0.0]
+    zero = [{"point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 0.0]}]
+    message = error_of(PRESET, {"compensator": {"kind": "model-mediated", "prior_walls": zero}})
+    assert "compensator.prior_walls[0].normal" in message and "nonzero" in message
+    nine = [{"point": [0.0, 0.0, 0.0], "normal": [1.0, 0.0, 0.0]}] * 9
+    assert "prior_walls" in error_of(PRESET, {"compensator": {"kind": "model-mediated", "prior_walls": nine}})

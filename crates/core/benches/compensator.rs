@@ -1,5 +1,6 @@
 //! `cargo bench -p hilcontact-core --bench compensator`: one compensator step (`pida`, then
-//! `dac` and `tdpa-impedance` for scale) on the inputs of a real run: `paper-table1` at 20 ms
+//! `dac` and `tdpa-impedance` for scale, and `model-mediated`, whose contact-end fits are
+//! spread over the steps) on the inputs of a real run: `paper-table1` at 20 ms
 //! robot delay with 0.2 N sensor noise, 5.5 s, recorded once from the HIL loop and replayed
 //! tick after tick (one criterion iteration = one step; a fresh compensator per sample); and
 //! the same over the ticks in contact only, where identification and the energy work run.
@@ -9,7 +10,8 @@ use std::time::{Duration, Instant};
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use hilcontact_core::compensator::{
-    CompensatorConfig, CompensatorContext, CompensatorInput, ModelParams, TdpaParams,
+    CompensatorConfig, CompensatorContext, CompensatorInput, ModelMediatedParams, ModelParams,
+    TdpaParams,
 };
 use hilcontact_core::facility::FacilityModel;
 use hilcontact_core::hil::VirtualDynamics;
@@ -58,6 +60,10 @@ fn bench(c: &mut Criterion) {
         (
             "tdpa-impedance",
             CompensatorConfig::TdpaImpedance(TdpaParams::default()),
+        ),
+        (
+            "model-mediated",
+            CompensatorConfig::ModelMediated(ModelMediatedParams::default()),
         ),
     ];
     // the ticks in contact only (measured force above 3 N): identification and energy work

@@ -3,7 +3,7 @@
 //! as a sweep runs it (metrics only) and with its time series, and its two halves.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use hilcontact_core::compensator::{CompensatorConfig, ModelParams};
+use hilcontact_core::compensator::{CompensatorConfig, ModelMediatedParams, ModelParams};
 use hilcontact_core::sim::{run_hil, run_reference};
 use hilcontact_core::{simulate, simulate_metrics, Scenario};
 use std::hint::black_box;
@@ -24,6 +24,12 @@ fn bench(c: &mut Criterion) {
     c.bench_function(
         "paper-table1 pida 20 ms: metrics only (a sweep's run)",
         |b| b.iter(|| simulate_metrics(black_box(&s)).expect("run")),
+    );
+    let mut m = s.clone();
+    m.compensator = CompensatorConfig::ModelMediated(ModelMediatedParams::default());
+    c.bench_function(
+        "paper-table1 model-mediated 20 ms: metrics only (a sweep's run)",
+        |b| b.iter(|| simulate_metrics(black_box(&m)).expect("run")),
     );
     c.bench_function("paper-table1 pida 20 ms: with time series", |b| {
         b.iter(|| simulate(black_box(&s)).expect("run"))

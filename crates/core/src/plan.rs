@@ -161,7 +161,9 @@ impl Plan {
                 }
                 let key = format!("compensator.prior_walls[{i}]");
                 finite(&mut issues, failed, &format!("{key}.point"), &wall.point);
-                if let Some(n) = unit_vector(&mut issues, failed, &format!("{key}.normal"), wall.normal) {
+                if let Some(n) =
+                    unit_vector(&mut issues, failed, &format!("{key}.normal"), wall.normal)
+                {
                     wall.normal = n;
                 }
             }

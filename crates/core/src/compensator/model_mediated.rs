@@ -423,7 +423,11 @@ fn fit_linear(samples: &[Sample], normal: &Vector3<f64>) -> Option<Fit> {
     let mut b2 = Vector2::zeros();
     for x in samples {
         let f = -x.force.dot(normal);
-        let row = Vector3::new(1.0, -(x.position.dot(normal) - s_mean), -x.velocity.dot(normal) - r_mean);
+        let row = Vector3::new(
+            1.0,
+            -(x.position.dot(normal) - s_mean),
+            -x.velocity.dot(normal) - r_mean,
+        );
         a += row * row.transpose();
         b += row * f;
         let row2 = Vector2::new(row[0], row[1]);
@@ -507,7 +511,12 @@ fn fit_hunt_crossley(
         .max(1e-9);
     let n0 = 1.5;
     let h0 = match linear {
-        Some(l) => l.wall.point.dot(normal).min(s_least + 0.05 * depth).max(s_least),
+        Some(l) => l
+            .wall
+            .point
+            .dot(normal)
+            .min(s_least + 0.05 * depth)
+            .max(s_least),
         None => s_least,
     }
     .max(s_min + 1e-3 * depth);
@@ -540,12 +549,7 @@ fn fit_hunt_crossley(
             let model = dn * k * g;
             let r = f - model;
             // ∂model/∂θ
-            let j = Vector4::new(
-                theta[3] * model / d,
-                model,
-                dn * k * rate,
-                model * d.ln(),
-            );
+            let j = Vector4::new(theta[3] * model / d, model, dn * k * rate, model * d.ln());
             jtj += j * j.transpose();
             jtr += j * r;
         }
