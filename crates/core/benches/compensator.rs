@@ -109,4 +109,37 @@ criterion_group! {
     config = Criterion::default().sample_size(50).measurement_time(Duration::from_secs(3));
     targets = bench
 }
-criterion_main!(benches);
+
+/// The contact-end fit of `model-mediated` on one contact's samples (linear and
+/// Hunt-Crossley, `law = "auto"`): the longest single step of that compensator.
+fn bench_fit(c: &mut Criterion) {
+    use hilcontact_core::compensator::{fit_contact, LawForm, Sample};
+    use nalgebra::Vector3;
+    let n = Vector3::new(-1.0, 0.0, 0.0);
+    let (k, omega, depth) = (176275.0, 25.1, 0.0008);
+    // one 125 ms contact at 1 kHz: a half sine of penetration
+    let samples: Vec<Sample> = (0..125)
+        .map(|i| {
+            let s = omega * i as f64 * 1e-3;
+            let (d, rate) = (depth * s.sin(), depth * omega * s.cos());
+            Sample {
+                force: -n * (k * d), // on the frame, into the wall
+                position: Vector3::new(0.01 + d, 0.0, 0.0),
+                velocity: Vector3::new(rate, 0.0, 0.0),
+            }
+        })
+        .collect();
+    let sum: Vector3<f64> = samples.iter().map(|s| s.force).sum();
+    for form in [LawForm::Linear, LawForm::Auto] {
+        c.bench_function(&format!("model-mediated fit of one contact ({form:?})"), |b| {
+            b.iter(|| fit_contact(black_box(&samples), &sum, form))
+        });
+    }
+}
+
+criterion_group! {
+    name = fits;
+    config = Criterion::default().sample_size(20).measurement_time(Duration::from_secs(2));
+    targets = bench_fit
+}
+criterion_main!(benches, fits);

@@ -43,6 +43,10 @@ use crate::frames::FrameWrench;
 
 /// Most surfaces the compensator models.
 pub const MAX_SURFACES: usize = 8;
+/// Most samples of one contact the Hunt-Crossley fit uses (evenly strided).
+pub const HUNT_CROSSLEY_SAMPLES: usize = 200;
+/// Most Levenberg-Marquardt iterations of the Hunt-Crossley fit.
+pub const HUNT_CROSSLEY_ITERATIONS: usize = 40;
 /// Hunt-Crossley is kept by `auto` when its RMS residual is below this share of the linear
 /// fit's.
 pub const HUNT_CROSSLEY_PREFERENCE: f64 = 0.7;
@@ -485,7 +489,10 @@ fn fit_hunt_crossley(
     normal: &Vector3<f64>,
     linear: Option<&Fit>,
 ) -> Option<Fit> {
-    // residuals f_i − dᵢⁿ·k·(1 + q·ḋᵢ) with θ = (h, ln k, q = c/k, n)
+    // residuals f_i − dᵢⁿ·k·(1 + q·ḋᵢ) with θ = (h, ln k, q = c/k, n), on at most
+    // HUNT_CROSSLEY_SAMPLES samples (evenly strided): the fit's time stays bounded
+    let stride = samples.len().div_ceil(HUNT_CROSSLEY_SAMPLES).max(1);
+    let fitted = || samples.iter().step_by(stride);
     let data = |x: &Sample| {
         (
             -x.force.dot(normal),
@@ -495,7 +502,7 @@ fn fit_hunt_crossley(
     };
     let (mut s_least, mut f_least, mut f_most) = (0.0, f64::INFINITY, 0.0_f64);
     let mut s_min = f64::INFINITY;
-    for x in samples {
+    for x in fitted() {
         let (f, s, _) = data(x);
         if f < f_least {
             (f_least, s_least) = (f, s);
@@ -504,8 +511,7 @@ fn fit_hunt_crossley(
         s_min = s_min.min(s);
     }
     // depth scale: the samples' spread along the normal
-    let depth = samples
-        .iter()
+    let depth = fitted()
         .map(|x| data(x).1 - s_min)
         .fold(0.0, f64::max)
         .max(1e-9);
@@ -525,7 +531,7 @@ fn fit_hunt_crossley(
     let mut theta = Vector4::new(h0, k0.ln(), 0.0, n0);
     let cost = |t: &Vector4<f64>| {
         let mut sq = 0.0;
-        for x in samples {
+        for x in fitted() {
             let (f, s, rate) = data(x);
             let d = (t[0] - s).max(0.0);
             sq += (f - d.powf(t[3]) * t[1].exp() * (1.0 + t[2] * rate)).powi(2);
@@ -534,10 +540,10 @@ fn fit_hunt_crossley(
     };
     let mut current = cost(&theta);
     let mut lambda = 1e-3;
-    for _ in 0..100 {
+    for _ in 0..HUNT_CROSSLEY_ITERATIONS {
         let mut jtj = Matrix4::zeros();
         let mut jtr = Vector4::zeros();
-        for x in samples {
+        for x in fitted() {
             let (f, s, rate) = data(x);
             let d = (theta[0] - s).max(0.0);
             if d <= 0.0 {
