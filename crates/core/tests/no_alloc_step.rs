@@ -1,0 +1,80 @@
+//! Every compensator's `step` allocates nothing, over whole contacts (identification, energy
+//! work, `model-mediated`'s contact-end fits and model updates): a counting allocator, armed on
+//! this test's thread only, while the steps run on recorded inputs.
+
+mod common;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use common::table1;
+use hilcontact_core::compensator::{CompensatorConfig, ModelMediatedParams, REGISTRY};
+use hilcontact_core::facility::FacilityModel;
+use hilcontact_core::hil::{compensator_context, VirtualDynamics};
+
+struct Counting;
+
+thread_local! {
+    static ARMED: Cell<bool> = const { Cell::new(false) };
+    static COUNT: Cell<u64> = const { Cell::new(0) };
+}
+
+fn count() {
+    if ARMED.with(Cell::get) {
+        COUNT.with(|c| c.set(c.get() + 1));
+    }
+}
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn no_compensator_step_allocates() {
+    // a model-mediated run with priors (so every mode, fit and update happens), with noise
+    let mut s = table1(0.04, 0.005);
+    s.facility.sensor_noise = 0.2;
+    s.compensator = CompensatorConfig::ModelMediated(ModelMediatedParams {
+        prior_walls: s.walls.clone(),
+        ..ModelMediatedParams::default()
+    });
+    let plan = s.resolve().unwrap();
+    let mut virt = VirtualDynamics::new(&plan);
+    let mut facility = FacilityModel::new(&plan, &virt.command());
+    let mut inputs = Vec::with_capacity(plan.ticks);
+    for _ in 0..plan.ticks {
+        let m = facility.measure();
+        inputs.push(virt.input(&m));
+        let out = virt.compensate(&m);
+        virt.integrate(&out);
+        facility.advance(&virt.command());
+    }
+    let context = compensator_context(&plan);
+    for info in REGISTRY {
+        let config = match (info.default)() {
+            CompensatorConfig::ModelMediated(_) => s.compensator.clone(),
+            other => other,
+        };
+        let mut compensator = config.build(&context);
+        COUNT.with(|c| c.set(0));
+        ARMED.with(|a| a.set(true));
+        for input in &inputs {
+            std::hint::black_box(compensator.step(input));
+        }
+        ARMED.with(|a| a.set(false));
+        assert_eq!(COUNT.with(Cell::get), 0, "{}: allocated while stepping", info.kind);
+    }
+}
