@@ -131,9 +131,10 @@ fn bench_fit(c: &mut Criterion) {
         .collect();
     let sum: Vector3<f64> = samples.iter().map(|s| s.force).sum();
     for form in [LawForm::Linear, LawForm::Auto] {
-        c.bench_function(&format!("model-mediated fit of one contact ({form:?})"), |b| {
-            b.iter(|| fit_contact(black_box(&samples), &sum, form))
-        });
+        c.bench_function(
+            &format!("model-mediated fit of one contact ({form:?})"),
+            |b| b.iter(|| fit_contact(black_box(&samples), &sum, form)),
+        );
     }
 }
 

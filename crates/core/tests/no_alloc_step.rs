@@ -75,6 +75,11 @@ fn no_compensator_step_allocates() {
             std::hint::black_box(compensator.step(input));
         }
         ARMED.with(|a| a.set(false));
-        assert_eq!(COUNT.with(Cell::get), 0, "{}: allocated while stepping", info.kind);
+        assert_eq!(
+            COUNT.with(Cell::get),
+            0,
+            "{}: allocated while stepping",
+            info.kind
+        );
     }
 }
