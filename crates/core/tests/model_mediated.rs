@@ -198,6 +198,17 @@ fn a_prior_two_millimetres_and_degrees_off_is_corrected_by_one_contact() {
     }
 }
 
+/// The scenario's walls moved `depth` m into the walls (negative: out into free space).
+fn deeper_walls(s: &Scenario, depth: f64) -> Vec<WallConfig> {
+    s.walls
+        .iter()
+        .map(|w| WallConfig {
+            point: (Vector3::from(w.point) - Vector3::from(w.normal) * depth).into(),
+            ..w.clone()
+        })
+        .collect()
+}
+
 fn model_mediated(s: &mut Scenario, p: ModelMediatedParams) {
     s.compensator = CompensatorConfig::ModelMediated(p);
 }
@@ -357,17 +368,7 @@ fn a_wrong_model_stays_passive() {
     // priors 5 mm off (either way), not corrected
     let shifted = |sign: f64| {
         let mut s = table1(0.04, 0.0);
-        let walls = s
-            .walls
-            .iter()
-            .map(|w| {
-                let n = Vector3::from(w.normal);
-                WallConfig {
-                    point: (Vector3::from(w.point) - n * (sign * 5e-3)).into(),
-                    ..w.clone()
-                }
-            })
-            .collect();
+        let walls = deeper_walls(&s, sign * 5e-3);
         model_mediated(
             &mut s,
             ModelMediatedParams {
@@ -402,14 +403,7 @@ fn model_updates_never_step_the_force() {
     // every later fit differ a little, so the model changes after every contact
     let mut s = table1(0.04, 0.005);
     s.facility.sensor_noise = 0.2;
-    let walls = s
-        .walls
-        .iter()
-        .map(|w| WallConfig {
-            point: (Vector3::from(w.point) - Vector3::from(w.normal) * 3e-4).into(),
-            ..w.clone()
-        })
-        .collect();
+    let walls = deeper_walls(&s, 3e-4);
     model_mediated(
         &mut s,
         ModelMediatedParams {
