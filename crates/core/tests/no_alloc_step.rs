@@ -1,6 +1,6 @@
 //! Every compensator's `step` allocates nothing, over whole contacts (identification, energy
 //! work, `model-mediated`'s contact-end fits and model updates): a counting allocator, armed on
-//! this test's thread only, while the steps run on recorded inputs.
+//! this test's thread only, while the steps run on recorded inputs. And `reset` forgets a run.
 
 mod common;
 
@@ -81,5 +81,18 @@ fn no_compensator_step_allocates() {
             "{}: allocated while stepping",
             info.kind
         );
+        // reset forgets the run: the same inputs give the same outputs as a fresh compensator
+        // (compared as text: NaN, "not observed", equals itself there)
+        compensator.reset();
+        let mut fresh = config.build(&context);
+        for (k, input) in inputs.iter().enumerate() {
+            let (a, b) = (compensator.step(input), fresh.step(input));
+            assert_eq!(
+                format!("{a:?}"),
+                format!("{b:?}"),
+                "{} after reset, tick {k}",
+                info.kind
+            );
+        }
     }
 }

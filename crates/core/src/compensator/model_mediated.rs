@@ -101,7 +101,6 @@ enum Mode {
 #[derive(Debug, Clone)]
 pub struct ModelMediated {
     params: ModelMediatedParams,
-    context: CompensatorContext,
     fallback: Pida,
     detector: ContactDetector,
     period: f64,
@@ -135,23 +134,9 @@ pub struct ModelMediated {
 impl ModelMediated {
     /// A model-mediated compensator (allocates its samples' buffer once).
     pub fn new(p: &ModelMediatedParams, context: &CompensatorContext) -> Self {
-        let mut surfaces = [None; MAX_SURFACES];
-        for (slot, w) in surfaces.iter_mut().zip(&p.prior_walls) {
-            let normal = Vector3::from(w.normal);
-            if normal.norm() > 0.0 {
-                *slot = Some(Surface {
-                    wall: Wall {
-                        point: Vector3::from(w.point),
-                        normal: normal.normalize(),
-                    },
-                    law: None,
-                    weight: 0.0,
-                });
-            }
-        }
+        let surfaces = prior_surfaces(p);
         ModelMediated {
             params: p.clone(),
-            context: *context,
             fallback: Pida::new(&p.fallback, context),
             detector: ContactDetector::new(p.fallback.contact_force, context.period),
             period: context.period,
@@ -366,6 +351,26 @@ impl ModelMediated {
             },
         })
     }
+}
+
+/// The prior walls as surfaces without a law of their own (the plan has checked them; a
+/// zero normal, which it refuses, is skipped).
+fn prior_surfaces(p: &ModelMediatedParams) -> [Option<Surface>; MAX_SURFACES] {
+    let mut surfaces = [None; MAX_SURFACES];
+    for (slot, w) in surfaces.iter_mut().zip(&p.prior_walls) {
+        let normal = Vector3::from(w.normal);
+        if normal.norm() > 0.0 {
+            *slot = Some(Surface {
+                wall: Wall {
+                    point: Vector3::from(w.point),
+                    normal: normal.normalize(),
+                },
+                law: None,
+                weight: 0.0,
+            });
+        }
+    }
+    surfaces
 }
 
 /// Sample-weighted mean of two laws of the same form; a different form: the newer.
@@ -725,11 +730,22 @@ impl Compensator for ModelMediated {
     }
 
     fn reset(&mut self) {
-        let fresh = ModelMediated::new(&self.params, &self.context);
-        // keep the allocated buffer
-        let mut samples = std::mem::take(&mut self.samples);
-        samples.clear();
-        *self = ModelMediated { samples, ..fresh };
+        // everything but the parameters and the samples' buffer (no allocation)
+        self.fallback.reset();
+        self.detector.reset();
+        self.kinematics.fill((Vector3::zeros(), Vector3::zeros()));
+        self.started = false;
+        self.surfaces = prior_surfaces(&self.params);
+        self.shared_law = None;
+        self.pending = [None; MAX_SURFACES];
+        self.pending_law = None;
+        self.samples.clear();
+        self.force_sum = Vector3::zeros();
+        self.mode = Mode::Free;
+        self.physical_ticks = 0;
+        self.rendered = None;
+        self.residual_energy = 0.0;
+        self.previous = None;
     }
 
     fn estimates_contact(&self) -> bool {
