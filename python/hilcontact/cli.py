@@ -635,17 +635,18 @@ def _report_sweep(console: Console, rows: Any, out: str) -> None:
 @cli.command(name="stability-map", short_help="Map where each compensator stays faithful in a sweep.")
 @click.argument("sweep_dir", metavar="SWEEP_DIR")
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: SWEEP_DIR].")
-@click.option("--cov-tolerance", default=0.05, show_default=True, type=NON_NEGATIVE, help="Faithful: |CoV - 1| <= this.")
-@click.option("--cof-limit", default=1.2, show_default=True, type=POSITIVE, help="Faithful: CoF <= this.")
-def stability_map_command(sweep_dir: str, out: str | None, cov_tolerance: float, cof_limit: float) -> None:
+@click.option("--cov-tolerance", default=None, type=NON_NEGATIVE,
+              help="Stricter than the runs' verdicts: |CoV - 1| <= this on every collision.")
+@click.option("--cof-limit", default=None, type=POSITIVE, help="Stricter than the runs' verdicts: CoF <= this on every collision.")
+def stability_map_command(sweep_dir: str, out: str | None, cov_tolerance: float | None, cof_limit: float | None) -> None:
     """Draw, per compensator, the (contact frequency, robot delay) region where every run is
-    faithful, heat maps of the worst CoV and CoF, and print the maximal faithful delay per
+    faithful (status ok: the scenario's [metrics] tolerances, from judge_from on), heat maps of the worst CoV and CoF, and print the maximal faithful delay per
     compensator and contact frequency.
 
     Writes stability_map.png, worst_cov.png, worst_cof.png, max_faithful_delay.csv and
     cells.csv into DIR.
     """
-    from .stability import MAP_FILES, stability_map
+    from .stability import MAP_FILES, criterion_text, stability_map
 
     with _errors():
         if not Path(sweep_dir).is_dir():
@@ -653,7 +654,7 @@ def stability_map_command(sweep_dir: str, out: str | None, cov_tolerance: float,
         result = stability_map(sweep_dir, cov_tolerance=cov_tolerance, cof_limit=cof_limit)
         folder = result.save(out if out is not None else sweep_dir)
     best = result.max_faithful_delay()
-    table = Table(title=f"maximal faithful robot delay (ms): |CoV-1| <= {cov_tolerance:g}, CoF <= {cof_limit:g}")
+    table = Table(title=f"maximal faithful robot delay (ms): {criterion_text(cov_tolerance, cof_limit)}")
     table.add_column("contact frequency (Hz)", justify="right")
     for kind in best.columns:
         table.add_column(escape(str(kind)), justify="right")

@@ -4,8 +4,10 @@ keeps the loop faithful.
 A run is *faithful* when the core's verdict says so (status ``ok``: it ran to the end and
 every collision kept the scenario's ``[metrics]`` tolerances: |CoV − 1|, CoF, rebound
 velocity error, no lost or extra collision; docs/model.md, "Metrics") and it had at least
-one compared collision; the map may be stricter still in CoV and CoF (``cov_tolerance``,
-``cof_limit``; by default the scenario's, which are |CoV − 1| ≤ 5 %, CoF ≤ 1.2). A cell (compensator, contact frequency, robot delay)
+one compared collision; the map may be stricter still in the worst CoV and CoF of every
+collision (``cov_tolerance``, ``cof_limit``; by default none: the verdict alone, by the
+scenario's tolerances, |CoV − 1| ≤ 5 %, CoF ≤ 1.2 unless set, from ``[metrics] judge_from``
+on). A cell (compensator, contact frequency, robot delay)
 is faithful when every run in it is: every seed and every value of any other swept key.
 The *maximal faithful delay* of a compensator at a frequency is the largest swept delay up to
 which every cell, from the smallest delay on, is faithful (NaN if the smallest is not).
@@ -34,11 +36,14 @@ __all__ = ["StabilityMap", "faithful", "stability_map"]
 MAP_FILES = ("stability_map.png", "worst_cov.png", "worst_cof.png", "max_faithful_delay.csv", "cells.csv")
 
 
-def faithful(rows: pd.DataFrame, cov_tolerance: float = 0.05, cof_limit: float = 1.2) -> pd.Series:
+def faithful(rows: pd.DataFrame, cov_tolerance: float | None = None, cof_limit: float | None = None) -> pd.Series:
     """Whether each run (row of a sweep) is faithful (see the module doc)."""
-    cov = rows["worst_cov"].astype(float)
-    cof = rows["worst_cof"].astype(float)
-    return (rows["status"] == "ok") & ((cov - 1.0).abs() <= cov_tolerance) & (cof <= cof_limit)
+    ok = rows["status"] == "ok"
+    if cov_tolerance is not None:
+        ok &= (rows["worst_cov"].astype(float) - 1.0).abs() <= cov_tolerance
+    if cof_limit is not None:
+        ok &= rows["worst_cof"].astype(float) <= cof_limit
+    return ok
 
 
 @dataclass
@@ -53,8 +58,8 @@ class StabilityMap:
     """
 
     cells: pd.DataFrame
-    cov_tolerance: float
-    cof_limit: float
+    cov_tolerance: float | None
+    cof_limit: float | None
 
     @property
     def compensators(self) -> list[str]:
@@ -99,7 +104,7 @@ class StabilityMap:
             return np.concatenate([[values[0] - (mids[0] - values[0])], mids, [values[-1] + (values[-1] - mids[-1])]])
 
         x, y = edges(delays * 1e3), edges(freqs)
-        criterion = f"|CoV−1| ≤ {self.cov_tolerance:g}, CoF ≤ {self.cof_limit:g} for every run"
+        criterion = criterion_text(self.cov_tolerance, self.cof_limit)
 
         def panels(title: str) -> tuple[Figure, list[Any]]:
             cols = min(len(kinds), 3)
@@ -128,7 +133,7 @@ class StabilityMap:
             mesh = ax.pcolormesh(x, y, np.ma.masked_invalid(np.clip(error, 1e-4, None)), cmap="viridis",
                                  norm=LogNorm(vmin=1e-4, vmax=max(1.0, float(np.nanmax(error)) if np.isfinite(error).any() else 1.0)))
             if min(error.shape) > 1 and np.isfinite(error).any():
-                ax.contour(delays * 1e3, freqs, error, levels=[self.cov_tolerance], colors="white", linewidths=1.0)
+                ax.contour(delays * 1e3, freqs, error, levels=[self.cov_tolerance if self.cov_tolerance is not None else 0.05], colors="white", linewidths=1.0)
             figure.colorbar(mesh, ax=ax)
         figures["worst_cov"] = figure
 
@@ -136,7 +141,7 @@ class StabilityMap:
         for ax, kind in zip(axes, kinds):
             cof = grid(kind, "worst_cof")
             mesh = ax.pcolormesh(x, y, np.ma.masked_invalid(cof), cmap="magma", vmin=1.0,
-                                 vmax=max(self.cof_limit * 1.5, float(np.nanmax(cof)) if np.isfinite(cof).any() else 2.0))
+                                 vmax=max((self.cof_limit or 1.2) * 1.5, float(np.nanmax(cof)) if np.isfinite(cof).any() else 2.0))
             figure.colorbar(mesh, ax=ax)
         figures["worst_cof"] = figure
         return figures
@@ -154,15 +159,25 @@ class StabilityMap:
         return folder
 
 
+def criterion_text(cov_tolerance: float | None, cof_limit: float | None) -> str:
+    """What makes a run faithful on the map, for titles."""
+    extra = []
+    if cov_tolerance is not None:
+        extra.append(f"|CoV−1| ≤ {cov_tolerance:g}")
+    if cof_limit is not None:
+        extra.append(f"CoF ≤ {cof_limit:g}")
+    return "every run ok" + (" and " + ", ".join(extra) + " on every collision" if extra else "")
+
+
 def stability_map(
-    results: pd.DataFrame | str | os.PathLike[str], cov_tolerance: float = 0.05, cof_limit: float = 1.2
+    results: pd.DataFrame | str | os.PathLike[str], cov_tolerance: float | None = None, cof_limit: float | None = None
 ) -> StabilityMap:
     """The stability map of a sweep's rows (a DataFrame from :func:`hilcontact.sweep` or a
     sweep folder)."""
     rows = results if isinstance(results, pd.DataFrame) else load_results(results)
     if rows.empty:
         raise HilContactError("stability map: the sweep has no finished runs")
-    if not (cov_tolerance > 0 and cof_limit > 0):
+    if not ((cov_tolerance is None or cov_tolerance > 0) and (cof_limit is None or cof_limit > 0)):
         raise HilContactError("stability map: the CoV tolerance and the CoF limit must be > 0")
     usable = rows[np.isfinite(rows["contact_frequency"].astype(float))]
     if usable.empty:

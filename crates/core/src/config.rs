@@ -288,6 +288,16 @@ pub struct MetricsConfig {
     #[serde(default)]
     #[schemars(range(max = 1000000))]
     pub max_extra_collisions: u32,
+    /// The first collision the verdict judges (1-based, integer 1 to 1e6; default 1, every
+    /// collision): earlier ones are reported but not judged, e.g. 3 to judge `model-mediated`
+    /// from each wall's second contact on `paper-table1`. Lost and extra collisions always count.
+    #[serde(default = "default_judge_from")]
+    #[schemars(range(min = 1, max = 1000000))]
+    pub judge_from: u32,
+}
+
+fn default_judge_from() -> u32 {
+    1
 }
 
 fn default_contact_threshold() -> f64 {
@@ -312,6 +322,7 @@ impl MetricsConfig {
             velocity_error: self.max_velocity_error,
             lost_collisions: self.max_lost_collisions as usize,
             extra_collisions: self.max_extra_collisions as usize,
+            judge_from: self.judge_from as usize,
         }
     }
 }
@@ -325,6 +336,7 @@ impl Default for MetricsConfig {
             max_velocity_error: default_max_velocity_error(),
             max_lost_collisions: 0,
             max_extra_collisions: 0,
+            judge_from: default_judge_from(),
         }
     }
 }

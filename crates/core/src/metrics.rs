@@ -282,6 +282,8 @@ pub struct Tolerances {
     pub lost_collisions: usize,
     /// How many HIL collisions may have no reference collision.
     pub extra_collisions: usize,
+    /// The first collision judged (1-based): earlier ones are reported, not judged.
+    pub judge_from: usize,
 }
 
 impl Default for Tolerances {
@@ -292,6 +294,7 @@ impl Default for Tolerances {
             velocity_error: 0.05,
             lost_collisions: 0,
             extra_collisions: 0,
+            judge_from: 1,
         }
     }
 }
@@ -498,6 +501,9 @@ fn verdict(
     let mut out = Vec::new();
     for c in collisions {
         let n = c.collision.index;
+        if n < tol.judge_from {
+            continue; // reported, not judged
+        }
         if let Some(cov) = c.cov.filter(|v| (v - 1.0).abs() > tol.cov) {
             out.push(format!(
                 "collision {n}: |CoV - 1| = {:.3} > {}",
@@ -1096,6 +1102,36 @@ mod tests {
         // CoV 1.5 and velocity error 0.5 break their tolerances; CoF 1.2 is at its limit
         assert_eq!(c.violations.len(), 2, "{:?}", c.violations);
         assert!(c.violations[0].contains("CoV"));
+    }
+
+    #[test]
+    fn judge_from_reports_earlier_collisions_without_judging_them() {
+        let r = trace(
+            &pulses(100, &[(10, 20, 100.0), (50, 60, 100.0)]),
+            &velocities(100, 20, -0.02 * Vector3::x()),
+        );
+        // the first collision 1.5 times as strong, the second exact
+        let h = trace(
+            &pulses(100, &[(10, 20, 150.0), (50, 60, 100.0)]),
+            &velocities(100, 20, -0.02 * Vector3::x()),
+        );
+        let judged = compare(&h, &r, 0.5, &tol(), 0.0, 0.0);
+        assert!(!judged.violations.is_empty());
+        let from_2 = Tolerances {
+            judge_from: 2,
+            ..tol()
+        };
+        let c = compare(&h, &r, 0.5, &from_2, 0.0, 0.0);
+        assert!(c.violations.is_empty(), "{:?}", c.violations);
+        // still reported
+        assert!((c.collisions[0].cof.unwrap() - 1.5).abs() < 1e-12);
+        // a lost collision counts whatever judge_from says
+        let one = trace(
+            &pulses(100, &[(10, 20, 100.0)]),
+            &velocities(100, 20, -0.02 * Vector3::x()),
+        );
+        let lost = compare(&one, &r, 0.5, &from_2, 0.0, 0.0);
+        assert!(lost.violations.iter().any(|v| v.contains("lost")), "{:?}", lost.violations);
     }
 
     #[test]
