@@ -1,0 +1,38 @@
+"""`model-mediated` from Python: the verdict with and without its learning contacts, the
+prior walls in a scenario file, the identified law in the time series."""
+
+from __future__ import annotations
+
+import tomllib
+
+import hilcontact as hc
+from hilcontact.template import commented_toml
+
+AT_40_MS = {"facility.robot_delay": 0.04}
+
+
+def test_faithful_from_each_walls_second_contact_and_only_then():
+    mm = hc.simulate(hc.load_scenario("paper-table1", {**AT_40_MS, "compensator.kind": "model-mediated"}))
+    pida = hc.simulate(hc.load_scenario("paper-table1", {**AT_40_MS, "compensator.kind": "pida"}))
+    # its first contacts are pida's: the whole run is unfaithful, like pida's
+    assert mm.status == pida.status == "unfaithful"
+    cofs = [c["cof"] for c in mm.metrics["collisions"]]
+    assert cofs[:2] == [c["cof"] for c in pida.metrics["collisions"][:2]]
+    assert all(abs(c - 1) < 0.01 for c in cofs[2:]), cofs
+    # judged from the third collision (each wall's second contact) on
+    later = {**AT_40_MS, "metrics.judge_from": 3}
+    assert hc.simulate(hc.load_scenario("paper-table1", {**later, "compensator.kind": "model-mediated"})).status == "ok"
+    assert hc.simulate(hc.load_scenario("paper-table1", {**later, "compensator.kind": "pida"})).status == "unfaithful"
+
+
+def test_prior_walls_round_trip_through_a_commented_file_and_render_the_rear_wall():
+    walls = hc.load_scenario("paper-table1").to_dict()["walls"]
+    s = hc.load_scenario("paper-table1", {**AT_40_MS, "compensator.kind": "model-mediated",
+                                          "compensator.prior_walls": walls})
+    assert hc.load_scenario(tomllib.loads(commented_toml(s))) == s
+    run = hc.simulate(s)
+    cofs = [c["cof"] for c in run.metrics["collisions"]]
+    assert cofs[0] > 1.3 and all(abs(c - 1) < 0.01 for c in cofs[1:]), cofs  # from the rear wall's first
+    # the identified stiffness of the walls is the scenario's
+    k = run.timeseries["stiffness_estimate"].dropna().iloc[-1]
+    assert abs(k / s.contact.stiffness - 1) < 1e-3
