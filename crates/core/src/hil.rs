@@ -108,14 +108,16 @@ impl VirtualDynamics {
             tip_velocity_actual: m.actual.point_velocity(rod),
             tip_position_desired: desired.point(rod),
             tip_velocity_desired: desired.point_velocity(rod),
+            tip_mobility: self.system.tip_mobility(&self.state),
         }
     }
 
     /// Advances the virtual dynamics one period under the compensator's output: its velocity
-    /// correction first (momentum conserved), then its wrench (`t` frame) into eqs. (1), (2).
+    /// correction first (an impulse at the rod tip: momentum and angular momentum conserved),
+    /// then its wrench (`t` frame) into eqs. (1), (2).
     pub fn integrate(&mut self, output: &CompensatorOutput) {
         self.system
-            .correct_relative_velocity(&mut self.state, &output.velocity_correction);
+            .correct_tip_velocity(&mut self.state, &output.velocity_correction);
         self.system
             .step_virtual(&mut self.state, &output.applied, self.period);
         self.command = self.system.relative_motion(&self.state);
