@@ -10,8 +10,8 @@
 //! ```text
 //! E(n) = E(n−1) + T·f_applied(n−1)·(v(n−1) + v(n))/2 + (PC dissipation of n−1)
 //! impedance type:  α = −E/(T·max(|v|², v_min²)) if E < 0 (α ≤ α_max);  f_applied = f + α·v
-//! admittance type: a velocity correction Δv = β·f of the virtual relative motion, β ≥ 0
-//!                  chosen so that it removes −E of kinetic energy (β ≤ β_max)
+//! admittance type: an impulse λ·f/|f| at the rod tip, λ ≥ 0 chosen with the tip's mobility K
+//!                  so that it removes exactly −E of kinetic energy; Δv = λ·K·f/|f|
 //! ```
 //! The measured force is used as it comes (no delay compensation), and neither controller
 //! knows the contact's damping: that is the weakness the paper attacks. On a damped contact
@@ -118,7 +118,8 @@ impl Compensator for TdpaImpedance {
     }
 }
 
-/// Admittance-type TDPA: a damper on the velocity the virtual dynamics output.
+/// Admittance-type TDPA: an impulse at the rod tip, along the measured force, that changes the
+/// virtual tip's velocity and removes exactly the deficit.
 #[derive(Debug, Clone)]
 pub struct TdpaAdmittance {
     observer: PassivityObserver,
@@ -137,6 +138,22 @@ impl TdpaAdmittance {
     }
 }
 
+/// The impulse `λ ≥ 0` along the unit vector `u` at a tip of velocity `v` and mobility `κ = uᵀKu`
+/// (1/kg) that changes the kinetic energy by `energy` (J, < 0): the smaller root of
+/// `λ·u·v + ½κλ² = energy`, real and positive only while `u·v < 0`; where no root is real
+/// (the motion along `u` holds less than `−energy`), the `λ` that stops it, `−u·v/κ`.
+fn admittance_impulse(energy: f64, uv: f64, kappa: f64) -> f64 {
+    if energy >= 0.0 || uv >= 0.0 {
+        return 0.0;
+    }
+    let disc = uv * uv + 2.0 * kappa * energy;
+    if disc >= 0.0 {
+        (-uv - disc.sqrt()) / kappa
+    } else {
+        -uv / kappa
+    }
+}
+
 impl Compensator for TdpaAdmittance {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
         let (f, v) = (input.measured.force, input.tip_velocity_desired);
@@ -144,26 +161,34 @@ impl Compensator for TdpaAdmittance {
         if !self.observer.observe(&f, &v) {
             return out;
         }
-        let (mu, e) = (self.reduced_mass, self.observer.energy);
-        let f2 = f.norm_squared().max(self.params.force_floor.powi(2));
-        let vf = v.dot(&f);
-        // ½μ(|v + βf|² − |v|²) = E: the smaller root, real and positive only when the rod is
-        // pushed back (v·f < 0) and E < 0
-        let beta = if e < 0.0 && vf < 0.0 {
-            let disc = (mu * vf).powi(2) + 2.0 * mu * f2 * e;
-            let root = if disc >= 0.0 {
-                (-mu * vf - disc.sqrt()) / (mu * f2)
-            } else {
-                -vf / f2
-            };
-            root.clamp(0.0, self.params.beta_max)
-        } else {
-            0.0
-        };
-        let dv = f * beta;
-        out.velocity_correction = dv;
+        let e = self.observer.energy;
         out.observed_energy = e;
-        let removed = -0.5 * mu * ((v + dv).norm_squared() - v.norm_squared());
+        let magnitude = f.norm();
+        if e >= 0.0 || magnitude < self.params.force_floor {
+            self.observer.remember(&f, &v, 0.0);
+            return out;
+        }
+        // the impulse J = λ·u on the servicer at the tip (−J on the target), u along the force
+        // on the frame: the tip's velocity changes by λ·K·u and the kinetic energy by exactly
+        // λ·u·v + ½κλ²; κ from the virtual dynamics (1/μ where they give none)
+        let u = f / magnitude;
+        let ku = input.tip_mobility * u;
+        let kappa = match u.dot(&ku) {
+            k if k > 0.0 => k,
+            _ => 1.0 / self.reduced_mass,
+        };
+        let ku = if input.tip_mobility == nalgebra::Matrix3::zeros() {
+            u * kappa
+        } else {
+            ku
+        };
+        let uv = u.dot(&v);
+        // the cap: |Δv| along u at most β_max·|f|, as for a velocity step β·f
+        let lambda = admittance_impulse(e, uv, kappa)
+            .min(self.params.beta_max * magnitude / kappa);
+        let dv = ku * lambda;
+        out.velocity_correction = dv;
+        let removed = -(lambda * uv + 0.5 * kappa * lambda * lambda);
         self.observer.remember(&f, &(v + dv), removed.max(0.0));
         out
     }
