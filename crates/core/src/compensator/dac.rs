@@ -23,7 +23,7 @@ impl Dac {
     pub fn new(p: &ModelParams, context: &CompensatorContext) -> Self {
         Dac {
             estimator: ContactEstimator::new(p, context),
-            amendment: DampingAmendment::new(p, context),
+            amendment: DampingAmendment::for_robot_force(p, context),
         }
     }
 }

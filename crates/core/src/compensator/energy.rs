@@ -337,6 +337,27 @@ impl EnergyController {
     }
 }
 
+/// The identified damping where the virtual rod tip is in the wall, else 0 (N·s/m): the
+/// contact dissipates only there. Its penetration from the identified model,
+/// `d_des = (F_act·e − ĉ·v_act·e)/k̂ + (p_des − p_act)·e`, e the direction of `F_act`. While
+/// the delayed robot still presses after the virtual tip has left the wall, `ĉ·(v·e)²` is no
+/// dissipation of the virtual contact, and booking it would let the controller remove energy
+/// the contact never took.
+fn virtual_damping(view: &ContactView, input: &CompensatorInput) -> f64 {
+    let magnitude = view.force.norm();
+    if view.damping <= 0.0 || view.stiffness <= 0.0 || magnitude == 0.0 {
+        return view.damping;
+    }
+    let e = view.force / magnitude;
+    let actual = (magnitude - view.damping * input.tip_velocity_actual.dot(&e)) / view.stiffness;
+    let desired = actual + (input.tip_position_desired - input.tip_position_actual).dot(&e);
+    if desired > 0.0 {
+        view.damping
+    } else {
+        0.0
+    }
+}
+
 /// Observer and controller together: the damping amendment that DAC and PIDA add to the
 /// force they feed the dynamics.
 #[derive(Debug, Clone, PartialEq)]
@@ -346,6 +367,8 @@ pub struct DampingAmendment {
     /// The quiet level of the force (the noise estimate), for the observer's window.
     detector: ContactDetector,
     sensor_origin: Vector3<f64>,
+    /// Whether the damping is booked only where the virtual tip is in the wall.
+    virtual_damping: bool,
 }
 
 impl DampingAmendment {
@@ -356,6 +379,20 @@ impl DampingAmendment {
             controller: EnergyController::new(p, context.period),
             detector: ContactDetector::new(p.contact_force, context.period),
             sensor_origin: context.sensor_origin,
+            virtual_damping: false,
+        }
+    }
+
+    /// An amendment for a force that is the robot's (`F_act`, `dac`): with the `work` observer,
+    /// the identified damping counts as dissipated only while the virtual tip is in the wall
+    /// ([`virtual_damping`]). The robot's force keeps pressing after the virtual tip has left,
+    /// and booking `ĉ·(v·e)²` there would let the controller remove energy the contact never
+    /// took (`dac`'s damped rebounds then slowed collision after collision). `F_comp` (`pida`)
+    /// is the model's force at the virtual tip, zero once it has left.
+    pub fn for_robot_force(p: &ModelParams, context: &CompensatorContext) -> Self {
+        DampingAmendment {
+            virtual_damping: true,
+            ..DampingAmendment::new(p, context)
         }
     }
 
@@ -387,14 +424,14 @@ impl DampingAmendment {
         let v = input.tip_velocity_desired;
         self.detector.update(&view.force);
         let active = force.norm() > self.detector.quiet_threshold();
-        let (f_ek, open) = self.observer.step(
-            view.in_contact,
-            active,
-            force,
-            &view.direction,
-            view.damping,
-            &v,
-        );
+        let damping = if self.virtual_damping && self.observer.mode == ObserverMode::Work {
+            virtual_damping(view, input)
+        } else {
+            view.damping
+        };
+        let (f_ek, open) =
+            self.observer
+                .step(view.in_contact, active, force, &view.direction, damping, &v);
         let f_alpha = if open {
             // after the contact (the window's tail) the force's own direction
             let direction = if view.in_contact || force.norm() == 0.0 {
