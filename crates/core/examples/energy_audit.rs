@@ -82,10 +82,7 @@ fn main() {
     println!("   #   t(s)   KE before   KE after  after/ref |  before-win  in-win(real) in-win(-E)  mismatch  after-win | E_end");
     // over the run: what the exchanges and the free flights between them did to the energy
     let exchanges: f64 = episodes.iter().map(|&(a, b)| ke[b] - ke[a]).sum();
-    let flights: f64 = episodes
-        .windows(2)
-        .map(|w| ke[w[1].0] - ke[w[0].1])
-        .sum();
+    let flights: f64 = episodes.windows(2).map(|w| ke[w[1].0] - ke[w[0].1]).sum();
     println!(
         "sum over exchanges {exchanges:+.6} J (mean {:+.3e}), over free flights {flights:+.6} J; final/ref {:.4}",
         exchanges / episodes.len().max(1) as f64,
@@ -101,7 +98,9 @@ fn main() {
     for (j, &(a, b)) in episodes.iter().enumerate().skip(skip) {
         // the window: ticks the observer runs (an observer that reports 0 out of contact
         // opens at the tick before its first non-zero energy)
-        let mut window: Vec<usize> = (a..b).filter(|&i| obs[i].is_finite() && obs[i] != 0.0).collect();
+        let mut window: Vec<usize> = (a..b)
+            .filter(|&i| obs[i].is_finite() && obs[i] != 0.0)
+            .collect();
         if let Some(&first) = window.first() {
             if first > 0 && obs[first - 1] == 0.0 {
                 window.insert(0, first - 1);

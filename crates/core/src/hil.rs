@@ -10,7 +10,7 @@
 //! 4. eqs. (1), (2) advance by T ([`VirtualDynamics::integrate`]); the new command, the relative
 //!    motion the robot must reproduce at k+1, must be finite.
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::compensator::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
 use crate::facility::Measurement;
@@ -40,6 +40,8 @@ pub struct VirtualDynamics {
     /// Sensor attitude in `t` (sensor to `t`).
     sensor_orientation: UnitQuaternion<f64>,
     compensator: Box<dyn Compensator>,
+    /// Whether the compensator reads the tip's mobility.
+    mobility: bool,
 }
 
 impl VirtualDynamics {
@@ -47,13 +49,15 @@ impl VirtualDynamics {
     pub fn new(plan: &Plan) -> Self {
         let system = &plan.system;
         let context = compensator_context(plan);
+        let compensator = plan.compensator.build(&context);
         VirtualDynamics {
             system: system.clone(),
             command: system.relative_motion(&plan.initial),
             state: plan.initial,
             period: plan.period,
             sensor_orientation: plan.facility.sensor_orientation,
-            compensator: plan.compensator.build(&context),
+            mobility: compensator.uses_tip_mobility(),
+            compensator,
         }
     }
 
@@ -108,7 +112,11 @@ impl VirtualDynamics {
             tip_velocity_actual: m.actual.point_velocity(rod),
             tip_position_desired: desired.point(rod),
             tip_velocity_desired: desired.point_velocity(rod),
-            tip_mobility: self.system.tip_mobility(&self.state),
+            tip_mobility: if self.mobility {
+                self.system.tip_mobility(&self.state)
+            } else {
+                Matrix3::zeros()
+            },
         }
     }
 

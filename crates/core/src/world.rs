@@ -161,8 +161,14 @@ impl TwoBodySystem {
         x.servicer.velocity += j / self.servicer.mass;
         x.target.velocity -= j / self.target.mass;
         // ΔL = r × J in the world; Δω = I⁻¹ Rᵀ ΔL in the body frame
-        let dl_s = x.servicer.orientation.inverse_transform_vector(&arm_s.cross(&j));
-        let dl_t = x.target.orientation.inverse_transform_vector(&arm_t.cross(&-j));
+        let dl_s = x
+            .servicer
+            .orientation
+            .inverse_transform_vector(&arm_s.cross(&j));
+        let dl_t = x
+            .target
+            .orientation
+            .inverse_transform_vector(&arm_t.cross(&-j));
         x.servicer.angular_velocity += self.servicer.inertia_inv * dl_s;
         x.target.angular_velocity += self.target.inertia_inv * dl_t;
     }

@@ -101,6 +101,9 @@ fn no_creep_over_a_minute_of_collisions() {
         let energy = out.timeseries.column("energy").unwrap();
         let reference = out.reference.column("energy").unwrap();
         let ratio = energy.last().unwrap() / reference.last().unwrap();
-        assert!((ratio - 1.0).abs() <= 0.06, "{name}: final energy {ratio:.4}");
+        assert!(
+            (ratio - 1.0).abs() <= 0.06,
+            "{name}: final energy {ratio:.4}"
+        );
     }
 }

@@ -287,7 +287,12 @@ fn an_impulse_at_the_rod_tip_moves_it_by_its_mobility_and_conserves_momentum() {
     let mut x = x0;
     system.apply_tip_impulse(&mut x, &j);
     let (u0, u1) = (tip(&x0), tip(&x));
-    assert!(((u1 - u0) - k * j).norm() < 1e-12, "{:?} vs {:?}", u1 - u0, k * j);
+    assert!(
+        ((u1 - u0) - k * j).norm() < 1e-12,
+        "{:?} vs {:?}",
+        u1 - u0,
+        k * j
+    );
     let de = system.energy(&x) - system.energy(&x0);
     let expected = j.dot(&(u0 + k * j * 0.5));
     assert!((de - expected).abs() < 1e-12, "{de} vs {expected}");

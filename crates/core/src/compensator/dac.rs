@@ -32,6 +32,7 @@ impl Compensator for Dac {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
         let view = self.estimator.step(input); // steps 1-2
         let alpha = self.amendment.step(&view, &view.force, input); // steps 3-6
+
         // steps 7-8: F_comp replaced by F_act in (29), (30); nothing outside the observer's
         // window (the sensor's noise)
         let applied = if self.amendment.applies() {

@@ -178,7 +178,9 @@ mod tests {
             // the quiet level: above the noise, at most the level contact ends at
             let quiet = d.quiet_threshold();
             assert!(quiet <= d.off_threshold(), "σ = {sigma}");
-            assert!((quiet / (QUIET_SIGMAS * sigma) - 1.0).abs() < 0.15 || quiet == d.off_threshold());
+            assert!(
+                (quiet / (QUIET_SIGMAS * sigma) - 1.0).abs() < 0.15 || quiet == d.off_threshold()
+            );
         }
     }
 

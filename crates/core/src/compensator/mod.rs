@@ -47,7 +47,8 @@ pub struct CompensatorInput {
     /// Desired contact-point velocity, eq. (26), m/s.
     pub tip_velocity_desired: Vector3<f64>,
     /// Mobility `K` of the virtual rod tip, 1/kg: an impulse `J` at the tip changes the desired
-    /// tip velocity by `K·J` ([`crate::world::TwoBodySystem::tip_mobility`]).
+    /// tip velocity by `K·J` ([`crate::world::TwoBodySystem::tip_mobility`]); zero unless the
+    /// compensator [`Compensator::uses_tip_mobility`].
     pub tip_mobility: Matrix3<f64>,
 }
 
@@ -120,6 +121,10 @@ pub trait Compensator: Send {
     }
     /// Whether `step` returns an observed energy.
     fn observes_energy(&self) -> bool {
+        false
+    }
+    /// Whether `step` reads the input's `tip_mobility` (computed only then).
+    fn uses_tip_mobility(&self) -> bool {
         false
     }
 }

@@ -189,19 +189,13 @@ impl Compensator for TdpaAdmittance {
         // λ·u·v + ½κλ²; κ from the virtual dynamics (1/μ where they give none)
         let u = f / magnitude;
         let ku = input.tip_mobility * u;
-        let kappa = match u.dot(&ku) {
-            k if k > 0.0 => k,
-            _ => 1.0 / self.reduced_mass,
-        };
-        let ku = if input.tip_mobility == nalgebra::Matrix3::zeros() {
-            u * kappa
-        } else {
-            ku
+        let (ku, kappa) = match u.dot(&ku) {
+            k if k > 0.0 => (ku, k),
+            _ => (u / self.reduced_mass, 1.0 / self.reduced_mass),
         };
         let uv = u.dot(&v);
         // the cap: |Δv| along u at most β_max·|f|, as for a velocity step β·f
-        let lambda = admittance_impulse(e, uv, kappa)
-            .min(self.params.beta_max * magnitude / kappa);
+        let lambda = admittance_impulse(e, uv, kappa).min(self.params.beta_max * magnitude / kappa);
         let dv = ku * lambda;
         out.velocity_correction = dv;
         let removed = -(lambda * uv + 0.5 * kappa * lambda * lambda);
@@ -214,6 +208,10 @@ impl Compensator for TdpaAdmittance {
     }
 
     fn observes_energy(&self) -> bool {
+        true
+    }
+
+    fn uses_tip_mobility(&self) -> bool {
         true
     }
 }
