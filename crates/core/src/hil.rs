@@ -10,7 +10,7 @@
 //! 4. eqs. (1), (2) advance by T ([`VirtualDynamics::integrate`]); the new command, the relative
 //!    motion the robot must reproduce at k+1, must be finite.
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::compensator::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
 use crate::facility::Measurement;
@@ -40,6 +40,8 @@ pub struct VirtualDynamics {
     /// Sensor attitude in `t` (sensor to `t`).
     sensor_orientation: UnitQuaternion<f64>,
     compensator: Box<dyn Compensator>,
+    /// Whether the compensator reads the tip's mobility.
+    mobility: bool,
 }
 
 impl VirtualDynamics {
@@ -47,13 +49,15 @@ impl VirtualDynamics {
     pub fn new(plan: &Plan) -> Self {
         let system = &plan.system;
         let context = compensator_context(plan);
+        let compensator = plan.compensator.build(&context);
         VirtualDynamics {
             system: system.clone(),
             command: system.relative_motion(&plan.initial),
             state: plan.initial,
             period: plan.period,
             sensor_orientation: plan.facility.sensor_orientation,
-            compensator: plan.compensator.build(&context),
+            mobility: compensator.uses_tip_mobility(),
+            compensator,
         }
     }
 
@@ -108,14 +112,20 @@ impl VirtualDynamics {
             tip_velocity_actual: m.actual.point_velocity(rod),
             tip_position_desired: desired.point(rod),
             tip_velocity_desired: desired.point_velocity(rod),
+            tip_mobility: if self.mobility {
+                self.system.tip_mobility(&self.state)
+            } else {
+                Matrix3::zeros()
+            },
         }
     }
 
     /// Advances the virtual dynamics one period under the compensator's output: its velocity
-    /// correction first (momentum conserved), then its wrench (`t` frame) into eqs. (1), (2).
+    /// correction first (an impulse at the rod tip: momentum and angular momentum conserved),
+    /// then its wrench (`t` frame) into eqs. (1), (2).
     pub fn integrate(&mut self, output: &CompensatorOutput) {
         self.system
-            .correct_relative_velocity(&mut self.state, &output.velocity_correction);
+            .correct_tip_velocity(&mut self.state, &output.velocity_correction);
         self.system
             .step_virtual(&mut self.state, &output.applied, self.period);
         self.command = self.system.relative_motion(&self.state);

@@ -9,7 +9,7 @@
 //! open-loop: the desired tip comes from the recording, not from dynamics driven by the new
 //! output. The output columns are allocated once; the loop over ticks does not allocate.
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::compensator::{CompensatorConfig, CompensatorContext, CompensatorInput};
 use crate::error::RecordingError;
@@ -172,7 +172,8 @@ impl<'a> Recording<'a> {
 
     /// What a compensator sees at tick `k`, as [`crate::hil::VirtualDynamics::input`] builds it:
     /// the measured wrench turned into `t` by `sensor_to_t` (the sensor's attitude in `t`), the
-    /// actual tip and the desired one (the actual one when the recording has none).
+    /// actual tip and the desired one (the actual one when the recording has none). The tip's
+    /// mobility is left zero (a recording has no virtual state; [`replay`] puts in `1/μ`).
     pub fn input(&self, k: usize, sensor_to_t: &UnitQuaternion<f64>) -> CompensatorInput {
         let actual_position = Self::at(&self.actual_tip_position, k);
         let actual_velocity = Self::at(&self.actual_tip_velocity, k);
@@ -189,6 +190,8 @@ impl<'a> Recording<'a> {
             tip_velocity_desired: self
                 .tip_velocity
                 .map_or(actual_velocity, |c| Self::at(&c, k)),
+            // a recording has no virtual state: `replay` puts in the translational mobility
+            tip_mobility: Matrix3::zeros(),
         }
     }
 }
@@ -234,8 +237,12 @@ pub fn replay(
     let n = recording.len();
     let mut columns: Vec<Vec<f64>> = vec![vec![0.0; n]; REPLAY_COLUMNS.len()];
     let mut compensator = config.build(context);
+    // the tip's mobility as if it moved with the centres of mass (no rotation): exact for a
+    // contact on their line, an approximation otherwise (only admittance-type compensators use it)
+    let mobility = Matrix3::identity() / context.reduced_mass;
     for k in 0..n {
-        let input = recording.input(k, sensor_to_t);
+        let mut input = recording.input(k, sensor_to_t);
+        input.tip_mobility = mobility;
         let out = compensator.step(&input);
         // as HilStep::observe records it: back into the sensor frame
         let force = sensor_to_t.inverse_transform_vector(&out.applied.force);

@@ -7,7 +7,7 @@
 //! A wrench "on the frame" is what the sensor measures: the force the rod exerts on the
 //! target's collision frame, with its moment about the sensor origin.
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 
 use crate::body::{BodyRate, BodyState, MassProperties};
 use crate::contact::ContactGeometry;
@@ -111,12 +111,81 @@ impl TwoBodySystem {
     }
 
     /// Changes the servicer's velocity relative to the target by `dv` (`t` frame, m/s), split
-    /// between the bodies so that the linear momentum is unchanged.
+    /// between the bodies so that the linear momentum is unchanged. (Both centres of mass
+    /// change velocity; the rotations do not. Not what the compensators' velocity correction
+    /// uses: see [`TwoBodySystem::correct_tip_velocity`].)
     pub fn correct_relative_velocity(&self, x: &mut TwoBodyState, dv: &Vector3<f64>) {
         let dv_world = x.target.orientation * dv;
         let mu = self.reduced_mass();
         x.servicer.velocity += dv_world * (mu / self.servicer.mass);
         x.target.velocity -= dv_world * (mu / self.target.mass);
+    }
+
+    /// The rod tip's lever arms from the servicer's and the target's centres of mass (world), m.
+    fn tip_arms(&self, x: &TwoBodyState) -> (Vector3<f64>, Vector3<f64>) {
+        let arm_s = x.servicer.orientation * self.rod_tip;
+        let tip = x.servicer.position + arm_s;
+        (arm_s, tip - x.target.position)
+    }
+
+    /// The mobility of the rod tip, `K` (`t` frame, 1/kg): an impulse `J` on the servicer at
+    /// its rod tip, with `−J` on the target at the same point, changes the tip's velocity
+    /// relative to the target (as [`RelativeMotion::point_velocity`] gives it) by `K·J`:
+    /// ```text
+    /// K = (1/m_s + 1/m_t)·1 − [r_s]× I_s⁻¹ [r_s]× − [r_t]× I_t⁻¹ [r_t]×
+    /// ```
+    /// with `r_s`, `r_t` the tip from each centre of mass and the inverse inertias in the same
+    /// frame. Symmetric positive definite; `1/K` along a direction is the effective mass the tip
+    /// has there (the reduced mass when the tip lies on the line of the two centres of mass and
+    /// the bodies do not turn). Exact for the energy: the impulse changes the kinetic energy by
+    /// `J·(u + K·J/2)`, `u` the tip's relative velocity before it.
+    pub fn tip_mobility(&self, x: &TwoBodyState) -> Matrix3<f64> {
+        let (arm_s, arm_t) = self.tip_arms(x);
+        let r_s = x.servicer.orientation.to_rotation_matrix();
+        let r_t = x.target.orientation.to_rotation_matrix();
+        let inv_s = r_s.matrix() * self.servicer.inertia_inv * r_s.matrix().transpose();
+        let inv_t = r_t.matrix() * self.target.inertia_inv * r_t.matrix().transpose();
+        let (cs, ct) = (arm_s.cross_matrix(), arm_t.cross_matrix());
+        let world = Matrix3::identity() * (1.0 / self.servicer.mass + 1.0 / self.target.mass)
+            - cs * inv_s * cs
+            - ct * inv_t * ct;
+        r_t.matrix().transpose() * world * r_t.matrix()
+    }
+
+    /// Applies the impulse `impulse` (`t` frame, N·s) to the servicer at its rod tip and the
+    /// opposite one to the target at the same point: linear and angular momentum are unchanged,
+    /// the tip's relative velocity changes by `K·impulse` ([`TwoBodySystem::tip_mobility`]).
+    pub fn apply_tip_impulse(&self, x: &mut TwoBodyState, impulse: &Vector3<f64>) {
+        let (arm_s, arm_t) = self.tip_arms(x);
+        let j = x.target.orientation * impulse;
+        x.servicer.velocity += j / self.servicer.mass;
+        x.target.velocity -= j / self.target.mass;
+        // ΔL = r × J in the world; Δω = I⁻¹ Rᵀ ΔL in the body frame
+        let dl_s = x
+            .servicer
+            .orientation
+            .inverse_transform_vector(&arm_s.cross(&j));
+        let dl_t = x
+            .target
+            .orientation
+            .inverse_transform_vector(&arm_t.cross(&-j));
+        x.servicer.angular_velocity += self.servicer.inertia_inv * dl_s;
+        x.target.angular_velocity += self.target.inertia_inv * dl_t;
+    }
+
+    /// Changes the rod tip's velocity relative to the target by `dv` (`t` frame, m/s) with the
+    /// impulse at the tip that does it, `J = K⁻¹·dv` ([`TwoBodySystem::apply_tip_impulse`]): the
+    /// velocity correction of the admittance-type compensators. Allocation-free.
+    pub fn correct_tip_velocity(&self, x: &mut TwoBodyState, dv: &Vector3<f64>) {
+        if *dv == Vector3::zeros() {
+            return;
+        }
+        let k = self.tip_mobility(x);
+        let impulse = match k.cholesky() {
+            Some(c) => c.solve(dv),
+            None => dv * self.reduced_mass(),
+        };
+        self.apply_tip_impulse(x, &impulse);
     }
 
     /// One control period of the virtual dynamics with the wrench held (zero-order hold), by

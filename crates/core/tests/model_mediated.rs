@@ -95,6 +95,7 @@ fn one_contact(
             tip_velocity_actual: v_act,
             tip_position_desired: p_des,
             tip_velocity_desired: v_des,
+            tip_mobility: nalgebra::Matrix3::zeros(), // not read by model-mediated
         });
     }
     c
@@ -357,7 +358,7 @@ fn a_wrong_model_stays_passive() {
         hunt.contact.exponent,
         hunt.contact.damping,
     ) = (6.2e6, 1.5, 3.1e7);
-    hunt.simulation.duration = 7.0;
+    hunt.simulation.duration = 10.0;
     model_mediated(
         &mut hunt,
         ModelMediatedParams {

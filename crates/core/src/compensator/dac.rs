@@ -23,7 +23,7 @@ impl Dac {
     pub fn new(p: &ModelParams, context: &CompensatorContext) -> Self {
         Dac {
             estimator: ContactEstimator::new(p, context),
-            amendment: DampingAmendment::new(p, context),
+            amendment: DampingAmendment::for_robot_force(p, context),
         }
     }
 }
@@ -32,12 +32,19 @@ impl Compensator for Dac {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
         let view = self.estimator.step(input); // steps 1-2
         let alpha = self.amendment.step(&view, &view.force, input); // steps 3-6
-        CompensatorOutput {
-            // steps 7-8: F_comp replaced by F_act in (29), (30)
-            applied: FrameWrench {
+
+        // steps 7-8: F_comp replaced by F_act in (29), (30); nothing outside the observer's
+        // window (the sensor's noise)
+        let applied = if self.amendment.applies() {
+            FrameWrench {
                 force: view.force + alpha.force,
                 moment: view.moment + alpha.moment,
-            },
+            }
+        } else {
+            FrameWrench::default()
+        };
+        CompensatorOutput {
+            applied,
             velocity_correction: Vector3::zeros(),
             estimate: Some(ContactEstimate {
                 stiffness: view.stiffness,

@@ -9,6 +9,7 @@
 //! σ̂² ← σ̂² + λ (|F|²/3 − σ̂²)            out of contact, λ = T / τ_σ (τ_σ = 0.1 s)
 //! contact starts when |F| > F_on  = max(F_c, 6 σ̂)
 //! contact ends   when |F| ≤ F_off = max(F_c, 4 σ̂)
+//! quiet (no wall touched) when |F| ≤ F_q = min(F_off, 5 σ̂)
 //! ```
 //! `F_c` is the compensator's `contact_force`. For Gaussian noise of σ per axis, |F|/σ
 //! follows a χ distribution with 3 degrees of freedom: a free-flight tick passes 6σ with
@@ -26,6 +27,8 @@ pub const NOISE_TIME: f64 = 0.1;
 pub const ON_SIGMAS: f64 = 6.0;
 /// Contact ends at or below this many.
 pub const OFF_SIGMAS: f64 = 4.0;
+/// A force at or below this many noise standard deviations is quiet: no exchange with a wall.
+pub const QUIET_SIGMAS: f64 = 5.0;
 
 /// Noise-aware contact detection with hysteresis (see the module doc). Allocation-free.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -83,6 +86,14 @@ impl ContactDetector {
     /// The force at or below which contact ends, N.
     pub fn off_threshold(&self) -> f64 {
         self.base.max(OFF_SIGMAS * self.noise())
+    }
+
+    /// The force at or below which no wall is touched, N: `min(F_off, 5 σ̂)` (0 without
+    /// noise). Between it and the contact thresholds lies the force of a contact's first and
+    /// last ticks, which does work (an energy observer must count it) but is too small to tell
+    /// contact by; below it lies the noise (a noise tick passes 5 σ̂ with probability 1.5e-5).
+    pub fn quiet_threshold(&self) -> f64 {
+        (QUIET_SIGMAS * self.noise()).min(self.off_threshold())
     }
 
     /// The level the force is compared with now: `F_off` in contact, `F_on` out of it, N.
@@ -164,6 +175,21 @@ mod tests {
             assert!(hold < d.on_threshold() || sigma <= 0.5, "hysteresis");
             assert!(d.update(&Vector3::new(hold, 0.0, 0.0)));
             assert!(!d.update(&Vector3::zeros()));
+            // the quiet level: above the noise, at most the level contact ends at
+            let quiet = d.quiet_threshold();
+            assert!(quiet <= d.off_threshold(), "σ = {sigma}");
+            assert!(
+                (quiet / (QUIET_SIGMAS * sigma) - 1.0).abs() < 0.15 || quiet == d.off_threshold()
+            );
         }
+    }
+
+    #[test]
+    fn without_noise_every_force_is_above_the_quiet_level() {
+        let mut d = ContactDetector::new(3.0, 1e-3);
+        for _ in 0..200 {
+            d.update(&Vector3::zeros());
+        }
+        assert_eq!(d.quiet_threshold(), 0.0);
     }
 }

@@ -22,17 +22,92 @@
 //!   within 0.1 % at 10 and 20 ms, but lets DAC's rebounds creep up: CoV 1.019 and 1.032 at
 //!   the fifth collision, against 1.005 and 1.003 with `work`.
 //!
-//! The observer runs only in contact (`E(0) = 0` at each contact's start): outside contact
-//! the damping term would otherwise accumulate during free flight. The controller only ever
-//! dissipates: α ≥ 0 and `F_α·v_des ≥ 0`; α is capped at `alpha_max` and a deficit that the
-//! cap leaves is carried to the next tick by the observer.
+//! The window ([`ExchangeWindow`]). With `work`, the observer covers the whole exchange with
+//! the wall: it is open while in contact or while the force is above the quiet level
+//! ([`ContactDetector::quiet_threshold`], the sensor's noise), so the first and last ticks of a
+//! contact, whose force is below the contact threshold, are counted too; outside it the
+//! compensator applies nothing (the force is noise, whose random work would otherwise move the
+//! energy by several per cent over minutes); a deficit (`E < 0`) left when the window closes
+//! is carried into the next exchange, a surplus is forgotten, so energy banked in one
+//! collision never pays for the next. With `paper` the window is the contact itself, `E(0) = 0`
+//! at each contact's start, and the force is applied outside it as it comes (the paper's
+//! form). Outside the window the damping term would accumulate during free flight. The
+//! controller only ever dissipates: α ≥ 0 and `F_α·v_des ≥ 0`; α is capped at `alpha_max` and a
+//! deficit that the cap leaves is carried to the next tick by the observer.
 
 use nalgebra::Vector3;
 
 use super::delay::ContactView;
+use super::detect::ContactDetector;
 use super::params::{ControllerMode, ModelParams, ObserverMode};
 use super::{CompensatorContext, CompensatorInput};
 use crate::frames::FrameWrench;
+
+/// The window of an energy observer over one exchange with a wall, and the carried deficit.
+///
+/// The window is open while the tick is in contact or its force is above the quiet level
+/// ([`ContactDetector::quiet_threshold`]): that covers the first and last ticks of a contact,
+/// whose force is below the contact threshold but does work. Outside it the force is the
+/// sensor's noise, and the compensator applies nothing (so every force that reaches the
+/// virtual dynamics is inside a window, and counted):
+/// ```text
+/// opens:   E ← D                  (D ≤ 0, the deficit carried from the exchanges before)
+/// open:    E ← E + W(k)           (W(k) the work the dynamics gave the port over the last step)
+/// closes:  D ← min(E, 0)
+/// ```
+/// A surplus is forgotten at the close (energy banked in one exchange must not pay for the
+/// next); a deficit is kept until a later exchange has dissipated it. Allocation-free.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ExchangeWindow {
+    open: bool,
+    energy: f64,
+    carried: f64,
+}
+
+impl ExchangeWindow {
+    /// Forgets everything, the carried deficit too.
+    pub fn reset(&mut self) {
+        *self = ExchangeWindow::default();
+    }
+
+    /// The energy of the open window (J; 0 when closed).
+    pub fn energy(&self) -> f64 {
+        self.energy
+    }
+
+    /// The deficit carried into the next exchange (J, ≤ 0).
+    pub fn carried(&self) -> f64 {
+        self.carried
+    }
+
+    /// Whether the window is open.
+    pub fn is_open(&self) -> bool {
+        self.open
+    }
+
+    /// One tick: `work` (J) over the step that ends now (by the force held since the last
+    /// tick: zero if the window was closed, since nothing was applied), and whether this tick
+    /// is in the exchange (in contact, or its force above the quiet level). Returns whether the
+    /// window is open.
+    pub fn step(&mut self, work: f64, in_exchange: bool) -> bool {
+        if self.open {
+            self.energy += work;
+        }
+        match (self.open, in_exchange) {
+            (false, true) => {
+                self.energy = self.carried;
+                self.carried = 0.0;
+            }
+            (true, false) => {
+                self.carried = self.energy.min(0.0);
+                self.energy = 0.0;
+            }
+            _ => {}
+        }
+        self.open = in_exchange;
+        self.open
+    }
+}
 
 /// One tick of the observer's history.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -51,6 +126,8 @@ pub struct EnergyObserver {
     mode: ObserverMode,
     energy: f64,
     previous: Option<Tick>,
+    /// The exchange window (`work`).
+    window: ExchangeWindow,
 }
 
 /// Damping force `ĉ·(v·e)·e` of the identified contact, N. A negative estimate (noise can
@@ -68,13 +145,20 @@ impl EnergyObserver {
             mode,
             energy: 0.0,
             previous: None,
+            window: ExchangeWindow::default(),
         }
     }
 
-    /// Forgets the contact.
+    /// Forgets the contact, and the deficit carried from the ones before.
     pub fn reset(&mut self) {
         self.energy = 0.0;
         self.previous = None;
+        self.window.reset();
+    }
+
+    /// The deficit carried into the next exchange (J, ≤ 0; always 0 with `paper`).
+    pub fn carried(&self) -> f64 {
+        self.window.carried()
     }
 
     /// Observed energy E_obs, J.
@@ -82,49 +166,88 @@ impl EnergyObserver {
         self.energy
     }
 
-    /// One tick with the compensated force (N), contact direction, identified damping (N·s/m)
-    /// and desired velocity (m/s). Returns the elastic force F_ek of this tick (N); zero out of
-    /// contact.
+    /// One tick with the compensated force (N), whether the tick is in contact and whether its
+    /// force is above the quiet level (`active`), the contact direction (zero out of contact:
+    /// then the force's own direction), identified damping (N·s/m) and desired velocity (m/s).
+    /// Returns the elastic force F_ek of this tick (N), zero outside the window, and whether
+    /// the window is open (with `paper`: whether the tick is in contact).
     pub fn step(
         &mut self,
         in_contact: bool,
+        active: bool,
         force: &Vector3<f64>,
         direction: &Vector3<f64>,
         damping: f64,
         velocity: &Vector3<f64>,
-    ) -> Vector3<f64> {
-        if !in_contact {
-            self.reset();
-            return Vector3::zeros();
-        }
+    ) -> (Vector3<f64>, bool) {
         let elastic = |t: &Tick| t.force - damping_force(t.damping, &t.velocity, &t.direction);
-        let current = Tick {
-            force: *force,
-            direction: *direction,
-            damping,
-            velocity: *velocity,
-            alpha_force: Vector3::zeros(),
-        };
-        let f_ek_now = elastic(&current);
-        self.energy += match (self.mode, self.previous) {
-            (_, None) => 0.0,
-            // the wrench held over the last step: its work on the virtual kinetic energy is
-            // exactly T·F(k−1)·(v(k−1) + v(k))/2 under symplectic Euler
-            (ObserverMode::Work, Some(p)) => {
-                0.5 * self.period * (elastic(&p) + p.alpha_force).dot(&(p.velocity + velocity))
+        if self.mode == ObserverMode::Paper {
+            if !in_contact {
+                self.energy = 0.0;
+                self.previous = None;
+                return (Vector3::zeros(), false);
             }
-            // (15), (16) as printed
-            (ObserverMode::Paper, Some(p)) => {
+            let current = Tick {
+                force: *force,
+                direction: *direction,
+                damping,
+                velocity: *velocity,
+                alpha_force: Vector3::zeros(),
+            };
+            let f_ek_now = elastic(&current);
+            if let Some(p) = self.previous {
+                // (15), (16) as printed
                 let f_ek = if velocity.dot(force) > 0.0 {
                     elastic(&p)
                 } else {
                     f_ek_now
                 };
-                self.period * (f_ek.dot(velocity) + p.alpha_force.dot(&p.velocity))
+                self.energy += self.period * (f_ek.dot(velocity) + p.alpha_force.dot(&p.velocity));
             }
+            self.previous = Some(current);
+            return (f_ek_now, true);
+        }
+        // out of contact the force's own direction (for the damping part of the first and
+        // last ticks of a contact, whose force is below the contact threshold)
+        let magnitude = force.norm();
+        let direction = if direction.norm_squared() > 0.5 || magnitude == 0.0 {
+            *direction
+        } else {
+            force / magnitude
         };
-        self.previous = Some(current);
-        f_ek_now
+        let current = Tick {
+            force: *force,
+            direction,
+            damping,
+            velocity: *velocity,
+            alpha_force: Vector3::zeros(),
+        };
+        // the wrench held over the last step: its work on the virtual kinetic energy is
+        // exactly T·F(k−1)·(v(k−1) + v(k))/2 under symplectic Euler
+        let work = self.previous.map_or(0.0, |p| {
+            0.5 * self.period * (elastic(&p) + p.alpha_force).dot(&(p.velocity + velocity))
+        });
+        let open = self.window.step(work, in_contact || active);
+        self.energy = self.window.energy();
+        if open {
+            self.previous = Some(current);
+            (elastic(&current), true)
+        } else {
+            // nothing is applied outside the window
+            self.previous = Some(Tick {
+                force: Vector3::zeros(),
+                damping: 0.0,
+                ..current
+            });
+            (Vector3::zeros(), false)
+        }
+    }
+
+    /// Whether the compensator applies its force at this tick: inside the window with
+    /// `work`, always with `paper` (which applies the force outside contact too, as the
+    /// paper does).
+    pub fn applies(&self) -> bool {
+        self.mode == ObserverMode::Paper || self.window.is_open()
     }
 
     /// Records the controller's force of this tick (enters the next tick's sum).
@@ -214,13 +337,38 @@ impl EnergyController {
     }
 }
 
+/// The identified damping where the virtual rod tip is in the wall, else 0 (N·s/m): the
+/// contact dissipates only there. Its penetration from the identified model,
+/// `d_des = (F_act·e − ĉ·v_act·e)/k̂ + (p_des − p_act)·e`, e the direction of `F_act`. While
+/// the delayed robot still presses after the virtual tip has left the wall, `ĉ·(v·e)²` is no
+/// dissipation of the virtual contact, and booking it would let the controller remove energy
+/// the contact never took.
+fn virtual_damping(view: &ContactView, input: &CompensatorInput) -> f64 {
+    let magnitude = view.force.norm();
+    if view.damping <= 0.0 || view.stiffness <= 0.0 || magnitude == 0.0 {
+        return view.damping;
+    }
+    let e = view.force / magnitude;
+    let actual = (magnitude - view.damping * input.tip_velocity_actual.dot(&e)) / view.stiffness;
+    let desired = actual + (input.tip_position_desired - input.tip_position_actual).dot(&e);
+    if desired > 0.0 {
+        view.damping
+    } else {
+        0.0
+    }
+}
+
 /// Observer and controller together: the damping amendment that DAC and PIDA add to the
 /// force they feed the dynamics.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DampingAmendment {
     observer: EnergyObserver,
     controller: EnergyController,
+    /// The quiet level of the force (the noise estimate), for the observer's window.
+    detector: ContactDetector,
     sensor_origin: Vector3<f64>,
+    /// Whether the damping is booked only where the virtual tip is in the wall.
+    virtual_damping: bool,
 }
 
 impl DampingAmendment {
@@ -229,18 +377,40 @@ impl DampingAmendment {
         DampingAmendment {
             observer: EnergyObserver::new(context.period, p.observer),
             controller: EnergyController::new(p, context.period),
+            detector: ContactDetector::new(p.contact_force, context.period),
             sensor_origin: context.sensor_origin,
+            virtual_damping: false,
         }
     }
 
-    /// Forgets the contact.
+    /// An amendment for a force that is the robot's (`F_act`, `dac`): with the `work` observer,
+    /// the identified damping counts as dissipated only while the virtual tip is in the wall
+    /// ([`virtual_damping`]). The robot's force keeps pressing after the virtual tip has left,
+    /// and booking `ĉ·(v·e)²` there would let the controller remove energy the contact never
+    /// took (`dac`'s damped rebounds then slowed collision after collision). `F_comp` (`pida`)
+    /// is the model's force at the virtual tip, zero once it has left.
+    pub fn for_robot_force(p: &ModelParams, context: &CompensatorContext) -> Self {
+        DampingAmendment {
+            virtual_damping: true,
+            ..DampingAmendment::new(p, context)
+        }
+    }
+
+    /// Forgets the contact and the deficit carried.
     pub fn reset(&mut self) {
         self.observer.reset();
+        self.detector.reset();
     }
 
     /// Observed energy E_obs, J.
     pub fn energy(&self) -> f64 {
         self.observer.energy()
+    }
+
+    /// Whether the compensator applies its force at this tick (see [`EnergyObserver::applies`]):
+    /// outside the `work` observer's window the force is the sensor's noise.
+    pub fn applies(&self) -> bool {
+        self.observer.applies()
     }
 
     /// One tick: observes `force` (the force fed to the dynamics before amendment, N) and
@@ -252,12 +422,29 @@ impl DampingAmendment {
         input: &CompensatorInput,
     ) -> FrameWrench {
         let v = input.tip_velocity_desired;
-        let f_ek = self
-            .observer
-            .step(view.in_contact, force, &view.direction, view.damping, &v);
-        let (_, f_alpha) =
+        self.detector.update(&view.force);
+        let active = force.norm() > self.detector.quiet_threshold();
+        let damping = if self.virtual_damping && self.observer.mode == ObserverMode::Work {
+            virtual_damping(view, input)
+        } else {
+            view.damping
+        };
+        let (f_ek, open) =
+            self.observer
+                .step(view.in_contact, active, force, &view.direction, damping, &v);
+        let f_alpha = if open {
+            // after the contact (the window's tail) the force's own direction
+            let direction = if view.in_contact || force.norm() == 0.0 {
+                view.direction
+            } else {
+                force.normalize()
+            };
             self.controller
-                .step(self.observer.energy(), &f_ek, &view.direction, &v, force);
+                .step(self.observer.energy(), &f_ek, &direction, &v, force)
+                .1
+        } else {
+            Vector3::zeros()
+        };
         self.observer.record_alpha_force(&f_alpha);
         FrameWrench {
             force: f_alpha,
@@ -284,7 +471,7 @@ mod tests {
             let (mut peak, mut worst) = (0.0f64, 0.0f64);
             loop {
                 let force = e * (k * x).max(0.0); // on the frame
-                obs.step(true, &force, &e, 0.0, &(e * v));
+                obs.step(true, true, &force, &e, 0.0, &(e * v));
                 if mode == ObserverMode::Work {
                     worst = worst.max((obs.energy() - (ke0 - 0.5 * m * v * v)).abs());
                 }
@@ -310,6 +497,57 @@ mod tests {
                     obs.energy()
                 );
             }
+        }
+    }
+
+    /// The window counts every step of an exchange, closes with a deficit carried into the
+    /// next exchange and a surplus forgotten, and counts nothing between exchanges.
+    #[test]
+    fn exchange_window_carries_a_deficit_and_forgets_a_surplus() {
+        let mut w = ExchangeWindow::default();
+        assert!(!w.step(0.0, false));
+        assert!(w.step(0.0, true));
+        w.step(1e-3, true);
+        w.step(-1.5e-3, true);
+        assert!((w.energy() + 0.5e-3).abs() < 1e-15);
+        // the step that ends at the closing tick still belongs to the exchange
+        assert!(!w.step(-0.1e-3, false));
+        assert!((w.carried() + 0.6e-3).abs() < 1e-15);
+        assert_eq!(w.energy(), 0.0);
+        // free flight: nothing is counted
+        assert!(!w.step(5.0, false));
+        // the next exchange opens with the deficit, ends with a surplus: forgotten
+        assert!(w.step(0.0, true));
+        assert!((w.energy() + 0.6e-3).abs() < 1e-15);
+        w.step(1e-3, true);
+        assert!(!w.step(0.0, false));
+        assert_eq!(w.carried(), 0.0);
+        w.reset();
+        assert_eq!(w, ExchangeWindow::default());
+    }
+
+    /// With `work`, nothing is applied outside the window, and the force of the ticks just
+    /// below the contact threshold opens it (their work is counted); with `paper` the window
+    /// is the contact and the force is applied throughout.
+    #[test]
+    fn the_work_observer_covers_the_sub_threshold_ticks_and_the_paper_one_does_not() {
+        let e = Vector3::new(1.0, 0.0, 0.0);
+        let v = e * 0.02;
+        for (mode, expected) in [(ObserverMode::Work, true), (ObserverMode::Paper, false)] {
+            let mut obs = EnergyObserver::new(1e-3, mode);
+            // a force of 1 N, below the 3 N threshold (not in contact) but above the noise
+            let (_, open) = obs.step(false, true, &(e * 1.0), &Vector3::zeros(), 0.0, &v);
+            assert_eq!(open, expected, "{mode:?}");
+            let (_, open) = obs.step(true, true, &(e * 5.0), &e, 0.0, &v);
+            assert!(open);
+            // the 1 N held over the first step is in the energy with `work` only
+            let first = 1e-3 * 1.0 * 0.02;
+            if expected {
+                assert!((obs.energy() - first).abs() < 1e-15, "{}", obs.energy());
+            }
+            assert!(obs.applies());
+            obs.step(false, false, &Vector3::zeros(), &Vector3::zeros(), 0.0, &v);
+            assert_eq!(obs.applies(), mode == ObserverMode::Paper);
         }
     }
 

@@ -31,7 +31,7 @@ pub use pic::Pic;
 pub use pida::Pida;
 pub use tdpa::{TdpaAdmittance, TdpaImpedance};
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -50,6 +50,10 @@ pub struct CompensatorInput {
     pub tip_position_desired: Vector3<f64>,
     /// Desired contact-point velocity, eq. (26), m/s.
     pub tip_velocity_desired: Vector3<f64>,
+    /// Mobility `K` of the virtual rod tip, 1/kg: an impulse `J` at the tip changes the desired
+    /// tip velocity by `K·J` ([`crate::world::TwoBodySystem::tip_mobility`]); zero unless the
+    /// compensator [`Compensator::uses_tip_mobility`].
+    pub tip_mobility: Matrix3<f64>,
 }
 
 /// Identified contact parameters.
@@ -66,9 +70,9 @@ pub struct ContactEstimate {
 pub struct CompensatorOutput {
     /// Wrench to apply to the virtual dynamics, same convention as the measurement.
     pub applied: FrameWrench,
-    /// Change of the virtual relative velocity of the servicer, `t` frame, m/s, applied by the
-    /// virtual dynamics with momentum conserved (admittance-type compensators act on the
-    /// velocity; zero for the others).
+    /// Change of the virtual rod tip's velocity, `t` frame, m/s, made by the virtual dynamics
+    /// with an impulse at the tip, `K⁻¹·Δv` (momentum and angular momentum conserved;
+    /// admittance-type compensators act on the velocity; zero for the others).
     pub velocity_correction: Vector3<f64>,
     /// Identified contact parameters, if the compensator identifies them.
     pub estimate: Option<ContactEstimate>,
@@ -121,6 +125,10 @@ pub trait Compensator: Send {
     }
     /// Whether `step` returns an observed energy.
     fn observes_energy(&self) -> bool {
+        false
+    }
+    /// Whether `step` reads the input's `tip_mobility` (computed only then).
+    fn uses_tip_mobility(&self) -> bool {
         false
     }
 }

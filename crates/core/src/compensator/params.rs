@@ -113,20 +113,21 @@ impl Default for ModelParams {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct TdpaParams {
-    /// In contact while the force magnitude exceeds this, N (> 0, <= 1e6); the observer restarts at
-    /// each contact (a windowed observer).
+    /// In contact while the force magnitude exceeds this, N (> 0, <= 1e6); the observer's window
+    /// is each exchange with the wall (a windowed observer).
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e6))]
     pub contact_force: f64,
     /// Largest damping α of the impedance-type controller, N·s/m (> 0, <= 1e12).
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e12))]
     pub alpha_max: f64,
-    /// Largest admittance β of the admittance-type controller, m/(N·s) (> 0, <= 1e3).
+    /// Largest admittance β of the admittance-type controller: its velocity change along the
+    /// force at most β·|f|, m/(N·s) (> 0, <= 1e3).
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e3))]
     pub beta_max: f64,
     /// Floor on |v| in the impedance controller's division, m/s (> 0, <= 1e3).
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e3))]
     pub velocity_floor: f64,
-    /// Floor on |f| in the admittance controller's division, N (> 0, <= 1e6).
+    /// The admittance controller acts only above this force magnitude, N (> 0, <= 1e6).
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e6))]
     pub force_floor: f64,
 }

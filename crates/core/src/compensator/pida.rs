@@ -37,10 +37,14 @@ impl Compensator for Pida {
         let comp = compensate_force(&view, input, &self.sensor_origin); // steps 5-6
         let alpha = self.amendment.step(&view, &comp.force, input); // steps 7-10
         CompensatorOutput {
-            // (29), (30)
-            applied: FrameWrench {
-                force: comp.force + alpha.force,
-                moment: comp.moment + alpha.moment,
+            // (29), (30); nothing outside the observer's window (the sensor's noise)
+            applied: if self.amendment.applies() {
+                FrameWrench {
+                    force: comp.force + alpha.force,
+                    moment: comp.moment + alpha.moment,
+                }
+            } else {
+                FrameWrench::default()
             },
             velocity_correction: Vector3::zeros(),
             estimate: Some(ContactEstimate {

@@ -2,16 +2,18 @@
 //! al. 2020) as baselines. It uses one port between the virtual dynamics and the environment,
 //! with power positive into the environment (`f·v`, f the force on the frame).
 //!
-//! Passivity observer, windowed to each contact (it restarts when the measured force drops
-//! below `contact_force`, so energy banked in one contact cannot come back as a spike in the
-//! next). It sums the energy the virtual dynamics actually gave the port over the last step.
-//! Under symplectic Euler with the force held, that is `T·f(n−1)·(v(n−1) + v(n))/2`, plus
-//! what the controller removed:
+//! Passivity observer over each exchange with the wall ([`ExchangeWindow`]): it opens when the
+//! contact starts, with the work the force did just before while above the quiet level, stays
+//! open after the contact while the force is above that level, and carries a deficit left at
+//! the close into the next exchange (a surplus is forgotten, so energy banked in one contact
+//! cannot come back as a spike in the next). It sums the energy the virtual dynamics actually
+//! gave the port over the last step. Under symplectic Euler with the force held, that is
+//! `T·f(n−1)·(v(n−1) + v(n))/2`, plus what the controller removed:
 //! ```text
-//! E(n) = E(n−1) + T·f_applied(n−1)·(v(n−1) + v(n))/2 + (PC dissipation of n−1)
+//! E(n) = E(n−1) + T·f_applied(n−1)·(v(n−1) + Δv(n−1) + v(n))/2 + (PC dissipation of n−1)
 //! impedance type:  α = −E/(T·max(|v|², v_min²)) if E < 0 (α ≤ α_max);  f_applied = f + α·v
-//! admittance type: a velocity correction Δv = β·f of the virtual relative motion, β ≥ 0
-//!                  chosen so that it removes −E of kinetic energy (β ≤ β_max)
+//! admittance type: an impulse λ·f/|f| at the rod tip, λ ≥ 0 chosen with the tip's mobility K
+//!                  so that it removes exactly −E of kinetic energy; Δv = λ·K·f/|f|
 //! ```
 //! The measured force is used as it comes (no delay compensation), and neither controller
 //! knows the contact's damping: that is the weakness the paper attacks. On a damped contact
@@ -21,17 +23,20 @@
 use nalgebra::Vector3;
 
 use super::detect::ContactDetector;
+use super::energy::ExchangeWindow;
 use super::params::TdpaParams;
 use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
+use crate::frames::FrameWrench;
 
-/// The passivity observer, restarted at each contact.
+/// The passivity observer over each exchange with the wall ([`ExchangeWindow`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct PassivityObserver {
     period: f64,
-    /// Contact detection (noise-aware, with hysteresis).
+    /// Contact detection (noise-aware, with hysteresis) and the quiet level.
     detector: ContactDetector,
-    energy: f64,
-    /// Force applied and velocity at the previous tick, and the energy the controller removed.
+    window: ExchangeWindow,
+    /// Force applied and velocity (after the correction) at the previous tick, and the energy
+    /// the controller removed there.
     previous: Option<(Vector3<f64>, Vector3<f64>, f64)>,
 }
 
@@ -40,26 +45,34 @@ impl PassivityObserver {
         PassivityObserver {
             period,
             detector: ContactDetector::new(threshold, period),
-            energy: 0.0,
+            window: ExchangeWindow::default(),
             previous: None,
         }
     }
 
     fn reset(&mut self) {
-        self.energy = 0.0;
+        self.window.reset();
+        self.detector.reset();
         self.previous = None;
     }
 
-    /// Adds the last step's port energy; returns whether the port is in contact.
+    fn energy(&self) -> f64 {
+        self.window.energy()
+    }
+
+    /// Adds the last step's port energy; returns whether the window is open (the compensator
+    /// applies the force and the controller may act; outside it nothing is applied). Until
+    /// [`PassivityObserver::remember`], the applied force is taken to be the measured one.
     fn observe(&mut self, force: &Vector3<f64>, velocity: &Vector3<f64>) -> bool {
-        if !self.detector.update(force) {
-            self.reset();
-            return false;
-        }
-        if let Some((f, v, dissipated)) = self.previous {
-            self.energy += 0.5 * self.period * f.dot(&(v + velocity)) + dissipated;
-        }
-        true
+        let in_contact = self.detector.update(force);
+        let active = force.norm() > self.detector.quiet_threshold();
+        let work = self.previous.map_or(0.0, |(f, v, dissipated)| {
+            0.5 * self.period * f.dot(&(v + velocity)) + dissipated
+        });
+        let open = self.window.step(work, in_contact || active);
+        let applied = if open { *force } else { Vector3::zeros() };
+        self.previous = Some((applied, *velocity, 0.0));
+        open
     }
 
     fn remember(&mut self, applied: &Vector3<f64>, velocity: &Vector3<f64>, dissipated: f64) {
@@ -91,11 +104,13 @@ impl Compensator for TdpaImpedance {
         let (f, v) = (input.measured.force, input.tip_velocity_desired);
         let mut out = CompensatorOutput::wrench(input.measured);
         if !self.observer.observe(&f, &v) {
+            // out of the window: the sensor's noise, nothing applied
+            out.applied = FrameWrench::default();
             return out;
         }
-        let t = self.observer.period;
-        let alpha = if self.observer.energy < 0.0 {
-            (-self.observer.energy / (t * v.norm_squared().max(self.params.velocity_floor.powi(2))))
+        let (t, e) = (self.observer.period, self.observer.energy());
+        let alpha = if e < 0.0 {
+            (-e / (t * v.norm_squared().max(self.params.velocity_floor.powi(2))))
                 .min(self.params.alpha_max)
         } else {
             0.0
@@ -103,7 +118,7 @@ impl Compensator for TdpaImpedance {
         let f_pc = v * alpha;
         out.applied.force += f_pc;
         out.applied.moment += (input.tip_position_desired - self.sensor_origin).cross(&f_pc);
-        out.observed_energy = self.observer.energy;
+        out.observed_energy = e;
         // the damper's work is part of the applied force's work, counted at the next tick
         self.observer.remember(&out.applied.force, &v, 0.0);
         out
@@ -118,7 +133,8 @@ impl Compensator for TdpaImpedance {
     }
 }
 
-/// Admittance-type TDPA: a damper on the velocity the virtual dynamics output.
+/// Admittance-type TDPA: an impulse at the rod tip, along the measured force, that changes the
+/// virtual tip's velocity and removes exactly the deficit.
 #[derive(Debug, Clone)]
 pub struct TdpaAdmittance {
     observer: PassivityObserver,
@@ -137,33 +153,52 @@ impl TdpaAdmittance {
     }
 }
 
+/// The impulse `λ ≥ 0` along the unit vector `u` at a tip of velocity `v` and mobility `κ = uᵀKu`
+/// (1/kg) that changes the kinetic energy by `energy` (J, < 0): the smaller root of
+/// `λ·u·v + ½κλ² = energy`, real and positive only while `u·v < 0`; where no root is real
+/// (the motion along `u` holds less than `−energy`), the `λ` that stops it, `−u·v/κ`.
+fn admittance_impulse(energy: f64, uv: f64, kappa: f64) -> f64 {
+    if energy >= 0.0 || uv >= 0.0 {
+        return 0.0;
+    }
+    let disc = uv * uv + 2.0 * kappa * energy;
+    if disc >= 0.0 {
+        (-uv - disc.sqrt()) / kappa
+    } else {
+        -uv / kappa
+    }
+}
+
 impl Compensator for TdpaAdmittance {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
         let (f, v) = (input.measured.force, input.tip_velocity_desired);
         let mut out = CompensatorOutput::wrench(input.measured);
         if !self.observer.observe(&f, &v) {
+            // out of the window: the sensor's noise, nothing applied
+            out.applied = FrameWrench::default();
             return out;
         }
-        let (mu, e) = (self.reduced_mass, self.observer.energy);
-        let f2 = f.norm_squared().max(self.params.force_floor.powi(2));
-        let vf = v.dot(&f);
-        // ½μ(|v + βf|² − |v|²) = E: the smaller root, real and positive only when the rod is
-        // pushed back (v·f < 0) and E < 0
-        let beta = if e < 0.0 && vf < 0.0 {
-            let disc = (mu * vf).powi(2) + 2.0 * mu * f2 * e;
-            let root = if disc >= 0.0 {
-                (-mu * vf - disc.sqrt()) / (mu * f2)
-            } else {
-                -vf / f2
-            };
-            root.clamp(0.0, self.params.beta_max)
-        } else {
-            0.0
-        };
-        let dv = f * beta;
-        out.velocity_correction = dv;
+        let e = self.observer.energy();
         out.observed_energy = e;
-        let removed = -0.5 * mu * ((v + dv).norm_squared() - v.norm_squared());
+        let magnitude = f.norm();
+        if e >= 0.0 || magnitude < self.params.force_floor {
+            return out;
+        }
+        // the impulse J = λ·u on the servicer at the tip (−J on the target), u along the force
+        // on the frame: the tip's velocity changes by λ·K·u and the kinetic energy by exactly
+        // λ·u·v + ½κλ²; κ from the virtual dynamics (1/μ where they give none)
+        let u = f / magnitude;
+        let ku = input.tip_mobility * u;
+        let (ku, kappa) = match u.dot(&ku) {
+            k if k > 0.0 => (ku, k),
+            _ => (u / self.reduced_mass, 1.0 / self.reduced_mass),
+        };
+        let uv = u.dot(&v);
+        // the cap: |Δv| along u at most β_max·|f|, as for a velocity step β·f
+        let lambda = admittance_impulse(e, uv, kappa).min(self.params.beta_max * magnitude / kappa);
+        let dv = ku * lambda;
+        out.velocity_correction = dv;
+        let removed = -(lambda * uv + 0.5 * kappa * lambda * lambda);
         self.observer.remember(&f, &(v + dv), removed.max(0.0));
         out
     }
@@ -173,6 +208,10 @@ impl Compensator for TdpaAdmittance {
     }
 
     fn observes_energy(&self) -> bool {
+        true
+    }
+
+    fn uses_tip_mobility(&self) -> bool {
         true
     }
 }
