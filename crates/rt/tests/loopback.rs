@@ -174,6 +174,7 @@ fn a_sensor_offset_is_measured_at_start_and_subtracted() {
     // this test is about the offset: a loop starved by a busy machine presses harder on the
     // wall (620 N once under a load of 7 on 2 cores), which must not end it on the force limit
     rt.limits.force_limit = 5000.0;
+    rt.limits.moment_limit = 1000.0; // likewise (100.3 N·m once, the tests running in parallel)
     let offset = [3.0, -2.0, 20.0, 0.5, -0.3, 0.2];
     emu.sensor_offset = offset;
     let facility = FacilityHandle::start(&s, &emu).unwrap();
