@@ -110,14 +110,19 @@ fn random_unit(rng: &mut Pcg64Mcg) -> Vector3<f64> {
     }
 }
 
+/// A wall through a point within 0.2 m of the origin, facing any way.
+fn random_wall(rng: &mut Pcg64Mcg) -> Wall {
+    Wall {
+        point: Vector3::from_fn(|_, _| rng.random_range(-0.2..0.2)),
+        normal: random_unit(rng),
+    }
+}
+
 #[test]
 fn a_random_surface_is_identified_within_half_a_millimetre_and_degree_after_one_contact() {
     let mut rng = Pcg64Mcg::seed_from_u64(12);
     for case in 0..40 {
-        let wall = Wall {
-            point: Vector3::from_fn(|_, _| rng.random_range(-0.2..0.2)),
-            normal: random_unit(&mut rng),
-        };
+        let wall = random_wall(&mut rng);
         let hunt = case % 2 == 1;
         let depth: f64 = rng.random_range(0.5e-3..3e-3);
         let peak = rng.random_range(60.0..400.0); // N, the spring's force at `depth`
@@ -162,10 +167,7 @@ fn a_random_surface_is_identified_within_half_a_millimetre_and_degree_after_one_
 fn a_prior_two_millimetres_and_degrees_off_is_corrected_by_one_contact() {
     let mut rng = Pcg64Mcg::seed_from_u64(3);
     for case in 0..10 {
-        let wall = Wall {
-            point: Vector3::from_fn(|_, _| rng.random_range(-0.2..0.2)),
-            normal: random_unit(&mut rng),
-        };
+        let wall = random_wall(&mut rng);
         let axis = Unit::new_normalize(wall.normal.cross(&random_unit(&mut rng)));
         let tilted = Rotation3::from_axis_angle(&axis, 2f64.to_radians()) * wall.normal;
         let sign = if case % 2 == 0 { 1.0 } else { -1.0 };
