@@ -1131,7 +1131,11 @@ mod tests {
             &velocities(100, 20, -0.02 * Vector3::x()),
         );
         let lost = compare(&one, &r, 0.5, &from_2, 0.0, 0.0);
-        assert!(lost.violations.iter().any(|v| v.contains("lost")), "{:?}", lost.violations);
+        assert!(
+            lost.violations.iter().any(|v| v.contains("lost")),
+            "{:?}",
+            lost.violations
+        );
     }
 
     #[test]

@@ -110,6 +110,15 @@ fn random_unit(rng: &mut Pcg64Mcg) -> Vector3<f64> {
     }
 }
 
+/// `paper-table1` at 40 ms on a Hunt-Crossley contact of about the same peak force
+/// (k = 6.2e6 N/m^1.5, n = 1.5, c = 3.1e7 N·s/m^2.5).
+fn hunt_crossley_40ms() -> Scenario {
+    let mut s = table1(0.04, 0.0);
+    s.contact.model = ContactModelKind::HuntCrossley;
+    (s.contact.stiffness, s.contact.exponent, s.contact.damping) = (6.2e6, 1.5, 3.1e7);
+    s
+}
+
 /// A wall through a point within 0.2 m of the origin, facing any way.
 fn random_wall(rng: &mut Pcg64Mcg) -> Wall {
     Wall {
@@ -283,13 +292,7 @@ fn servo_lag_hunt_crossley_and_damping_are_rendered_from_the_first_contact_with_
     };
     let mut servo = table1(0.04, 0.0);
     servo.facility.servo_frequency = 10.0;
-    let mut hunt = table1(0.04, 0.0);
-    hunt.contact.model = ContactModelKind::HuntCrossley;
-    (
-        hunt.contact.stiffness,
-        hunt.contact.exponent,
-        hunt.contact.damping,
-    ) = (6.2e6, 1.5, 3.1e7);
+    let mut hunt = hunt_crossley_40ms();
     let mut damped = table1(0.04, 0.0);
     damped.contact.damping = 1403.0; // ζ = 0.1 with μ = 279 kg
     for (label, mut s) in [("servo", servo), ("hunt-crossley", hunt)] {
@@ -353,13 +356,7 @@ fn energy_ratios(s: &Scenario) -> (Vec<f64>, f64) {
 #[test]
 fn a_wrong_model_stays_passive() {
     // a linear law identified on a Hunt-Crossley contact
-    let mut hunt = table1(0.04, 0.0);
-    hunt.contact.model = ContactModelKind::HuntCrossley;
-    (
-        hunt.contact.stiffness,
-        hunt.contact.exponent,
-        hunt.contact.damping,
-    ) = (6.2e6, 1.5, 3.1e7);
+    let mut hunt = hunt_crossley_40ms();
     hunt.simulation.duration = 10.0;
     model_mediated(
         &mut hunt,
