@@ -15,8 +15,8 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use crate::compensator::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
 use crate::facility::Measurement;
 use crate::frames::{FrameWrench, RelativeMotion};
-use crate::metrics::{Stop, StopKind};
 use crate::plan::Plan;
+use crate::stop::{Stop, StopKind};
 use crate::world::{TwoBodyState, TwoBodySystem};
 
 /// The facts a plan's compensator is built with: period, sensor delay (ticks), sensor origin

@@ -28,6 +28,8 @@ pub mod plan;
 pub mod replay;
 pub mod schema;
 pub mod sim;
+pub mod stop;
+pub mod sweep;
 pub mod world;
 
 pub use config::Scenario;

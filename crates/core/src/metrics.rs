@@ -39,6 +39,7 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use crate::frames::FrameWrench;
+use crate::stop::{Status, Stop};
 
 /// What the metrics read of a run, one value per tick (the compact record a sweep keeps).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -662,159 +663,6 @@ pub struct EnergySummary {
     pub max: f64,
 }
 
-/// Outcome of a run, as `metrics.json` states it (one vocabulary for simulated and
-/// real-time runs).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Status {
-    /// Ran to the end, faithful to the reference within the tolerances.
-    Ok,
-    /// Ran to the end, but broke a tolerance (see `violations`).
-    Unfaithful,
-    /// Stopped by the user (Ctrl-C).
-    Interrupted,
-    /// Stopped when the energy passed its bound or a value stopped being finite.
-    Diverged,
-    /// Stopped by a safety function of the real-time runtime.
-    Stopped,
-}
-
-/// Why a run stopped: the one list for simulations and the real-time runtime.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum StopKind {
-    /// Ran for the whole duration.
-    Completed,
-    /// Stopped by the user (Ctrl-C).
-    User,
-    /// Measured force magnitude above the limit.
-    ForceLimit,
-    /// Measured moment magnitude above the limit.
-    MomentLimit,
-    /// No valid sensor record for longer than the watchdog.
-    SensorWatchdog,
-    /// No valid robot feedback for longer than the watchdog.
-    RobotWatchdog,
-    /// Commanded rod tip outside the workspace.
-    Workspace,
-    /// The robot's fed-back rod tip far from every command of the tracking window (frozen or
-    /// wrong feedback, a robot that does not follow).
-    Tracking,
-    /// A state, force or command stopped being finite.
-    NonFinite,
-    /// The virtual energy passed the scenario's divergence bound.
-    Diverged,
-}
-
-impl StopKind {
-    /// Every kind, in the order of [`StopKind::code`].
-    pub const ALL: [StopKind; 10] = [
-        StopKind::Completed,
-        StopKind::User,
-        StopKind::ForceLimit,
-        StopKind::MomentLimit,
-        StopKind::SensorWatchdog,
-        StopKind::RobotWatchdog,
-        StopKind::Workspace,
-        StopKind::Tracking,
-        StopKind::NonFinite,
-        StopKind::Diverged,
-    ];
-
-    /// The run's status for this stop.
-    pub fn status(self) -> Status {
-        match self {
-            StopKind::Completed => Status::Ok,
-            StopKind::User => Status::Interrupted,
-            StopKind::Diverged | StopKind::NonFinite => Status::Diverged,
-            _ => Status::Stopped,
-        }
-    }
-
-    /// Whether a safety function stopped the run.
-    pub fn is_safety_stop(self) -> bool {
-        !matches!(self, StopKind::Completed | StopKind::User)
-    }
-
-    /// Exit code of the command that ran it: 0 completed (or a simulation that ran its
-    /// course), 130 user stop (Ctrl-C), 3 any safety stop.
-    pub fn exit_code(self) -> i32 {
-        match self {
-            StopKind::Completed => 0,
-            StopKind::User => 130,
-            _ => 3,
-        }
-    }
-
-    /// Small integer for atomics (0 = still running).
-    pub fn code(self) -> u8 {
-        self as u8 + 1
-    }
-
-    /// The kind of a [`StopKind::code`].
-    pub fn from_code(code: u8) -> Option<Self> {
-        StopKind::ALL.get((code as usize).checked_sub(1)?).copied()
-    }
-}
-
-/// How a run stopped: kind, tick time (s), and the value that tripped against its limit.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Stop {
-    /// Why.
-    pub kind: StopKind,
-    /// Time of the tick, s.
-    pub time: f64,
-    /// The offending value (N, N·m, ms, m or J), NaN when there is none.
-    #[serde(serialize_with = "finite_or_null")]
-    pub value: f64,
-    /// The limit it passed, same unit, NaN when there is none.
-    #[serde(serialize_with = "finite_or_null")]
-    pub limit: f64,
-}
-
-fn finite_or_null<S: serde::Serializer>(v: &f64, s: S) -> std::result::Result<S::Ok, S::Error> {
-    if v.is_finite() {
-        s.serialize_f64(*v)
-    } else {
-        s.serialize_none()
-    }
-}
-
-impl Stop {
-    /// A stop without a value.
-    pub fn plain(kind: StopKind, time: f64) -> Self {
-        Stop {
-            kind,
-            time,
-            value: f64::NAN,
-            limit: f64::NAN,
-        }
-    }
-
-    /// One line for humans, `None` for a completed run (formats: call it outside a loop).
-    pub fn reason(&self) -> Option<String> {
-        self.reason_naming("sensor", "robot")
-    }
-
-    /// [`Stop::reason`] naming the devices' protocols, e.g. `reason_naming("RDT", "EGM")`:
-    /// "no valid RDT record", "no valid EGM feedback".
-    pub fn reason_naming(&self, sensor: &str, robot: &str) -> Option<String> {
-        let (v, l, t) = (self.value, self.limit, self.time);
-        Some(match self.kind {
-            StopKind::Completed => return None,
-            StopKind::User => format!("stopped by the user at {t:.3} s"),
-            StopKind::ForceLimit => format!("force limit: |F| = {v:.1} N > {l:.1} N (force_limit) at {t:.3} s"),
-            StopKind::MomentLimit => format!("moment limit: |M| = {v:.2} N·m > {l:.2} N·m (moment_limit) at {t:.3} s"),
-            StopKind::SensorWatchdog => format!("sensor watchdog: no valid {sensor} record for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
-            StopKind::RobotWatchdog => format!("robot watchdog: no valid {robot} feedback for {v:.1} ms > {l:.1} ms (watchdog_ms) at {t:.3} s"),
-            StopKind::Workspace => format!("workspace limit: commanded rod tip {:.1} mm from its start > {:.1} mm (workspace) at {t:.3} s", v * 1e3, l * 1e3),
-            StopKind::Tracking => format!("tracking limit: the fed-back rod tip is {:.1} mm from every command of the tracking window > {:.1} mm (tracking_limit) at {t:.3} s: frozen or wrong feedback, or a robot that does not follow", v * 1e3, l * 1e3),
-            StopKind::NonFinite => format!("a state, force or command stopped being finite at {t:.3} s"),
-            StopKind::Diverged => format!("diverged: energy {v:.4} J passed the divergence bound {l:.4} J at {t:.3} s"),
-        })
-    }
-}
-
 /// Everything `metrics.json` holds.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Metrics {
@@ -863,140 +711,6 @@ impl Metrics {
     }
 }
 
-/// One column of a table the core produces: name, unit, meaning.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-pub struct Column {
-    /// Column name.
-    pub name: &'static str,
-    /// SI unit ("" for counts and ratios, "1" for fractions).
-    pub unit: &'static str,
-    /// What it holds.
-    pub doc: &'static str,
-}
-
-/// A run in one row: what a sweep keeps of each run ([`RunSummary::COLUMNS`] in order,
-/// after `status`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct RunSummary {
-    /// The run's status.
-    pub status: Status,
-    /// The numbers, in the order of [`RunSummary::COLUMNS`] (NaN where a run has none).
-    pub values: [f64; RunSummary::COLUMNS.len()],
-}
-
-impl RunSummary {
-    /// The numeric columns of a run's row, after `status`.
-    pub const COLUMNS: [Column; 16] = [
-        Column {
-            name: "diverged_at",
-            unit: "s",
-            doc: "time the run diverged (NaN if it did not)",
-        },
-        Column {
-            name: "collisions",
-            unit: "",
-            doc: "HIL collisions",
-        },
-        Column {
-            name: "reference_collisions",
-            unit: "",
-            doc: "reference collisions",
-        },
-        Column {
-            name: "lost_collisions",
-            unit: "",
-            doc: "reference collisions the run lost",
-        },
-        Column {
-            name: "extra_collisions",
-            unit: "",
-            doc: "HIL collisions without a reference collision",
-        },
-        Column {
-            name: "mean_cov",
-            unit: "",
-            doc: "mean CoV",
-        },
-        Column {
-            name: "worst_cov",
-            unit: "",
-            doc: "the CoV farthest from 1",
-        },
-        Column {
-            name: "mean_cof",
-            unit: "",
-            doc: "mean CoF",
-        },
-        Column {
-            name: "worst_cof",
-            unit: "",
-            doc: "the CoF farthest from 1",
-        },
-        Column {
-            name: "worst_velocity_error",
-            unit: "1",
-            doc: "largest rebound velocity error |v - v_ref| / |v_ref|",
-        },
-        Column {
-            name: "worst_angular_velocity_error",
-            unit: "1",
-            doc: "largest angular velocity error |w - w_ref| / |w_ref|",
-        },
-        Column {
-            name: "worst_impulse_ratio",
-            unit: "",
-            doc: "the impulse ratio farthest from 1",
-        },
-        Column {
-            name: "worst_angular_impulse_ratio",
-            unit: "",
-            doc: "the angular impulse ratio farthest from 1",
-        },
-        Column {
-            name: "stiffness_error",
-            unit: "1",
-            doc: "mean |k_hat / k - 1|",
-        },
-        Column {
-            name: "damping_error",
-            unit: "N s/m",
-            doc: "mean |c_hat - c|",
-        },
-        Column {
-            name: "energy_ratio",
-            unit: "",
-            doc: "final energy / the reference's",
-        },
-    ];
-
-    /// The row of a run's metrics.
-    pub fn of(m: &Metrics) -> Self {
-        let id = m.identification.as_ref();
-        let s = &m.summary;
-        RunSummary {
-            status: m.status,
-            values: [
-                m.diverged_at.unwrap_or(f64::NAN),
-                s.collisions as f64,
-                m.reference_collisions.len() as f64,
-                m.lost_collisions.len() as f64,
-                m.extra_collisions.len() as f64,
-                s.mean_cov,
-                s.worst_cov,
-                s.mean_cof,
-                s.worst_cof,
-                s.worst_velocity_error,
-                s.worst_angular_velocity_error,
-                s.worst_impulse_ratio,
-                s.worst_angular_impulse_ratio,
-                id.map_or(f64::NAN, |i| i.stiffness_error),
-                id.map_or(f64::NAN, |i| i.damping_error),
-                m.energy.r#final / m.energy.reference_final,
-            ],
-        }
-    }
-}
-
 /// Energy bound past which a run is `diverged`, J: `ratio × max(initial, reference peak)`.
 pub fn divergence_bound(ratio: f64, initial_energy: f64, reference_energy: &[f64]) -> f64 {
     ratio
@@ -1009,6 +723,7 @@ pub fn divergence_bound(ratio: f64, initial_energy: f64, reference_energy: &[f64
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stop::StopKind;
 
     /// A trace sampled every 0.1 s: contact force magnitude (along −x on the rod, so the
     /// frame feels +x) and rod tip velocity per sample.
@@ -1266,14 +981,5 @@ mod tests {
         assert!((s.mean_cof - 1.0).abs() < 1e-12);
         let empty = Summary::of(&[]);
         assert!(empty.worst_cov.is_nan() && empty.mean_cof.is_nan() && empty.collisions == 0);
-    }
-
-    #[test]
-    fn run_summary_has_a_value_per_column() {
-        let names: Vec<&str> = RunSummary::COLUMNS.iter().map(|c| c.name).collect();
-        let mut sorted = names.clone();
-        sorted.sort();
-        sorted.dedup();
-        assert_eq!(sorted.len(), names.len(), "duplicate column names");
     }
 }

@@ -11,8 +11,9 @@ use crate::frames::FrameWrench;
 pub use crate::hil::HilRecord;
 use crate::hil::HilStep;
 pub use crate::metrics::Trace;
-use crate::metrics::{self, EnergySummary, Metrics, Stop, TraceSample};
+use crate::metrics::{self, EnergySummary, Metrics, TraceSample};
 use crate::plan::Plan;
+use crate::stop::{Status, Stop};
 
 /// Named columns of equal length.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -464,8 +465,7 @@ pub fn trace_metrics(
         scenario: s.name.clone(),
         compensator: s.compensator.kind().to_string(),
         status,
-        diverged_at: (status == metrics::Status::Diverged)
-            .then(|| t.time.last().copied().unwrap_or(0.0)),
+        diverged_at: (status == Status::Diverged).then(|| t.time.last().copied().unwrap_or(0.0)),
         reason,
         stop,
         summary: metrics::Summary::of(&comparison.collisions),

@@ -5,7 +5,7 @@ mod common;
 
 use common::{preset, table1};
 use hilcontact_core::compensator::{CompensatorConfig, DelayMode, ModelParams, TdpaParams};
-use hilcontact_core::metrics::StopKind;
+use hilcontact_core::stop::StopKind;
 use hilcontact_core::{simulate, Scenario, SimulationOutput};
 use proptest::prelude::*;
 

@@ -4,7 +4,7 @@
 mod common;
 
 use common::{preset, table1};
-use hilcontact_core::metrics::Status;
+use hilcontact_core::stop::Status;
 use hilcontact_core::{simulate, CoreError, SimulationOutput};
 
 fn col<'a>(out: &'a SimulationOutput, name: &str) -> &'a [f64] {

@@ -292,7 +292,7 @@ fn servo_lag_hunt_crossley_and_damping_are_rendered_from_the_first_contact_with_
     };
     let mut servo = table1(0.04, 0.0);
     servo.facility.servo_frequency = 10.0;
-    let mut hunt = hunt_crossley_40ms();
+    let hunt = hunt_crossley_40ms();
     let mut damped = table1(0.04, 0.0);
     damped.contact.damping = 1403.0; // ζ = 0.1 with μ = 279 kg
     for (label, mut s) in [("servo", servo), ("hunt-crossley", hunt)] {
@@ -468,7 +468,7 @@ proptest::proptest! {
         let p = ModelMediatedParams { prior_walls: s.walls.clone(), ..ModelMediatedParams::default() };
         model_mediated(&mut s, p);
         let m = run(&s);
-        proptest::prop_assert!(m.status != hilcontact_core::metrics::Status::Diverged);
+        proptest::prop_assert!(m.status != hilcontact_core::stop::Status::Diverged);
         proptest::prop_assert!(m.lost_collisions.is_empty(), "lost {:?}", m.lost_collisions);
         let (ratios, _) = energy_ratios(&s);
         proptest::prop_assert!(ratios.iter().all(|&x| x <= 1.1), "energy / reference {:?}", ratios);

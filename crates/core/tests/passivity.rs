@@ -6,7 +6,7 @@ mod common;
 
 use common::{preset, table1};
 use hilcontact_core::compensator::{CompensatorConfig, ModelParams, TdpaParams};
-use hilcontact_core::metrics::StopKind;
+use hilcontact_core::stop::StopKind;
 use hilcontact_core::{simulate, Scenario, SimulationOutput};
 
 fn run(mut s: Scenario, kind: CompensatorConfig) -> SimulationOutput {

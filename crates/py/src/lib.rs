@@ -460,7 +460,7 @@ fn simulate_batch<'py>(
                 .map_err(|e| PyValueError::new_err(format!("thread pool: {e}"))),
         }
     })?;
-    use hilcontact_core::metrics::RunSummary;
+    use hilcontact_core::sweep::RunSummary;
     let n = results.len();
     let mut status = Vec::with_capacity(n);
     let mut columns: Vec<Vec<f64>> = vec![Vec::with_capacity(n); RunSummary::COLUMNS.len() + 1];
@@ -535,7 +535,7 @@ fn table_columns(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 /// `wall_time` (s).
 #[pyfunction]
 fn summary_columns() -> Vec<(&'static str, &'static str, &'static str)> {
-    use hilcontact_core::metrics::RunSummary;
+    use hilcontact_core::sweep::RunSummary;
     RunSummary::COLUMNS
         .iter()
         .map(|c| (c.name, c.unit, c.doc))

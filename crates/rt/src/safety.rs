@@ -98,8 +98,8 @@ impl SafetyLimits {
 }
 
 /// A stop of the real-time loop: the core's one vocabulary of how runs stop.
-pub type StopEvent = hilcontact_core::metrics::Stop;
-pub use hilcontact_core::metrics::StopKind;
+pub type StopEvent = hilcontact_core::stop::Stop;
+pub use hilcontact_core::stop::StopKind;
 
 /// Checks the wrench limits (magnitudes of the measured force N and moment N·m).
 pub fn check_wrench(
@@ -234,7 +234,7 @@ impl Tracking {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hilcontact_core::metrics::Status;
+    use hilcontact_core::stop::Status;
 
     #[test]
     fn limits_trip_above_and_on_nan() {
