@@ -45,7 +45,7 @@ pub struct Scenario {
     pub walls: Vec<WallConfig>,
     /// Contact law between the rod tip and the walls.
     pub contact: ContactConfig,
-    /// Facility model: robot response and sensor.
+    /// The facility: its engine (`kind`), robot response and sensor.
     #[serde(default)]
     pub facility: FacilityConfig,
     /// Delay compensator.
@@ -180,10 +180,25 @@ fn default_exponent() -> f64 {
     1.5
 }
 
-/// The facility model: robot response and F/T sensor.
+/// Which engine stands in for the hardware (robot, mockup, F/T sensor) in a simulation and in
+/// the emulated facility.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum FacilityKind {
+    /// The facility model: robot delay and servo lag, the contact law with the walls, sensor
+    /// delay, noise and quantisation (the keys of `[facility]`).
+    #[default]
+    Model,
+}
+
+/// The facility: which engine stands in for the hardware, the facility model's robot response
+/// and F/T sensor, and the sensor's mounting on the frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FacilityConfig {
+    /// Which engine stands in for the hardware: `"model"` (the facility model, the default).
+    #[serde(default)]
+    pub kind: FacilityKind,
     /// Pure delay of the robot's response, s (a whole number of periods, 0 to 60, at most
     /// the run's duration).
     #[serde(default)]
@@ -241,6 +256,7 @@ fn default_servo_damping() -> f64 {
 impl Default for FacilityConfig {
     fn default() -> Self {
         FacilityConfig {
+            kind: FacilityKind::Model,
             robot_delay: 0.0,
             sensor_delay: 0.0,
             servo_frequency: 0.0,
