@@ -196,9 +196,6 @@ pub enum FacilityKind {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FacilityConfig {
-    /// Which engine stands in for the hardware: `"model"` (the facility model, the default).
-    #[serde(default)]
-    pub kind: FacilityKind,
     /// Pure delay of the robot's response, s (a whole number of periods, 0 to 60, at most
     /// the run's duration).
     #[serde(default)]
@@ -247,6 +244,10 @@ pub struct FacilityConfig {
     /// Round delays to whole periods instead of rejecting them (the Python layer applies it).
     #[serde(default)]
     pub round_delays: bool,
+    /// Which engine stands in for the hardware: `"model"` (the facility model, the default; the
+    /// keys above are its parameters and the sensor's mounting).
+    #[serde(default)]
+    pub kind: FacilityKind,
 }
 
 fn default_servo_damping() -> f64 {
@@ -256,7 +257,6 @@ fn default_servo_damping() -> f64 {
 impl Default for FacilityConfig {
     fn default() -> Self {
         FacilityConfig {
-            kind: FacilityKind::Model,
             robot_delay: 0.0,
             sensor_delay: 0.0,
             servo_frequency: 0.0,
@@ -269,6 +269,7 @@ impl Default for FacilityConfig {
             sensor_orientation: identity_quaternion(),
             seed: 0,
             round_delays: false,
+            kind: FacilityKind::Model,
         }
     }
 }
