@@ -164,9 +164,19 @@ pub struct HilRun {
 /// `[facility] kind`), stopped once the energy passes `energy_bound` (J); every record is kept
 /// if `keep_rows`, the trace always.
 pub fn run_hil(plan: &Plan, energy_bound: f64, keep_rows: bool) -> HilRun {
+    run_hil_against(plan, FacilityLoop::new(plan), energy_bound, keep_rows)
+}
+
+/// [`run_hil`] against a facility built elsewhere (e.g. an external engine the core cannot
+/// build by kind, wrapped with [`FacilityLoop::with`]); it must not have ticked yet.
+pub fn run_hil_against(
+    plan: &Plan,
+    mut facility: FacilityLoop,
+    energy_bound: f64,
+    keep_rows: bool,
+) -> HilRun {
     let n = plan.ticks;
     let mut step = HilStep::new(plan, energy_bound);
-    let mut facility = FacilityLoop::new(plan);
     let estimates = step.dynamics().estimates_contact();
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut trace = Trace::with_capacity(n + 1, estimates);
