@@ -13,7 +13,7 @@ use hilcontact_core::compensator::{
     CompensatorConfig, CompensatorContext, CompensatorInput, ModelMediatedParams, ModelParams,
     TdpaParams,
 };
-use hilcontact_core::facility::FacilityModel;
+use hilcontact_core::facility::{Facility, FacilityModel};
 use hilcontact_core::hil::VirtualDynamics;
 use hilcontact_core::Scenario;
 
@@ -41,7 +41,7 @@ fn recorded_inputs(s: &Scenario) -> (Vec<CompensatorInput>, CompensatorContext) 
     }
     let context = CompensatorContext {
         period: s.simulation.period,
-        sensor_delay_ticks: plan.facility.sensor_delay_ticks,
+        sensor_delay_ticks: plan.sensor.delay_ticks,
         sensor_origin: system.sensor_origin,
         reduced_mass: system.reduced_mass(),
     };

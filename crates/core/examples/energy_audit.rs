@@ -10,7 +10,7 @@
 //! `before` and `after` columns hold is energy no window counts.
 
 use hilcontact_core::compensator::CompensatorConfig;
-use hilcontact_core::facility::FacilityModel;
+use hilcontact_core::facility::{Facility, FacilityModel};
 use hilcontact_core::hil::HilStep;
 use hilcontact_core::sim::run_reference;
 

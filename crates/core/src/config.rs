@@ -45,7 +45,7 @@ pub struct Scenario {
     pub walls: Vec<WallConfig>,
     /// Contact law between the rod tip and the walls.
     pub contact: ContactConfig,
-    /// Facility model: robot response and sensor.
+    /// The facility: its engine (`kind`), robot response and sensor.
     #[serde(default)]
     pub facility: FacilityConfig,
     /// Delay compensator.
@@ -180,7 +180,19 @@ fn default_exponent() -> f64 {
     1.5
 }
 
-/// The facility model: robot response and F/T sensor.
+/// Which engine stands in for the hardware (robot, mockup, F/T sensor) in a simulation and in
+/// the emulated facility.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum FacilityKind {
+    /// The facility model: robot delay and servo lag, the contact law with the walls, sensor
+    /// delay, noise and quantisation (the keys of `[facility]`).
+    #[default]
+    Model,
+}
+
+/// The facility: which engine stands in for the hardware, the facility model's robot response
+/// and F/T sensor, and the sensor's mounting on the frame.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct FacilityConfig {
@@ -232,6 +244,10 @@ pub struct FacilityConfig {
     /// Round delays to whole periods instead of rejecting them (the Python layer applies it).
     #[serde(default)]
     pub round_delays: bool,
+    /// Which engine stands in for the hardware: `"model"` (the facility model, the default; the
+    /// keys above are its parameters and the sensor's mounting).
+    #[serde(default)]
+    pub kind: FacilityKind,
 }
 
 fn default_servo_damping() -> f64 {
@@ -253,6 +269,7 @@ impl Default for FacilityConfig {
             sensor_orientation: identity_quaternion(),
             seed: 0,
             round_delays: false,
+            kind: FacilityKind::Model,
         }
     }
 }

@@ -1,6 +1,7 @@
 //! The virtual side of the HIL loop: compensator and satellite dynamics, and [`HilStep`], the
-//! one HIL tick that both the simulation (against [`crate::facility::FacilityModel`]) and the
-//! real-time runtime (against real devices) drive.
+//! one HIL tick that both the simulation (against a [`crate::facility::Facility`]) and the
+//! real-time runtime (against real devices) drive. It reads of the facility only the
+//! measurement and the sensor as the plan describes it ([`crate::plan::SensorPlan`]).
 //!
 //! One control tick k (period T), [`HilStep::observe`] then [`HilStep::advance`]:
 //! 1. the facility has advanced to k and reports a [`Measurement`] (sensor wrench, robot motion);
@@ -24,7 +25,7 @@ use crate::world::{TwoBodyState, TwoBodySystem};
 pub fn compensator_context(plan: &Plan) -> CompensatorContext {
     CompensatorContext {
         period: plan.period,
-        sensor_delay_ticks: plan.facility.sensor_delay_ticks,
+        sensor_delay_ticks: plan.sensor.delay_ticks,
         sensor_origin: plan.system.sensor_origin,
         reduced_mass: plan.system.reduced_mass(),
     }
@@ -55,7 +56,7 @@ impl VirtualDynamics {
             command: system.relative_motion(&plan.initial),
             state: plan.initial,
             period: plan.period,
-            sensor_orientation: plan.facility.sensor_orientation,
+            sensor_orientation: plan.sensor.orientation,
             mobility: compensator.uses_tip_mobility(),
             compensator,
         }

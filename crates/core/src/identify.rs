@@ -233,7 +233,7 @@ pub fn identify_plan(
     identify(
         &model_params(&plan.compensator),
         &compensator_context(plan),
-        &plan.facility.sensor_orientation,
+        &plan.sensor.orientation,
         recording,
     )
 }
@@ -257,7 +257,7 @@ mod tests {
         let mut params = model_params(&plan.compensator);
         params.forgetting = OFFLINE_FORGETTING;
         let context = compensator_context(&plan);
-        let q = plan.facility.sensor_orientation;
+        let q = plan.sensor.orientation;
         let id = identify(&params, &context, &q, &recording).expect("identify");
         (plan, id)
     }

@@ -4,8 +4,12 @@
 //! the first), each naming its dotted key. It produces typed values that cannot be invalid:
 //! unit quaternions, unit wall normals, symmetric positive-definite inertia tensors, delays in
 //! whole ticks (`facility.round_delays` applied), the compensator's checked parameters. Every
-//! physics constructor ([`crate::facility::FacilityModel`], [`crate::hil::VirtualDynamics`],
+//! physics constructor ([`crate::facility::build`], [`crate::hil::VirtualDynamics`],
 //! the reference in [`crate::sim`]) takes the plan and checks nothing again.
+//!
+//! The sensor as the loop knows it ([`SensorPlan`]: attitude, delay) is kept apart from the
+//! facility engine's own parameters ([`FacilityPlan`]), so that the loop reads the same
+//! whatever `[facility] kind` stands in for the hardware.
 //!
 //! The plan also keeps the *resolved scenario* ([`Plan::scenario`]): the input with defaults
 //! filled in, quaternions and normals normalised, the inertia symmetrised, wall names set and
@@ -18,7 +22,8 @@ use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 use crate::body::{BodyState, MassProperties};
 use crate::compensator::{CompensatorConfig, MAX_SURFACES};
 use crate::config::{
-    BodyConfig, ContactModelKind, Inertia, Scenario, MAX_NAME_LENGTH, MAX_TICKS, MIN_INERTIA,
+    BodyConfig, ContactModelKind, FacilityKind, Inertia, Scenario, MAX_NAME_LENGTH, MAX_TICKS,
+    MIN_INERTIA,
 };
 use crate::contact::{ContactGeometry, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
 use crate::error::{CoreError, Issues, Result};
@@ -26,13 +31,27 @@ use crate::metrics::Tolerances;
 use crate::schema::check_ranges;
 use crate::world::{TwoBodyState, TwoBodySystem};
 
-/// The facility model's settings, checked; delays in whole control ticks.
+/// The F/T sensor as the HIL loop knows it, whatever stands in for the hardware (a facility
+/// engine or the real devices): its attitude on the frame and its delay, which the loop, the
+/// compensators, the replay and the identification read. Its origin is the two-body system's
+/// `sensor_origin` ([`Plan::system`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensorPlan {
+    /// Sensor attitude in `t` (sensor to `t`).
+    pub orientation: UnitQuaternion<f64>,
+    /// Sensor delay τ_p in control ticks (known to the compensators).
+    pub delay_ticks: usize,
+}
+
+/// The facility's engine (`[facility] kind`) and the facility model's own parameters, checked;
+/// delays in whole control ticks. Only the engine ([`crate::facility`]) and the metrics'
+/// allowance for the facility's lag ([`Plan::facility_lag`]) read them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FacilityPlan {
+    /// Which engine stands in for the hardware.
+    pub kind: FacilityKind,
     /// Robot response delay τ_r in control ticks.
     pub robot_delay_ticks: usize,
-    /// Sensor delay τ_p in control ticks.
-    pub sensor_delay_ticks: usize,
     /// Servo lag natural frequency, Hz (0 = no lag).
     pub servo_frequency: f64,
     /// Servo lag damping ratio (> 0).
@@ -45,8 +64,6 @@ pub struct FacilityPlan {
     pub force_resolution: f64,
     /// Moment quantisation step, N·m (0 = none).
     pub torque_resolution: f64,
-    /// Sensor attitude in `t` (sensor to `t`).
-    pub sensor_orientation: UnitQuaternion<f64>,
     /// Seed of the sensor-noise generator.
     pub seed: u64,
 }
@@ -71,7 +88,9 @@ pub struct Plan {
     pub system: TwoBodySystem,
     /// The initial state of both satellites (world frame).
     pub initial: TwoBodyState,
-    /// The facility model.
+    /// The F/T sensor's attitude and delay, as the loop knows them.
+    pub sensor: SensorPlan,
+    /// The facility's engine and the facility model's parameters.
     pub facility: FacilityPlan,
     /// The compensator and its checked parameters.
     pub compensator: CompensatorConfig,
@@ -259,16 +278,19 @@ impl Plan {
                 servicer: servicer.1,
                 target: target.1,
             },
+            sensor: SensorPlan {
+                orientation: to_unit(q),
+                delay_ticks: sensor,
+            },
             facility: FacilityPlan {
+                kind: f.kind,
                 robot_delay_ticks: robot,
-                sensor_delay_ticks: sensor,
                 servo_frequency: f.servo_frequency,
                 servo_damping: f.servo_damping,
                 force_noise: f.sensor_noise,
                 torque_noise: f.torque_noise,
                 force_resolution: f.force_resolution,
                 torque_resolution: f.torque_resolution,
-                sensor_orientation: to_unit(q),
                 seed: f.seed,
             },
             compensator: resolved.compensator.clone(),
@@ -280,7 +302,7 @@ impl Plan {
 
     /// The sensor delay τ_p, s (whole ticks).
     pub fn sensor_delay(&self) -> f64 {
-        self.facility.sensor_delay_ticks as f64 * self.period
+        self.sensor.delay_ticks as f64 * self.period
     }
 
     /// The facility's lag, s: the robot delay τ_r plus, with a servo lag, its time constant

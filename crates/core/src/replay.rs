@@ -280,7 +280,7 @@ pub fn replay_plan(plan: &Plan, recording: &Recording<'_>) -> Result<Table, Reco
     replay(
         &plan.compensator,
         &compensator_context(plan),
-        &plan.facility.sensor_orientation,
+        &plan.sensor.orientation,
         recording,
     )
 }

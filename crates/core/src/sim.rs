@@ -1,12 +1,12 @@
-//! A whole simulation: the ideal reference, the HIL loop against the facility model, the
-//! recorded time series and the metrics. Allocates its records up front; the per-tick code
+//! A whole simulation: the ideal reference, the HIL loop against the plan's facility (the
+//! [`FacilityLoop`] the emulated facility runs too), the recorded time series and the metrics. Allocates its records up front; the per-tick code
 //! (facility, compensator, dynamics) does not allocate.
 
 use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::config::{ContactModelKind, Scenario};
 use crate::error::Result;
-use crate::facility::FacilityModel;
+use crate::facility::FacilityLoop;
 use crate::frames::FrameWrench;
 pub use crate::hil::HilRecord;
 use crate::hil::HilStep;
@@ -46,7 +46,7 @@ impl Table {
 /// The trace of HIL records (with estimates if `estimates_contact`), for the metrics.
 pub fn hil_trace(plan: &Plan, rows: &[HilRecord], estimates_contact: bool) -> Trace {
     let mut trace = Trace::with_capacity(rows.len(), estimates_contact);
-    let q = plan.facility.sensor_orientation;
+    let q = plan.sensor.orientation;
     for row in rows {
         push_record(&mut trace, row, &q, estimates_contact);
     }
@@ -161,25 +161,33 @@ pub struct HilRun {
     pub stop: Stop,
 }
 
-/// The HIL loop of [`HilStep`] against the facility model, stopped once the energy passes
-/// `energy_bound` (J); every record is kept if `keep_rows`, the trace always.
+/// The HIL loop of [`HilStep`] against the plan's facility ([`FacilityLoop`], the engine of
+/// `[facility] kind`), stopped once the energy passes `energy_bound` (J); every record is kept
+/// if `keep_rows`, the trace always.
 pub fn run_hil(plan: &Plan, energy_bound: f64, keep_rows: bool) -> HilRun {
+    run_hil_against(plan, FacilityLoop::new(plan), energy_bound, keep_rows)
+}
+
+/// [`run_hil`] against a facility built elsewhere (e.g. an external engine the core cannot
+/// build by kind, wrapped with [`FacilityLoop::with`]); it must not have ticked yet.
+pub fn run_hil_against(
+    plan: &Plan,
+    mut facility: FacilityLoop,
+    energy_bound: f64,
+    keep_rows: bool,
+) -> HilRun {
     let n = plan.ticks;
     let mut step = HilStep::new(plan, energy_bound);
-    let mut facility = FacilityModel::new(plan, &step.command());
     let estimates = step.dynamics().estimates_contact();
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut trace = Trace::with_capacity(n + 1, estimates);
+    // the command for the coming tick (the first tick does not read it)
+    let mut command = step.command();
     let mut k = 0;
     let stop = loop {
-        let m = facility.measure();
+        let m = facility.tick(&command);
         let (row, stop) = step.observe(k, &m, Some(facility.contact_force()));
-        push_record(
-            &mut trace,
-            &row,
-            &plan.facility.sensor_orientation,
-            estimates,
-        );
+        push_record(&mut trace, &row, &plan.sensor.orientation, estimates);
         if keep_rows {
             rows.push(row);
         }
@@ -187,7 +195,7 @@ pub fn run_hil(plan: &Plan, energy_bound: f64, keep_rows: bool) -> HilRun {
             break stop;
         }
         match step.advance(k) {
-            Ok(command) => facility.advance(&command),
+            Ok(next) => command = next,
             Err(stop) => break stop,
         }
         k += 1;

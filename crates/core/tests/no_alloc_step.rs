@@ -1,6 +1,8 @@
 //! Every compensator's `step` allocates nothing, over whole contacts (identification, energy
 //! work, `model-mediated`'s contact-end fits and model updates): a counting allocator, armed on
 //! this test's thread only, while the steps run on recorded inputs. And `reset` forgets a run.
+//! The facility's side of a tick (`FacilityLoop::tick`: advance, measure) allocates nothing
+//! either, over a whole run with noise, quantisation and servo lag.
 
 mod common;
 
@@ -9,7 +11,8 @@ use std::cell::Cell;
 
 use common::table1;
 use hilcontact_core::compensator::{CompensatorConfig, ModelMediatedParams, REGISTRY};
-use hilcontact_core::facility::FacilityModel;
+use hilcontact_core::facility::{Facility, FacilityLoop, FacilityModel};
+use hilcontact_core::hil::HilStep;
 use hilcontact_core::hil::{compensator_context, VirtualDynamics};
 
 struct Counting;
@@ -95,4 +98,38 @@ fn no_compensator_step_allocates() {
             );
         }
     }
+}
+
+#[test]
+fn no_facility_tick_allocates() {
+    // the commands of a whole run with contact, then the same ticks again, armed
+    let mut s = table1(0.02, 0.005);
+    s.facility.sensor_noise = 0.2;
+    s.facility.torque_noise = 0.02;
+    s.facility.force_resolution = 0.01;
+    s.facility.servo_frequency = 10.0;
+    let plan = s.resolve().unwrap();
+    let mut step = HilStep::new(&plan, f64::INFINITY);
+    let mut facility = FacilityLoop::new(&plan);
+    let mut commands = Vec::with_capacity(plan.ticks + 1);
+    let mut command = step.command();
+    for k in 0..=plan.ticks {
+        commands.push(command);
+        let m = facility.tick(&command);
+        let _ = step.observe(k, &m, Some(facility.contact_force()));
+        command = step.advance(k).unwrap();
+    }
+    assert!(commands.iter().any(|c| c.position.norm() > 0.0));
+    let mut facility = FacilityLoop::new(&plan);
+    let mut contact = 0.0_f64;
+    COUNT.with(|c| c.set(0));
+    ARMED.with(|a| a.set(true));
+    for command in &commands {
+        let m = facility.tick(command);
+        contact = contact.max(facility.contact_force().norm());
+        std::hint::black_box(m);
+    }
+    ARMED.with(|a| a.set(false));
+    assert_eq!(COUNT.with(Cell::get), 0, "allocated while ticking");
+    assert!(contact > 0.0, "the run touches a wall");
 }

@@ -1,6 +1,7 @@
-//! The emulated facility: the core's facility model (robot with the scenario's response lag,
-//! contact law, F/T sensor with the scenario's delay and noise) running in real time behind
-//! the real devices' protocols.
+//! The emulated facility: the core's facility engine of the scenario's `[facility] kind` (the
+//! facility model: robot with the scenario's response lag, contact law, F/T sensor with the
+//! scenario's delay and noise) running in real time behind the real devices' protocols, in
+//! the core's [`FacilityLoop`], the tick loop the simulation runs too.
 //!
 //! The emulator names no protocol: it holds a [`SensorEndpoint`] and a [`RobotEndpoint`]
 //! ([`crate::links`]), opened from the options' `sensor` and `robot` groups by their `kind`
@@ -12,8 +13,8 @@
 //! 1. the sensor endpoint serves the requests that arrived; the robot endpoint reads the
 //!    commands, and the newest becomes the command the robot follows (held until the next),
 //!    with the scenario's `facility.robot_delay` (and servo lag, if any);
-//! 2. one [`FacilityModel`] step (with `simulation.plant_substeps` sub-steps), then its
-//!    measurement;
+//! 2. one [`FacilityLoop::tick`] with that command: the facility advances one period (not at
+//!    k = 0; the model with `simulation.plant_substeps` sub-steps), then it is measured;
 //! 3. the sensor endpoint samples the measured wrench (and streams it), the robot endpoint
 //!    sends feedback of the actual motion when its own period is due.
 //!
@@ -29,8 +30,7 @@ use std::thread::JoinHandle;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use hilcontact_core::facility::FacilityModel;
-use hilcontact_core::hil::VirtualDynamics;
+use hilcontact_core::facility::FacilityLoop;
 use hilcontact_core::world::RelativeMotion;
 use hilcontact_core::Scenario;
 
@@ -211,7 +211,7 @@ impl FacilityHandle {
             ));
         }
         let period = plan.period;
-        let initial = VirtualDynamics::new(&plan).command();
+        let initial = plan.system.relative_motion(&plan.initial);
         let initial = RelativeMotion {
             velocity: Vector3::zeros(),
             angular_velocity: Vector3::zeros(),
@@ -228,7 +228,7 @@ impl FacilityHandle {
         };
         let protocols = (sensor.name(), robot.name());
 
-        let facility = FacilityModel::new(&plan, &initial);
+        let facility = FacilityLoop::new(&plan);
         let shared = Arc::new(Shared::default());
         let silence = |after: Option<f64>| after.map(|s| (s / period).round() as u64);
         let mut state = Emulator {
@@ -325,7 +325,8 @@ impl Drop for FacilityHandle {
 }
 
 struct Emulator {
-    facility: FacilityModel,
+    /// The facility's side of each tick (advance with `command`, measure).
+    facility: FacilityLoop,
     sensor: Box<dyn SensorEndpoint>,
     robot: Box<dyn RobotEndpoint>,
     shared: Arc<Shared>,
@@ -374,10 +375,7 @@ impl Emulator {
             self.command = command;
             self.first_command.get_or_insert(k);
         }
-        if k > 0 {
-            self.facility.advance(&self.command);
-        }
-        let m = self.facility.measure();
+        let m = self.facility.tick(&self.command);
         self.shared.contact_force_bits.store(
             self.facility.contact_force().norm().to_bits(),
             Ordering::Relaxed,

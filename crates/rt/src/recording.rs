@@ -277,7 +277,7 @@ impl RunInfo {
             period: plan.period,
             duration: plan.ticks as f64 * plan.period,
             sensor_position: plan.system.sensor_origin,
-            sensor_orientation: plan.facility.sensor_orientation,
+            sensor_orientation: plan.sensor.orientation,
             estimates_contact: VirtualDynamics::new(plan).estimates_contact(),
             scenario_json: serde_json::to_string(&plan.scenario).unwrap_or_default(),
         }

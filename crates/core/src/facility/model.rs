@@ -1,4 +1,5 @@
-//! The facility model: what stands in for the hardware in a simulation.
+//! The facility model, the `[facility] kind = "model"` engine: what stands in for the hardware
+//! when nothing external does.
 //!
 //! - Robot: the actual relative pose follows the commanded one with a pure delay `τ_r`
 //!   (commands are interpolated linearly between control ticks, attitude by slerp) and an
@@ -7,29 +8,19 @@
 //! - Sensor: the wrench on the frame from `τ_p` earlier, in the sensor frame, with Gaussian
 //!   noise and optional quantisation, from a seeded generator (reproducible runs).
 //!
-//! [`FacilityModel::advance`] never allocates.
+//! [`FacilityModel`] implements [`Facility`]; its [`Facility::advance`] and
+//! [`Facility::measure`] never allocate.
 
 use nalgebra::{UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 use rand_pcg::Pcg64Mcg;
 
+use super::{Facility, Measurement};
 use crate::delay_line::DelayLine;
 use crate::frames::{FrameWrench, RelativeMotion};
-use crate::plan::{FacilityPlan, Plan};
+use crate::plan::Plan;
 use crate::world::TwoBodySystem;
-
-/// What the loop receives from the facility at a control tick: the sensor reading and the
-/// robot's actual motion (its forward kinematics).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Measurement {
-    /// Measured force on the frame, sensor frame, N.
-    pub force: Vector3<f64>,
-    /// Measured moment about the sensor origin, sensor frame, N·m.
-    pub moment: Vector3<f64>,
-    /// Actual relative motion of the servicer (robot), `t` frame.
-    pub actual: RelativeMotion,
-}
 
 /// Second-order servo lag state (`t` frame).
 #[derive(Debug, Clone, Copy)]
@@ -154,12 +145,14 @@ fn quantise(v: Vector3<f64>, step: f64) -> Vector3<f64> {
 }
 
 impl SensorModel {
-    /// The sensor of a plan's facility, having read `initial` for all earlier time.
-    pub fn new(f: &FacilityPlan, initial: &FrameWrench) -> Self {
+    /// The sensor of a plan (its mounting, [`Plan::sensor`], and the facility model's noise
+    /// and resolution), having read `initial` for all earlier time.
+    pub fn new(plan: &Plan, initial: &FrameWrench) -> Self {
+        let (mount, f) = (&plan.sensor, &plan.facility);
         SensorModel {
-            delay_ticks: f.sensor_delay_ticks,
-            history: DelayLine::new(f.sensor_delay_ticks, *initial),
-            orientation: f.sensor_orientation,
+            delay_ticks: mount.delay_ticks,
+            history: DelayLine::new(mount.delay_ticks, *initial),
+            orientation: mount.orientation,
             force_noise: f.force_noise,
             torque_noise: f.torque_noise,
             force_resolution: f.force_resolution,
@@ -220,19 +213,18 @@ impl FacilityModel {
         FacilityModel {
             system: plan.system.clone(),
             robot,
-            sensor: SensorModel::new(f, &initial_wrench),
+            sensor: SensorModel::new(plan, &initial_wrench),
             contact_force,
         }
     }
+}
 
-    /// The physical contact force on the rod at the last tick, `t` frame, N (the truth that a
-    /// real facility does not report).
-    pub fn contact_force(&self) -> Vector3<f64> {
-        self.contact_force
+impl Facility for FacilityModel {
+    fn advance(&mut self, command: &RelativeMotion) {
+        self.robot.advance(command);
     }
 
-    /// The measurement at the current tick (call once per tick).
-    pub fn measure(&mut self) -> Measurement {
+    fn measure(&mut self) -> Measurement {
         let (contact_force, wrench) = physical_wrench(&self.system, self.robot.actual());
         self.contact_force = contact_force;
         let (force, moment) = self.sensor.sample(&wrench);
@@ -243,9 +235,8 @@ impl FacilityModel {
         }
     }
 
-    /// Advances one control period: the robot receives the command for the next tick.
-    pub fn advance(&mut self, command: &RelativeMotion) {
-        self.robot.advance(command);
+    fn contact_force(&self) -> Vector3<f64> {
+        self.contact_force
     }
 }
 
