@@ -389,38 +389,27 @@ impl ser::SerializeSeq for Compound {
     }
 }
 
-impl ser::SerializeTuple for Compound {
-    type Ok = Node;
-    type Error = CollectError;
-    fn serialize_element<T: ?Sized + Serialize>(&mut self, value: &T) -> Result<(), CollectError> {
-        ser::SerializeSeq::serialize_element(self, value)
-    }
-    fn end(self) -> R {
-        Ok(self.list())
-    }
+/// The tuple-like compounds serialise as lists, element by element like a sequence.
+macro_rules! list_like {
+    ($($trait:ident :: $method:ident),+) => {$(
+        impl ser::$trait for Compound {
+            type Ok = Node;
+            type Error = CollectError;
+            fn $method<T: ?Sized + Serialize>(&mut self, value: &T) -> Result<(), CollectError> {
+                ser::SerializeSeq::serialize_element(self, value)
+            }
+            fn end(self) -> R {
+                Ok(self.list())
+            }
+        }
+    )+};
 }
 
-impl ser::SerializeTupleStruct for Compound {
-    type Ok = Node;
-    type Error = CollectError;
-    fn serialize_field<T: ?Sized + Serialize>(&mut self, value: &T) -> Result<(), CollectError> {
-        ser::SerializeSeq::serialize_element(self, value)
-    }
-    fn end(self) -> R {
-        Ok(self.list())
-    }
-}
-
-impl ser::SerializeTupleVariant for Compound {
-    type Ok = Node;
-    type Error = CollectError;
-    fn serialize_field<T: ?Sized + Serialize>(&mut self, value: &T) -> Result<(), CollectError> {
-        ser::SerializeSeq::serialize_element(self, value)
-    }
-    fn end(self) -> R {
-        Ok(self.list())
-    }
-}
+list_like!(
+    SerializeTuple::serialize_element,
+    SerializeTupleStruct::serialize_field,
+    SerializeTupleVariant::serialize_field
+);
 
 impl ser::SerializeMap for Compound {
     type Ok = Node;
