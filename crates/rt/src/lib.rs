@@ -14,7 +14,10 @@
 //!   those protocols;
 //! - [`runtime`]: the HIL loop thread (the core's [`hilcontact_core::hil::VirtualDynamics`]) on a
 //!   monotonic clock, with [`safety`] limits, a lock-free sample log and timing statistics;
-//! - [`recording`]: MCAP recordings of a run (ROS 2 messages, crash-safe chunks) for robotics viewers;
+//! - [`output`]: the outputs of a run behind one [`output::Sink`] trait, fed by the runtime's
+//!   writer thread or from a finished simulation: [`output::mcap`] (MCAP recordings, ROS 2
+//!   messages in crash-safe chunks, for robotics viewers) and [`output::run_folder`];
+//! - [`counters`]: the links' and the loop's counters shared between threads;
 //! - [`report`]: time series and metrics of a real-time run, as a simulation writes them;
 //! - [`check`]: a dry run (`hilcontact check`): both links opened as a run opens them, listened
 //!   to, and the run's start checks applied, with nothing commanded to the robot.
@@ -25,6 +28,7 @@
 
 pub mod check;
 pub mod clock;
+pub mod counters;
 pub mod egm;
 pub mod egm_proto;
 pub mod emulator;
@@ -34,8 +38,8 @@ pub mod links;
 pub mod mapping;
 pub mod netftapi;
 pub mod offset;
+pub mod output;
 pub mod rdt;
-pub mod recording;
 pub mod report;
 pub mod rsi;
 pub mod runtime;

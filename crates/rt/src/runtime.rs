@@ -43,6 +43,7 @@ use crate::clock::{
     now_ns, request_realtime, sleep_until_ns, tighten_timer_slack, Histogram, SchedulingOptions,
     SchedulingReport,
 };
+use crate::counters::{LoopCounters, SharedLinkStats};
 use crate::error::{Result, RtError};
 use crate::feedback::{Extrapolation, FeedbackEstimator};
 pub use crate::links::LinkStats;
@@ -51,8 +52,11 @@ use crate::links::{
     SensorOptions, StartRegion, Wrench,
 };
 use crate::offset::{OffsetMode, OffsetOptions, WrenchStats};
-use crate::recording::{start_text, EventLevel, McapOptions, McapRecorder, RunInfo};
-use crate::report::{build_output, HilOutput};
+use crate::output::events::{realtime_end, EventWatch};
+use crate::output::mcap::McapOptions;
+use crate::output::run_folder::RunFolder;
+use crate::output::{Outputs, RunInfo, Sink};
+use crate::report::HilOutput;
 pub use crate::report::{RunOutcome, Sample};
 use crate::safety::{
     check_workspace, check_wrench, hold_target, SafetyLimits, StopEvent, StopKind, Tracking,
@@ -86,7 +90,7 @@ pub struct RuntimeOptions {
     /// refusal by the OS is reported in `metrics.json` (`realtime.scheduling`), not an error.
     pub scheduling: SchedulingOptions,
     /// An MCAP recording of the run (`--mcap FILE`), written by the writer thread: None, or
-    /// the file and its chunk interval ([`crate::recording`]). The file is created before
+    /// the file and its chunk interval ([`crate::output::mcap`]). The file is created before
     /// anything is opened or started; `metrics.json` reports it in `realtime.mcap`.
     pub mcap: Option<McapOptions>,
 }
@@ -120,12 +124,19 @@ struct SharedStatus {
     energy_bits: AtomicU64,
     max_latency_ns: AtomicU64,
     overruns: AtomicU64,
-    sensor_lost: AtomicU64,
-    sensor_late: AtomicU64,
-    robot_lost: AtomicU64,
-    robot_late: AtomicU64,
-    dropped: AtomicU64,
-    io_errors: AtomicU64,
+    sensor: SharedLinkStats,
+    robot: SharedLinkStats,
+}
+
+impl SharedStatus {
+    /// The counters the run's events report, as last published.
+    fn counters(&self) -> LoopCounters {
+        LoopCounters {
+            overruns: self.overruns.load(Ordering::Relaxed),
+            sensor: self.sensor.load(),
+            robot: self.robot.load(),
+        }
+    }
 }
 
 /// A snapshot of the loop's state for a live display.
@@ -165,7 +176,7 @@ pub struct StatusSnapshot {
 pub struct HilHandle {
     shared: Arc<SharedStatus>,
     thread: Option<JoinHandle<Result<RunOutcome>>>,
-    writer: Option<JoinHandle<(Vec<Sample>, Option<McapRecorder>)>>,
+    writer: Option<JoinHandle<(RunFolder, Outputs)>>,
     plan: Plan,
     options: RuntimeOptions,
     period: f64,
@@ -184,16 +195,14 @@ impl HilHandle {
     /// after the MCAP file was created removes it.
     pub fn start(scenario: &Scenario, options: &RuntimeOptions) -> Result<Self> {
         let plan = Self::validate(scenario, options)?;
-        let recorder = open_recorder(&plan, options)?;
+        let outputs = open_outputs(&plan, options)?;
         let context = link_context(&plan, options);
         let links = open_sensor(&options.sensor, &context)
             .and_then(|sensor| Ok((sensor, open_robot(&options.robot, &context)?)));
         match links {
-            Ok((sensor, robot)) => Self::start_inner(plan, options, sensor, robot, recorder),
+            Ok((sensor, robot)) => Self::start_inner(plan, options, sensor, robot, outputs),
             Err(e) => {
-                if let Some(r) = recorder {
-                    r.discard();
-                }
+                outputs.discard();
                 Err(e)
             }
         }
@@ -209,8 +218,8 @@ impl HilHandle {
         robot: Box<dyn RobotLink>,
     ) -> Result<Self> {
         let plan = Self::validate(scenario, options)?;
-        let recorder = open_recorder(&plan, options)?;
-        Self::start_inner(plan, options, sensor, robot, recorder)
+        let outputs = open_outputs(&plan, options)?;
+        Self::start_inner(plan, options, sensor, robot, outputs)
     }
 
     /// The scenario's plan, once the options are checked too, and that the scenario can start
@@ -260,13 +269,11 @@ impl HilHandle {
         options: &RuntimeOptions,
         sensor: Box<dyn SensorLink>,
         robot: Box<dyn RobotLink>,
-        mut recorder: Option<McapRecorder>,
+        outputs: Outputs,
     ) -> Result<Self> {
         let o = options;
         if let Err(e) = check_pacing(robot.as_ref(), plan.period) {
-            if let Some(r) = recorder {
-                r.discard();
-            }
+            outputs.discard();
             return Err(e);
         }
         let pacing = robot.pacing();
@@ -283,39 +290,8 @@ impl HilHandle {
         let ticks = plan.ticks as u64;
 
         let shared = Arc::new(SharedStatus::default());
-        let (producer, mut consumer) = rtrb::RingBuffer::<Sample>::new(RING_CAPACITY);
-        let mut events = EventWatch::new(shared.clone(), start_text(&RunInfo::new(&plan, true)));
-        // the writer thread: drains the ring into the run's samples and, with --mcap, feeds
-        // the recording (messages, the loop's events, chunks written out as run time passes)
-        let writer = std::thread::Builder::new()
-            .name("hil-writer".into())
-            .spawn(move || {
-                // room for the whole run, up to 2^20 ticks (17 min at 1 kHz): a longer run
-                // grows the log as it goes rather than reserving it all at the start
-                let mut samples = Vec::with_capacity((ticks as usize).min(1 << 20) + 1);
-                loop {
-                    let abandoned = consumer.is_abandoned();
-                    // read before draining: every sample up to the stop is in the ring then
-                    let stop_code = events.shared.stop_code.load(Ordering::Acquire);
-                    let new = samples.len();
-                    while let Ok(s) = consumer.pop() {
-                        samples.push(s);
-                    }
-                    if let Some(recorder) = recorder.as_mut() {
-                        for s in &samples[new..] {
-                            events.before_sample(recorder);
-                            recorder.sample(s);
-                        }
-                        events.after_drain(recorder, stop_code);
-                    }
-                    if abandoned {
-                        break; // drained after the producer was dropped: complete
-                    }
-                    std::thread::sleep(Duration::from_millis(5));
-                }
-                (samples, recorder)
-            })
-            .map_err(|e| RtError::io("writer thread", &e))?;
+        let (producer, consumer) = rtrb::RingBuffer::<Sample>::new(RING_CAPACITY);
+        let writer = spawn_writer(consumer, shared.clone(), RunFolder::new(ticks), outputs)?;
 
         let rod = plan.system.rod_tip;
         let initial = step.command();
@@ -388,6 +364,7 @@ impl HilHandle {
     pub fn status(&self) -> StatusSnapshot {
         let s = &self.shared;
         let tick = s.tick.load(Ordering::Relaxed);
+        let (sensor, robot) = (s.sensor.load(), s.robot.load());
         StatusSnapshot {
             phase: ["connecting", "running", "holding", "finished"]
                 [s.phase.load(Ordering::Acquire).min(3) as usize],
@@ -397,12 +374,12 @@ impl HilHandle {
             energy: f64::from_bits(s.energy_bits.load(Ordering::Relaxed)),
             max_latency_us: s.max_latency_ns.load(Ordering::Relaxed) as f64 / 1e3,
             overruns: s.overruns.load(Ordering::Relaxed),
-            sensor_lost: s.sensor_lost.load(Ordering::Relaxed),
-            sensor_late: s.sensor_late.load(Ordering::Relaxed),
-            robot_lost: s.robot_lost.load(Ordering::Relaxed),
-            robot_late: s.robot_late.load(Ordering::Relaxed),
-            dropped: s.dropped.load(Ordering::Relaxed),
-            io_errors: s.io_errors.load(Ordering::Relaxed),
+            sensor_lost: sensor.lost,
+            sensor_late: sensor.late,
+            robot_lost: robot.lost,
+            robot_late: robot.late,
+            dropped: sensor.dropped() + robot.dropped(),
+            io_errors: sensor.io_errors + robot.io_errors,
             stop: StopKind::from_code(s.stop_code.load(Ordering::Acquire)),
         }
     }
@@ -430,38 +407,35 @@ impl HilHandle {
     }
 
     /// Waits for the loop and the writer, and builds the time series, reference and metrics;
-    /// with a recording, writes its end events, summary and footer (`realtime.mcap` in the
-    /// metrics). A run that never started (a peer did not answer) removes its recording.
+    /// then gives the outputs (an MCAP recording, ...) the end events and finishes them, their
+    /// reports in the metrics (`realtime.mcap`, ...). A run that never started (a peer did not
+    /// answer) discards its outputs (an MCAP file is removed).
     pub fn finish(mut self) -> Result<HilOutput> {
         let outcome = match self.thread.take().map(|t| t.join()) {
             Some(Ok(outcome)) => outcome,
             _ => Err(RtError::io_other("loop thread", "panicked")),
         };
-        let (samples, recorder) = match self.writer.take().map(|t| t.join()) {
+        let (run_folder, mut outputs) = match self.writer.take().map(|t| t.join()) {
             Some(Ok(drained)) => drained,
             _ => return Err(RtError::io_other("writer thread", "panicked")),
         };
         let outcome = match outcome {
             Ok(outcome) => outcome,
             Err(e) => {
-                if let Some(r) = recorder {
-                    r.discard();
-                }
+                outputs.discard();
                 return Err(e);
             }
         };
-        let mut output = build_output(&self.plan, &self.options, &samples, &outcome)?;
-        if let Some(recorder) = recorder {
-            let stats = end_recording(recorder, &outcome, &output.metrics);
-            if let Some(realtime) = output
-                .metrics
-                .get_mut("realtime")
-                .and_then(|v| v.as_object_mut())
-            {
-                realtime.insert(
-                    "mcap".into(),
-                    serde_json::to_value(&stats).unwrap_or_default(),
-                );
+        let mut output = run_folder.build(&self.plan, &self.options, &outcome)?;
+        realtime_end(&mut outputs, &outcome, &output.metrics);
+        let reports = outputs.finish();
+        if let Some(realtime) = output
+            .metrics
+            .get_mut("realtime")
+            .and_then(|v| v.as_object_mut())
+        {
+            for (key, report) in reports {
+                realtime.insert(key.into(), report);
             }
         }
         Ok(output)
@@ -480,174 +454,47 @@ impl Drop for HilHandle {
     }
 }
 
-/// The run's MCAP recorder, if `options.mcap` asks for one: the file created (or the start
-/// refused, naming it) before anything else is opened.
-fn open_recorder(plan: &Plan, options: &RuntimeOptions) -> Result<Option<McapRecorder>> {
-    options
-        .mcap
-        .as_ref()
-        .map(|mcap| McapRecorder::create(mcap, &RunInfo::new(plan, true)))
-        .transpose()
+/// The run's outputs that `options` asks for (an MCAP recording with `mcap`, ...): each
+/// created (or the start refused, naming it) before anything else is opened.
+fn open_outputs(plan: &Plan, options: &RuntimeOptions) -> Result<Outputs> {
+    let value =
+        serde_json::to_value(options).map_err(|e| RtError::io_other("options", e.to_string()))?;
+    Outputs::open(plan, &RunInfo::new(plan, true), &value)
 }
 
-/// Run time between two fault events on `/hil/events`, ns: faults that keep coming are
-/// summed up, not reported once per tick.
-const FAULT_EVENT_INTERVAL_NS: u64 = 500_000_000;
-
-/// The loop's live events for the recording, read by the writer thread from the shared
-/// status: the start (before the first sample), faults (the loop's counters that grew: lost
-/// packets, dropped datagrams, socket errors, overruns) and the stop as it happens.
-struct EventWatch {
+/// Starts the writer thread: it drains the loop's ring buffer every 5 ms into the run folder
+/// and the outputs, with the loop's events (its counters that grew, the stop) after each
+/// drain; once the loop has ended (the ring abandoned) and the ring is empty, it hands both
+/// back. It keeps normal scheduling and never runs on the loop thread.
+fn spawn_writer(
+    mut consumer: rtrb::Consumer<Sample>,
     shared: Arc<SharedStatus>,
-    start_text: String,
-    started: bool,
-    /// The fault counters last reported: overruns, sensor lost, robot lost, dropped, io errors.
-    reported: [u64; 5],
-    /// Run time of the last fault event, ns.
-    last_fault_ns: Option<u64>,
-    stop_reported: bool,
-}
-
-impl EventWatch {
-    fn new(shared: Arc<SharedStatus>, start_text: String) -> Self {
-        EventWatch {
-            shared,
-            start_text,
-            started: false,
-            reported: [0; 5],
-            last_fault_ns: None,
-            stop_reported: false,
-        }
-    }
-
-    fn counters(&self) -> [u64; 5] {
-        let s = &self.shared;
-        [
-            s.overruns.load(Ordering::Relaxed),
-            s.sensor_lost.load(Ordering::Relaxed),
-            s.robot_lost.load(Ordering::Relaxed),
-            s.dropped.load(Ordering::Relaxed),
-            s.io_errors.load(Ordering::Relaxed),
-        ]
-    }
-
-    /// The start event, before the first sample.
-    fn before_sample(&mut self, recorder: &mut McapRecorder) {
-        if !self.started {
-            self.started = true;
-            recorder.event(0.0, EventLevel::Info, &self.start_text);
-        }
-    }
-
-    /// After a drain: a fault event if counters grew (at most one per
-    /// [`FAULT_EVENT_INTERVAL_NS`] of run time), and the stop once `stop_code` is set.
-    fn after_drain(&mut self, recorder: &mut McapRecorder, stop_code: u8) {
-        let now_ns = crate::recording::time_ns(recorder.last_time());
-        let due = self
-            .last_fault_ns
-            .is_none_or(|t| now_ns >= t + FAULT_EVENT_INTERVAL_NS);
-        let counters = self.counters();
-        if self.started && due && counters != self.reported {
-            const NAMES: [&str; 5] = [
-                "overruns",
-                "sensor records lost",
-                "robot feedback lost",
-                "datagrams dropped",
-                "socket errors",
-            ];
-            let parts: Vec<String> = NAMES
-                .iter()
-                .zip(counters.iter().zip(self.reported))
-                .filter(|(_, (now, before))| **now > *before)
-                .map(|(name, (now, before))| format!("{name} +{} ({now} in all)", now - before))
-                .collect();
-            recorder.event(recorder.last_time(), EventLevel::Warn, &parts.join(", "));
-            self.reported = counters;
-            self.last_fault_ns = Some(now_ns);
-        }
-        if let (false, Some(kind)) = (self.stop_reported, StopKind::from_code(stop_code)) {
-            self.stop_reported = true;
-            let level = match kind {
-                StopKind::Completed => EventLevel::Info,
-                StopKind::User => EventLevel::Warn,
-                _ => EventLevel::Error,
-            };
-            let name = serde_json::to_value(kind)
-                .ok()
-                .and_then(|v| v.as_str().map(str::to_string))
-                .unwrap_or_default();
-            let what = if kind.is_safety_stop() {
-                "safety stop"
-            } else {
-                "stop"
-            };
-            recorder.event(
-                recorder.last_time(),
-                level,
-                &format!(
-                    "{what}: {name} at {:.3} s; the robot is commanded to hold",
-                    recorder.last_time()
-                ),
-            );
-        }
-    }
-}
-
-/// The recording's end: the run's status and reason and the loop's counters as events at the
-/// stop's time, then the summary and footer; returns what was written.
-fn end_recording(
-    mut recorder: McapRecorder,
-    outcome: &RunOutcome,
-    metrics: &serde_json::Value,
-) -> crate::recording::RecordingStats {
-    let stop = &outcome.stop;
-    let status = metrics["status"].as_str().unwrap_or("?");
-    let reason = metrics["reason"]
-        .as_str()
-        .unwrap_or("ran its whole duration");
-    let level = match stop.kind {
-        StopKind::Completed if status == "ok" => EventLevel::Info,
-        StopKind::Completed | StopKind::User => EventLevel::Warn,
-        _ => EventLevel::Error,
-    };
-    recorder.event(
-        stop.time,
-        level,
-        &format!(
-            "run ended at {:.3} s: status {status}; {reason}; exit code {}",
-            stop.time,
-            stop.kind.exit_code()
-        ),
-    );
-    let (sensor, robot) = (&outcome.sensor, &outcome.robot);
-    recorder.event(
-        stop.time,
-        EventLevel::Info,
-        &format!(
-            "loop: {} ticks, wake latency p50/p99/max {:.0}/{:.0}/{:.0} µs, overruns {}, samples dropped {}; \
-             {} sensor: accepted {}, lost {}, late {}, dropped {}, socket errors {}; \
-             {} robot: accepted {}, lost {}, late {}, dropped {}, socket errors {}",
-            outcome.ticks,
-            outcome.wake_latency.p50,
-            outcome.wake_latency.p99,
-            outcome.wake_latency.max,
-            outcome.overruns,
-            outcome.samples_dropped,
-            outcome.sensor_name,
-            sensor.accepted,
-            sensor.lost,
-            sensor.late,
-            sensor.dropped(),
-            sensor.io_errors,
-            outcome.robot_name,
-            robot.accepted,
-            robot.lost,
-            robot.late,
-            robot.dropped(),
-            robot.io_errors,
-        ),
-    );
-    recorder.finish()
+    mut run_folder: RunFolder,
+    mut outputs: Outputs,
+) -> Result<JoinHandle<(RunFolder, Outputs)>> {
+    let mut events = EventWatch::new();
+    std::thread::Builder::new()
+        .name("hil-writer".into())
+        .spawn(move || {
+            loop {
+                let abandoned = consumer.is_abandoned();
+                // read before draining: every sample up to the stop is in the ring then
+                let stop = StopKind::from_code(shared.stop_code.load(Ordering::Acquire));
+                while let Ok(s) = consumer.pop() {
+                    run_folder.sample(&s);
+                    outputs.sample(&s);
+                }
+                if !outputs.is_empty() {
+                    events.after_drain(&mut outputs, &shared.counters(), stop);
+                }
+                if abandoned {
+                    break; // drained after the producer was dropped: complete
+                }
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            (run_folder, outputs)
+        })
+        .map_err(|e| RtError::io("writer thread", &e))
 }
 
 /// What the links of a run of `plan` are told when they are opened: the period, the connect
@@ -1188,13 +1035,7 @@ impl Loop {
             .store(self.step.dynamics().energy().to_bits(), Ordering::Relaxed);
         s.max_latency_ns.fetch_max(latency, Ordering::Relaxed);
         s.overruns.store(self.overruns, Ordering::Relaxed);
-        s.sensor_lost.store(sensor.lost, Ordering::Relaxed);
-        s.sensor_late.store(sensor.late, Ordering::Relaxed);
-        s.robot_lost.store(robot.lost, Ordering::Relaxed);
-        s.robot_late.store(robot.late, Ordering::Relaxed);
-        s.dropped
-            .store(sensor.dropped() + robot.dropped(), Ordering::Relaxed);
-        s.io_errors
-            .store(sensor.io_errors + robot.io_errors, Ordering::Relaxed);
+        s.sensor.store(sensor);
+        s.robot.store(robot);
     }
 }
