@@ -18,8 +18,9 @@ use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
 use crate::links::{open_robot, open_sensor, LinkStats, Wrench};
 use crate::offset::{OffsetMode, WrenchStats};
-use crate::runtime::{
-    check_pacing, check_start_distance, link_context, missing_peers, HilHandle, RuntimeOptions,
+use crate::options::RuntimeOptions;
+use crate::runtime::start::{
+    check_pacing, check_start_distance, link_context, missing_peers, validate_options,
 };
 
 /// What `hilcontact check` found: both links, and the verdict.
@@ -131,7 +132,7 @@ fn six(w: &Wrench) -> [f64; 6] {
 }
 
 /// Checks that a run of `scenario` with `options` would start, commanding nothing: opens the
-/// links as [`HilHandle::start`] does, asks the sensor to stream, listens to both links for
+/// links as [`crate::HilHandle::start`] does, asks the sensor to stream, listens to both links for
 /// `duration` s, stops the streaming, and applies the run's start checks to what arrived (a
 /// record and feedback, the start distance, the offset, the scenario's start in contact with
 /// `offset.mode = measure`, the robot's pacing).
@@ -139,7 +140,7 @@ fn six(w: &Wrench) -> [f64; 6] {
 /// Errors are bad input (scenario, options, `duration`) and links that cannot be opened (a
 /// port in use, the sensor's counts per unit unreadable); everything else is in the report.
 pub fn check(scenario: &Scenario, options: &RuntimeOptions, duration: f64) -> Result<CheckReport> {
-    let plan = HilHandle::validate_options(scenario, options)?;
+    let plan = validate_options(scenario, options)?;
     if !(duration.is_finite() && duration > 0.0 && duration <= 3600.0) {
         return Err(RtError::option(
             "duration",

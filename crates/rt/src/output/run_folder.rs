@@ -26,7 +26,7 @@ pub struct RunFolder {
 }
 
 impl RunFolder {
-    /// Room for a run of `ticks` ticks (up to [`RESERVED_SAMPLES`]).
+    /// Room for a run of `ticks` ticks (up to 2^20 reserved at the start).
     pub fn new(ticks: u64) -> Self {
         RunFolder {
             samples: Vec::with_capacity((ticks as usize).min(RESERVED_SAMPLES) + 1),
