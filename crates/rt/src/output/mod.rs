@@ -202,14 +202,18 @@ impl Outputs {
     /// As [`Outputs::open`], refusing keys of no output first (`options`: the outputs' options
     /// only, as a simulation is given them).
     pub fn open_only(plan: &Plan, info: &RunInfo, options: &Value) -> Result<Self> {
-        if let Some(map) = options.as_object() {
-            if let Some(key) = map.keys().find(|k| OUTPUTS.iter().all(|o| o.key != *k)) {
-                let known: Vec<&str> = OUTPUTS.iter().map(|o| o.key).collect();
-                return Err(RtError::option(
-                    key,
-                    format!("is not an output (outputs: {})", known.join(", ")),
-                ));
-            }
+        let known: Vec<&str> = OUTPUTS.iter().map(|o| o.key).collect();
+        let Some(map) = options.as_object() else {
+            return Err(RtError::option(
+                "outputs",
+                format!("must be an object of outputs by key ({})", known.join(", ")),
+            ));
+        };
+        if let Some(key) = map.keys().find(|k| !known.contains(&k.as_str())) {
+            return Err(RtError::option(
+                key,
+                format!("is not an output (outputs: {})", known.join(", ")),
+            ));
         }
         Self::open(plan, info, options)
     }
@@ -309,4 +313,75 @@ pub fn feed_simulation(
         level,
         text: &text,
     });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::{Arc, Mutex};
+
+    /// A sink that logs what it is given: `s <time>` per sample, `e <time> <text>` per event.
+    struct Log(Arc<Mutex<Vec<String>>>);
+
+    impl Sink for Log {
+        fn sample(&mut self, s: &Sample) {
+            self.0.lock().unwrap().push(format!("s {}", s.record.time));
+        }
+        fn event(&mut self, e: &Event<'_>) {
+            self.0
+                .lock()
+                .unwrap()
+                .push(format!("e {} {}", e.time, e.text));
+        }
+        fn finish(self: Box<Self>) -> Value {
+            Value::from("done")
+        }
+        fn discard(self: Box<Self>) {}
+    }
+
+    fn outputs(log: &Arc<Mutex<Vec<String>>>) -> Outputs {
+        Outputs {
+            sinks: vec![("log", Box::new(Log(log.clone())))],
+            start_text: "start".into(),
+            started: false,
+            last_time: 0.0,
+        }
+    }
+
+    #[test]
+    fn the_start_event_comes_first_and_events_are_never_before_the_newest_sample() {
+        let log = Arc::new(Mutex::new(Vec::new()));
+        let mut o = outputs(&log);
+        assert!(!o.is_empty() && !o.started());
+        for k in 0..3 {
+            let mut s = Sample::default();
+            s.record.time = k as f64 * 0.5;
+            o.sample(&s);
+        }
+        o.event(0.2, EventLevel::Warn, "late");
+        assert_eq!(o.finish(), vec![("log", Value::from("done"))]);
+        assert_eq!(
+            *log.lock().unwrap(),
+            ["e 0 start", "s 0", "s 0.5", "s 1", "e 1 late"]
+        );
+    }
+
+    #[test]
+    fn a_simulation_refuses_keys_of_no_output() {
+        let path = format!(
+            "{}/../../python/hilcontact/scenarios/paper-table1.toml",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let scenario: hilcontact_core::Scenario =
+            toml::from_str(&std::fs::read_to_string(path).expect("preset")).expect("toml");
+        let plan = scenario.resolve().expect("plan");
+        let info = RunInfo::new(&plan, false);
+        let err = Outputs::open_only(&plan, &info, &serde_json::json!({"mcapp": {}}))
+            .err()
+            .expect("refused");
+        assert!(err.to_string().contains("mcapp"), "{err}");
+        assert!(Outputs::open_only(&plan, &info, &serde_json::json!([])).is_err());
+        let none = Outputs::open_only(&plan, &info, &serde_json::json!({})).expect("none");
+        assert!(none.is_empty());
+    }
 }
