@@ -1,9 +1,9 @@
 //! A dry run (`hilcontact check`): connects to the sensor and the robot exactly as a run would
-//! (the same options, links and [`crate::links::LinkContext`]), listens for a while, and tells
+//! (the same options, links and [`crate::devices::LinkContext`]), listens for a while, and tells
 //! whether a run would start, and if not, why, with the same checks as the run's start.
 //!
 //! Nothing is commanded to the robot, not even a hold: the robot link is only polled (its
-//! [`crate::links::RobotLink::send`] and [`crate::links::RobotLink::hold`] are never called). The sensor is asked to
+//! [`crate::devices::RobotLink::send`] and [`crate::devices::RobotLink::hold`] are never called). The sensor is asked to
 //! stream and to stop, as at a run's start and end.
 
 use std::time::Duration;
@@ -14,9 +14,9 @@ use hilcontact_core::hil::VirtualDynamics;
 use hilcontact_core::Scenario;
 
 use crate::clock::now_ns;
+use crate::devices::{open_robot, open_sensor, LinkStats, Wrench};
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
-use crate::links::{open_robot, open_sensor, LinkStats, Wrench};
 use crate::offset::{OffsetMode, WrenchStats};
 use crate::options::MAX_CONNECT_TIMEOUT;
 use crate::runtime::{

@@ -3,9 +3,9 @@
 //! the real devices' protocols.
 //!
 //! The emulator names no protocol: it holds a [`SensorEndpoint`] and a [`RobotEndpoint`]
-//! ([`crate::links`]), opened from the options' `sensor` and `robot` groups by their `kind`
-//! (RDT: [`crate::links::rdt::RdtEndpoint`], EGM: [`crate::links::egm::EgmEndpoint`], KUKA RSI:
-//! [`crate::links::rsi::RsiEndpoint`]).
+//! ([`crate::devices`]), opened from the options' `sensor` and `robot` groups by their `kind`
+//! (RDT: [`crate::devices::rdt::RdtEndpoint`], EGM: [`crate::devices::egm::EgmEndpoint`], KUKA RSI:
+//! [`crate::devices::rsi::RsiEndpoint`]).
 //!
 //! One control period k (`simulation.period`, on the monotonic clock; a late wake-up is caught
 //! up by running the missed periods at once, as time goes on for hardware):
@@ -35,11 +35,11 @@ use hilcontact_core::world::RelativeMotion;
 use hilcontact_core::Scenario;
 
 use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack};
-use crate::error::{Result, RtError};
-use crate::links::{
+use crate::devices::{
     open_robot_endpoint, open_sensor_endpoint, EndpointContext, LinkStats, RobotEndpoint,
     SensorEndpoint, Wrench,
 };
+use crate::error::{Result, RtError};
 
 pub use crate::options::EmulatorOptions;
 

@@ -15,12 +15,12 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::clock::SchedulingOptions;
-use crate::error::{Result, RtError};
-use crate::feedback::Extrapolation;
-use crate::links::{
+use crate::devices::{
     EmulatedRobotConfig, EmulatedRobotOptions, EmulatedSensorConfig, EmulatedSensorOptions,
     RobotConfig, RobotOptions, SensorConfig, SensorOptions,
 };
+use crate::error::{Result, RtError};
+use crate::feedback::Extrapolation;
 use crate::offset::OffsetOptions;
 use crate::recording::McapOptions;
 use crate::safety::SafetyLimits;
@@ -214,9 +214,9 @@ mod tests {
     fn the_schema_has_every_protocol_and_the_ranges() {
         let s = schema();
         let text = s.to_string();
-        for kind in crate::links::SENSOR_KINDS
+        for kind in crate::devices::SENSOR_KINDS
             .iter()
-            .chain(crate::links::ROBOT_KINDS)
+            .chain(crate::devices::ROBOT_KINDS)
         {
             assert!(text.contains(&format!("\"const\":\"{kind}\"")), "{kind}");
         }
@@ -231,7 +231,7 @@ mod tests {
     /// parsed, naming the key: before any file or socket exists.
     #[test]
     fn bad_link_options_fail_when_parsed() {
-        use crate::links::{egm::EgmOptions, rdt::RdtOptions, sri::SriOptions};
+        use crate::devices::{egm::EgmOptions, rdt::RdtOptions, sri::SriOptions};
         let rdt = |o: RdtOptions| RuntimeOptions {
             sensor: SensorOptions::Rdt(o),
             ..Default::default()

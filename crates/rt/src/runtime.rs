@@ -14,7 +14,7 @@
 //!    against the workspace;
 //! 4. the command sent through the robot link.
 //!
-//! The loop names no device: the links ([`crate::links`]) own the protocols, their counters
+//! The loop names no device: the links ([`crate::devices`]) own the protocols, their counters
 //! ([`LinkStats`], socket errors included) and their units. The tick never allocates, locks or
 //! logs: sockets are non-blocking, codecs and buffers are preallocated, samples go to an
 //! `rtrb` ring buffer that a writer thread drains, counters and the live status are atomics.
@@ -42,12 +42,12 @@ use hilcontact_core::{metrics, sim, Plan, Scenario};
 use crate::clock::{
     now_ns, request_realtime, sleep_until_ns, tighten_timer_slack, Histogram, SchedulingReport,
 };
-use crate::error::{Result, RtError};
-use crate::feedback::FeedbackEstimator;
-pub use crate::links::LinkStats;
-use crate::links::{
+pub use crate::devices::LinkStats;
+use crate::devices::{
     open_robot, open_sensor, LinkContext, Pacing, RobotLink, SensorLink, StartRegion, Wrench,
 };
+use crate::error::{Result, RtError};
+use crate::feedback::FeedbackEstimator;
 use crate::offset::{OffsetMode, OffsetOptions, WrenchStats};
 use crate::options::ParsedRuntime;
 pub use crate::options::RuntimeOptions;

@@ -1,6 +1,6 @@
 //! ATI Net F/T over RDT, both sides: [`RdtSensor`] is the [`SensorLink`] of the loop (RDT over
-//! UDP, codec in [`crate::rdt`]; counts per unit and the configured units from
-//! `/netftapi2.xml` over HTTP, [`crate::netftapi`], unless given), [`RdtEndpoint`] the emulated
+//! UDP, codec in [`self::codec`]; counts per unit and the configured units from
+//! `/netftapi2.xml` over HTTP, [`self::netftapi`], unless given), [`RdtEndpoint`] the emulated
 //! sensor's [`SensorEndpoint`] (configurable units: fault injection for clients that ignore
 //! them).
 //!
@@ -8,21 +8,25 @@
 //! number newer than the last accepted one (gaps are counted as `lost`) and status 0; its
 //! counts divided by the counts per unit are the wrench (sensor frame, N and N·m).
 
+pub mod codec;
+pub mod netftapi;
+
 use std::net::{SocketAddr, UdpSocket};
 use std::time::Duration;
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use super::{
-    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EndpointContext,
-    LinkContext, LinkStats, SensorEndpoint, SensorLink, Wrench,
-};
-use crate::error::{Result, RtError};
-use crate::netftapi::{
+use self::codec::{CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, RDT_PORT};
+use self::netftapi::{
     fetch_counts, netftapi_xml, ForceUnit, NetFtApiServer, SensorCalibration, TorqueUnit,
 };
-use crate::rdt::{CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, SequenceTracker, RDT_PORT};
+use super::transport::SequenceTracker;
+use super::{
+    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EndpointContext,
+    LinkContext, LinkStats, SensorEndpoint, SensorLink, SensorProtocol, Wrench,
+};
+use crate::error::{Result, RtError};
 
 /// Options of an RDT sensor link (`[sensor] kind = "rdt"`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -505,5 +509,34 @@ impl SensorEndpoint for RdtEndpoint {
 
     fn stats(&self) -> &LinkStats {
         &self.stats
+    }
+}
+
+/// ATI Net F/T over RDT: the protocol as the registry ([`crate::devices`]) sees it.
+pub struct Rdt;
+
+impl SensorProtocol for Rdt {
+    type Options = RdtOptions;
+    type Config = RdtConfig;
+    type EndpointOptions = RdtEndpointOptions;
+    type EndpointConfig = RdtEndpointConfig;
+
+    fn parse(options: &RdtOptions) -> Result<RdtConfig> {
+        options.parse()
+    }
+
+    fn open(config: &RdtConfig, context: &LinkContext) -> Result<Box<dyn SensorLink>> {
+        Ok(Box::new(RdtSensor::open_parsed(config, context)?))
+    }
+
+    fn parse_endpoint(options: &RdtEndpointOptions) -> Result<RdtEndpointConfig> {
+        options.parse()
+    }
+
+    fn open_endpoint(
+        config: &RdtEndpointConfig,
+        context: &EndpointContext,
+    ) -> Result<Box<dyn SensorEndpoint>> {
+        Ok(Box::new(RdtEndpoint::open_parsed(config, context)?))
     }
 }

@@ -1,5 +1,5 @@
 //! SRI (Sunrise Instruments) M812x interface box (M8126, M8128) over TCP, both sides:
-//! [`SriSensor`] is the [`SensorLink`] of the loop (codec and sources in [`crate::sri`]),
+//! [`SriSensor`] is the [`SensorLink`] of the loop (codec and sources in [`self::codec`]),
 //! [`SriEndpoint`] the emulated box's [`SensorEndpoint`].
 //!
 //! At open the link connects (within `connect_timeout`) and configures the box with AT
@@ -16,6 +16,8 @@
 //! decoupling matrix gives them (SRI calibrates in N and N·m; the box cannot be asked its
 //! units: `realtime.sensor.sensor_units` records the assumption).
 
+pub mod codec;
+
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::time::{Duration, Instant};
@@ -23,15 +25,15 @@ use std::time::{Duration, Instant};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use super::{
-    check_host, resolve, EndpointContext, LinkContext, LinkStats, SensorEndpoint, SensorLink,
-    Wrench,
-};
-use crate::error::{Result, RtError};
-use crate::sri::{
+use self::codec::{
     parse_matrix, FrameReader, PackageTracker, SriAck, SriCommand, SriFrame, SriRateCommand,
     SriRequest, MAX_LINE, SRI_PORT,
 };
+use super::{
+    check_host, resolve, EndpointContext, LinkContext, LinkStats, SensorEndpoint, SensorLink,
+    SensorProtocol, Wrench,
+};
+use crate::error::{Result, RtError};
 
 /// Options of an SRI M812x sensor link (`[sensor] kind = "sri"`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -689,5 +691,38 @@ impl SensorEndpoint for SriEndpoint {
 
     fn stats(&self) -> &LinkStats {
         &self.stats
+    }
+}
+
+/// SRI M812x interface box over TCP: the protocol as the registry ([`crate::devices`]) sees it.
+pub struct Sri;
+
+impl SensorProtocol for Sri {
+    type Options = SriOptions;
+    type Config = SriConfig;
+    type EndpointOptions = SriEndpointOptions;
+    type EndpointConfig = SriEndpointOptions;
+
+    fn parse(options: &SriOptions) -> Result<SriConfig> {
+        options.parse()
+    }
+
+    fn check_period(config: &SriConfig, period: f64) -> Result<()> {
+        config.sample_rate(period).map(|_| ())
+    }
+
+    fn open(config: &SriConfig, context: &LinkContext) -> Result<Box<dyn SensorLink>> {
+        Ok(Box::new(SriSensor::open_parsed(config, context)?))
+    }
+
+    fn parse_endpoint(options: &SriEndpointOptions) -> Result<SriEndpointOptions> {
+        Ok(options.clone())
+    }
+
+    fn open_endpoint(
+        config: &SriEndpointOptions,
+        context: &EndpointContext,
+    ) -> Result<Box<dyn SensorEndpoint>> {
+        Ok(Box::new(SriEndpoint::open(config, context)?))
     }
 }

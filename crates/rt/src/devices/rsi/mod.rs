@@ -1,6 +1,6 @@
 //! KUKA RobotSensorInterface (RSI) over Ethernet, both sides: [`RsiRobot`] is the
 //! [`RobotLink`] of the loop (the controller's XML state in, the PC's XML correction out, codec
-//! in [`crate::rsi`]), [`RsiEndpoint`] the emulated controller's [`RobotEndpoint`].
+//! in [`self::codec`]), [`RsiEndpoint`] the emulated controller's [`RobotEndpoint`].
 //!
 //! The controller sends its state every interpolation cycle (IPO_FAST 4 ms, or 12 ms: the
 //! `period` option) to the PC's port and stops, as a real one does, when too many answers are
@@ -30,6 +30,8 @@
 //! `robot_host` if given; else it is identified, not raced for, as with EGM: the first sender
 //! whose valid state puts the rod tip within the start region ([`LinkContext::start`]).
 
+pub mod codec;
+
 use std::net::{IpAddr, SocketAddr, UdpSocket};
 
 use nalgebra::{UnitQuaternion, Vector3};
@@ -37,18 +39,18 @@ use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
 
+use self::codec::{
+    abc_to_quaternion, decode_answer, decode_state, quaternion_to_abc, AnswerEncoder, KukaPose,
+    RsiError, RsiNames, StateEncoder, RSI_MAX_DATAGRAM, RSI_PERIOD, RSI_PERIODS, RSI_PORT,
+};
 use super::{
     bind_udp, check_host, local_addr, recv_counted, resolve, wait_readable, EndpointContext,
-    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
+    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink, RobotProtocol,
 };
 use crate::clock::{now_ns, Histogram};
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
 use crate::mapping::{EgmPoseMm, PoseMapping};
-use crate::rsi::{
-    abc_to_quaternion, decode_answer, decode_state, quaternion_to_abc, AnswerEncoder, KukaPose,
-    RsiError, RsiNames, StateEncoder, RSI_MAX_DATAGRAM, RSI_PERIOD, RSI_PERIODS, RSI_PORT,
-};
 
 /// How the answer's correction (`RKorr`) relates to the target pose (the controller's RSI
 /// correction object must be configured the same way).
@@ -685,6 +687,36 @@ impl RobotEndpoint for RsiEndpoint {
 
     fn stats(&self) -> &LinkStats {
         &self.stats
+    }
+}
+
+/// KUKA RobotSensorInterface over Ethernet: the protocol as the registry ([`crate::devices`]) sees it.
+pub struct Rsi;
+
+impl RobotProtocol for Rsi {
+    const PACING: Pacing = Pacing::Robot;
+    type Options = RsiOptions;
+    type Config = RsiConfig;
+    type EndpointOptions = RsiEndpointOptions;
+    type EndpointConfig = RsiEndpointConfig;
+
+    fn parse(options: &RsiOptions) -> Result<RsiConfig> {
+        options.parse()
+    }
+
+    fn open(config: &RsiConfig, context: &LinkContext) -> Result<Box<dyn RobotLink>> {
+        Ok(Box::new(RsiRobot::open_parsed(config, context)?))
+    }
+
+    fn parse_endpoint(options: &RsiEndpointOptions) -> Result<RsiEndpointConfig> {
+        options.parse()
+    }
+
+    fn open_endpoint(
+        config: &RsiEndpointConfig,
+        context: &EndpointContext,
+    ) -> Result<Box<dyn RobotEndpoint>> {
+        Ok(Box::new(RsiEndpoint::open_parsed(config, context)?))
     }
 }
 

@@ -1,6 +1,6 @@
 //! ABB Externally Guided Motion (EGM), both sides: [`EgmRobot`] is the [`RobotLink`] of the
 //! loop (`EgmRobot` feedback in, `EgmSensor` corrections out, protobuf over UDP, codec in
-//! [`crate::egm`]), [`EgmEndpoint`] the emulated controller's [`RobotEndpoint`] (feedback out,
+//! [`self::codec`]), [`EgmEndpoint`] the emulated controller's [`RobotEndpoint`] (feedback out,
 //! corrections in).
 //!
 //! The controller sends feedback every 4 ms ([`EGM_PERIOD`]) to the PC's EGM port; the loop
@@ -16,24 +16,27 @@
 //! earlier (another robot, a simulator) is counted `foreign` and never locked onto. Every
 //! other sender is counted `foreign`.
 
+pub mod codec;
+pub mod proto;
+
 use std::net::{IpAddr, SocketAddr, UdpSocket};
 
 use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
 
-use super::{
-    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EndpointContext,
-    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
-};
-use crate::egm::{
+use self::codec::{
     CorrectionDecoder, CorrectionEncoder, EgmError, FeedbackEncoder, RobotDecoder, EGM_PERIOD,
     EGM_PORT,
+};
+use super::transport::SequenceTracker;
+use super::{
+    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EndpointContext,
+    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink, RobotProtocol,
 };
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
 use crate::mapping::{EgmPoseMm, PoseMapping};
-use crate::rdt::SequenceTracker;
 
 /// Options of an EGM robot link (`[robot] kind = "egm"`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -427,5 +430,35 @@ impl RobotEndpoint for EgmEndpoint {
 
     fn stats(&self) -> &LinkStats {
         &self.stats
+    }
+}
+
+/// ABB Externally Guided Motion: the protocol as the registry ([`crate::devices`]) sees it.
+pub struct Egm;
+
+impl RobotProtocol for Egm {
+    const PACING: Pacing = Pacing::Clock;
+    type Options = EgmOptions;
+    type Config = EgmConfig;
+    type EndpointOptions = EgmEndpointOptions;
+    type EndpointConfig = EgmEndpointConfig;
+
+    fn parse(options: &EgmOptions) -> Result<EgmConfig> {
+        options.parse()
+    }
+
+    fn open(config: &EgmConfig, context: &LinkContext) -> Result<Box<dyn RobotLink>> {
+        Ok(Box::new(EgmRobot::open_parsed(config, context)?))
+    }
+
+    fn parse_endpoint(options: &EgmEndpointOptions) -> Result<EgmEndpointConfig> {
+        options.parse()
+    }
+
+    fn open_endpoint(
+        config: &EgmEndpointConfig,
+        context: &EndpointContext,
+    ) -> Result<Box<dyn RobotEndpoint>> {
+        Ok(Box::new(EgmEndpoint::open_parsed(config, context)?))
     }
 }
