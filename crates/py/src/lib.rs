@@ -354,10 +354,10 @@ fn realtime_defaults() -> PyResult<String> {
         "runtime": RuntimeOptions::default(),
         "facility": EmulatorOptions::default(),
         "protocols": {
-            "sensor": hilcontact_rt::links::SENSOR_KINDS,
-            "robot": hilcontact_rt::links::ROBOT_KINDS,
+            "sensor": hilcontact_rt::devices::SENSOR_KINDS,
+            "robot": hilcontact_rt::devices::ROBOT_KINDS,
         },
-        "kinds": hilcontact_rt::links::protocol_defaults(),
+        "kinds": hilcontact_rt::devices::protocol_defaults(),
     });
     Ok(value.to_string())
 }

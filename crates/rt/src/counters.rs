@@ -7,7 +7,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use crate::links::LinkStats;
+use crate::devices::LinkStats;
 
 /// Number of counters in a [`LinkStats`].
 const LINK_COUNTERS: usize = 11;

@@ -3,12 +3,12 @@
 //! The real-time side of hilcontact: the HIL loop against a facility over the devices' own
 //! network protocols, and an emulated facility that speaks them.
 //!
-//! - [`rdt`], [`netftapi`]: ATI Net F/T sensor (RDT over UDP, `/netftapi2.xml` over HTTP);
-//! - [`sri`]: SRI M812x interface box (AT commands and binary frames over TCP);
-//! - [`egm`], [`egm_proto`]: ABB Externally Guided Motion (protobuf over UDP);
-//! - [`links`]: the loop's seam to the devices: the [`SensorLink`] and [`RobotLink`] traits,
-//!   [`Pacing`], and their RDT, EGM and RSI implementations;
-//! - [`rsi`]: KUKA RobotSensorInterface over Ethernet (XML over UDP);
+//! - [`devices`]: one folder per device protocol, each with its codec, its link (the PC's
+//!   side: [`SensorLink`] / [`RobotLink`]), its emulated endpoint (the device's side) and its
+//!   options, registered by one line in `devices/mod.rs`: [`devices::rdt`] (ATI Net F/T, RDT
+//!   over UDP and `/netftapi2.xml` over HTTP), [`devices::sri`] (SRI M812x, AT commands and
+//!   binary frames over TCP), [`devices::egm`] (ABB Externally Guided Motion, protobuf over
+//!   UDP), [`devices::rsi`] (KUKA RobotSensorInterface, XML over UDP, robot paced);
 //! - [`mapping`]: the scenario's relative motion (`t` frame, m) as EGM poses (mm, quaternion);
 //! - [`emulator`]: robot, contact and sensor (the core's facility model) in real time behind
 //!   those protocols;
@@ -30,27 +30,23 @@
 pub mod check;
 pub mod clock;
 pub mod counters;
-pub mod egm;
-pub mod egm_proto;
+pub mod devices;
 pub mod emulator;
 pub mod error;
 pub mod feedback;
-pub mod links;
 pub mod mapping;
-pub mod netftapi;
 pub mod offset;
 pub mod options;
 pub mod output;
-pub mod rdt;
 pub mod report;
-pub mod rsi;
 pub mod runtime;
 pub mod safety;
-pub mod sri;
 
 pub use check::{check, CheckReport};
+/// The former name of [`devices`], for code written against it.
+pub use devices as links;
+pub use devices::{LinkStats, Pacing, RobotLink, RobotOptions, SensorLink, SensorOptions};
 pub use emulator::{EmulatorOptions, FacilityHandle};
 pub use error::{Result, RtError};
-pub use links::{LinkStats, Pacing, RobotLink, RobotOptions, SensorLink, SensorOptions};
 pub use options::RuntimeOptions;
 pub use runtime::HilHandle;

@@ -10,8 +10,8 @@ use serde::{Deserialize, Serialize};
 
 use hilcontact_core::Plan;
 
+use crate::devices::Wrench;
 use crate::error::{Result, RtError};
-use crate::links::Wrench;
 
 /// How the runtime handles the sensor's offset at start.
 #[derive(

@@ -9,11 +9,11 @@ use std::net::{SocketAddr, UdpSocket};
 use std::time::{Duration, Instant};
 
 use common::{free_udp_port, preset};
-use hilcontact_rt::egm::{CorrectionDecoder, FeedbackEncoder};
-use hilcontact_rt::links::egm::EgmOptions;
-use hilcontact_rt::links::rdt::RdtOptions;
+use hilcontact_rt::devices::egm::codec::{CorrectionDecoder, FeedbackEncoder};
+use hilcontact_rt::devices::egm::EgmOptions;
+use hilcontact_rt::devices::rdt::codec::{RdtCommand, RdtRecord, RdtRequest};
+use hilcontact_rt::devices::rdt::RdtOptions;
 use hilcontact_rt::mapping::EgmPoseMm;
-use hilcontact_rt::rdt::{RdtCommand, RdtRecord, RdtRequest};
 use hilcontact_rt::safety::SafetyLimits;
 use hilcontact_rt::{HilHandle, RobotOptions, RuntimeOptions, SensorOptions};
 
@@ -407,7 +407,7 @@ fn a_foreign_sender_that_starts_first_is_not_the_robot() {
 /// What a scripted run saw: the output (or the error) and every correction the robot got.
 struct Scripted {
     output: hilcontact_rt::Result<hilcontact_rt::report::HilOutput>,
-    corrections: Vec<hilcontact_rt::egm::Correction>,
+    corrections: Vec<hilcontact_rt::devices::egm::codec::Correction>,
 }
 
 /// Runs `s` against a scripted sensor (zero wrench, a record per ms) and a scripted robot that
@@ -553,7 +553,7 @@ fn a_300_mm_feedback_jump_is_counted_and_never_held() {
 /// socket is opened or any peer is asked: not as a connection error after trying to connect.
 #[test]
 fn bad_options_are_refused_before_any_socket_is_opened() {
-    use hilcontact_rt::links::rsi::RsiOptions;
+    use hilcontact_rt::devices::rsi::RsiOptions;
     use hilcontact_rt::RtError;
 
     let s = preset("paper-table1");

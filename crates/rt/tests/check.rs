@@ -8,11 +8,11 @@ use std::net::{SocketAddr, UdpSocket};
 use std::time::{Duration, Instant};
 
 use common::{free_udp_port, loopback_options, preset};
-use hilcontact_rt::egm::FeedbackEncoder;
-use hilcontact_rt::links::egm::EgmOptions;
-use hilcontact_rt::links::rdt::RdtOptions;
+use hilcontact_rt::devices::egm::codec::FeedbackEncoder;
+use hilcontact_rt::devices::egm::EgmOptions;
+use hilcontact_rt::devices::rdt::codec::RdtRecord;
+use hilcontact_rt::devices::rdt::RdtOptions;
 use hilcontact_rt::mapping::EgmPoseMm;
-use hilcontact_rt::rdt::RdtRecord;
 use hilcontact_rt::{check, FacilityHandle, RobotOptions, RuntimeOptions, SensorOptions};
 
 /// Against the emulator with an unbiased sensor: a run would start; the offset is the injected

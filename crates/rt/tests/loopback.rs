@@ -5,7 +5,7 @@ mod common;
 
 use common::{loopback_options, preset};
 use hilcontact_core::compensator::{CompensatorConfig, ModelParams};
-use hilcontact_rt::links::EmulatedRobotOptions;
+use hilcontact_rt::devices::EmulatedRobotOptions;
 use hilcontact_rt::safety::StopKind;
 use hilcontact_rt::{FacilityHandle, HilHandle, RuntimeOptions};
 use serde_json::Value;

@@ -9,8 +9,8 @@ use std::time::Duration;
 use super::start::{check_start_distance, missing_peers};
 use super::tick::Loop;
 use crate::clock::now_ns;
+use crate::devices::Wrench;
 use crate::error::{Result, RtError};
-use crate::links::Wrench;
 use crate::offset::{OffsetMode, WrenchStats};
 
 impl Loop {

@@ -18,9 +18,9 @@ use super::status::{SharedStatus, StatusSnapshot};
 use super::tick::Loop;
 use super::writer::{open_outputs, spawn_writer};
 use crate::clock::{request_realtime, tighten_timer_slack, Histogram, SchedulingReport};
+use crate::devices::{open_robot, open_sensor, RobotLink, SensorLink, Wrench};
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
-use crate::links::{open_robot, open_sensor, RobotLink, SensorLink, Wrench};
 use crate::options::RuntimeOptions;
 use crate::output::events::realtime_end;
 use crate::output::run_folder::RunFolder;
@@ -48,11 +48,11 @@ impl HilHandle {
     /// threads. A start that fails after the outputs were opened discards them (the MCAP file
     /// is removed).
     pub fn start(scenario: &Scenario, options: &RuntimeOptions) -> Result<Self> {
-        let plan = validate(scenario, options)?;
+        let (plan, parsed) = validate(scenario, options)?;
         let outputs = open_outputs(&plan, options)?;
         let context = link_context(&plan, options);
-        let links = open_sensor(&options.sensor, &context)
-            .and_then(|sensor| Ok((sensor, open_robot(&options.robot, &context)?)));
+        let links = open_sensor(&parsed.sensor, &context)
+            .and_then(|sensor| Ok((sensor, open_robot(&parsed.robot, &context)?)));
         match links {
             Ok((sensor, robot)) => Self::start_inner(plan, options, sensor, robot, outputs),
             Err(e) => {
@@ -71,7 +71,7 @@ impl HilHandle {
         sensor: Box<dyn SensorLink>,
         robot: Box<dyn RobotLink>,
     ) -> Result<Self> {
-        let plan = validate(scenario, options)?;
+        let (plan, _) = validate(scenario, options)?;
         let outputs = open_outputs(&plan, options)?;
         Self::start_inner(plan, options, sensor, robot, outputs)
     }

@@ -8,7 +8,7 @@ use hilcontact_core::world::RelativeMotion;
 
 use super::tick::Loop;
 use crate::clock::{now_ns, sleep_until_ns};
-use crate::links::Pacing;
+use crate::devices::Pacing;
 use crate::safety::hold_target;
 
 impl Loop {

@@ -1,6 +1,6 @@
 //! The real-time HIL loop: a sensor link, a robot link, compensator and virtual dynamics in
 //! one thread, paced by the PC's monotonic clock at the scenario's period or by the robot's
-//! packets ([`crate::links::Pacing`], the robot link's choice).
+//! packets ([`crate::devices::Pacing`], the robot link's choice).
 //!
 //! One tick k (clock pacing: deadline `t0 + k·T`, absolute sleep; robot pacing: the robot's
 //! next packet, waited for up to the watchdog):
@@ -14,7 +14,7 @@
 //!    against the workspace;
 //! 4. the command sent through the robot link.
 //!
-//! The loop names no device: the links ([`crate::links`]) own the protocols, their counters
+//! The loop names no device: the links ([`crate::devices`]) own the protocols, their counters
 //! ([`LinkStats`], socket errors included) and their units. The tick never allocates, locks or
 //! logs: sockets are non-blocking, codecs and buffers are preallocated, samples go to an
 //! `rtrb` ring buffer that a writer thread drains, counters and the live status are atomics.
@@ -48,7 +48,7 @@ pub mod status;
 mod tick;
 mod writer;
 
-pub use crate::links::LinkStats;
+pub use crate::devices::LinkStats;
 pub use crate::options::{RuntimeOptions, MAX_CONNECT_TIMEOUT};
 pub use crate::report::{RunOutcome, Sample};
 pub use handle::HilHandle;

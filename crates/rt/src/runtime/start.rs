@@ -5,50 +5,31 @@
 use hilcontact_core::hil::VirtualDynamics;
 use hilcontact_core::{Plan, Scenario};
 
+use crate::devices::{LinkContext, Pacing, RobotLink, SensorLink, StartRegion};
 use crate::error::{Result, RtError};
-use crate::links::{LinkContext, Pacing, RobotLink, SensorLink, StartRegion};
-use crate::options::{RuntimeOptions, MAX_CONNECT_TIMEOUT};
+use crate::options::{ParsedRuntime, RuntimeOptions};
 
-/// The scenario's plan, once the options are checked too, and that the scenario can start
-/// with them ([`crate::offset::OffsetOptions::check_start`]).
-pub(crate) fn validate(scenario: &Scenario, options: &RuntimeOptions) -> Result<Plan> {
-    let plan = validate_options(scenario, options)?;
+/// The scenario's plan and the parsed options, once the options are checked too, and that the
+/// scenario can start with them ([`crate::offset::OffsetOptions::check_start`]).
+pub(crate) fn validate(
+    scenario: &Scenario,
+    options: &RuntimeOptions,
+) -> Result<(Plan, ParsedRuntime)> {
+    let (plan, parsed) = validate_options(scenario, options)?;
     options.offset.check_start(&plan)?;
-    Ok(plan)
+    Ok((plan, parsed))
 }
 
-/// The scenario's plan, once the options are checked (each alone: bad input).
-pub(crate) fn validate_options(scenario: &Scenario, options: &RuntimeOptions) -> Result<Plan> {
+/// The scenario's plan and the parsed options ([`RuntimeOptions::parse`]: each alone, bad
+/// input), once the checks across them are done too (the sensor's rate from the period).
+pub(crate) fn validate_options(
+    scenario: &Scenario,
+    options: &RuntimeOptions,
+) -> Result<(Plan, ParsedRuntime)> {
     let plan = scenario.resolve()?;
-    let o = options;
-    o.limits.validate()?;
-    o.offset.validate()?;
-    o.scheduling.validate()?;
-    if let Some(mcap) = &o.mcap {
-        mcap.validate()?;
-    }
-    o.sensor.validate()?;
-    o.robot.validate()?;
-    for (key, v, max) in [
-        ("connect_timeout", o.connect_timeout, MAX_CONNECT_TIMEOUT),
-        ("start_tolerance", o.start_tolerance, f64::MAX),
-    ] {
-        if !(v.is_finite() && v > 0.0 && v <= max) {
-            let allowed = if max < f64::MAX {
-                format!("a number > 0 and <= {max}")
-            } else {
-                "a positive number".to_string()
-            };
-            return Err(RtError::option(key, format!("must be {allowed}, got {v}")));
-        }
-    }
-    if !(o.hold_time.is_finite() && o.hold_time >= 0.0) {
-        return Err(RtError::option(
-            "hold_time",
-            format!("must be a number >= 0, got {}", o.hold_time),
-        ));
-    }
-    Ok(plan)
+    let parsed = options.parse()?;
+    parsed.sensor.check_period(plan.period)?;
+    Ok((plan, parsed))
 }
 
 /// What the links of a run of `plan` are told when they are opened: the period, the connect

@@ -14,9 +14,9 @@ use hilcontact_core::world::RelativeMotion;
 
 use super::status::SharedStatus;
 use crate::clock::{now_ns, sleep_until_ns, Histogram, SchedulingReport};
+use crate::devices::{Pacing, RobotLink, SensorLink, Wrench};
 use crate::error::Result;
 use crate::feedback::FeedbackEstimator;
-use crate::links::{Pacing, RobotLink, SensorLink, Wrench};
 use crate::offset::{OffsetMode, OffsetOptions};
 use crate::report::{RunOutcome, Sample};
 use crate::safety::{check_workspace, check_wrench, SafetyLimits, StopEvent, StopKind, Tracking};

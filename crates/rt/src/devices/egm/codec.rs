@@ -16,13 +16,13 @@
 //! Feedback of both `egm.proto` generations decodes: RobotWare 6 and 7 differ, for the fields
 //! a controller sends, only in `EgmMeasuredForce`, whose field 1 is RobotWare 6's `force` and
 //! RobotWare 7's `fcActive`; [`EgmMeasuredForce`] tells them apart by wire type (see
-//! [`crate::egm_proto`]). The measured force is reported when it has six finite values; it is
+//! [`super::proto`]). The measured force is reported when it has six finite values; it is
 //! not validated further, as the loop does not use it.
 
 use prost::Message;
 use thiserror::Error;
 
-use crate::egm_proto::*;
+use super::proto::*;
 use crate::mapping::{EgmPoseMm, EgmTarget};
 
 /// Default UDP port of the PC side (the port the controller's EGM transmission is configured to).
@@ -700,7 +700,10 @@ mod tests {
             Err(EgmError::BadQuaternion)
         );
         // an RDT record is not EGM
-        assert!(d(crate::rdt::RdtRecord::default().encode().to_vec()).is_err());
+        assert!(d(crate::devices::rdt::codec::RdtRecord::default()
+            .encode()
+            .to_vec())
+        .is_err());
         // the decoder still works after errors
         assert!(dec.decode(&good).is_ok());
     }

@@ -1,6 +1,6 @@
 //! ATI Net F/T over RDT, both sides: [`RdtSensor`] is the [`SensorLink`] of the loop (RDT over
-//! UDP, codec in [`crate::rdt`]; counts per unit and the configured units from
-//! `/netftapi2.xml` over HTTP, [`crate::netftapi`], unless given), [`RdtEndpoint`] the emulated
+//! UDP, codec in [`self::codec`]; counts per unit and the configured units from
+//! `/netftapi2.xml` over HTTP, [`self::netftapi`], unless given), [`RdtEndpoint`] the emulated
 //! sensor's [`SensorEndpoint`] (configurable units: fault injection for clients that ignore
 //! them).
 //!
@@ -8,21 +8,25 @@
 //! number newer than the last accepted one (gaps are counted as `lost`) and status 0; its
 //! counts divided by the counts per unit are the wrench (sensor frame, N and N·m).
 
+pub mod codec;
+pub mod netftapi;
+
 use std::net::{SocketAddr, UdpSocket};
 use std::time::Duration;
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use super::{
-    bind_udp, local_addr, recv_counted, resolve, sequence_counted, EndpointContext, LinkContext,
-    LinkStats, SensorEndpoint, SensorLink, Wrench,
-};
-use crate::error::{Result, RtError};
-use crate::netftapi::{
+use self::codec::{CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, RDT_PORT};
+use self::netftapi::{
     fetch_counts, netftapi_xml, ForceUnit, NetFtApiServer, SensorCalibration, TorqueUnit,
 };
-use crate::rdt::{CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, SequenceTracker, RDT_PORT};
+use super::transport::SequenceTracker;
+use super::{
+    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EndpointContext,
+    LinkContext, LinkStats, SensorEndpoint, SensorLink, SensorProtocol, Wrench,
+};
+use crate::error::{Result, RtError};
 
 /// Options of an RDT sensor link (`[sensor] kind = "rdt"`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -74,11 +78,20 @@ pub struct RdtSensor {
     buf: [u8; 2048],
 }
 
-impl RdtSensor {
-    /// Validates the options, reads the counts per unit and the configured units (HTTP,
-    /// unless both counts are given, then per N and N·m) and binds the client socket.
-    pub fn open(o: &RdtOptions, context: &LinkContext) -> Result<Self> {
-        let (counts, calibration) = match (o.counts_per_force, o.counts_per_torque) {
+/// An RDT link's options once parsed ([`RdtOptions::parse`]): the host's form checked, the
+/// counts per unit given (both positive) or to be read from `/netftapi2.xml`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RdtConfig {
+    options: RdtOptions,
+    /// Counts per N and per N·m, when given in the options.
+    counts: Option<CountsPerUnit>,
+}
+
+impl RdtOptions {
+    /// Checks the host's form and the counts per unit (both positive, or neither), once.
+    pub fn parse(&self) -> Result<RdtConfig> {
+        check_host("sensor host", &self.host)?;
+        let counts = match (self.counts_per_force, self.counts_per_torque) {
             (Some(force), Some(torque)) => {
                 if !(force.is_finite() && force > 0.0 && torque.is_finite() && torque > 0.0) {
                     return Err(RtError::option(
@@ -86,18 +99,39 @@ impl RdtSensor {
                         "counts per unit must be positive numbers",
                     ));
                 }
-                (CountsPerUnit { force, torque }, None)
+                Some(CountsPerUnit { force, torque })
             }
-            (None, None) => {
-                let c = fetch_counts(&o.host, o.http_port, Duration::from_secs_f64(context.connect_timeout.min(5.0)))
-                    .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit: {e} (or give counts_per_force and counts_per_torque)")))?;
-                (c.counts, Some(c))
-            }
+            (None, None) => None,
             _ => {
                 return Err(RtError::option(
                     "counts_per_force",
                     "give both counts_per_force and counts_per_torque, or neither",
                 ))
+            }
+        };
+        Ok(RdtConfig {
+            options: self.clone(),
+            counts,
+        })
+    }
+}
+
+impl RdtSensor {
+    /// Parses the options ([`RdtOptions::parse`]) and opens the link ([`RdtSensor::open_parsed`]).
+    pub fn open(o: &RdtOptions, context: &LinkContext) -> Result<Self> {
+        Self::open_parsed(&o.parse()?, context)
+    }
+
+    /// Reads the counts per unit and the configured units (HTTP, unless both counts are given,
+    /// then per N and N·m) and binds the client socket.
+    pub fn open_parsed(c: &RdtConfig, context: &LinkContext) -> Result<Self> {
+        let o = &c.options;
+        let (counts, calibration) = match c.counts {
+            Some(counts) => (counts, None),
+            None => {
+                let c = fetch_counts(&o.host, o.http_port, Duration::from_secs_f64(context.connect_timeout.min(5.0)))
+                    .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit: {e} (or give counts_per_force and counts_per_torque)")))?;
+                (c.counts, Some(c))
             }
         };
         let peer = resolve("sensor_host", &o.host, o.port)?;
@@ -295,10 +329,19 @@ pub struct RdtEndpoint {
     buf: [u8; 2048],
 }
 
-impl RdtEndpoint {
-    /// Validates the counts per unit and the units, binds the RDT socket and starts the HTTP
-    /// server (unless `http_port` is 0).
-    pub fn open(o: &RdtEndpointOptions, context: &EndpointContext) -> Result<Self> {
+/// The emulated RDT sensor's options once parsed ([`RdtEndpointOptions::parse`]): positive
+/// counts per configured unit, and the units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RdtEndpointConfig {
+    options: RdtEndpointOptions,
+    force_unit: ForceUnit,
+    torque_unit: TorqueUnit,
+}
+
+impl RdtEndpointOptions {
+    /// Checks the counts per unit (positive) and the units (known names), once.
+    pub fn parse(&self) -> Result<RdtEndpointConfig> {
+        let o = self;
         for (key, v) in [
             ("counts_per_force", o.counts_per_force),
             ("counts_per_torque", o.counts_per_torque),
@@ -328,6 +371,24 @@ impl RdtEndpoint {
                 ),
             )
         })?;
+        Ok(RdtEndpointConfig {
+            options: self.clone(),
+            force_unit,
+            torque_unit,
+        })
+    }
+}
+
+impl RdtEndpoint {
+    /// Parses the options ([`RdtEndpointOptions::parse`]) and opens the endpoint
+    /// ([`RdtEndpoint::open_parsed`]).
+    pub fn open(o: &RdtEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open_parsed(&o.parse()?, context)
+    }
+
+    /// Binds the RDT socket and starts the HTTP server (unless `http_port` is 0).
+    pub fn open_parsed(c: &RdtEndpointConfig, context: &EndpointContext) -> Result<Self> {
+        let (o, force_unit, torque_unit) = (&c.options, c.force_unit, c.torque_unit);
         // the page's counts are per configured unit; the records count the wrench in those units
         let per_unit = CountsPerUnit {
             force: o.counts_per_force,
@@ -448,5 +509,34 @@ impl SensorEndpoint for RdtEndpoint {
 
     fn stats(&self) -> &LinkStats {
         &self.stats
+    }
+}
+
+/// ATI Net F/T over RDT: the protocol as the registry ([`crate::devices`]) sees it.
+pub struct Rdt;
+
+impl SensorProtocol for Rdt {
+    type Options = RdtOptions;
+    type Config = RdtConfig;
+    type EndpointOptions = RdtEndpointOptions;
+    type EndpointConfig = RdtEndpointConfig;
+
+    fn parse(options: &RdtOptions) -> Result<RdtConfig> {
+        options.parse()
+    }
+
+    fn open(config: &RdtConfig, context: &LinkContext) -> Result<Box<dyn SensorLink>> {
+        Ok(Box::new(RdtSensor::open_parsed(config, context)?))
+    }
+
+    fn parse_endpoint(options: &RdtEndpointOptions) -> Result<RdtEndpointConfig> {
+        options.parse()
+    }
+
+    fn open_endpoint(
+        config: &RdtEndpointConfig,
+        context: &EndpointContext,
+    ) -> Result<Box<dyn SensorEndpoint>> {
+        Ok(Box::new(RdtEndpoint::open_parsed(config, context)?))
     }
 }

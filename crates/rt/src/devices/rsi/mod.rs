@@ -1,6 +1,6 @@
 //! KUKA RobotSensorInterface (RSI) over Ethernet, both sides: [`RsiRobot`] is the
 //! [`RobotLink`] of the loop (the controller's XML state in, the PC's XML correction out, codec
-//! in [`crate::rsi`]), [`RsiEndpoint`] the emulated controller's [`RobotEndpoint`].
+//! in [`self::codec`]), [`RsiEndpoint`] the emulated controller's [`RobotEndpoint`].
 //!
 //! The controller sends its state every interpolation cycle (IPO_FAST 4 ms, or 12 ms: the
 //! `period` option) to the PC's port and stops, as a real one does, when too many answers are
@@ -30,6 +30,8 @@
 //! `robot_host` if given; else it is identified, not raced for, as with EGM: the first sender
 //! whose valid state puts the rod tip within the start region ([`LinkContext::start`]).
 
+pub mod codec;
+
 use std::net::{IpAddr, SocketAddr, UdpSocket};
 
 use nalgebra::{UnitQuaternion, Vector3};
@@ -37,18 +39,18 @@ use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
 
+use self::codec::{
+    abc_to_quaternion, decode_answer, decode_state, quaternion_to_abc, AnswerEncoder, KukaPose,
+    RsiError, RsiNames, StateEncoder, RSI_MAX_DATAGRAM, RSI_PERIOD, RSI_PERIODS, RSI_PORT,
+};
 use super::{
     bind_udp, check_host, local_addr, recv_counted, resolve, wait_readable, EndpointContext,
-    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
+    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink, RobotProtocol,
 };
 use crate::clock::{now_ns, Histogram};
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
 use crate::mapping::{EgmPoseMm, PoseMapping};
-use crate::rsi::{
-    abc_to_quaternion, decode_answer, decode_state, quaternion_to_abc, AnswerEncoder, KukaPose,
-    RsiError, RsiNames, StateEncoder, RSI_MAX_DATAGRAM, RSI_PERIOD, RSI_PERIODS, RSI_PORT,
-};
 
 /// How the answer's correction (`RKorr`) relates to the target pose (the controller's RSI
 /// correction object must be configured the same way).
@@ -202,9 +204,20 @@ pub struct RsiRobot {
     buf: [u8; RSI_MAX_DATAGRAM + 1],
 }
 
-impl RsiRobot {
-    /// Checks the options without opening anything (hosts, cycle, deadline, names, mapping).
-    pub fn validate(o: &RsiOptions) -> Result<()> {
+/// An RSI link's options once parsed ([`RsiOptions::parse`]): hosts' form, cycle and deadline
+/// checked, the XML names and the pose mapping built.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RsiConfig {
+    options: RsiOptions,
+    names: RsiNames,
+    mapping: PoseMapping,
+}
+
+impl RsiOptions {
+    /// Checks the options without opening anything (hosts, cycle, deadline, names, mapping),
+    /// once.
+    pub fn parse(&self) -> Result<RsiConfig> {
+        let o = self;
         check_host("rsi bind_host", &o.bind_host)?;
         if let Some(host) = &o.robot_host {
             check_host("robot_host", host)?;
@@ -219,19 +232,30 @@ impl RsiRobot {
                 ),
             ));
         }
-        PoseMapping::new(o.offset_mm, o.rotation)?;
-        Ok(())
-    }
-
-    /// Validates the options and binds the PC's RSI socket.
-    pub fn open(o: &RsiOptions, context: &LinkContext) -> Result<Self> {
-        Self::validate(o)?;
+        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
         let names = checked_names(RsiNames {
             sen_type: o.sen_type.clone(),
             state: o.state_element.clone(),
             correction: o.correction_element.clone(),
         })?;
-        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
+        Ok(RsiConfig {
+            options: self.clone(),
+            names,
+            mapping,
+        })
+    }
+}
+
+impl RsiRobot {
+    /// Parses the options ([`RsiOptions::parse`]) and binds the PC's RSI socket
+    /// ([`RsiRobot::open_parsed`]).
+    pub fn open(o: &RsiOptions, context: &LinkContext) -> Result<Self> {
+        Self::open_parsed(&o.parse()?, context)
+    }
+
+    /// Binds the PC's RSI socket.
+    pub fn open_parsed(c: &RsiConfig, context: &LinkContext) -> Result<Self> {
+        let (o, names, mapping) = (&c.options, c.names.clone(), c.mapping);
         let socket = bind_udp(
             "RSI endpoint",
             resolve("rsi bind_host", &o.bind_host, o.port)?,
@@ -504,10 +528,19 @@ pub struct RsiEndpoint {
     buf: [u8; RSI_MAX_DATAGRAM + 1],
 }
 
-impl RsiEndpoint {
-    /// Validates the options, resolves the PC's address and binds the controller's socket (on
-    /// loopback when the PC is).
-    pub fn open(o: &RsiEndpointOptions, context: &EndpointContext) -> Result<Self> {
+/// The emulated RSI controller's options once parsed ([`RsiEndpointOptions::parse`]): cycle
+/// and `max_late` checked, the XML names and the pose mapping built.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RsiEndpointConfig {
+    options: RsiEndpointOptions,
+    names: RsiNames,
+    mapping: PoseMapping,
+}
+
+impl RsiEndpointOptions {
+    /// Checks the cycle, `max_late`, the names and the mapping, once.
+    pub fn parse(&self) -> Result<RsiEndpointConfig> {
+        let o = self;
         check_period("rsi.period", o.period)?;
         if o.max_late == 0 {
             return Err(RtError::option("rsi.max_late", "must be at least 1"));
@@ -517,7 +550,25 @@ impl RsiEndpoint {
             state: o.state_element.clone(),
             correction: o.correction_element.clone(),
         })?;
-        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
+        Ok(RsiEndpointConfig {
+            options: self.clone(),
+            names,
+            mapping: PoseMapping::new(o.offset_mm, o.rotation)?,
+        })
+    }
+}
+
+impl RsiEndpoint {
+    /// Parses the options ([`RsiEndpointOptions::parse`]) and opens the controller
+    /// ([`RsiEndpoint::open_parsed`]).
+    pub fn open(o: &RsiEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open_parsed(&o.parse()?, context)
+    }
+
+    /// Resolves the PC's address and binds the controller's socket (on loopback when the PC
+    /// is).
+    pub fn open_parsed(c: &RsiEndpointConfig, context: &EndpointContext) -> Result<Self> {
+        let (o, names, mapping) = (&c.options, c.names.clone(), c.mapping);
         let peer = resolve("rsi host", &o.host, o.port)?;
         let bind: SocketAddr = match peer.ip() {
             IpAddr::V4(ip) if ip.is_loopback() => SocketAddr::from(([127, 0, 0, 1], o.local_port)),
@@ -636,6 +687,36 @@ impl RobotEndpoint for RsiEndpoint {
 
     fn stats(&self) -> &LinkStats {
         &self.stats
+    }
+}
+
+/// KUKA RobotSensorInterface over Ethernet: the protocol as the registry ([`crate::devices`]) sees it.
+pub struct Rsi;
+
+impl RobotProtocol for Rsi {
+    const PACING: Pacing = Pacing::Robot;
+    type Options = RsiOptions;
+    type Config = RsiConfig;
+    type EndpointOptions = RsiEndpointOptions;
+    type EndpointConfig = RsiEndpointConfig;
+
+    fn parse(options: &RsiOptions) -> Result<RsiConfig> {
+        options.parse()
+    }
+
+    fn open(config: &RsiConfig, context: &LinkContext) -> Result<Box<dyn RobotLink>> {
+        Ok(Box::new(RsiRobot::open_parsed(config, context)?))
+    }
+
+    fn parse_endpoint(options: &RsiEndpointOptions) -> Result<RsiEndpointConfig> {
+        options.parse()
+    }
+
+    fn open_endpoint(
+        config: &RsiEndpointConfig,
+        context: &EndpointContext,
+    ) -> Result<Box<dyn RobotEndpoint>> {
+        Ok(Box::new(RsiEndpoint::open_parsed(config, context)?))
     }
 }
 

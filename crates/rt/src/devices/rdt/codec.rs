@@ -10,7 +10,7 @@
 //!   sent), `u32 status` (0 = healthy), then `Fx, Fy, Fz, Tx, Ty, Tz` as `i32` counts.
 //!
 //! Counts convert to N and N·m through the counts per force/torque (`cfgcpf`, `cfgcpt`) that
-//! the sensor serves in `/netftapi2.xml` (see [`crate::netftapi`]).
+//! the sensor serves in `/netftapi2.xml` (see [`super::netftapi`]).
 //!
 //! Decoding never allocates and never panics: a datagram of the wrong size or header is an
 //! [`RdtError`].
@@ -213,60 +213,10 @@ impl CountsPerUnit {
     }
 }
 
-/// What a sequence number says about a packet.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SequenceVerdict {
-    /// The first packet seen.
-    First,
-    /// The packet after the last accepted one.
-    Next,
-    /// Newer than the last accepted one, with this many packets missing in between.
-    Gap(u32),
-    /// The same as the last accepted one (a duplicate) or older (reordered): drop it.
-    Stale,
-}
-
-/// Tracks a stream's sequence numbers (wrapping `u32`): accepts only newer packets and
-/// counts the missing ones. Never allocates.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct SequenceTracker {
-    last: Option<u32>,
-}
-
-impl SequenceTracker {
-    /// A tracker that has seen nothing.
-    pub fn new() -> Self {
-        SequenceTracker { last: None }
-    }
-
-    /// The last accepted sequence number.
-    pub fn last(&self) -> Option<u32> {
-        self.last
-    }
-
-    /// Classifies `seq` and, unless it is stale, accepts it as the newest. A jump of more
-    /// than 2³¹ backwards is taken as older (wrapping comparison).
-    pub fn check(&mut self, seq: u32) -> SequenceVerdict {
-        let Some(last) = self.last else {
-            self.last = Some(seq);
-            return SequenceVerdict::First;
-        };
-        let ahead = seq.wrapping_sub(last) as i32;
-        if ahead <= 0 {
-            return SequenceVerdict::Stale;
-        }
-        self.last = Some(seq);
-        if ahead == 1 {
-            SequenceVerdict::Next
-        } else {
-            SequenceVerdict::Gap(ahead as u32 - 1)
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::devices::transport::{SequenceTracker, SequenceVerdict};
     use proptest::prelude::*;
 
     #[test]

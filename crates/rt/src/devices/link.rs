@@ -1,97 +1,22 @@
-//! Device links: the seam between the real-time loop and the devices' protocols, on both
-//! sides of the wire.
-//!
-//! The loop ([`crate::runtime`]) talks to one [`SensorLink`] (a force/torque sensor) and one
-//! [`RobotLink`] (a robot controller's external-motion interface) and names neither device:
-//! every protocol detail (ports, codecs, units, counts per unit, pose mapping, the feedback
-//! period) lives in the link's implementation. The robot link also chooses the loop's
-//! [`Pacing`]: the PC's monotonic clock at the scenario's period ([`Pacing::Clock`], ABB EGM),
-//! or one tick per robot packet ([`Pacing::Robot`], e.g. KUKA RSI, whose 4 ms packet must be
-//! answered).
-//!
-//! The emulated facility ([`crate::emulator`]) is the devices' side of the same protocols: a
-//! [`SensorEndpoint`] serves the sensor's protocol given the physical wrench, a
-//! [`RobotEndpoint`] takes the commands and sends the robot's feedback; it names no device
-//! either.
-//!
-//! Implementations, one file per protocol with both sides: `rdt.rs` ([`rdt::RdtSensor`] and the
-//! emulated [`rdt::RdtEndpoint`], ATI Net F/T, RDT over UDP), `egm.rs` ([`egm::EgmRobot`]
-//! and the emulated [`egm::EgmEndpoint`], ABB EGM, protobuf over UDP), `rsi.rs`
-//! ([`rsi::RsiRobot`] and the emulated [`rsi::RsiEndpoint`], KUKA RSI, XML over UDP, robot
-//! paced) and `sri.rs` ([`sri::SriSensor`] and the emulated [`sri::SriEndpoint`], SRI M812x,
-//! AT commands and binary frames over TCP). A new protocol is one
-//! file implementing the link and the endpoint, one variant in [`SensorOptions`] /
-//! [`RobotOptions`] and in [`EmulatedSensorOptions`] / [`EmulatedRobotOptions`], one arm in
-//! [`open_sensor`] / [`open_robot`] and [`open_sensor_endpoint`] / [`open_robot_endpoint`], and
-//! its kind in [`SENSOR_KINDS`] / [`ROBOT_KINDS`].
-//!
-//! Every datagram a link or an endpoint receives is counted in its [`LinkStats`], and so is
-//! every socket error, on receive and on send ([`LinkStats::io_errors`]): nothing is dropped
-//! uncounted. Polling, serving, sending and holding never allocate.
+//! The generic side of the devices: what the loop and the emulator see of a device (the
+//! [`SensorLink`] and [`RobotLink`] traits of the PC's side, the [`SensorEndpoint`] and
+//! [`RobotEndpoint`] traits of the emulated device's side, their [`LinkStats`], the
+//! [`Wrench`], the loop's [`Pacing`]), what they are opened with ([`LinkContext`],
+//! [`EndpointContext`]), which sender is the robot ([`RobotIdentity`]), and what a protocol
+//! implements to be registered ([`SensorProtocol`], [`RobotProtocol`]). Nothing here names a
+//! device.
 
-pub mod egm;
-pub mod rdt;
-pub mod rsi;
-pub mod sri;
-
-use std::io::ErrorKind;
-use std::net::{IpAddr, SocketAddr, ToSocketAddrs, UdpSocket};
+use std::net::{IpAddr, SocketAddr};
 
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
 
+use super::transport::resolve;
 use crate::clock::now_ns;
-use crate::error::{Result, RtError};
+use crate::error::Result;
 use crate::feedback::FeedbackEstimator;
-use crate::rdt::{SequenceTracker, SequenceVerdict};
-
-/// Sensor protocols, as `[sensor] kind` / `--sensor-protocol` accept them, in the runtime's
-/// options and the emulator's alike (the one list; a test checks both option types take
-/// exactly these kinds).
-pub const SENSOR_KINDS: &[&str] = &["rdt", "sri"];
-/// Robot protocols, as `[robot] kind` / `--robot-protocol` accept them, in the runtime's
-/// options and the emulator's alike (the one list).
-pub const ROBOT_KINDS: &[&str] = &["egm", "rsi"];
-
-/// The default options of every protocol, keyed by kind, for the runtime's links and the
-/// emulator's devices: `{"runtime": {"sensor": {"rdt": {...}, "sri": {...}}, "robot": {...}},
-/// "facility": {...}, "robot_paced": [KIND, ...]}` (each kind's options as `{"kind": KIND}` deserializes them: the one
-/// place the defaults live).
-pub fn protocol_defaults() -> serde_json::Value {
-    fn each<T: Serialize + serde::de::DeserializeOwned>(
-        kinds: &[&str],
-    ) -> serde_json::Map<String, serde_json::Value> {
-        kinds
-            .iter()
-            .filter_map(|kind| {
-                let options: T =
-                    serde_json::from_value(serde_json::json!({ "kind": kind })).ok()?;
-                Some((kind.to_string(), serde_json::to_value(options).ok()?))
-            })
-            .collect()
-    }
-    let paced: Vec<&str> = ROBOT_KINDS
-        .iter()
-        .copied()
-        .filter(|kind| {
-            serde_json::from_value::<RobotOptions>(serde_json::json!({ "kind": kind }))
-                .is_ok_and(|o| o.pacing() == Pacing::Robot)
-        })
-        .collect();
-    serde_json::json!({
-        "robot_paced": paced,
-        "runtime": {
-            "sensor": each::<SensorOptions>(SENSOR_KINDS),
-            "robot": each::<RobotOptions>(ROBOT_KINDS),
-        },
-        "facility": {
-            "sensor": each::<EmulatedSensorOptions>(SENSOR_KINDS),
-            "robot": each::<EmulatedRobotOptions>(ROBOT_KINDS),
-        },
-    })
-}
 
 /// Packet counters of one link.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
@@ -259,50 +184,6 @@ pub trait RobotLink: Send {
     }
 }
 
-/// Options of the sensor link, one variant per protocol (`kind`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(tag = "kind", rename_all = "kebab-case")]
-pub enum SensorOptions {
-    /// ATI Net F/T over RDT.
-    Rdt(rdt::RdtOptions),
-    /// SRI M812x interface box over TCP.
-    Sri(sri::SriOptions),
-}
-
-impl Default for SensorOptions {
-    fn default() -> Self {
-        SensorOptions::Rdt(rdt::RdtOptions::default())
-    }
-}
-
-/// Options of the robot link, one variant per protocol (`kind`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(tag = "kind", rename_all = "kebab-case")]
-pub enum RobotOptions {
-    /// ABB Externally Guided Motion.
-    Egm(egm::EgmOptions),
-    /// KUKA RobotSensorInterface over Ethernet.
-    Rsi(rsi::RsiOptions),
-}
-
-impl Default for RobotOptions {
-    fn default() -> Self {
-        RobotOptions::Egm(egm::EgmOptions::default())
-    }
-}
-
-impl RobotOptions {
-    /// What clocks the loop with this robot, known before it is opened (the opened link's
-    /// [`RobotLink::pacing`] says the same; with [`Pacing::Robot`] the scenario's period
-    /// must equal the robot's cycle).
-    pub fn pacing(&self) -> Pacing {
-        match self {
-            RobotOptions::Egm(_) => Pacing::Clock,
-            RobotOptions::Rsi(_) => Pacing::Robot,
-        }
-    }
-}
-
 /// What a link needs to know of the run when it is opened.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LinkContext {
@@ -431,62 +312,6 @@ impl RobotIdentity {
     }
 }
 
-impl SensorOptions {
-    /// Checks the options that need no socket (the host's form), so that bad input is
-    /// refused before any socket is opened.
-    pub fn validate(&self) -> Result<()> {
-        match self {
-            SensorOptions::Rdt(o) => check_host("sensor host", &o.host),
-            SensorOptions::Sri(o) => check_host("sensor host", &o.host),
-        }
-    }
-}
-
-impl RobotOptions {
-    /// Checks the options that need no socket (hosts, pose mapping, the protocol's own
-    /// values), so that bad input is refused before any socket is opened.
-    pub fn validate(&self) -> Result<()> {
-        match self {
-            RobotOptions::Egm(o) => egm::EgmRobot::validate(o),
-            RobotOptions::Rsi(o) => rsi::RsiRobot::validate(o),
-        }
-    }
-}
-
-/// The form of a host option, checked without a lookup: an IP address or a host name (at most
-/// 253 characters without spaces or control characters; one of digits and dots only must be
-/// an IPv4 address, so `999.1.1.1` is refused). `key` names the option for the message.
-pub(crate) fn check_host(key: &str, host: &str) -> Result<()> {
-    let numeric = host.chars().all(|c| c.is_ascii_digit() || c == '.');
-    let bad = host.is_empty()
-        || host.len() > 253
-        || host.chars().any(|c| c.is_whitespace() || c.is_control())
-        || (numeric && host.parse::<std::net::Ipv4Addr>().is_err());
-    if bad {
-        return Err(RtError::option(
-            key,
-            format!("{host:?} is not an IP address (IPv4: four numbers 0-255) or a host name"),
-        ));
-    }
-    Ok(())
-}
-
-/// Opens the sensor link of `options` (binds, reads what it needs before the loop starts).
-pub fn open_sensor(options: &SensorOptions, context: &LinkContext) -> Result<Box<dyn SensorLink>> {
-    Ok(match options {
-        SensorOptions::Rdt(o) => Box::new(rdt::RdtSensor::open(o, context)?),
-        SensorOptions::Sri(o) => Box::new(sri::SriSensor::open(o, context)?),
-    })
-}
-
-/// Opens the robot link of `options` (binds its endpoint).
-pub fn open_robot(options: &RobotOptions, context: &LinkContext) -> Result<Box<dyn RobotLink>> {
-    Ok(match options {
-        RobotOptions::Egm(o) => Box::new(egm::EgmRobot::open(o, context)?),
-        RobotOptions::Rsi(o) => Box::new(rsi::RsiRobot::open(o, context)?),
-    })
-}
-
 /// An emulated force/torque sensor: the device's side of a sensor protocol. The emulator
 /// calls [`serve`](SensorEndpoint::serve) then [`sample`](SensorEndpoint::sample) once per
 /// control period, on its real-time thread.
@@ -543,40 +368,6 @@ pub trait RobotEndpoint: Send {
     fn stats(&self) -> &LinkStats;
 }
 
-/// Options of the emulated sensor, one variant per protocol (`kind`, the same kinds as
-/// [`SensorOptions`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(tag = "kind", rename_all = "kebab-case")]
-pub enum EmulatedSensorOptions {
-    /// ATI Net F/T over RDT, with `/netftapi2.xml` over HTTP.
-    Rdt(rdt::RdtEndpointOptions),
-    /// SRI M812x interface box over TCP.
-    Sri(sri::SriEndpointOptions),
-}
-
-impl Default for EmulatedSensorOptions {
-    fn default() -> Self {
-        EmulatedSensorOptions::Rdt(rdt::RdtEndpointOptions::default())
-    }
-}
-
-/// Options of the emulated robot, one variant per protocol (`kind`, the same kinds as
-/// [`RobotOptions`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(tag = "kind", rename_all = "kebab-case")]
-pub enum EmulatedRobotOptions {
-    /// ABB Externally Guided Motion.
-    Egm(egm::EgmEndpointOptions),
-    /// KUKA RobotSensorInterface over Ethernet.
-    Rsi(rsi::RsiEndpointOptions),
-}
-
-impl Default for EmulatedRobotOptions {
-    fn default() -> Self {
-        EmulatedRobotOptions::Egm(egm::EgmEndpointOptions::default())
-    }
-}
-
 /// What an emulated device needs to know of the run when it is opened.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EndpointContext {
@@ -587,122 +378,70 @@ pub struct EndpointContext {
     pub initial: RelativeMotion,
 }
 
-/// Opens the emulated sensor of `options` (binds its sockets and servers).
-pub fn open_sensor_endpoint(
-    options: &EmulatedSensorOptions,
-    context: &EndpointContext,
-) -> Result<Box<dyn SensorEndpoint>> {
-    Ok(match options {
-        EmulatedSensorOptions::Rdt(o) => Box::new(rdt::RdtEndpoint::open(o, context)?),
-        EmulatedSensorOptions::Sri(o) => Box::new(sri::SriEndpoint::open(o, context)?),
-    })
-}
+/// A sensor protocol as the registry ([`crate::devices`]) sees it: its link's options, parsed
+/// once into what opens the link, and the same for its emulated endpoint. Implemented by a
+/// unit type in the device's folder; registered by one line of `registry!`.
+pub trait SensorProtocol {
+    /// The link's options (`[sensor]` of the runtime's options, without `kind`).
+    type Options;
+    /// The link's options once parsed: what opens the link.
+    type Config;
+    /// The emulated sensor's options (`[sensor]` of the emulator's options).
+    type EndpointOptions;
+    /// The emulated sensor's options once parsed.
+    type EndpointConfig;
 
-/// Opens the emulated robot of `options` (binds its socket, resolves where feedback goes).
-pub fn open_robot_endpoint(
-    options: &EmulatedRobotOptions,
-    context: &EndpointContext,
-) -> Result<Box<dyn RobotEndpoint>> {
-    Ok(match options {
-        EmulatedRobotOptions::Egm(o) => Box::new(egm::EgmEndpoint::open(o, context)?),
-        EmulatedRobotOptions::Rsi(o) => Box::new(rsi::RsiEndpoint::open(o, context)?),
-    })
-}
+    /// Checks and types the link's options, once, before anything is opened.
+    fn parse(options: &Self::Options) -> Result<Self::Config>;
 
-/// Resolves `host:port` to one socket address; `key` names the option for the message.
-pub(crate) fn resolve(key: &str, host: &str, port: u16) -> Result<SocketAddr> {
-    (host, port)
-        .to_socket_addrs()
-        .map_err(|e| RtError::option(key, format!("cannot resolve {host:?}: {e}")))?
-        .next()
-        .ok_or_else(|| RtError::option(key, format!("{host:?} has no address")))
-}
-
-/// Binds a non-blocking UDP socket; `what` names it for the message (an error keeps its
-/// kind and errno, e.g. `EADDRINUSE`).
-pub(crate) fn bind_udp(what: &str, addr: SocketAddr) -> Result<UdpSocket> {
-    let socket = UdpSocket::bind(addr)
-        .map_err(|e| RtError::io(format!("{what}: cannot bind UDP {addr}"), &e))?;
-    socket
-        .set_nonblocking(true)
-        .map_err(|e| RtError::io(what, &e))?;
-    Ok(socket)
-}
-
-/// The local address of a bound socket; `what` names it for the message.
-pub(crate) fn local_addr(what: &str, socket: &UdpSocket) -> Result<SocketAddr> {
-    socket.local_addr().map_err(|e| RtError::io(what, &e))
-}
-
-/// Checks a packet's sequence number against `tracker`: a stale packet (a duplicate or
-/// reordered one) is counted and to be dropped (false); a gap counts the packets it says
-/// were lost. The one sequence rule of every link and endpoint.
-pub fn sequence_counted(tracker: &mut SequenceTracker, seq: u32, stats: &mut LinkStats) -> bool {
-    match tracker.check(seq) {
-        SequenceVerdict::Stale => {
-            stats.stale += 1;
-            false
-        }
-        SequenceVerdict::Gap(n) => {
-            stats.lost += n as u64;
-            true
-        }
-        SequenceVerdict::First | SequenceVerdict::Next => true,
+    /// The checks across the options and the scenario's control period `period` (s), done once
+    /// before anything is opened; none by default.
+    fn check_period(_config: &Self::Config, _period: f64) -> Result<()> {
+        Ok(())
     }
+
+    /// Opens the link (binds, connects, reads what it needs before the loop starts).
+    fn open(config: &Self::Config, context: &LinkContext) -> Result<Box<dyn SensorLink>>;
+
+    /// Checks and types the emulated sensor's options, once.
+    fn parse_endpoint(options: &Self::EndpointOptions) -> Result<Self::EndpointConfig>;
+
+    /// Opens the emulated sensor (binds its sockets and servers).
+    fn open_endpoint(
+        config: &Self::EndpointConfig,
+        context: &EndpointContext,
+    ) -> Result<Box<dyn SensorEndpoint>>;
 }
 
-/// Receives one datagram from a non-blocking socket: `Some((len, from))`, or None when
-/// nothing is waiting. A socket error is counted in `stats.io_errors` and the read goes on
-/// (at most 64 errors per call, so a persistently failing socket cannot spin the tick).
-pub fn recv_counted(
-    socket: &UdpSocket,
-    buf: &mut [u8],
-    stats: &mut LinkStats,
-) -> Option<(usize, SocketAddr)> {
-    for _ in 0..64 {
-        match socket.recv_from(buf) {
-            Ok(x) => return Some(x),
-            Err(e) if e.kind() == ErrorKind::WouldBlock => return None,
-            Err(e) if e.kind() == ErrorKind::Interrupted => continue,
-            Err(_) => stats.io_errors += 1, // e.g. ICMP port unreachable surfaced on the socket
-        }
-    }
-    None
-}
+/// A robot protocol as the registry ([`crate::devices`]) sees it: its link's options, parsed
+/// once into what opens the link, what clocks the loop with it, and the same for its emulated
+/// endpoint. Implemented by a unit type in the device's folder; registered by one line of
+/// `registry!`.
+pub trait RobotProtocol {
+    /// What clocks the loop with this robot, known before it is opened (the opened link's
+    /// [`RobotLink::pacing`] says the same).
+    const PACING: Pacing;
+    /// The link's options (`[robot]` of the runtime's options, without `kind`).
+    type Options;
+    /// The link's options once parsed: what opens the link.
+    type Config;
+    /// The emulated robot's options (`[robot]` of the emulator's options).
+    type EndpointOptions;
+    /// The emulated robot's options once parsed.
+    type EndpointConfig;
 
-/// Blocks until `socket` is readable or the monotonic time passes `deadline_ns` (`poll(2)`,
-/// no allocation); returns whether it is readable. For robot-paced links.
-pub fn wait_readable(socket: &UdpSocket, deadline_ns: u64) -> bool {
-    #[cfg(unix)]
-    {
-        use std::os::fd::AsRawFd;
-        loop {
-            let now = now_ns();
-            if now >= deadline_ns {
-                return false;
-            }
-            let timeout_ms = (deadline_ns - now).div_ceil(1_000_000).min(i32::MAX as u64) as i32;
-            let mut fd = libc::pollfd {
-                fd: socket.as_raw_fd(),
-                events: libc::POLLIN,
-                revents: 0,
-            };
-            // SAFETY: one valid pollfd for the duration of the call.
-            let r = unsafe { libc::poll(&mut fd, 1, timeout_ms) };
-            if r > 0 {
-                return true;
-            }
-            if r < 0 && std::io::Error::last_os_error().kind() != ErrorKind::Interrupted {
-                return false;
-            }
-        }
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = socket;
-        while now_ns() < deadline_ns {
-            std::thread::sleep(std::time::Duration::from_micros(100));
-        }
-        true
-    }
+    /// Checks and types the link's options, once, before anything is opened.
+    fn parse(options: &Self::Options) -> Result<Self::Config>;
+
+    /// Opens the link (binds its socket, or connects to the robot).
+    fn open(config: &Self::Config, context: &LinkContext) -> Result<Box<dyn RobotLink>>;
+
+    /// Checks and types the emulated robot's options, once.
+    fn parse_endpoint(options: &Self::EndpointOptions) -> Result<Self::EndpointConfig>;
+
+    /// Opens the emulated robot (binds its socket, resolves where feedback goes).
+    fn open_endpoint(
+        config: &Self::EndpointConfig,
+        context: &EndpointContext,
+    ) -> Result<Box<dyn RobotEndpoint>>;
 }
