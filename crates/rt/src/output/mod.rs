@@ -18,15 +18,22 @@
 //! loop's summary). A sink may allocate, block briefly and fail: a failure is counted in its
 //! own report, never stops the run (the loop does not wait for the writer).
 //!
-//! **Adding an output** (a live view, say): write `output/<name>.rs` with its options, a type
-//! implementing [`Sink`] and an `open` function ([`OpenSink`]), and add its line to
-//! [`OUTPUTS`]. Its options key is read from the run's options (`RuntimeOptions` has the
-//! typed field that the CLI and `metrics.json` see); its report lands in
-//! `metrics.json` `realtime.<key>` (a real-time run) or in the simulation's result under
-//! `<key>` (`hilcontact._core.simulate`).
+//! **Adding an output** (a live view, say):
+//! 1. write `output/<name>.rs`: its options (serde, with a `JsonSchema`), a type implementing
+//!    [`Sink`], and an `open` function ([`OpenSink`]) that parses its options from the JSON
+//!    value it is given and creates the sink (binds its socket, creates its file);
+//! 2. add its line to the `outputs!` list here (`<name>;`): it declares the module and
+//!    registers it in [`OUTPUTS`] under the key `<name>`.
+//!
+//! Nothing else changes for a simulation (`hilcontact._core.simulate(scenario, outputs)` and
+//! `hilcontact.simulate(..., outputs={"<name>": {...}})` take any registered key). A real-time
+//! run's options are typed and refuse unknown keys, so it also needs its options as a field
+//! `<name>: Option<...>` of `RuntimeOptions` (`crate::options`: one field, from which the
+//! schema and the CLI's flags follow). The loop, the writer thread, the bindings and run.py
+//! are not edited. Its report is `metrics.json` `realtime.<key>` (a real-time run) or the
+//! simulation's result under `<key>`.
 
 pub mod events;
-pub mod mcap;
 pub mod run_folder;
 
 use nalgebra::{UnitQuaternion, Vector3};
@@ -57,12 +64,23 @@ pub struct Output {
     pub open: OpenSink,
 }
 
-/// Every output a run can have besides its run folder, in the order they are fed and
-/// finished: the one list.
-pub const OUTPUTS: &[Output] = &[Output {
-    key: "mcap",
-    open: mcap::open,
-}];
+/// Declares each output's module and lists it in [`OUTPUTS`], its key the module's name.
+macro_rules! outputs {
+    ($( $module:ident; )+) => {
+        $( pub mod $module; )+
+
+        /// Every output a run can have besides its run folder, in the order they are fed and
+        /// finished: the one list.
+        pub const OUTPUTS: &[Output] = &[
+            $( Output { key: stringify!($module), open: $module::open }, )+
+        ];
+    };
+}
+
+outputs! {
+    // an MCAP recording (ROS 2 messages, crash-safe chunks) for robotics viewers
+    mcap;
+}
 
 /// A destination of a run's samples and events. Fed by one thread (a real-time run's writer
 /// thread), in time order; every method is infallible (a sink counts its own failures and
