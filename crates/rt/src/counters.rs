@@ -18,36 +18,38 @@ const LINK_COUNTERS: usize = 11;
 #[derive(Debug, Default)]
 pub struct SharedLinkStats([AtomicU64; LINK_COUNTERS]);
 
-/// The counters of `s` in the mirror's order (every field: adding one to [`LinkStats`] fails
-/// to compile here until the mirror has it too).
-fn to_array(s: &LinkStats) -> [u64; LINK_COUNTERS] {
-    let LinkStats {
-        received,
-        accepted,
-        malformed,
-        invalid,
-        foreign,
-        stale,
-        lost,
-        late,
-        sent,
-        send_errors,
-        io_errors,
-    } = *s;
-    [
-        received,
-        accepted,
-        malformed,
-        invalid,
-        foreign,
-        stale,
-        lost,
-        late,
-        sent,
-        send_errors,
-        io_errors,
-    ]
+/// Writes the conversions between a [`LinkStats`] and its counters in the mirror's order from
+/// one list of its fields (every field: adding one to [`LinkStats`] fails to compile here until
+/// the list has it too).
+macro_rules! mirror_order {
+    ($($field:ident),+ $(,)?) => {
+        /// The counters of `s`, in the mirror's order.
+        fn to_array(s: &LinkStats) -> [u64; LINK_COUNTERS] {
+            let LinkStats { $($field),+ } = *s;
+            [$($field),+]
+        }
+
+        /// The [`LinkStats`] of counters in the mirror's order.
+        fn from_array(v: [u64; LINK_COUNTERS]) -> LinkStats {
+            let [$($field),+] = v;
+            LinkStats { $($field),+ }
+        }
+    };
 }
+
+mirror_order!(
+    received,
+    accepted,
+    malformed,
+    invalid,
+    foreign,
+    stale,
+    lost,
+    late,
+    sent,
+    send_errors,
+    io_errors,
+);
 
 impl SharedLinkStats {
     /// Stores every counter of `s` (never allocates).
@@ -59,20 +61,7 @@ impl SharedLinkStats {
 
     /// The counters last stored.
     pub fn load(&self) -> LinkStats {
-        let v = |i: usize| self.0[i].load(Ordering::Relaxed);
-        LinkStats {
-            received: v(0),
-            accepted: v(1),
-            malformed: v(2),
-            invalid: v(3),
-            foreign: v(4),
-            stale: v(5),
-            lost: v(6),
-            late: v(7),
-            sent: v(8),
-            send_errors: v(9),
-            io_errors: v(10),
-        }
+        from_array(std::array::from_fn(|i| self.0[i].load(Ordering::Relaxed)))
     }
 }
 
