@@ -3,7 +3,8 @@
 //! [`RobotEndpoint`] traits of the emulated device's side, their [`LinkStats`], the
 //! [`Wrench`], the loop's [`Pacing`]), what they are opened with ([`LinkContext`],
 //! [`EndpointContext`]), which sender is the robot ([`RobotIdentity`]), and what a protocol
-//! implements to be registered ([`SensorProtocol`], [`RobotProtocol`]). Nothing here names a
+//! implements to be registered ([`SensorDevice`], [`RobotDevice`], [`EmulatedSensor`],
+//! [`EmulatedRobot`]). Nothing here names a
 //! device.
 
 use std::net::{IpAddr, SocketAddr};
@@ -140,7 +141,7 @@ pub trait RobotLink: Send {
 
     /// Waits until at least one valid feedback arrived or the monotonic time passes
     /// `deadline_ns`; returns how many were accepted (0 = timed out). The default polls every
-    /// 100 µs; a robot-paced link should block on its socket ([`wait_readable`]).
+    /// 100 µs; a robot-paced link should block on its socket ([`wait_readable`](super::wait_readable)).
     fn wait(&mut self, deadline_ns: u64, estimator: &mut FeedbackEstimator) -> usize {
         loop {
             let n = self.poll(now_ns(), estimator);
@@ -378,20 +379,15 @@ pub struct EndpointContext {
     pub initial: RelativeMotion,
 }
 
-/// A sensor protocol as the registry ([`crate::devices`]) sees it: its link's options, parsed
-/// once into what opens the link, and the same for its emulated endpoint. Implemented by a
-/// unit type in the device's folder; registered by one line of `registry!`.
-pub trait SensorProtocol {
-    /// The link's options (`[sensor]` of the runtime's options, without `kind`).
+/// A sensor link that the registry ([`crate::devices`]) opens: its options (`[sensor]` of
+/// the runtime's options, without `kind`), parsed once into what opens it.
+pub trait SensorDevice: SensorLink + Sized + 'static {
+    /// The link's options.
     type Options;
     /// The link's options once parsed: what opens the link.
     type Config;
-    /// The emulated sensor's options (`[sensor]` of the emulator's options).
-    type EndpointOptions;
-    /// The emulated sensor's options once parsed.
-    type EndpointConfig;
 
-    /// Checks and types the link's options, once, before anything is opened.
+    /// Checks and types the options, once, before anything is opened.
     fn parse(options: &Self::Options) -> Result<Self::Config>;
 
     /// The checks across the options and the scenario's control period `period` (s), done once
@@ -400,48 +396,56 @@ pub trait SensorProtocol {
         Ok(())
     }
 
-    /// Opens the link (binds, connects, reads what it needs before the loop starts).
-    fn open(config: &Self::Config, context: &LinkContext) -> Result<Box<dyn SensorLink>>;
-
-    /// Checks and types the emulated sensor's options, once.
-    fn parse_endpoint(options: &Self::EndpointOptions) -> Result<Self::EndpointConfig>;
-
-    /// Opens the emulated sensor (binds its sockets and servers).
-    fn open_endpoint(
-        config: &Self::EndpointConfig,
-        context: &EndpointContext,
-    ) -> Result<Box<dyn SensorEndpoint>>;
+    /// Opens the link (binds or connects, reads what it needs before the loop starts); checks
+    /// nothing again.
+    fn open_parsed(config: &Self::Config, context: &LinkContext) -> Result<Self>;
 }
 
-/// A robot protocol as the registry ([`crate::devices`]) sees it: its link's options, parsed
-/// once into what opens the link, what clocks the loop with it, and the same for its emulated
-/// endpoint. Implemented by a unit type in the device's folder; registered by one line of
-/// `registry!`.
-pub trait RobotProtocol {
+/// A robot link that the registry ([`crate::devices`]) opens: its options (`[robot]` of the
+/// runtime's options, without `kind`), parsed once into what opens it, and what clocks the
+/// loop with it.
+pub trait RobotDevice: RobotLink + Sized + 'static {
     /// What clocks the loop with this robot, known before it is opened (the opened link's
     /// [`RobotLink::pacing`] says the same).
     const PACING: Pacing;
-    /// The link's options (`[robot]` of the runtime's options, without `kind`).
+    /// The link's options.
     type Options;
     /// The link's options once parsed: what opens the link.
     type Config;
-    /// The emulated robot's options (`[robot]` of the emulator's options).
-    type EndpointOptions;
-    /// The emulated robot's options once parsed.
-    type EndpointConfig;
 
-    /// Checks and types the link's options, once, before anything is opened.
+    /// Checks and types the options, once, before anything is opened.
     fn parse(options: &Self::Options) -> Result<Self::Config>;
 
-    /// Opens the link (binds its socket, or connects to the robot).
-    fn open(config: &Self::Config, context: &LinkContext) -> Result<Box<dyn RobotLink>>;
+    /// Opens the link (binds its socket, or connects to the robot); checks nothing again.
+    fn open_parsed(config: &Self::Config, context: &LinkContext) -> Result<Self>;
+}
 
-    /// Checks and types the emulated robot's options, once.
-    fn parse_endpoint(options: &Self::EndpointOptions) -> Result<Self::EndpointConfig>;
+/// An emulated sensor that the registry ([`crate::devices`]) opens: its options (`[sensor]`
+/// of the emulator's options, without `kind`), parsed once into what opens it.
+pub trait EmulatedSensor: SensorEndpoint + Sized + 'static {
+    /// The emulated sensor's options.
+    type Options;
+    /// The options once parsed: what opens the endpoint.
+    type Config;
 
-    /// Opens the emulated robot (binds its socket, resolves where feedback goes).
-    fn open_endpoint(
-        config: &Self::EndpointConfig,
-        context: &EndpointContext,
-    ) -> Result<Box<dyn RobotEndpoint>>;
+    /// Checks and types the options, once, before anything is opened.
+    fn parse(options: &Self::Options) -> Result<Self::Config>;
+
+    /// Opens the emulated sensor (binds its sockets and servers).
+    fn open_parsed(config: &Self::Config, context: &EndpointContext) -> Result<Self>;
+}
+
+/// An emulated robot that the registry ([`crate::devices`]) opens: its options (`[robot]` of
+/// the emulator's options, without `kind`), parsed once into what opens it.
+pub trait EmulatedRobot: RobotEndpoint + Sized + 'static {
+    /// The emulated robot's options.
+    type Options;
+    /// The options once parsed: what opens the endpoint.
+    type Config;
+
+    /// Checks and types the options, once, before anything is opened.
+    fn parse(options: &Self::Options) -> Result<Self::Config>;
+
+    /// Opens the emulated robot (binds its socket, resolves where feedback goes, or listens).
+    fn open_parsed(config: &Self::Config, context: &EndpointContext) -> Result<Self>;
 }

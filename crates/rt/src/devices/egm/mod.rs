@@ -31,8 +31,9 @@ use self::codec::{
 };
 use super::transport::SequenceTracker;
 use super::{
-    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EndpointContext,
-    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink, RobotProtocol,
+    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EmulatedRobot,
+    EndpointContext, LinkContext, LinkStats, Pacing, RobotDevice, RobotEndpoint, RobotIdentity,
+    RobotLink,
 };
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
@@ -82,7 +83,7 @@ pub struct EgmRobot {
     buf: [u8; 2048],
 }
 
-/// An EGM link's options once parsed ([`EgmOptions::parse`]): the hosts' form checked, the
+/// An EGM link's options once parsed ([`RobotDevice::parse`] of [`EgmRobot`]): the hosts' form checked, the
 /// pose mapping built.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EgmConfig {
@@ -90,29 +91,33 @@ pub struct EgmConfig {
     mapping: PoseMapping,
 }
 
-impl EgmOptions {
-    /// Checks the hosts' form and builds the pose mapping, once, without opening anything.
-    pub fn parse(&self) -> Result<EgmConfig> {
-        check_host("egm_bind_host", &self.bind_host)?;
-        if let Some(host) = &self.robot_host {
-            check_host("robot_host", host)?;
-        }
-        Ok(EgmConfig {
-            options: self.clone(),
-            mapping: PoseMapping::new(self.offset_mm, self.rotation)?,
-        })
+impl EgmRobot {
+    /// Parses the options ([`RobotDevice::parse`] of [`EgmRobot`]) and binds the EGM endpoint
+    /// ([`EgmRobot::open_parsed`]).
+    pub fn open(o: &EgmOptions, context: &LinkContext) -> Result<Self> {
+        Self::open_parsed(&Self::parse(o)?, context)
     }
 }
 
-impl EgmRobot {
-    /// Parses the options ([`EgmOptions::parse`]) and binds the EGM endpoint
-    /// ([`EgmRobot::open_parsed`]).
-    pub fn open(o: &EgmOptions, context: &LinkContext) -> Result<Self> {
-        Self::open_parsed(&o.parse()?, context)
+impl RobotDevice for EgmRobot {
+    const PACING: Pacing = Pacing::Clock;
+    type Options = EgmOptions;
+    type Config = EgmConfig;
+
+    /// Checks the hosts' form and builds the pose mapping, once, without opening anything.
+    fn parse(options: &EgmOptions) -> Result<EgmConfig> {
+        check_host("egm_bind_host", &options.bind_host)?;
+        if let Some(host) = &options.robot_host {
+            check_host("robot_host", host)?;
+        }
+        Ok(EgmConfig {
+            options: options.clone(),
+            mapping: PoseMapping::new(options.offset_mm, options.rotation)?,
+        })
     }
 
     /// Binds the EGM endpoint.
-    pub fn open_parsed(c: &EgmConfig, context: &LinkContext) -> Result<Self> {
+    fn open_parsed(c: &EgmConfig, context: &LinkContext) -> Result<Self> {
         let (o, mapping) = (&c.options, c.mapping);
         let socket = bind_udp(
             "EGM endpoint",
@@ -306,7 +311,7 @@ pub struct EgmEndpoint {
     buf: [u8; 2048],
 }
 
-/// The emulated EGM robot's options once parsed ([`EgmEndpointOptions::parse`]): a positive
+/// The emulated EGM robot's options once parsed ([`EmulatedRobot::parse`] of [`EgmEndpoint`]): a positive
 /// feedback period, the RobotWare generation's encoder, the pose mapping.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EgmEndpointConfig {
@@ -314,37 +319,40 @@ pub struct EgmEndpointConfig {
     mapping: PoseMapping,
 }
 
-impl EgmEndpointOptions {
-    /// Checks the period and the RobotWare generation and builds the mapping, once.
-    pub fn parse(&self) -> Result<EgmEndpointConfig> {
-        if !(self.period.is_finite() && self.period > 0.0) {
-            return Err(RtError::option(
-                "egm_period",
-                format!("must be a positive number, got {}", self.period),
-            ));
-        }
-        if !matches!(self.robotware, 6 | 7) {
-            return Err(RtError::option(
-                "robotware",
-                format!("must be 6 or 7, got {}", self.robotware),
-            ));
-        }
-        Ok(EgmEndpointConfig {
-            options: self.clone(),
-            mapping: PoseMapping::new(self.offset_mm, self.rotation)?,
-        })
+impl EgmEndpoint {
+    /// Parses the options ([`EmulatedRobot::parse`] of [`EgmEndpoint`]) and opens the endpoint
+    /// ([`EgmEndpoint::open_parsed`]).
+    pub fn open(o: &EgmEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open_parsed(&Self::parse(o)?, context)
     }
 }
 
-impl EgmEndpoint {
-    /// Parses the options ([`EgmEndpointOptions::parse`]) and opens the endpoint
-    /// ([`EgmEndpoint::open_parsed`]).
-    pub fn open(o: &EgmEndpointOptions, context: &EndpointContext) -> Result<Self> {
-        Self::open_parsed(&o.parse()?, context)
+impl EmulatedRobot for EgmEndpoint {
+    type Options = EgmEndpointOptions;
+    type Config = EgmEndpointConfig;
+
+    /// Checks the period and the RobotWare generation and builds the mapping, once.
+    fn parse(options: &EgmEndpointOptions) -> Result<EgmEndpointConfig> {
+        if !(options.period.is_finite() && options.period > 0.0) {
+            return Err(RtError::option(
+                "egm_period",
+                format!("must be a positive number, got {}", options.period),
+            ));
+        }
+        if !matches!(options.robotware, 6 | 7) {
+            return Err(RtError::option(
+                "robotware",
+                format!("must be 6 or 7, got {}", options.robotware),
+            ));
+        }
+        Ok(EgmEndpointConfig {
+            options: options.clone(),
+            mapping: PoseMapping::new(options.offset_mm, options.rotation)?,
+        })
     }
 
     /// Resolves the PC's address and binds the robot's socket (on loopback when the PC is).
-    pub fn open_parsed(c: &EgmEndpointConfig, context: &EndpointContext) -> Result<Self> {
+    fn open_parsed(c: &EgmEndpointConfig, context: &EndpointContext) -> Result<Self> {
         let (o, mapping) = (&c.options, c.mapping);
         let encoder = if o.robotware == 6 {
             FeedbackEncoder::robotware6()
@@ -430,35 +438,5 @@ impl RobotEndpoint for EgmEndpoint {
 
     fn stats(&self) -> &LinkStats {
         &self.stats
-    }
-}
-
-/// ABB Externally Guided Motion: the protocol as the registry ([`crate::devices`]) sees it.
-pub struct Egm;
-
-impl RobotProtocol for Egm {
-    const PACING: Pacing = Pacing::Clock;
-    type Options = EgmOptions;
-    type Config = EgmConfig;
-    type EndpointOptions = EgmEndpointOptions;
-    type EndpointConfig = EgmEndpointConfig;
-
-    fn parse(options: &EgmOptions) -> Result<EgmConfig> {
-        options.parse()
-    }
-
-    fn open(config: &EgmConfig, context: &LinkContext) -> Result<Box<dyn RobotLink>> {
-        Ok(Box::new(EgmRobot::open_parsed(config, context)?))
-    }
-
-    fn parse_endpoint(options: &EgmEndpointOptions) -> Result<EgmEndpointConfig> {
-        options.parse()
-    }
-
-    fn open_endpoint(
-        config: &EgmEndpointConfig,
-        context: &EndpointContext,
-    ) -> Result<Box<dyn RobotEndpoint>> {
-        Ok(Box::new(EgmEndpoint::open_parsed(config, context)?))
     }
 }

@@ -23,8 +23,8 @@ use self::netftapi::{
 };
 use super::transport::SequenceTracker;
 use super::{
-    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EndpointContext,
-    LinkContext, LinkStats, SensorEndpoint, SensorLink, SensorProtocol, Wrench,
+    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EmulatedSensor,
+    EndpointContext, LinkContext, LinkStats, SensorDevice, SensorEndpoint, SensorLink, Wrench,
 };
 use crate::error::{Result, RtError};
 
@@ -78,7 +78,7 @@ pub struct RdtSensor {
     buf: [u8; 2048],
 }
 
-/// An RDT link's options once parsed ([`RdtOptions::parse`]): the host's form checked, the
+/// An RDT link's options once parsed ([`SensorDevice::parse`] of [`RdtSensor`]): the host's form checked, the
 /// counts per unit given (both positive) or to be read from `/netftapi2.xml`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RdtConfig {
@@ -87,11 +87,43 @@ pub struct RdtConfig {
     counts: Option<CountsPerUnit>,
 }
 
-impl RdtOptions {
+impl RdtSensor {
+    /// Parses the options ([`SensorDevice::parse`] of [`RdtSensor`]) and opens the link ([`RdtSensor::open_parsed`]).
+    pub fn open(o: &RdtOptions, context: &LinkContext) -> Result<Self> {
+        Self::open_parsed(&Self::parse(o)?, context)
+    }
+
+    /// The counts per N and per N·m in use.
+    pub fn counts(&self) -> CountsPerUnit {
+        self.counts
+    }
+
+    /// What the sensor's `/netftapi2.xml` said: its configured force and torque units (the
+    /// page's counts are per these) and whether they were assumed (N, N·m: the page gives
+    /// none). None when the counts were given in the options (per N and N·m).
+    pub fn calibration(&self) -> Option<SensorCalibration> {
+        self.calibration
+    }
+
+    fn request(&mut self, command: RdtCommand) {
+        let bytes = RdtRequest {
+            command,
+            sample_count: 0,
+        }
+        .encode();
+        let sent = self.socket.send_to(&bytes, self.peer);
+        self.stats.count_send(sent);
+    }
+}
+
+impl SensorDevice for RdtSensor {
+    type Options = RdtOptions;
+    type Config = RdtConfig;
+
     /// Checks the host's form and the counts per unit (both positive, or neither), once.
-    pub fn parse(&self) -> Result<RdtConfig> {
-        check_host("sensor host", &self.host)?;
-        let counts = match (self.counts_per_force, self.counts_per_torque) {
+    fn parse(options: &RdtOptions) -> Result<RdtConfig> {
+        check_host("sensor host", &options.host)?;
+        let counts = match (options.counts_per_force, options.counts_per_torque) {
             (Some(force), Some(torque)) => {
                 if !(force.is_finite() && force > 0.0 && torque.is_finite() && torque > 0.0) {
                     return Err(RtError::option(
@@ -110,21 +142,14 @@ impl RdtOptions {
             }
         };
         Ok(RdtConfig {
-            options: self.clone(),
+            options: options.clone(),
             counts,
         })
-    }
-}
-
-impl RdtSensor {
-    /// Parses the options ([`RdtOptions::parse`]) and opens the link ([`RdtSensor::open_parsed`]).
-    pub fn open(o: &RdtOptions, context: &LinkContext) -> Result<Self> {
-        Self::open_parsed(&o.parse()?, context)
     }
 
     /// Reads the counts per unit and the configured units (HTTP, unless both counts are given,
     /// then per N and N·m) and binds the client socket.
-    pub fn open_parsed(c: &RdtConfig, context: &LinkContext) -> Result<Self> {
+    fn open_parsed(c: &RdtConfig, context: &LinkContext) -> Result<Self> {
         let o = &c.options;
         let (counts, calibration) = match c.counts {
             Some(counts) => (counts, None),
@@ -150,28 +175,6 @@ impl RdtSensor {
             bias_pending: o.bias,
             buf: [0u8; 2048],
         })
-    }
-
-    /// The counts per N and per N·m in use.
-    pub fn counts(&self) -> CountsPerUnit {
-        self.counts
-    }
-
-    /// What the sensor's `/netftapi2.xml` said: its configured force and torque units (the
-    /// page's counts are per these) and whether they were assumed (N, N·m: the page gives
-    /// none). None when the counts were given in the options (per N and N·m).
-    pub fn calibration(&self) -> Option<SensorCalibration> {
-        self.calibration
-    }
-
-    fn request(&mut self, command: RdtCommand) {
-        let bytes = RdtRequest {
-            command,
-            sample_count: 0,
-        }
-        .encode();
-        let sent = self.socket.send_to(&bytes, self.peer);
-        self.stats.count_send(sent);
     }
 }
 
@@ -329,7 +332,7 @@ pub struct RdtEndpoint {
     buf: [u8; 2048],
 }
 
-/// The emulated RDT sensor's options once parsed ([`RdtEndpointOptions::parse`]): positive
+/// The emulated RDT sensor's options once parsed ([`EmulatedSensor::parse`] of [`RdtEndpoint`]): positive
 /// counts per configured unit, and the units.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RdtEndpointConfig {
@@ -338,10 +341,47 @@ pub struct RdtEndpointConfig {
     torque_unit: TorqueUnit,
 }
 
-impl RdtEndpointOptions {
+impl RdtEndpoint {
+    /// Parses the options ([`EmulatedSensor::parse`] of [`RdtEndpoint`]) and opens the endpoint
+    /// ([`RdtEndpoint::open_parsed`]).
+    pub fn open(o: &RdtEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open_parsed(&Self::parse(o)?, context)
+    }
+
+    fn send_record(&mut self) {
+        let Some(client) = self.client else { return };
+        if self.remaining == Some(0) {
+            self.client = None;
+            return;
+        }
+        let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+        let (reading, bias) = (self.last_reading, self.bias);
+        let (counts, saturated) = self
+            .counts
+            .to_counts(&sub(reading.0, bias.0), &sub(reading.1, bias.1));
+        self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
+        let record = RdtRecord {
+            rdt_sequence: self.rdt_sequence,
+            ft_sequence: self.ft_sequence,
+            // bit 31 (error) and bit 16 (saturation) when a gauge is out of range
+            status: if saturated { 0x8001_0000 } else { 0 },
+            counts,
+        };
+        let sent = self.socket.send_to(&record.encode(), client);
+        self.stats.count_send(sent);
+        if let Some(n) = self.remaining.as_mut() {
+            *n -= 1;
+        }
+    }
+}
+
+impl EmulatedSensor for RdtEndpoint {
+    type Options = RdtEndpointOptions;
+    type Config = RdtEndpointConfig;
+
     /// Checks the counts per unit (positive) and the units (known names), once.
-    pub fn parse(&self) -> Result<RdtEndpointConfig> {
-        let o = self;
+    fn parse(options: &RdtEndpointOptions) -> Result<RdtEndpointConfig> {
+        let o = options;
         for (key, v) in [
             ("counts_per_force", o.counts_per_force),
             ("counts_per_torque", o.counts_per_torque),
@@ -372,22 +412,14 @@ impl RdtEndpointOptions {
             )
         })?;
         Ok(RdtEndpointConfig {
-            options: self.clone(),
+            options: options.clone(),
             force_unit,
             torque_unit,
         })
     }
-}
-
-impl RdtEndpoint {
-    /// Parses the options ([`RdtEndpointOptions::parse`]) and opens the endpoint
-    /// ([`RdtEndpoint::open_parsed`]).
-    pub fn open(o: &RdtEndpointOptions, context: &EndpointContext) -> Result<Self> {
-        Self::open_parsed(&o.parse()?, context)
-    }
 
     /// Binds the RDT socket and starts the HTTP server (unless `http_port` is 0).
-    pub fn open_parsed(c: &RdtEndpointConfig, context: &EndpointContext) -> Result<Self> {
+    fn open_parsed(c: &RdtEndpointConfig, context: &EndpointContext) -> Result<Self> {
         let (o, force_unit, torque_unit) = (&c.options, c.force_unit, c.torque_unit);
         // the page's counts are per configured unit; the records count the wrench in those units
         let per_unit = CountsPerUnit {
@@ -429,32 +461,6 @@ impl RdtEndpoint {
             stats: LinkStats::default(),
             buf: [0u8; 2048],
         })
-    }
-
-    fn send_record(&mut self) {
-        let Some(client) = self.client else { return };
-        if self.remaining == Some(0) {
-            self.client = None;
-            return;
-        }
-        let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-        let (reading, bias) = (self.last_reading, self.bias);
-        let (counts, saturated) = self
-            .counts
-            .to_counts(&sub(reading.0, bias.0), &sub(reading.1, bias.1));
-        self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
-        let record = RdtRecord {
-            rdt_sequence: self.rdt_sequence,
-            ft_sequence: self.ft_sequence,
-            // bit 31 (error) and bit 16 (saturation) when a gauge is out of range
-            status: if saturated { 0x8001_0000 } else { 0 },
-            counts,
-        };
-        let sent = self.socket.send_to(&record.encode(), client);
-        self.stats.count_send(sent);
-        if let Some(n) = self.remaining.as_mut() {
-            *n -= 1;
-        }
     }
 }
 
@@ -509,34 +515,5 @@ impl SensorEndpoint for RdtEndpoint {
 
     fn stats(&self) -> &LinkStats {
         &self.stats
-    }
-}
-
-/// ATI Net F/T over RDT: the protocol as the registry ([`crate::devices`]) sees it.
-pub struct Rdt;
-
-impl SensorProtocol for Rdt {
-    type Options = RdtOptions;
-    type Config = RdtConfig;
-    type EndpointOptions = RdtEndpointOptions;
-    type EndpointConfig = RdtEndpointConfig;
-
-    fn parse(options: &RdtOptions) -> Result<RdtConfig> {
-        options.parse()
-    }
-
-    fn open(config: &RdtConfig, context: &LinkContext) -> Result<Box<dyn SensorLink>> {
-        Ok(Box::new(RdtSensor::open_parsed(config, context)?))
-    }
-
-    fn parse_endpoint(options: &RdtEndpointOptions) -> Result<RdtEndpointConfig> {
-        options.parse()
-    }
-
-    fn open_endpoint(
-        config: &RdtEndpointConfig,
-        context: &EndpointContext,
-    ) -> Result<Box<dyn SensorEndpoint>> {
-        Ok(Box::new(RdtEndpoint::open_parsed(config, context)?))
     }
 }

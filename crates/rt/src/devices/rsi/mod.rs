@@ -44,8 +44,9 @@ use self::codec::{
     RsiError, RsiNames, StateEncoder, RSI_MAX_DATAGRAM, RSI_PERIOD, RSI_PERIODS, RSI_PORT,
 };
 use super::{
-    bind_udp, check_host, local_addr, recv_counted, resolve, wait_readable, EndpointContext,
-    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink, RobotProtocol,
+    bind_udp, check_host, local_addr, recv_counted, resolve, wait_readable, EmulatedRobot,
+    EndpointContext, LinkContext, LinkStats, Pacing, RobotDevice, RobotEndpoint, RobotIdentity,
+    RobotLink,
 };
 use crate::clock::{now_ns, Histogram};
 use crate::error::{Result, RtError};
@@ -204,7 +205,7 @@ pub struct RsiRobot {
     buf: [u8; RSI_MAX_DATAGRAM + 1],
 }
 
-/// An RSI link's options once parsed ([`RsiOptions::parse`]): hosts' form, cycle and deadline
+/// An RSI link's options once parsed ([`RobotDevice::parse`] of [`RsiRobot`]): hosts' form, cycle and deadline
 /// checked, the XML names and the pose mapping built.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RsiConfig {
@@ -213,11 +214,23 @@ pub struct RsiConfig {
     mapping: PoseMapping,
 }
 
-impl RsiOptions {
+impl RsiRobot {
+    /// Parses the options ([`RobotDevice::parse`] of [`RsiRobot`]) and binds the PC's RSI socket
+    /// ([`RsiRobot::open_parsed`]).
+    pub fn open(o: &RsiOptions, context: &LinkContext) -> Result<Self> {
+        Self::open_parsed(&Self::parse(o)?, context)
+    }
+}
+
+impl RobotDevice for RsiRobot {
+    const PACING: Pacing = Pacing::Robot;
+    type Options = RsiOptions;
+    type Config = RsiConfig;
+
     /// Checks the options without opening anything (hosts, cycle, deadline, names, mapping),
     /// once.
-    pub fn parse(&self) -> Result<RsiConfig> {
-        let o = self;
+    fn parse(options: &RsiOptions) -> Result<RsiConfig> {
+        let o = options;
         check_host("rsi bind_host", &o.bind_host)?;
         if let Some(host) = &o.robot_host {
             check_host("robot_host", host)?;
@@ -239,22 +252,14 @@ impl RsiOptions {
             correction: o.correction_element.clone(),
         })?;
         Ok(RsiConfig {
-            options: self.clone(),
+            options: options.clone(),
             names,
             mapping,
         })
     }
-}
-
-impl RsiRobot {
-    /// Parses the options ([`RsiOptions::parse`]) and binds the PC's RSI socket
-    /// ([`RsiRobot::open_parsed`]).
-    pub fn open(o: &RsiOptions, context: &LinkContext) -> Result<Self> {
-        Self::open_parsed(&o.parse()?, context)
-    }
 
     /// Binds the PC's RSI socket.
-    pub fn open_parsed(c: &RsiConfig, context: &LinkContext) -> Result<Self> {
+    fn open_parsed(c: &RsiConfig, context: &LinkContext) -> Result<Self> {
         let (o, names, mapping) = (&c.options, c.names.clone(), c.mapping);
         let socket = bind_udp(
             "RSI endpoint",
@@ -528,7 +533,7 @@ pub struct RsiEndpoint {
     buf: [u8; RSI_MAX_DATAGRAM + 1],
 }
 
-/// The emulated RSI controller's options once parsed ([`RsiEndpointOptions::parse`]): cycle
+/// The emulated RSI controller's options once parsed ([`EmulatedRobot::parse`] of [`RsiEndpoint`]): cycle
 /// and `max_late` checked, the XML names and the pose mapping built.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RsiEndpointConfig {
@@ -537,10 +542,21 @@ pub struct RsiEndpointConfig {
     mapping: PoseMapping,
 }
 
-impl RsiEndpointOptions {
+impl RsiEndpoint {
+    /// Parses the options ([`EmulatedRobot::parse`] of [`RsiEndpoint`]) and opens the controller
+    /// ([`RsiEndpoint::open_parsed`]).
+    pub fn open(o: &RsiEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open_parsed(&Self::parse(o)?, context)
+    }
+}
+
+impl EmulatedRobot for RsiEndpoint {
+    type Options = RsiEndpointOptions;
+    type Config = RsiEndpointConfig;
+
     /// Checks the cycle, `max_late`, the names and the mapping, once.
-    pub fn parse(&self) -> Result<RsiEndpointConfig> {
-        let o = self;
+    fn parse(options: &RsiEndpointOptions) -> Result<RsiEndpointConfig> {
+        let o = options;
         check_period("rsi.period", o.period)?;
         if o.max_late == 0 {
             return Err(RtError::option("rsi.max_late", "must be at least 1"));
@@ -551,23 +567,15 @@ impl RsiEndpointOptions {
             correction: o.correction_element.clone(),
         })?;
         Ok(RsiEndpointConfig {
-            options: self.clone(),
+            options: options.clone(),
             names,
             mapping: PoseMapping::new(o.offset_mm, o.rotation)?,
         })
     }
-}
-
-impl RsiEndpoint {
-    /// Parses the options ([`RsiEndpointOptions::parse`]) and opens the controller
-    /// ([`RsiEndpoint::open_parsed`]).
-    pub fn open(o: &RsiEndpointOptions, context: &EndpointContext) -> Result<Self> {
-        Self::open_parsed(&o.parse()?, context)
-    }
 
     /// Resolves the PC's address and binds the controller's socket (on loopback when the PC
     /// is).
-    pub fn open_parsed(c: &RsiEndpointConfig, context: &EndpointContext) -> Result<Self> {
+    fn open_parsed(c: &RsiEndpointConfig, context: &EndpointContext) -> Result<Self> {
         let (o, names, mapping) = (&c.options, c.names.clone(), c.mapping);
         let peer = resolve("rsi host", &o.host, o.port)?;
         let bind: SocketAddr = match peer.ip() {
@@ -687,36 +695,6 @@ impl RobotEndpoint for RsiEndpoint {
 
     fn stats(&self) -> &LinkStats {
         &self.stats
-    }
-}
-
-/// KUKA RobotSensorInterface over Ethernet: the protocol as the registry ([`crate::devices`]) sees it.
-pub struct Rsi;
-
-impl RobotProtocol for Rsi {
-    const PACING: Pacing = Pacing::Robot;
-    type Options = RsiOptions;
-    type Config = RsiConfig;
-    type EndpointOptions = RsiEndpointOptions;
-    type EndpointConfig = RsiEndpointConfig;
-
-    fn parse(options: &RsiOptions) -> Result<RsiConfig> {
-        options.parse()
-    }
-
-    fn open(config: &RsiConfig, context: &LinkContext) -> Result<Box<dyn RobotLink>> {
-        Ok(Box::new(RsiRobot::open_parsed(config, context)?))
-    }
-
-    fn parse_endpoint(options: &RsiEndpointOptions) -> Result<RsiEndpointConfig> {
-        options.parse()
-    }
-
-    fn open_endpoint(
-        config: &RsiEndpointConfig,
-        context: &EndpointContext,
-    ) -> Result<Box<dyn RobotEndpoint>> {
-        Ok(Box::new(RsiEndpoint::open_parsed(config, context)?))
     }
 }
 
