@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
 
-use super::transport::resolve;
+use super::transport::{resolve, sequence_counted, SequenceNumber, SequenceTracker};
 use crate::clock::now_ns;
 use crate::error::Result;
 use crate::feedback::FeedbackEstimator;
@@ -217,6 +217,22 @@ impl StartRegion {
     }
 }
 
+/// One decoded robot feedback as [`RobotIdentity::accept`] takes it: the sender, the
+/// protocol's sequence number, the robot's time and the fed-back pose in `t`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FeedbackPose<T> {
+    /// The datagram's sender.
+    pub from: SocketAddr,
+    /// The protocol's sequence number (EGM `seqno`, RSI IPOC).
+    pub seq: T,
+    /// The robot's time of the pose, s.
+    pub robot_time: f64,
+    /// Fed-back position in `t`, m.
+    pub position: Vector3<f64>,
+    /// Fed-back orientation in `t`.
+    pub orientation: UnitQuaternion<f64>,
+}
+
 /// Which sender is the robot, for a robot link: the host `robot_host` names, else the first
 /// sender whose valid feedback puts the rod tip in the start region ([`LinkContext::start`]);
 /// identified, not raced for: a foreign sender that started earlier, elsewhere, is counted
@@ -246,18 +262,14 @@ impl RobotIdentity {
         })
     }
 
-    /// Whether a datagram from `from` may be the robot's (checked before decoding); else it is
-    /// counted `foreign`.
-    pub fn admits(&self, from: SocketAddr, stats: &mut LinkStats) -> bool {
-        let ok = match (self.robot_ip, self.robot_addr) {
+    /// Whether a datagram from `from` may be the robot's (checked before decoding); else the
+    /// receive loop counts it `foreign`.
+    pub fn admits(&self, from: SocketAddr) -> bool {
+        match (self.robot_ip, self.robot_addr) {
             (_, Some(addr)) => from == addr,
             (Some(ip), None) => from.ip() == ip,
             (None, None) => true,
-        };
-        if !ok {
-            stats.foreign += 1;
         }
-        ok
     }
 
     /// After decoding a valid pose (`t` frame, m): whether its sender can be the robot. Before
@@ -287,6 +299,34 @@ impl RobotIdentity {
             }
         }
         at_start
+    }
+
+    /// The one acceptance rule of a decoded robot feedback `f`: before the lock its sender at
+    /// the scenario's start ([`RobotIdentity::at_start`]), newer than the last accepted one
+    /// (`sequence`: stale and lost counted), then its sender locked onto, and a motion the
+    /// robot can make (`estimator`, which takes it; else `invalid`). Counts `accepted`;
+    /// returns whether it was. Never allocates.
+    pub fn accept<T: SequenceNumber>(
+        &mut self,
+        f: &FeedbackPose<T>,
+        sequence: &mut SequenceTracker<T>,
+        now_ns: u64,
+        estimator: &mut FeedbackEstimator,
+        stats: &mut LinkStats,
+    ) -> bool {
+        if !self.at_start(f.from, f.position, f.orientation, stats) {
+            return false; // not locked yet: the robot is the sender at the scenario's start
+        }
+        if !sequence_counted(sequence, f.seq, stats) {
+            return false;
+        }
+        self.lock(f.from);
+        if !estimator.push(f.robot_time, now_ns, f.position, f.orientation) {
+            stats.invalid += 1; // a jump no robot makes in one cycle
+            return false;
+        }
+        stats.accepted += 1;
+        true
     }
 
     /// Locks onto `from` (the first accepted feedback's sender), if not locked yet.

@@ -48,7 +48,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::Result;
 pub use link::*;
-pub(crate) use transport::{bind_udp, check_host, local_addr, resolve};
+pub(crate) use transport::{check_host, local_addr, resolve};
 pub use transport::{recv_counted, sequence_counted, wait_readable};
 
 /// The registry: from one line per protocol, the option enums (tagged by `kind`), their

@@ -19,7 +19,7 @@
 pub mod codec;
 pub mod proto;
 
-use std::net::{IpAddr, SocketAddr, UdpSocket};
+use std::net::SocketAddr;
 
 use serde::{Deserialize, Serialize};
 
@@ -29,10 +29,10 @@ use self::codec::{
     CorrectionDecoder, CorrectionEncoder, EgmError, FeedbackEncoder, RobotDecoder, EGM_PERIOD,
     EGM_PORT,
 };
-use super::transport::SequenceTracker;
+use super::transport::{bind_address_for, decode_counted, DecodeError, SequenceTracker, UdpInbox};
 use super::{
-    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EmulatedRobot,
-    EndpointContext, LinkContext, LinkStats, Pacing, RobotDevice, RobotEndpoint, RobotIdentity,
+    check_host, local_addr, resolve, sequence_counted, EmulatedRobot, EndpointContext,
+    FeedbackPose, LinkContext, LinkStats, Pacing, RobotDevice, RobotEndpoint, RobotIdentity,
     RobotLink,
 };
 use crate::error::{Result, RtError};
@@ -70,7 +70,7 @@ impl Default for EgmOptions {
 
 /// The PC side of ABB EGM.
 pub struct EgmRobot {
-    socket: UdpSocket,
+    inbox: UdpInbox<2048>,
     port: u16,
     /// Which sender is the robot.
     identity: RobotIdentity,
@@ -80,7 +80,6 @@ pub struct EgmRobot {
     encoder: CorrectionEncoder,
     send_seq: u32,
     stats: LinkStats,
-    buf: [u8; 2048],
 }
 
 /// An EGM link's options once parsed ([`RobotDevice::parse`] of [`EgmRobot`]): the hosts' form checked, the
@@ -119,14 +118,14 @@ impl RobotDevice for EgmRobot {
     /// Binds the EGM endpoint.
     fn open_parsed(c: &EgmConfig, context: &LinkContext) -> Result<Self> {
         let (o, mapping) = (&c.options, c.mapping);
-        let socket = bind_udp(
+        let inbox = UdpInbox::bind(
             "EGM endpoint",
             resolve("egm_bind_host", &o.bind_host, o.port)?,
         )?;
         let identity = RobotIdentity::new(o.robot_host.as_deref(), context.start)?;
         Ok(EgmRobot {
             port: o.port,
-            socket,
+            inbox,
             identity,
             mapping,
             sequence: SequenceTracker::new(),
@@ -134,7 +133,6 @@ impl RobotDevice for EgmRobot {
             encoder: CorrectionEncoder::new(),
             send_seq: 0,
             stats: LinkStats::default(),
-            buf: [0u8; 2048],
         })
     }
 }
@@ -162,33 +160,28 @@ impl RobotLink for EgmRobot {
 
     fn poll(&mut self, now_ns: u64, estimator: &mut FeedbackEstimator) -> usize {
         let mut accepted = 0;
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            if !self.identity.admits(from, &mut self.stats) {
-                continue;
-            }
-            let Some(feedback) =
-                decode_counted(self.decoder.decode(&self.buf[..n]), &mut self.stats)
-            else {
+        while let Some((bytes, from)) = self
+            .inbox
+            .next(&mut self.stats, |from| self.identity.admits(from))
+        {
+            let Some(feedback) = decode_counted(self.decoder.decode(bytes), &mut self.stats) else {
                 continue;
             };
             let (position, orientation) = self.mapping.from_egm(&feedback.actual);
-            if !self
+            let pose = FeedbackPose {
+                from,
+                seq: feedback.seqno,
+                robot_time: feedback.robot_time(),
+                position,
+                orientation,
+            };
+            let (sequence, stats) = (&mut self.sequence, &mut self.stats);
+            if self
                 .identity
-                .at_start(from, position, orientation, &mut self.stats)
+                .accept(&pose, sequence, now_ns, estimator, stats)
             {
-                continue; // not locked yet: the robot is the sender at the scenario's start
+                accepted += 1;
             }
-            if !sequence_counted(&mut self.sequence, feedback.seqno, &mut self.stats) {
-                continue;
-            }
-            self.identity.lock(from);
-            if !estimator.push(feedback.robot_time(), now_ns, position, orientation) {
-                self.stats.invalid += 1; // a jump no robot makes in one cycle
-                continue;
-            }
-            self.stats.accepted += 1;
-            accepted += 1;
         }
         accepted
     }
@@ -201,7 +194,7 @@ impl RobotLink for EgmRobot {
         let tm = (clock_ns / 1_000_000) as u32;
         let target = self.mapping.to_egm(command);
         let bytes = self.encoder.encode(self.send_seq, tm, &target);
-        let sent = self.socket.send_to(bytes, addr);
+        let sent = self.inbox.socket().send_to(bytes, addr);
         self.stats.count_send(sent);
     }
 
@@ -218,34 +211,18 @@ impl RobotLink for EgmRobot {
     }
 }
 
-/// A decoded message, or None with the error counted: `malformed` for a datagram that is not
-/// an EGM message, `invalid` for one whose values are not usable.
-fn decode_counted<T>(
-    decoded: std::result::Result<T, EgmError>,
-    stats: &mut LinkStats,
-) -> Option<T> {
-    match decoded {
-        Ok(message) => Some(message),
-        Err(e) if is_malformed(&e) => {
-            stats.malformed += 1;
-            None
-        }
-        Err(_) => {
-            stats.invalid += 1;
-            None
-        }
+/// EGM decoding errors as the counters see them: a wrong size, bytes that are not protobuf, a
+/// missing header or a wrong type are malformed, the rest invalid.
+impl DecodeError for EgmError {
+    fn is_malformed(&self) -> bool {
+        matches!(
+            self,
+            EgmError::WrongSize(_)
+                | EgmError::Decode
+                | EgmError::MissingHeader
+                | EgmError::WrongType(_)
+        )
     }
-}
-
-/// Whether an EGM decoding error means a malformed datagram (else: invalid values).
-fn is_malformed(e: &EgmError) -> bool {
-    matches!(
-        e,
-        EgmError::WrongSize(_)
-            | EgmError::Decode
-            | EgmError::MissingHeader
-            | EgmError::WrongType(_)
-    )
 }
 
 /// Options of the emulated EGM robot controller (`[robot] kind = "egm"` of the emulator's
@@ -293,7 +270,7 @@ impl Default for EgmEndpointOptions {
 /// (by sequence number; gaps are counted as `lost`, older ones as `stale`) becomes the command
 /// the robot follows. With `robotware = 6` the feedback carries RobotWare 6's `measuredForce`.
 pub struct EgmEndpoint {
-    socket: UdpSocket,
+    inbox: UdpInbox<2048>,
     address: SocketAddr,
     peer: SocketAddr,
     mapping: PoseMapping,
@@ -308,7 +285,6 @@ pub struct EgmEndpoint {
     decoder: CorrectionDecoder,
     encoder: FeedbackEncoder,
     stats: LinkStats,
-    buf: [u8; 2048],
 }
 
 /// The emulated EGM robot's options once parsed ([`EmulatedRobot::parse`] of [`EgmEndpoint`]): a positive
@@ -360,15 +336,10 @@ impl EmulatedRobot for EgmEndpoint {
             FeedbackEncoder::new()
         };
         let peer = resolve("egm_host", &o.host, o.port)?;
-        let bind: SocketAddr = match peer.ip() {
-            IpAddr::V4(ip) if ip.is_loopback() => SocketAddr::from(([127, 0, 0, 1], o.local_port)),
-            IpAddr::V4(_) => SocketAddr::from(([0, 0, 0, 0], o.local_port)),
-            IpAddr::V6(_) => SocketAddr::from(([0u16; 8], o.local_port)),
-        };
-        let socket = bind_udp("robot (EGM)", bind)?;
-        let address = local_addr("robot (EGM)", &socket)?;
+        let inbox = UdpInbox::bind("robot (EGM)", bind_address_for(peer, o.local_port))?;
+        let address = local_addr("robot (EGM)", inbox.socket())?;
         Ok(EgmEndpoint {
-            socket,
+            inbox,
             address,
             peer,
             mapping,
@@ -380,7 +351,6 @@ impl EmulatedRobot for EgmEndpoint {
             decoder: CorrectionDecoder::new(),
             encoder,
             stats: LinkStats::default(),
-            buf: [0u8; 2048],
         })
     }
 }
@@ -400,14 +370,9 @@ impl RobotEndpoint for EgmEndpoint {
 
     fn receive(&mut self) -> Option<RelativeMotion> {
         let mut newest = None;
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            if from != self.peer {
-                self.stats.foreign += 1;
-                continue;
-            }
-            let Some(correction) =
-                decode_counted(self.decoder.decode(&self.buf[..n]), &mut self.stats)
+        let peer = self.peer;
+        while let Some((bytes, _)) = self.inbox.next(&mut self.stats, |from| from == peer) {
+            let Some(correction) = decode_counted(self.decoder.decode(bytes), &mut self.stats)
             else {
                 continue;
             };
@@ -432,7 +397,7 @@ impl RobotEndpoint for EgmEndpoint {
         let bytes = self
             .encoder
             .encode(self.seqno, time_us, &actual, &self.planned);
-        let sent = self.socket.send_to(bytes, self.peer);
+        let sent = self.inbox.socket().send_to(bytes, self.peer);
         self.stats.count_send(sent);
     }
 

@@ -11,7 +11,7 @@
 pub mod codec;
 pub mod netftapi;
 
-use std::net::{SocketAddr, UdpSocket};
+use std::net::SocketAddr;
 use std::time::Duration;
 
 use nalgebra::Vector3;
@@ -21,10 +21,10 @@ use self::codec::{CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, RDT_PORT};
 use self::netftapi::{
     fetch_counts, netftapi_xml, ForceUnit, NetFtApiServer, SensorCalibration, TorqueUnit,
 };
-use super::transport::SequenceTracker;
+use super::transport::{bind_address_for, decode_counted, SequenceTracker, UdpInbox};
 use super::{
-    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EmulatedSensor,
-    EndpointContext, LinkContext, LinkStats, SensorDevice, SensorEndpoint, SensorLink, Wrench,
+    check_host, local_addr, resolve, sequence_counted, EmulatedSensor, EndpointContext,
+    LinkContext, LinkStats, SensorDevice, SensorEndpoint, SensorLink, Wrench,
 };
 use crate::error::{Result, RtError};
 
@@ -66,7 +66,7 @@ impl Default for RdtOptions {
 
 /// The RDT client of an ATI Net F/T sensor.
 pub struct RdtSensor {
-    socket: UdpSocket,
+    inbox: UdpInbox<2048>,
     peer: SocketAddr,
     /// Counts per N and per N·m.
     counts: CountsPerUnit,
@@ -75,7 +75,6 @@ pub struct RdtSensor {
     sequence: SequenceTracker,
     stats: LinkStats,
     bias_pending: bool,
-    buf: [u8; 2048],
 }
 
 /// An RDT link's options once parsed ([`SensorDevice::parse`] of [`RdtSensor`]): the host's form checked, the
@@ -111,7 +110,7 @@ impl RdtSensor {
             sample_count: 0,
         }
         .encode();
-        let sent = self.socket.send_to(&bytes, self.peer);
+        let sent = self.inbox.socket().send_to(&bytes, self.peer);
         self.stats.count_send(sent);
     }
 }
@@ -160,20 +159,14 @@ impl SensorDevice for RdtSensor {
             }
         };
         let peer = resolve("sensor_host", &o.host, o.port)?;
-        let bind: SocketAddr = if peer.ip().is_loopback() {
-            ([127, 0, 0, 1], o.local_port).into()
-        } else {
-            ([0, 0, 0, 0], o.local_port).into()
-        };
         Ok(RdtSensor {
-            socket: bind_udp("RDT client", bind)?,
+            inbox: UdpInbox::bind("RDT client", bind_address_for(peer, o.local_port))?,
             peer,
             counts,
             calibration,
             sequence: SequenceTracker::new(),
             stats: LinkStats::default(),
             bias_pending: o.bias,
-            buf: [0u8; 2048],
         })
     }
 }
@@ -206,14 +199,9 @@ impl SensorLink for RdtSensor {
 
     fn poll(&mut self, _now_ns: u64) -> Option<Wrench> {
         let mut newest = None;
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            if from != self.peer {
-                self.stats.foreign += 1;
-                continue;
-            }
-            let Ok(record) = RdtRecord::decode(&self.buf[..n]) else {
-                self.stats.malformed += 1;
+        let peer = self.peer;
+        while let Some((bytes, _)) = self.inbox.next(&mut self.stats, |from| from == peer) {
+            let Some(record) = decode_counted(RdtRecord::decode(bytes), &mut self.stats) else {
                 continue;
             };
             if !sequence_counted(&mut self.sequence, record.rdt_sequence, &mut self.stats) {
@@ -313,7 +301,7 @@ impl Default for RdtEndpointOptions {
 /// per configured unit and the units; the records count in those units. A count beyond the
 /// `i32` range saturates and sets status `0x80010000`.
 pub struct RdtEndpoint {
-    socket: UdpSocket,
+    inbox: UdpInbox<2048>,
     address: SocketAddr,
     http: Option<NetFtApiServer>,
     /// Counts per N and per N·m (the options' counts per configured unit, converted).
@@ -329,7 +317,6 @@ pub struct RdtEndpoint {
     /// The newest sample: force N, moment N·m.
     last_reading: ([f64; 3], [f64; 3]),
     stats: LinkStats,
-    buf: [u8; 2048],
 }
 
 /// The emulated RDT sensor's options once parsed ([`EmulatedSensor::parse`] of [`RdtEndpoint`]): positive
@@ -367,7 +354,7 @@ impl RdtEndpoint {
             status: if saturated { 0x8001_0000 } else { 0 },
             counts,
         };
-        let sent = self.socket.send_to(&record.encode(), client);
+        let sent = self.inbox.socket().send_to(&record.encode(), client);
         self.stats.count_send(sent);
         if let Some(n) = self.remaining.as_mut() {
             *n -= 1;
@@ -430,8 +417,8 @@ impl EmulatedSensor for RdtEndpoint {
             force: o.counts_per_force / force_unit.newtons(),
             torque: o.counts_per_torque / torque_unit.newton_metres(),
         };
-        let socket = bind_udp("sensor (RDT)", resolve("bind_host", &o.bind_host, o.port)?)?;
-        let address = local_addr("sensor (RDT)", &socket)?;
+        let inbox = UdpInbox::bind("sensor (RDT)", resolve("bind_host", &o.bind_host, o.port)?)?;
+        let address = local_addr("sensor (RDT)", inbox.socket())?;
         let http = if o.http_port == 0 {
             None
         } else {
@@ -448,7 +435,7 @@ impl EmulatedSensor for RdtEndpoint {
             })?)
         };
         Ok(RdtEndpoint {
-            socket,
+            inbox,
             address,
             http,
             counts,
@@ -459,7 +446,6 @@ impl EmulatedSensor for RdtEndpoint {
             bias: ([0.0; 3], [0.0; 3]),
             last_reading: ([0.0; 3], [0.0; 3]),
             stats: LinkStats::default(),
-            buf: [0u8; 2048],
         })
     }
 }
@@ -484,10 +470,8 @@ impl SensorEndpoint for RdtEndpoint {
             self.stats.send_errors += send;
             self.stats.io_errors += receive + send;
         }
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            let Ok(request) = RdtRequest::decode(&self.buf[..n]) else {
-                self.stats.malformed += 1;
+        while let Some((bytes, from)) = self.inbox.next(&mut self.stats, |_| true) {
+            let Some(request) = decode_counted(RdtRequest::decode(bytes), &mut self.stats) else {
                 continue;
             };
             self.stats.accepted += 1;

@@ -32,7 +32,7 @@
 
 pub mod codec;
 
-use std::net::{IpAddr, SocketAddr, UdpSocket};
+use std::net::SocketAddr;
 
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
@@ -41,12 +41,12 @@ use hilcontact_core::world::RelativeMotion;
 
 use self::codec::{
     abc_to_quaternion, decode_answer, decode_state, quaternion_to_abc, AnswerEncoder, KukaPose,
-    RsiError, RsiNames, StateEncoder, RSI_MAX_DATAGRAM, RSI_PERIOD, RSI_PERIODS, RSI_PORT,
+    RsiNames, StateEncoder, RSI_MAX_DATAGRAM, RSI_PERIOD, RSI_PERIODS, RSI_PORT,
 };
+use super::transport::{bind_address_for, decode_counted, Ipoc, SequenceTracker, UdpInbox};
 use super::{
-    bind_udp, check_host, local_addr, recv_counted, resolve, wait_readable, EmulatedRobot,
-    EndpointContext, LinkContext, LinkStats, Pacing, RobotDevice, RobotEndpoint, RobotIdentity,
-    RobotLink,
+    check_host, local_addr, resolve, wait_readable, EmulatedRobot, EndpointContext, FeedbackPose,
+    LinkContext, LinkStats, Pacing, RobotDevice, RobotEndpoint, RobotIdentity, RobotLink,
 };
 use crate::clock::{now_ns, Histogram};
 use crate::error::{Result, RtError};
@@ -180,7 +180,7 @@ pub fn corrected(reference: &EgmPoseMm, correction: &KukaPose) -> EgmPoseMm {
 
 /// The PC side of KUKA RSI.
 pub struct RsiRobot {
-    socket: UdpSocket,
+    inbox: UdpInbox<{ RSI_MAX_DATAGRAM + 1 }>,
     port: u16,
     /// Which sender is the robot.
     identity: RobotIdentity,
@@ -192,7 +192,7 @@ pub struct RsiRobot {
     /// The pose the corrections are relative to: the start (absolute) or the previous
     /// answer's target (relative), in `e`.
     reference: Option<EgmPoseMm>,
-    last_ipoc: Option<u64>,
+    ipoc: SequenceTracker<Ipoc>,
     /// The newest accepted message not answered yet: its IPOC and when it was read, ns.
     pending: Option<(u64, u64)>,
     /// The controller's own count of late answers (`Delay D`), as last sent.
@@ -202,7 +202,6 @@ pub struct RsiRobot {
     unanswered: u64,
     encoder: AnswerEncoder,
     stats: LinkStats,
-    buf: [u8; RSI_MAX_DATAGRAM + 1],
 }
 
 /// An RSI link's options once parsed ([`RobotDevice::parse`] of [`RsiRobot`]): hosts' form, cycle and deadline
@@ -261,13 +260,13 @@ impl RobotDevice for RsiRobot {
     /// Binds the PC's RSI socket.
     fn open_parsed(c: &RsiConfig, context: &LinkContext) -> Result<Self> {
         let (o, names, mapping) = (&c.options, c.names.clone(), c.mapping);
-        let socket = bind_udp(
+        let inbox = UdpInbox::bind(
             "RSI endpoint",
             resolve("rsi bind_host", &o.bind_host, o.port)?,
         )?;
         let identity = RobotIdentity::new(o.robot_host.as_deref(), context.start)?;
         Ok(RsiRobot {
-            socket,
+            inbox,
             port: o.port,
             identity,
             mapping,
@@ -276,7 +275,7 @@ impl RobotDevice for RsiRobot {
             deadline_ns: (o.deadline * 1e9).round() as u64,
             state_element: names.state.clone(),
             reference: None,
-            last_ipoc: None,
+            ipoc: SequenceTracker::new(),
             pending: None,
             controller_delay: None,
             latency: Histogram::new(20_000),
@@ -284,7 +283,6 @@ impl RobotDevice for RsiRobot {
             unanswered: 0,
             encoder: AnswerEncoder::new(names),
             stats: LinkStats::default(),
-            buf: [0; RSI_MAX_DATAGRAM + 1],
         })
     }
 }
@@ -312,39 +310,31 @@ impl RobotLink for RsiRobot {
 
     fn poll(&mut self, now_ns: u64, estimator: &mut FeedbackEstimator) -> usize {
         let mut accepted = 0;
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            if !self.identity.admits(from, &mut self.stats) {
+        while let Some((bytes, from)) = self
+            .inbox
+            .next(&mut self.stats, |from| self.identity.admits(from))
+        {
+            let decoded = decode_state(bytes, &self.state_element);
+            let Some(state) = decode_counted(decoded, &mut self.stats) else {
                 continue;
-            }
-            let state = match decode_state(&self.buf[..n], &self.state_element) {
-                Ok(state) => state,
-                Err(e) => {
-                    count_error(&e, &mut self.stats);
-                    continue;
-                }
             };
             let actual = from_kuka(&state.actual);
             let (position, orientation) = self.mapping.from_egm(&actual);
+            let pose = FeedbackPose {
+                from,
+                seq: Ipoc {
+                    ms: state.ipoc,
+                    step_ms: (self.period * 1e3).round() as u64,
+                },
+                robot_time: state.ipoc as f64 * 1e-3,
+                position,
+                orientation,
+            };
+            let (sequence, stats) = (&mut self.ipoc, &mut self.stats);
             if !self
                 .identity
-                .at_start(from, position, orientation, &mut self.stats)
+                .accept(&pose, sequence, now_ns, estimator, stats)
             {
-                continue; // not locked yet: the robot is the sender at the scenario's start
-            }
-            if let Some(last) = self.last_ipoc {
-                if state.ipoc <= last {
-                    self.stats.stale += 1;
-                    continue;
-                }
-                let step_ms = (self.period * 1e3).round() as u64;
-                let cycles = (state.ipoc - last + step_ms / 2) / step_ms;
-                self.stats.lost += cycles.saturating_sub(1);
-            }
-            self.last_ipoc = Some(state.ipoc);
-            self.identity.lock(from);
-            if !estimator.push(state.ipoc as f64 * 1e-3, now_ns, position, orientation) {
-                self.stats.invalid += 1; // a jump no robot makes in one cycle
                 continue;
             }
             if self.reference.is_none() {
@@ -355,7 +345,6 @@ impl RobotLink for RsiRobot {
             }
             self.pending = Some((state.ipoc, now_ns));
             self.controller_delay = state.delay.or(self.controller_delay);
-            self.stats.accepted += 1;
             accepted += 1;
         }
         accepted
@@ -367,7 +356,7 @@ impl RobotLink for RsiRobot {
             if n > 0 {
                 return n;
             }
-            if !wait_readable(&self.socket, deadline_ns) {
+            if !wait_readable(self.inbox.socket(), deadline_ns) {
                 return self.poll(now_ns(), estimator);
             }
         }
@@ -386,7 +375,7 @@ impl RobotLink for RsiRobot {
             self.reference = Some(target);
         }
         let bytes = self.encoder.encode(&korr, ipoc);
-        let sent = self.socket.send_to(bytes, addr);
+        let sent = self.inbox.socket().send_to(bytes, addr);
         self.stats.count_send(sent);
         self.pending = None;
         let latency = now_ns().saturating_sub(read_ns);
@@ -428,16 +417,6 @@ impl RobotLink for RsiRobot {
             }),
         );
         map
-    }
-}
-
-/// Counts a decoding error: `malformed` (not an RSI message of this configuration) or
-/// `invalid` (unusable values).
-fn count_error(e: &RsiError, stats: &mut LinkStats) {
-    if e.is_malformed() {
-        stats.malformed += 1;
-    } else {
-        stats.invalid += 1;
     }
 }
 
@@ -508,7 +487,7 @@ const FIRST_IPOC: u64 = 1_000_000;
 /// has answered once: on a real cell the operator starts the KRL program (`RSI_MOVECORR`)
 /// after the PC side is listening, so here the emulator and the PC may start in either order.
 pub struct RsiEndpoint {
-    socket: UdpSocket,
+    inbox: UdpInbox<{ RSI_MAX_DATAGRAM + 1 }>,
     address: SocketAddr,
     peer: SocketAddr,
     mapping: PoseMapping,
@@ -530,7 +509,6 @@ pub struct RsiEndpoint {
     stopped: bool,
     encoder: StateEncoder,
     stats: LinkStats,
-    buf: [u8; RSI_MAX_DATAGRAM + 1],
 }
 
 /// The emulated RSI controller's options once parsed ([`EmulatedRobot::parse`] of [`RsiEndpoint`]): cycle
@@ -578,16 +556,11 @@ impl EmulatedRobot for RsiEndpoint {
     fn open_parsed(c: &RsiEndpointConfig, context: &EndpointContext) -> Result<Self> {
         let (o, names, mapping) = (&c.options, c.names.clone(), c.mapping);
         let peer = resolve("rsi host", &o.host, o.port)?;
-        let bind: SocketAddr = match peer.ip() {
-            IpAddr::V4(ip) if ip.is_loopback() => SocketAddr::from(([127, 0, 0, 1], o.local_port)),
-            IpAddr::V4(_) => SocketAddr::from(([0, 0, 0, 0], o.local_port)),
-            IpAddr::V6(_) => SocketAddr::from(([0u16; 8], o.local_port)),
-        };
-        let socket = bind_udp("robot (RSI)", bind)?;
-        let address = local_addr("robot (RSI)", &socket)?;
+        let inbox = UdpInbox::bind("robot (RSI)", bind_address_for(peer, o.local_port))?;
+        let address = local_addr("robot (RSI)", inbox.socket())?;
         let start = mapping.to_egm(&context.initial).pose;
         Ok(RsiEndpoint {
-            socket,
+            inbox,
             address,
             peer,
             mapping,
@@ -604,7 +577,6 @@ impl EmulatedRobot for RsiEndpoint {
             consecutive_late: 0,
             stopped: false,
             stats: LinkStats::default(),
-            buf: [0; RSI_MAX_DATAGRAM + 1],
         })
     }
 }
@@ -630,18 +602,11 @@ impl RobotEndpoint for RsiEndpoint {
 
     fn receive(&mut self) -> Option<RelativeMotion> {
         let mut newest = None;
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            if from != self.peer {
-                self.stats.foreign += 1;
+        let peer = self.peer;
+        while let Some((bytes, _)) = self.inbox.next(&mut self.stats, |from| from == peer) {
+            let decoded = decode_answer(bytes, &self.names);
+            let Some(answer) = decode_counted(decoded, &mut self.stats) else {
                 continue;
-            }
-            let answer = match decode_answer(&self.buf[..n], &self.names) {
-                Ok(a) => a,
-                Err(e) => {
-                    count_error(&e, &mut self.stats);
-                    continue;
-                }
             };
             if self.outstanding != Some(answer.ipoc) {
                 if answer.ipoc <= self.ipoc {
@@ -688,7 +653,7 @@ impl RobotEndpoint for RsiEndpoint {
         let bytes = self
             .encoder
             .encode(&actual, &setpoint, self.stats.late, self.ipoc);
-        let sent = self.socket.send_to(bytes, self.peer);
+        let sent = self.inbox.socket().send_to(bytes, self.peer);
         self.stats.count_send(sent);
         self.outstanding = Some(self.ipoc);
     }

@@ -26,9 +26,10 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use self::codec::{
-    parse_matrix, FrameReader, PackageTracker, SriAck, SriCommand, SriFrame, SriRateCommand,
-    SriRequest, MAX_LINE, SRI_PORT,
+    parse_matrix, FrameReader, SriAck, SriCommand, SriFrame, SriRateCommand, SriRequest, MAX_LINE,
+    SRI_PORT,
 };
+use super::transport::SequenceTracker;
 use super::{
     check_host, resolve, EmulatedSensor, EndpointContext, LinkContext, LinkStats, SensorDevice,
     SensorEndpoint, SensorLink, Wrench,
@@ -77,7 +78,7 @@ pub struct SriSensor {
     rate_command: SriRateCommand,
     matrix_sent: bool,
     reader: FrameReader,
-    packages: PackageTracker,
+    packages: SequenceTracker<u16>,
     /// The connection was closed or failed: nothing more is read.
     closed: bool,
     stats: LinkStats,
@@ -203,7 +204,7 @@ impl SriSensor {
                 self.stats.malformed += 1;
                 continue;
             };
-            self.stats.lost += self.packages.check(frame.package) as u64;
+            self.stats.lost += self.packages.advance(frame.package) as u64;
             let v = frame.values;
             if !v.iter().all(|x| x.is_finite()) {
                 self.stats.invalid += 1;
@@ -269,7 +270,7 @@ impl SensorDevice for SriSensor {
             rate_command: o.rate_command,
             matrix_sent: o.decoupling_matrix.is_some(),
             reader: FrameReader::new(),
-            packages: PackageTracker::new(),
+            packages: SequenceTracker::new(),
             closed: false,
             stats: LinkStats::default(),
             line: [0u8; MAX_LINE],
