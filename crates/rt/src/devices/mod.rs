@@ -16,6 +16,8 @@
 //!   [`SensorEndpoint`], [`RobotEndpoint`], [`LinkStats`], [`Wrench`], [`Pacing`],
 //!   [`LinkContext`], [`RobotIdentity`]) and what a protocol implements to be registered
 //!   ([`SensorDevice`], [`RobotDevice`], [`EmulatedSensor`], [`EmulatedRobot`]);
+//! - `pose.rs`: the scenario's relative motion (`t`, m) as robot poses (mm, quaternion), for
+//!   every robot protocol ([`pose::PoseMapping`]);
 //! - `transport.rs`: sockets, counted receives, the sequence rule, host checks (written once);
 //! - one folder per device, each with its codec (`codec.rs`), its options (parsed once into a
 //!   config), its link (the PC's side) and its emulated endpoint (the device's side):
@@ -39,6 +41,7 @@
 
 pub mod egm;
 pub mod link;
+pub mod pose;
 pub mod rdt;
 pub mod rsi;
 pub mod sri;

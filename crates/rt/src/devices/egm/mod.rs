@@ -35,9 +35,9 @@ use super::{
     FeedbackPose, LinkContext, LinkStats, Pacing, RobotDevice, RobotEndpoint, RobotIdentity,
     RobotLink,
 };
+use crate::devices::pose::{PoseMapping, PoseMm};
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
-use crate::mapping::{EgmPoseMm, PoseMapping};
 
 /// Options of an EGM robot link (`[robot] kind = "egm"`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -167,7 +167,7 @@ impl RobotLink for EgmRobot {
             let Some(feedback) = decode_counted(self.decoder.decode(bytes), &mut self.stats) else {
                 continue;
             };
-            let (position, orientation) = self.mapping.from_egm(&feedback.actual);
+            let (position, orientation) = self.mapping.from_device(&feedback.actual);
             let pose = FeedbackPose {
                 from,
                 seq: feedback.seqno,
@@ -192,7 +192,7 @@ impl RobotLink for EgmRobot {
         };
         self.send_seq = self.send_seq.wrapping_add(1);
         let tm = (clock_ns / 1_000_000) as u32;
-        let target = self.mapping.to_egm(command);
+        let target = self.mapping.to_device(command);
         let bytes = self.encoder.encode(self.send_seq, tm, &target);
         let sent = self.inbox.socket().send_to(bytes, addr);
         self.stats.count_send(sent);
@@ -240,7 +240,7 @@ pub struct EgmEndpointOptions {
     #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub period: f64,
     /// Origin of the target frame `t` in the EGM frame, mm (CLI `--egm-offset`; see
-    /// [`crate::mapping`]).
+    /// [`crate::devices::pose`]).
     pub offset_mm: [f64; 3],
     /// Rotation from `t` to the EGM frame, quaternion `[w, x, y, z]` (CLI `--egm-rotation`).
     pub rotation: [f64; 4],
@@ -279,7 +279,7 @@ pub struct EgmEndpoint {
     /// Control period, ns.
     period_ns: u64,
     /// The newest commanded pose, mm (`planned` in the feedback).
-    planned: EgmPoseMm,
+    planned: PoseMm,
     seqno: u32,
     sequence: SequenceTracker,
     decoder: CorrectionDecoder,
@@ -345,7 +345,7 @@ impl EmulatedRobot for EgmEndpoint {
             mapping,
             every: ((o.period / context.period).round() as u64).max(1),
             period_ns: (context.period * 1e9).round() as u64,
-            planned: mapping.to_egm(&context.initial).pose,
+            planned: mapping.to_device(&context.initial).pose,
             seqno: 0,
             sequence: SequenceTracker::new(),
             decoder: CorrectionDecoder::new(),
@@ -384,14 +384,14 @@ impl RobotEndpoint for EgmEndpoint {
         }
         let c = newest?;
         self.planned = c.target.pose;
-        Some(self.mapping.motion_from_egm(&c.target))
+        Some(self.mapping.motion_from_device(&c.target))
     }
 
     fn feedback(&mut self, k: u64, actual: &RelativeMotion, send: bool) {
         if !send || !k.is_multiple_of(self.every) {
             return;
         }
-        let actual = self.mapping.to_egm(actual).pose;
+        let actual = self.mapping.to_device(actual).pose;
         let time_us = k * self.period_ns / 1000;
         self.seqno = self.seqno.wrapping_add(1);
         let bytes = self

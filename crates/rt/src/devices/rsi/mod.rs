@@ -49,9 +49,9 @@ use super::{
     LinkContext, LinkStats, Pacing, RobotDevice, RobotEndpoint, RobotIdentity, RobotLink,
 };
 use crate::clock::{now_ns, Histogram};
+use crate::devices::pose::{PoseMapping, PoseMm};
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
-use crate::mapping::{EgmPoseMm, PoseMapping};
 
 /// How the answer's correction (`RKorr`) relates to the target pose (the controller's RSI
 /// correction object must be configured the same way).
@@ -146,33 +146,33 @@ fn checked_names(names: RsiNames) -> Result<RsiNames> {
 }
 
 /// A KUKA pose (mm, A/B/C degrees) as a pose in `e` (mm, quaternion `[w, x, y, z]`).
-fn from_kuka(p: &KukaPose) -> EgmPoseMm {
+fn from_kuka(p: &KukaPose) -> PoseMm {
     let q = abc_to_quaternion(p[3], p[4], p[5]);
-    EgmPoseMm {
+    PoseMm {
         position_mm: [p[0], p[1], p[2]],
         orientation: [q.w, q.i, q.j, q.k],
     }
 }
 
-fn quaternion(p: &EgmPoseMm) -> UnitQuaternion<f64> {
+fn quaternion(p: &PoseMm) -> UnitQuaternion<f64> {
     let [w, x, y, z] = p.orientation;
     UnitQuaternion::new_normalize(nalgebra::Quaternion::new(w, x, y, z))
 }
 
 /// The correction that takes `reference` to `target` (both in `e`): translation in mm, then
 /// the ZYX angles (degrees) of `R_target · R_reference⁻¹`.
-pub fn correction(reference: &EgmPoseMm, target: &EgmPoseMm) -> KukaPose {
+pub fn correction(reference: &PoseMm, target: &PoseMm) -> KukaPose {
     let d = Vector3::from(target.position_mm) - Vector3::from(reference.position_mm);
     let [a, b, c] = quaternion_to_abc(&(quaternion(target) * quaternion(reference).inverse()));
     [d.x, d.y, d.z, a, b, c]
 }
 
 /// The pose a correction takes `reference` to (the inverse of [`correction`]).
-pub fn corrected(reference: &EgmPoseMm, correction: &KukaPose) -> EgmPoseMm {
+pub fn corrected(reference: &PoseMm, correction: &KukaPose) -> PoseMm {
     let p = Vector3::from(reference.position_mm)
         + Vector3::new(correction[0], correction[1], correction[2]);
     let q = abc_to_quaternion(correction[3], correction[4], correction[5]) * quaternion(reference);
-    EgmPoseMm {
+    PoseMm {
         position_mm: [p.x, p.y, p.z],
         orientation: [q.w, q.i, q.j, q.k],
     }
@@ -191,7 +191,7 @@ pub struct RsiRobot {
     state_element: String,
     /// The pose the corrections are relative to: the start (absolute) or the previous
     /// answer's target (relative), in `e`.
-    reference: Option<EgmPoseMm>,
+    reference: Option<PoseMm>,
     ipoc: SequenceTracker<Ipoc>,
     /// The newest accepted message not answered yet: its IPOC and when it was read, ns.
     pending: Option<(u64, u64)>,
@@ -319,7 +319,7 @@ impl RobotLink for RsiRobot {
                 continue;
             };
             let actual = from_kuka(&state.actual);
-            let (position, orientation) = self.mapping.from_egm(&actual);
+            let (position, orientation) = self.mapping.from_device(&actual);
             let pose = FeedbackPose {
                 from,
                 seq: Ipoc {
@@ -369,7 +369,7 @@ impl RobotLink for RsiRobot {
         else {
             return;
         };
-        let target = self.mapping.to_egm(command).pose;
+        let target = self.mapping.to_device(command).pose;
         let korr = correction(&reference, &target);
         if self.mode == CorrectionMode::Relative {
             self.reference = Some(target);
@@ -499,9 +499,9 @@ pub struct RsiEndpoint {
     /// The cycle in IPOC units (ms).
     step_ms: u64,
     /// The pose corrections apply to (absolute: the start), in `e`.
-    reference: EgmPoseMm,
+    reference: PoseMm,
     /// The setpoint: the reference corrected by the newest answer (`RSol`), in `e`.
-    setpoint: EgmPoseMm,
+    setpoint: PoseMm,
     ipoc: u64,
     /// The IPOC of the last message sent, while it is unanswered.
     outstanding: Option<u64>,
@@ -558,7 +558,7 @@ impl EmulatedRobot for RsiEndpoint {
         let peer = resolve("rsi host", &o.host, o.port)?;
         let inbox = UdpInbox::bind("robot (RSI)", bind_address_for(peer, o.local_port))?;
         let address = local_addr("robot (RSI)", inbox.socket())?;
-        let start = mapping.to_egm(&context.initial).pose;
+        let start = mapping.to_device(&context.initial).pose;
         Ok(RsiEndpoint {
             inbox,
             address,
@@ -581,7 +581,7 @@ impl EmulatedRobot for RsiEndpoint {
     }
 }
 
-fn to_kuka(p: &EgmPoseMm) -> KukaPose {
+fn to_kuka(p: &PoseMm) -> KukaPose {
     let [a, b, c] = quaternion_to_abc(&quaternion(p));
     let [x, y, z] = p.position_mm;
     [x, y, z, a, b, c]
@@ -626,7 +626,7 @@ impl RobotEndpoint for RsiEndpoint {
         if self.mode == CorrectionMode::Relative {
             self.reference = self.setpoint;
         }
-        let (position, orientation) = self.mapping.from_egm(&self.setpoint);
+        let (position, orientation) = self.mapping.from_device(&self.setpoint);
         Some(RelativeMotion {
             position,
             orientation,
@@ -648,7 +648,7 @@ impl RobotEndpoint for RsiEndpoint {
             }
         }
         self.ipoc = FIRST_IPOC + k / self.every * self.step_ms;
-        let actual = to_kuka(&self.mapping.to_egm(actual).pose);
+        let actual = to_kuka(&self.mapping.to_device(actual).pose);
         let setpoint = to_kuka(&self.setpoint);
         let bytes = self
             .encoder
