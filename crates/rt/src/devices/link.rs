@@ -85,6 +85,20 @@ pub enum Pacing {
     Robot,
 }
 
+/// How a link or an endpoint reaches the other side: the loop and the emulator name no
+/// transport, a link chooses it (and whether it connects or listens) in its `open`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Transport {
+    /// UDP datagrams (RDT, EGM, RSI): the device sends first, or answers the PC's requests.
+    Udp,
+    /// A TCP connection the PC opens to the device (the SRI box; e.g. Universal Robots RTDE,
+    /// port 30004).
+    TcpClient,
+    /// A TCP server on this side, the other side connects (the emulated SRI box).
+    TcpServer,
+}
+
 /// A force/torque sensor as the loop sees it.
 pub trait SensorLink: Send {
     /// Short protocol name for messages, e.g. `"RDT"`.
@@ -92,6 +106,11 @@ pub trait SensorLink: Send {
 
     /// The peer for messages, e.g. `"the sensor at 127.0.0.1:49152"` (allocates: not in a tick).
     fn describe(&self) -> String;
+
+    /// How the link reaches the sensor (UDP by default).
+    fn transport(&self) -> Transport {
+        Transport::Udp
+    }
 
     /// Asks the sensor to stream (called again every 200 ms while nothing arrives at start);
     /// a bias configured in the link's options is sent before the first request.
@@ -128,6 +147,13 @@ pub trait RobotLink: Send {
 
     /// The peer for messages, e.g. `"the robot on UDP port 6510"` (allocates: not in a tick).
     fn describe(&self) -> String;
+
+    /// How the link reaches the robot (UDP by default): a link that connects out (TCP, the PC
+    /// as client, e.g. Universal Robots RTDE) connects in its `open` and says
+    /// [`Transport::TcpClient`]; the loop does not change.
+    fn transport(&self) -> Transport {
+        Transport::Udp
+    }
 
     /// What clocks the loop with this link.
     fn pacing(&self) -> Pacing;
@@ -169,7 +195,9 @@ pub trait RobotLink: Send {
         self.send(&at_rest, clock_ns);
     }
 
-    /// The robot's address, once known.
+    /// The robot's address, once known: the sender locked onto (a robot that sends first, over
+    /// UDP), or the address connected to (a link that connects out in its `open`, known from
+    /// the start). None before that.
     fn peer(&self) -> Option<SocketAddr>;
 
     /// The link's counters.
@@ -363,6 +391,11 @@ pub trait SensorEndpoint: Send {
     /// The local address the sensor serves its protocol on.
     fn address(&self) -> SocketAddr;
 
+    /// How the emulated sensor serves (UDP by default).
+    fn transport(&self) -> Transport {
+        Transport::Udp
+    }
+
     /// The address of the sensor's HTTP configuration server, if it has one (Net F/T:
     /// `/netftapi2.xml`).
     fn http_address(&self) -> Option<SocketAddr> {
@@ -392,8 +425,14 @@ pub trait RobotEndpoint: Send {
     /// The robot's own local address.
     fn address(&self) -> SocketAddr;
 
-    /// Where the robot's feedback goes (the PC running the loop).
-    fn peer(&self) -> SocketAddr;
+    /// Where the robot's feedback goes (the PC running the loop): the configured address
+    /// (UDP), or the connected client's (a TCP server; None until one connects).
+    fn peer(&self) -> Option<SocketAddr>;
+
+    /// How the emulated robot reaches the PC (UDP by default).
+    fn transport(&self) -> Transport {
+        Transport::Udp
+    }
 
     /// Reads the commands that arrived (non-blocking, never allocates) and returns the newest
     /// valid one as the pose and velocity to follow, in the target frame `t` (m, m/s, rad/s),

@@ -35,6 +35,27 @@
 //! [`open_robot_endpoint`], [`RobotOptions::pacing`], the kind lists ([`SENSOR_KINDS`],
 //! [`ROBOT_KINDS`]), [`protocol_defaults`] and the options' JSON Schema all follow from it.
 //!
+//! **A robot that is a TCP server, or that the PC polls** fits the same traits (worked example,
+//! not implemented: Universal Robots RTDE, the PC a TCP client of the controller's port 30004,
+//! the robot pushing its state at 500 Hz): `devices/rtde/` with a `RtdeRobot` whose
+//! [`RobotDevice::open_parsed`] connects to `robot_host:30004` within
+//! [`LinkContext::connect_timeout`] (`TcpStream::connect_timeout`, like the SRI sensor link),
+//! negotiates the protocol version and the output/input recipes (blocking, each answer
+//! checked), sends `RTDE_CONTROL_PACKAGE_START` and leaves the stream non-blocking;
+//! [`RobotDevice::PACING`] is [`Pacing::Clock`] (the state arrives every 2 ms whatever the PC
+//! sends; nothing must be answered per packet); [`RobotLink::feedback_period`] is 0.002;
+//! [`RobotLink::poll`] reads the stream into a preallocated frame buffer (as the SRI link
+//! does), decodes each `DATA_PACKAGE` (`actual_TCP_pose`, `timestamp`) and gives it to
+//! [`RobotIdentity::accept`] with a `u32` sequence of its own (TCP neither drops nor reorders,
+//! so `lost` and `stale` stay 0) or a timestamp in ms like [`transport::Ipoc`];
+//! [`RobotLink::send`] writes the command into the input registers of the recipe (a URScript
+//! on the controller servoes to them); [`RobotLink::peer`] is the address connected to,
+//! `Some` from `open` on; [`RobotLink::transport`] is [`Transport::TcpClient`]. Its emulated
+//! endpoint is a TCP server ([`RobotEndpoint::peer`] None until the PC connects,
+//! [`RobotEndpoint::transport`] [`Transport::TcpServer`]), like the emulated SRI box. One
+//! `registry!` line, `Rtde = "rtde", rtde::RtdeRobot, rtde::RtdeEndpoint;`, and the loop, the
+//! emulator, the options' schema and the CLI's protocol lists take it as they are.
+//!
 //! Every datagram a link or an endpoint receives is counted in its [`LinkStats`], and so is
 //! every socket error, on receive and on send ([`LinkStats::io_errors`]): nothing is dropped
 //! uncounted. Polling, serving, sending and holding never allocate.

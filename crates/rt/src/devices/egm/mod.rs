@@ -364,8 +364,8 @@ impl RobotEndpoint for EgmEndpoint {
         self.address
     }
 
-    fn peer(&self) -> SocketAddr {
-        self.peer
+    fn peer(&self) -> Option<SocketAddr> {
+        Some(self.peer)
     }
 
     fn receive(&mut self) -> Option<RelativeMotion> {

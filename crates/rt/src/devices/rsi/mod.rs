@@ -596,8 +596,8 @@ impl RobotEndpoint for RsiEndpoint {
         self.address
     }
 
-    fn peer(&self) -> SocketAddr {
-        self.peer
+    fn peer(&self) -> Option<SocketAddr> {
+        Some(self.peer)
     }
 
     fn receive(&mut self) -> Option<RelativeMotion> {

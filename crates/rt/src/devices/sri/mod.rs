@@ -32,7 +32,7 @@ use self::codec::{
 use super::transport::SequenceTracker;
 use super::{
     check_host, resolve, EmulatedSensor, EndpointContext, LinkContext, LinkStats, SensorDevice,
-    SensorEndpoint, SensorLink, Wrench,
+    SensorEndpoint, SensorLink, Transport, Wrench,
 };
 use crate::error::{Result, RtError};
 
@@ -297,6 +297,10 @@ impl SensorDevice for SriSensor {
 }
 
 impl SensorLink for SriSensor {
+    fn transport(&self) -> Transport {
+        Transport::TcpClient
+    }
+
     fn name(&self) -> &'static str {
         "SRI"
     }
@@ -608,6 +612,10 @@ impl EmulatedSensor for SriEndpoint {
 }
 
 impl SensorEndpoint for SriEndpoint {
+    fn transport(&self) -> Transport {
+        Transport::TcpServer
+    }
+
     fn name(&self) -> &'static str {
         "SRI"
     }
