@@ -298,8 +298,8 @@ impl PyFacilityHandle {
         d.set_item("sensor", a.sensor.to_string())?;
         d.set_item("http", a.http.map(|h| h.to_string()))?;
         d.set_item("robot", a.robot.to_string())?;
-        d.set_item("robot_peer", a.robot_peer.to_string())?;
-        d.set_item("egm_peer", a.robot_peer.to_string())?;
+        d.set_item("robot_peer", a.robot_peer.map(|p| p.to_string()))?;
+        d.set_item("egm_peer", a.robot_peer.map(|p| p.to_string()))?;
         Ok(d)
     }
 

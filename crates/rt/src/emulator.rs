@@ -151,8 +151,8 @@ pub struct FacilityAddresses {
     pub http: Option<SocketAddr>,
     /// The robot's socket.
     pub robot: SocketAddr,
-    /// Where the robot's feedback goes (the PC).
-    pub robot_peer: SocketAddr,
+    /// Where the robot's feedback goes (the PC; None: a TCP server no client connected to yet).
+    pub robot_peer: Option<SocketAddr>,
 }
 
 /// A running emulated facility.

@@ -9,7 +9,6 @@
 //!   over UDP and `/netftapi2.xml` over HTTP), [`devices::sri`] (SRI M812x, AT commands and
 //!   binary frames over TCP), [`devices::egm`] (ABB Externally Guided Motion, protobuf over
 //!   UDP), [`devices::rsi`] (KUKA RobotSensorInterface, XML over UDP, robot paced);
-//! - [`mapping`]: the scenario's relative motion (`t` frame, m) as EGM poses (mm, quaternion);
 //! - [`emulator`]: robot, contact and sensor (the core's facility model) in real time behind
 //!   those protocols;
 //! - [`options`]: the real-time options at the edge ([`RuntimeOptions`]) and their JSON Schema;
@@ -34,7 +33,6 @@ pub mod devices;
 pub mod emulator;
 pub mod error;
 pub mod feedback;
-pub mod mapping;
 pub mod offset;
 pub mod options;
 pub mod output;

@@ -3,7 +3,8 @@
 //! [`RobotEndpoint`] traits of the emulated device's side, their [`LinkStats`], the
 //! [`Wrench`], the loop's [`Pacing`]), what they are opened with ([`LinkContext`],
 //! [`EndpointContext`]), which sender is the robot ([`RobotIdentity`]), and what a protocol
-//! implements to be registered ([`SensorProtocol`], [`RobotProtocol`]). Nothing here names a
+//! implements to be registered ([`SensorDevice`], [`RobotDevice`], [`EmulatedSensor`],
+//! [`EmulatedRobot`]). Nothing here names a
 //! device.
 
 use std::net::{IpAddr, SocketAddr};
@@ -13,7 +14,7 @@ use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
 
-use super::transport::resolve;
+use super::transport::{resolve, sequence_counted, SequenceNumber, SequenceTracker};
 use crate::clock::now_ns;
 use crate::error::Result;
 use crate::feedback::FeedbackEstimator;
@@ -84,6 +85,20 @@ pub enum Pacing {
     Robot,
 }
 
+/// How a link or an endpoint reaches the other side: the loop and the emulator name no
+/// transport, a link chooses it (and whether it connects or listens) in its `open`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Transport {
+    /// UDP datagrams (RDT, EGM, RSI): the device sends first, or answers the PC's requests.
+    Udp,
+    /// A TCP connection the PC opens to the device (the SRI box; e.g. Universal Robots RTDE,
+    /// port 30004).
+    TcpClient,
+    /// A TCP server on this side, the other side connects (the emulated SRI box).
+    TcpServer,
+}
+
 /// A force/torque sensor as the loop sees it.
 pub trait SensorLink: Send {
     /// Short protocol name for messages, e.g. `"RDT"`.
@@ -91,6 +106,11 @@ pub trait SensorLink: Send {
 
     /// The peer for messages, e.g. `"the sensor at 127.0.0.1:49152"` (allocates: not in a tick).
     fn describe(&self) -> String;
+
+    /// How the link reaches the sensor (UDP by default).
+    fn transport(&self) -> Transport {
+        Transport::Udp
+    }
 
     /// Asks the sensor to stream (called again every 200 ms while nothing arrives at start);
     /// a bias configured in the link's options is sent before the first request.
@@ -128,6 +148,13 @@ pub trait RobotLink: Send {
     /// The peer for messages, e.g. `"the robot on UDP port 6510"` (allocates: not in a tick).
     fn describe(&self) -> String;
 
+    /// How the link reaches the robot (UDP by default): a link that connects out (TCP, the PC
+    /// as client, e.g. Universal Robots RTDE) connects in its `open` and says
+    /// [`Transport::TcpClient`]; the loop does not change.
+    fn transport(&self) -> Transport {
+        Transport::Udp
+    }
+
     /// What clocks the loop with this link.
     fn pacing(&self) -> Pacing;
 
@@ -140,7 +167,7 @@ pub trait RobotLink: Send {
 
     /// Waits until at least one valid feedback arrived or the monotonic time passes
     /// `deadline_ns`; returns how many were accepted (0 = timed out). The default polls every
-    /// 100 µs; a robot-paced link should block on its socket ([`wait_readable`]).
+    /// 100 µs; a robot-paced link should block on its socket ([`wait_readable`](super::wait_readable)).
     fn wait(&mut self, deadline_ns: u64, estimator: &mut FeedbackEstimator) -> usize {
         loop {
             let n = self.poll(now_ns(), estimator);
@@ -168,7 +195,9 @@ pub trait RobotLink: Send {
         self.send(&at_rest, clock_ns);
     }
 
-    /// The robot's address, once known.
+    /// The robot's address, once known: the sender locked onto (a robot that sends first, over
+    /// UDP), or the address connected to (a link that connects out in its `open`, known from
+    /// the start). None before that.
     fn peer(&self) -> Option<SocketAddr>;
 
     /// The link's counters.
@@ -216,6 +245,22 @@ impl StartRegion {
     }
 }
 
+/// One decoded robot feedback as [`RobotIdentity::accept`] takes it: the sender, the
+/// protocol's sequence number, the robot's time and the fed-back pose in `t`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FeedbackPose<T> {
+    /// The datagram's sender.
+    pub from: SocketAddr,
+    /// The protocol's sequence number (EGM `seqno`, RSI IPOC).
+    pub seq: T,
+    /// The robot's time of the pose, s.
+    pub robot_time: f64,
+    /// Fed-back position in `t`, m.
+    pub position: Vector3<f64>,
+    /// Fed-back orientation in `t`.
+    pub orientation: UnitQuaternion<f64>,
+}
+
 /// Which sender is the robot, for a robot link: the host `robot_host` names, else the first
 /// sender whose valid feedback puts the rod tip in the start region ([`LinkContext::start`]);
 /// identified, not raced for: a foreign sender that started earlier, elsewhere, is counted
@@ -245,18 +290,14 @@ impl RobotIdentity {
         })
     }
 
-    /// Whether a datagram from `from` may be the robot's (checked before decoding); else it is
-    /// counted `foreign`.
-    pub fn admits(&self, from: SocketAddr, stats: &mut LinkStats) -> bool {
-        let ok = match (self.robot_ip, self.robot_addr) {
+    /// Whether a datagram from `from` may be the robot's (checked before decoding); else the
+    /// receive loop counts it `foreign`.
+    pub fn admits(&self, from: SocketAddr) -> bool {
+        match (self.robot_ip, self.robot_addr) {
             (_, Some(addr)) => from == addr,
             (Some(ip), None) => from.ip() == ip,
             (None, None) => true,
-        };
-        if !ok {
-            stats.foreign += 1;
         }
-        ok
     }
 
     /// After decoding a valid pose (`t` frame, m): whether its sender can be the robot. Before
@@ -286,6 +327,34 @@ impl RobotIdentity {
             }
         }
         at_start
+    }
+
+    /// The one acceptance rule of a decoded robot feedback `f`: before the lock its sender at
+    /// the scenario's start ([`RobotIdentity::at_start`]), newer than the last accepted one
+    /// (`sequence`: stale and lost counted), then its sender locked onto, and a motion the
+    /// robot can make (`estimator`, which takes it; else `invalid`). Counts `accepted`;
+    /// returns whether it was. Never allocates.
+    pub fn accept<T: SequenceNumber>(
+        &mut self,
+        f: &FeedbackPose<T>,
+        sequence: &mut SequenceTracker<T>,
+        now_ns: u64,
+        estimator: &mut FeedbackEstimator,
+        stats: &mut LinkStats,
+    ) -> bool {
+        if !self.at_start(f.from, f.position, f.orientation, stats) {
+            return false; // not locked yet: the robot is the sender at the scenario's start
+        }
+        if !sequence_counted(sequence, f.seq, stats) {
+            return false;
+        }
+        self.lock(f.from);
+        if !estimator.push(f.robot_time, now_ns, f.position, f.orientation) {
+            stats.invalid += 1; // a jump no robot makes in one cycle
+            return false;
+        }
+        stats.accepted += 1;
+        true
     }
 
     /// Locks onto `from` (the first accepted feedback's sender), if not locked yet.
@@ -322,6 +391,11 @@ pub trait SensorEndpoint: Send {
     /// The local address the sensor serves its protocol on.
     fn address(&self) -> SocketAddr;
 
+    /// How the emulated sensor serves (UDP by default).
+    fn transport(&self) -> Transport {
+        Transport::Udp
+    }
+
     /// The address of the sensor's HTTP configuration server, if it has one (Net F/T:
     /// `/netftapi2.xml`).
     fn http_address(&self) -> Option<SocketAddr> {
@@ -351,8 +425,14 @@ pub trait RobotEndpoint: Send {
     /// The robot's own local address.
     fn address(&self) -> SocketAddr;
 
-    /// Where the robot's feedback goes (the PC running the loop).
-    fn peer(&self) -> SocketAddr;
+    /// Where the robot's feedback goes (the PC running the loop): the configured address
+    /// (UDP), or the connected client's (a TCP server; None until one connects).
+    fn peer(&self) -> Option<SocketAddr>;
+
+    /// How the emulated robot reaches the PC (UDP by default).
+    fn transport(&self) -> Transport {
+        Transport::Udp
+    }
 
     /// Reads the commands that arrived (non-blocking, never allocates) and returns the newest
     /// valid one as the pose and velocity to follow, in the target frame `t` (m, m/s, rad/s),
@@ -378,20 +458,15 @@ pub struct EndpointContext {
     pub initial: RelativeMotion,
 }
 
-/// A sensor protocol as the registry ([`crate::devices`]) sees it: its link's options, parsed
-/// once into what opens the link, and the same for its emulated endpoint. Implemented by a
-/// unit type in the device's folder; registered by one line of `registry!`.
-pub trait SensorProtocol {
-    /// The link's options (`[sensor]` of the runtime's options, without `kind`).
+/// A sensor link that the registry ([`crate::devices`]) opens: its options (`[sensor]` of
+/// the runtime's options, without `kind`), parsed once into what opens it.
+pub trait SensorDevice: SensorLink + Sized + 'static {
+    /// The link's options.
     type Options;
     /// The link's options once parsed: what opens the link.
     type Config;
-    /// The emulated sensor's options (`[sensor]` of the emulator's options).
-    type EndpointOptions;
-    /// The emulated sensor's options once parsed.
-    type EndpointConfig;
 
-    /// Checks and types the link's options, once, before anything is opened.
+    /// Checks and types the options, once, before anything is opened.
     fn parse(options: &Self::Options) -> Result<Self::Config>;
 
     /// The checks across the options and the scenario's control period `period` (s), done once
@@ -400,48 +475,56 @@ pub trait SensorProtocol {
         Ok(())
     }
 
-    /// Opens the link (binds, connects, reads what it needs before the loop starts).
-    fn open(config: &Self::Config, context: &LinkContext) -> Result<Box<dyn SensorLink>>;
-
-    /// Checks and types the emulated sensor's options, once.
-    fn parse_endpoint(options: &Self::EndpointOptions) -> Result<Self::EndpointConfig>;
-
-    /// Opens the emulated sensor (binds its sockets and servers).
-    fn open_endpoint(
-        config: &Self::EndpointConfig,
-        context: &EndpointContext,
-    ) -> Result<Box<dyn SensorEndpoint>>;
+    /// Opens the link (binds or connects, reads what it needs before the loop starts); checks
+    /// nothing again.
+    fn open_parsed(config: &Self::Config, context: &LinkContext) -> Result<Self>;
 }
 
-/// A robot protocol as the registry ([`crate::devices`]) sees it: its link's options, parsed
-/// once into what opens the link, what clocks the loop with it, and the same for its emulated
-/// endpoint. Implemented by a unit type in the device's folder; registered by one line of
-/// `registry!`.
-pub trait RobotProtocol {
+/// A robot link that the registry ([`crate::devices`]) opens: its options (`[robot]` of the
+/// runtime's options, without `kind`), parsed once into what opens it, and what clocks the
+/// loop with it.
+pub trait RobotDevice: RobotLink + Sized + 'static {
     /// What clocks the loop with this robot, known before it is opened (the opened link's
     /// [`RobotLink::pacing`] says the same).
     const PACING: Pacing;
-    /// The link's options (`[robot]` of the runtime's options, without `kind`).
+    /// The link's options.
     type Options;
     /// The link's options once parsed: what opens the link.
     type Config;
-    /// The emulated robot's options (`[robot]` of the emulator's options).
-    type EndpointOptions;
-    /// The emulated robot's options once parsed.
-    type EndpointConfig;
 
-    /// Checks and types the link's options, once, before anything is opened.
+    /// Checks and types the options, once, before anything is opened.
     fn parse(options: &Self::Options) -> Result<Self::Config>;
 
-    /// Opens the link (binds its socket, or connects to the robot).
-    fn open(config: &Self::Config, context: &LinkContext) -> Result<Box<dyn RobotLink>>;
+    /// Opens the link (binds its socket, or connects to the robot); checks nothing again.
+    fn open_parsed(config: &Self::Config, context: &LinkContext) -> Result<Self>;
+}
 
-    /// Checks and types the emulated robot's options, once.
-    fn parse_endpoint(options: &Self::EndpointOptions) -> Result<Self::EndpointConfig>;
+/// An emulated sensor that the registry ([`crate::devices`]) opens: its options (`[sensor]`
+/// of the emulator's options, without `kind`), parsed once into what opens it.
+pub trait EmulatedSensor: SensorEndpoint + Sized + 'static {
+    /// The emulated sensor's options.
+    type Options;
+    /// The options once parsed: what opens the endpoint.
+    type Config;
 
-    /// Opens the emulated robot (binds its socket, resolves where feedback goes).
-    fn open_endpoint(
-        config: &Self::EndpointConfig,
-        context: &EndpointContext,
-    ) -> Result<Box<dyn RobotEndpoint>>;
+    /// Checks and types the options, once, before anything is opened.
+    fn parse(options: &Self::Options) -> Result<Self::Config>;
+
+    /// Opens the emulated sensor (binds its sockets and servers).
+    fn open_parsed(config: &Self::Config, context: &EndpointContext) -> Result<Self>;
+}
+
+/// An emulated robot that the registry ([`crate::devices`]) opens: its options (`[robot]` of
+/// the emulator's options, without `kind`), parsed once into what opens it.
+pub trait EmulatedRobot: RobotEndpoint + Sized + 'static {
+    /// The emulated robot's options.
+    type Options;
+    /// The options once parsed: what opens the endpoint.
+    type Config;
+
+    /// Checks and types the options, once, before anything is opened.
+    fn parse(options: &Self::Options) -> Result<Self::Config>;
+
+    /// Opens the emulated robot (binds its socket, resolves where feedback goes, or listens).
+    fn open_parsed(config: &Self::Config, context: &EndpointContext) -> Result<Self>;
 }

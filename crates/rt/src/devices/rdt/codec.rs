@@ -15,6 +15,7 @@
 //! Decoding never allocates and never panics: a datagram of the wrong size or header is an
 //! [`RdtError`].
 
+use crate::devices::transport::DecodeError;
 use thiserror::Error;
 
 /// The sensor's RDT port (fixed on a real Net F/T).
@@ -79,6 +80,14 @@ pub enum RdtError {
     /// A request carries a command this crate does not handle.
     #[error("unknown command 0x{0:04x}")]
     UnknownCommand(u16),
+}
+
+/// RDT decoding errors as the counters see them: every one is a malformed datagram (a record's
+/// error status is checked after decoding, and counted invalid).
+impl DecodeError for RdtError {
+    fn is_malformed(&self) -> bool {
+        true
+    }
 }
 
 /// A request from a client.
@@ -310,14 +319,14 @@ mod tests {
 
     #[test]
     fn sequences_accept_newer_count_gaps_drop_duplicates() {
-        let mut s = SequenceTracker::new();
+        let mut s: SequenceTracker = SequenceTracker::new();
         assert_eq!(s.check(10), SequenceVerdict::First);
         assert_eq!(s.check(11), SequenceVerdict::Next);
         assert_eq!(s.check(11), SequenceVerdict::Stale);
         assert_eq!(s.check(9), SequenceVerdict::Stale);
         assert_eq!(s.check(15), SequenceVerdict::Gap(3));
         assert_eq!(s.last(), Some(15));
-        let mut w = SequenceTracker::new();
+        let mut w: SequenceTracker = SequenceTracker::new();
         w.check(u32::MAX);
         assert_eq!(w.check(0), SequenceVerdict::Next); // wraps
         assert_eq!(w.check(u32::MAX), SequenceVerdict::Stale);
@@ -342,7 +351,7 @@ mod tests {
 
         #[test]
         fn sequence_tracker_accepts_only_increasing(seqs in proptest::collection::vec(any::<u16>(), 1..50)) {
-            let mut s = SequenceTracker::new();
+            let mut s: SequenceTracker = SequenceTracker::new();
             let mut last: Option<u32> = None;
             for q in seqs {
                 let q = q as u32;

@@ -11,7 +11,7 @@
 pub mod codec;
 pub mod netftapi;
 
-use std::net::{SocketAddr, UdpSocket};
+use std::net::SocketAddr;
 use std::time::Duration;
 
 use nalgebra::Vector3;
@@ -21,10 +21,10 @@ use self::codec::{CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, RDT_PORT};
 use self::netftapi::{
     fetch_counts, netftapi_xml, ForceUnit, NetFtApiServer, SensorCalibration, TorqueUnit,
 };
-use super::transport::SequenceTracker;
+use super::transport::{bind_address_for, decode_counted, SequenceTracker, UdpInbox};
 use super::{
-    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EndpointContext,
-    LinkContext, LinkStats, SensorEndpoint, SensorLink, SensorProtocol, Wrench,
+    check_host, local_addr, resolve, sequence_counted, EmulatedSensor, EndpointContext,
+    LinkContext, LinkStats, SensorDevice, SensorEndpoint, SensorLink, Wrench,
 };
 use crate::error::{Result, RtError};
 
@@ -66,7 +66,7 @@ impl Default for RdtOptions {
 
 /// The RDT client of an ATI Net F/T sensor.
 pub struct RdtSensor {
-    socket: UdpSocket,
+    inbox: UdpInbox<2048>,
     peer: SocketAddr,
     /// Counts per N and per N·m.
     counts: CountsPerUnit,
@@ -75,10 +75,9 @@ pub struct RdtSensor {
     sequence: SequenceTracker,
     stats: LinkStats,
     bias_pending: bool,
-    buf: [u8; 2048],
 }
 
-/// An RDT link's options once parsed ([`RdtOptions::parse`]): the host's form checked, the
+/// An RDT link's options once parsed ([`SensorDevice::parse`] of [`RdtSensor`]): the host's form checked, the
 /// counts per unit given (both positive) or to be read from `/netftapi2.xml`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RdtConfig {
@@ -87,69 +86,10 @@ pub struct RdtConfig {
     counts: Option<CountsPerUnit>,
 }
 
-impl RdtOptions {
-    /// Checks the host's form and the counts per unit (both positive, or neither), once.
-    pub fn parse(&self) -> Result<RdtConfig> {
-        check_host("sensor host", &self.host)?;
-        let counts = match (self.counts_per_force, self.counts_per_torque) {
-            (Some(force), Some(torque)) => {
-                if !(force.is_finite() && force > 0.0 && torque.is_finite() && torque > 0.0) {
-                    return Err(RtError::option(
-                        "counts_per_force",
-                        "counts per unit must be positive numbers",
-                    ));
-                }
-                Some(CountsPerUnit { force, torque })
-            }
-            (None, None) => None,
-            _ => {
-                return Err(RtError::option(
-                    "counts_per_force",
-                    "give both counts_per_force and counts_per_torque, or neither",
-                ))
-            }
-        };
-        Ok(RdtConfig {
-            options: self.clone(),
-            counts,
-        })
-    }
-}
-
 impl RdtSensor {
-    /// Parses the options ([`RdtOptions::parse`]) and opens the link ([`RdtSensor::open_parsed`]).
+    /// Parses the options ([`SensorDevice::parse`] of [`RdtSensor`]) and opens the link ([`RdtSensor::open_parsed`]).
     pub fn open(o: &RdtOptions, context: &LinkContext) -> Result<Self> {
-        Self::open_parsed(&o.parse()?, context)
-    }
-
-    /// Reads the counts per unit and the configured units (HTTP, unless both counts are given,
-    /// then per N and N·m) and binds the client socket.
-    pub fn open_parsed(c: &RdtConfig, context: &LinkContext) -> Result<Self> {
-        let o = &c.options;
-        let (counts, calibration) = match c.counts {
-            Some(counts) => (counts, None),
-            None => {
-                let c = fetch_counts(&o.host, o.http_port, Duration::from_secs_f64(context.connect_timeout.min(5.0)))
-                    .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit: {e} (or give counts_per_force and counts_per_torque)")))?;
-                (c.counts, Some(c))
-            }
-        };
-        let peer = resolve("sensor_host", &o.host, o.port)?;
-        let bind: SocketAddr = if peer.ip().is_loopback() {
-            ([127, 0, 0, 1], o.local_port).into()
-        } else {
-            ([0, 0, 0, 0], o.local_port).into()
-        };
-        Ok(RdtSensor {
-            socket: bind_udp("RDT client", bind)?,
-            peer,
-            counts,
-            calibration,
-            sequence: SequenceTracker::new(),
-            stats: LinkStats::default(),
-            bias_pending: o.bias,
-            buf: [0u8; 2048],
-        })
+        Self::open_parsed(&Self::parse(o)?, context)
     }
 
     /// The counts per N and per N·m in use.
@@ -170,8 +110,64 @@ impl RdtSensor {
             sample_count: 0,
         }
         .encode();
-        let sent = self.socket.send_to(&bytes, self.peer);
+        let sent = self.inbox.socket().send_to(&bytes, self.peer);
         self.stats.count_send(sent);
+    }
+}
+
+impl SensorDevice for RdtSensor {
+    type Options = RdtOptions;
+    type Config = RdtConfig;
+
+    /// Checks the host's form and the counts per unit (both positive, or neither), once.
+    fn parse(options: &RdtOptions) -> Result<RdtConfig> {
+        check_host("sensor host", &options.host)?;
+        let counts = match (options.counts_per_force, options.counts_per_torque) {
+            (Some(force), Some(torque)) => {
+                if !(force.is_finite() && force > 0.0 && torque.is_finite() && torque > 0.0) {
+                    return Err(RtError::option(
+                        "counts_per_force",
+                        "counts per unit must be positive numbers",
+                    ));
+                }
+                Some(CountsPerUnit { force, torque })
+            }
+            (None, None) => None,
+            _ => {
+                return Err(RtError::option(
+                    "counts_per_force",
+                    "give both counts_per_force and counts_per_torque, or neither",
+                ))
+            }
+        };
+        Ok(RdtConfig {
+            options: options.clone(),
+            counts,
+        })
+    }
+
+    /// Reads the counts per unit and the configured units (HTTP, unless both counts are given,
+    /// then per N and N·m) and binds the client socket.
+    fn open_parsed(c: &RdtConfig, context: &LinkContext) -> Result<Self> {
+        let o = &c.options;
+        let (counts, calibration) = match c.counts {
+            Some(counts) => (counts, None),
+            None => {
+                let c = fetch_counts(&o.host, o.http_port, Duration::from_secs_f64(context.connect_timeout.min(5.0)))
+                    .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit: {e} (or give counts_per_force and counts_per_torque)")))?;
+                (c.counts, Some(c))
+            }
+        };
+        let peer = resolve("sensor_host", &o.host, o.port)?;
+        Ok(RdtSensor {
+            inbox: UdpInbox::bind("RDT client", bind_address_for(peer, o.local_port))?,
+            peer,
+            counts,
+            calibration,
+            sequence: SequenceTracker::new(),
+            stats: LinkStats::default(),
+            bias_pending: o.bias,
+        })
     }
 }
 
@@ -203,14 +199,9 @@ impl SensorLink for RdtSensor {
 
     fn poll(&mut self, _now_ns: u64) -> Option<Wrench> {
         let mut newest = None;
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            if from != self.peer {
-                self.stats.foreign += 1;
-                continue;
-            }
-            let Ok(record) = RdtRecord::decode(&self.buf[..n]) else {
-                self.stats.malformed += 1;
+        let peer = self.peer;
+        while let Some((bytes, _)) = self.inbox.next(&mut self.stats, |from| from == peer) {
+            let Some(record) = decode_counted(RdtRecord::decode(bytes), &mut self.stats) else {
                 continue;
             };
             if !sequence_counted(&mut self.sequence, record.rdt_sequence, &mut self.stats) {
@@ -310,7 +301,7 @@ impl Default for RdtEndpointOptions {
 /// per configured unit and the units; the records count in those units. A count beyond the
 /// `i32` range saturates and sets status `0x80010000`.
 pub struct RdtEndpoint {
-    socket: UdpSocket,
+    inbox: UdpInbox<2048>,
     address: SocketAddr,
     http: Option<NetFtApiServer>,
     /// Counts per N and per N·m (the options' counts per configured unit, converted).
@@ -326,10 +317,9 @@ pub struct RdtEndpoint {
     /// The newest sample: force N, moment N·m.
     last_reading: ([f64; 3], [f64; 3]),
     stats: LinkStats,
-    buf: [u8; 2048],
 }
 
-/// The emulated RDT sensor's options once parsed ([`RdtEndpointOptions::parse`]): positive
+/// The emulated RDT sensor's options once parsed ([`EmulatedSensor::parse`] of [`RdtEndpoint`]): positive
 /// counts per configured unit, and the units.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RdtEndpointConfig {
@@ -338,10 +328,47 @@ pub struct RdtEndpointConfig {
     torque_unit: TorqueUnit,
 }
 
-impl RdtEndpointOptions {
+impl RdtEndpoint {
+    /// Parses the options ([`EmulatedSensor::parse`] of [`RdtEndpoint`]) and opens the endpoint
+    /// ([`RdtEndpoint::open_parsed`]).
+    pub fn open(o: &RdtEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open_parsed(&Self::parse(o)?, context)
+    }
+
+    fn send_record(&mut self) {
+        let Some(client) = self.client else { return };
+        if self.remaining == Some(0) {
+            self.client = None;
+            return;
+        }
+        let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+        let (reading, bias) = (self.last_reading, self.bias);
+        let (counts, saturated) = self
+            .counts
+            .to_counts(&sub(reading.0, bias.0), &sub(reading.1, bias.1));
+        self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
+        let record = RdtRecord {
+            rdt_sequence: self.rdt_sequence,
+            ft_sequence: self.ft_sequence,
+            // bit 31 (error) and bit 16 (saturation) when a gauge is out of range
+            status: if saturated { 0x8001_0000 } else { 0 },
+            counts,
+        };
+        let sent = self.inbox.socket().send_to(&record.encode(), client);
+        self.stats.count_send(sent);
+        if let Some(n) = self.remaining.as_mut() {
+            *n -= 1;
+        }
+    }
+}
+
+impl EmulatedSensor for RdtEndpoint {
+    type Options = RdtEndpointOptions;
+    type Config = RdtEndpointConfig;
+
     /// Checks the counts per unit (positive) and the units (known names), once.
-    pub fn parse(&self) -> Result<RdtEndpointConfig> {
-        let o = self;
+    fn parse(options: &RdtEndpointOptions) -> Result<RdtEndpointConfig> {
+        let o = options;
         for (key, v) in [
             ("counts_per_force", o.counts_per_force),
             ("counts_per_torque", o.counts_per_torque),
@@ -372,22 +399,14 @@ impl RdtEndpointOptions {
             )
         })?;
         Ok(RdtEndpointConfig {
-            options: self.clone(),
+            options: options.clone(),
             force_unit,
             torque_unit,
         })
     }
-}
-
-impl RdtEndpoint {
-    /// Parses the options ([`RdtEndpointOptions::parse`]) and opens the endpoint
-    /// ([`RdtEndpoint::open_parsed`]).
-    pub fn open(o: &RdtEndpointOptions, context: &EndpointContext) -> Result<Self> {
-        Self::open_parsed(&o.parse()?, context)
-    }
 
     /// Binds the RDT socket and starts the HTTP server (unless `http_port` is 0).
-    pub fn open_parsed(c: &RdtEndpointConfig, context: &EndpointContext) -> Result<Self> {
+    fn open_parsed(c: &RdtEndpointConfig, context: &EndpointContext) -> Result<Self> {
         let (o, force_unit, torque_unit) = (&c.options, c.force_unit, c.torque_unit);
         // the page's counts are per configured unit; the records count the wrench in those units
         let per_unit = CountsPerUnit {
@@ -398,8 +417,8 @@ impl RdtEndpoint {
             force: o.counts_per_force / force_unit.newtons(),
             torque: o.counts_per_torque / torque_unit.newton_metres(),
         };
-        let socket = bind_udp("sensor (RDT)", resolve("bind_host", &o.bind_host, o.port)?)?;
-        let address = local_addr("sensor (RDT)", &socket)?;
+        let inbox = UdpInbox::bind("sensor (RDT)", resolve("bind_host", &o.bind_host, o.port)?)?;
+        let address = local_addr("sensor (RDT)", inbox.socket())?;
         let http = if o.http_port == 0 {
             None
         } else {
@@ -416,7 +435,7 @@ impl RdtEndpoint {
             })?)
         };
         Ok(RdtEndpoint {
-            socket,
+            inbox,
             address,
             http,
             counts,
@@ -427,34 +446,7 @@ impl RdtEndpoint {
             bias: ([0.0; 3], [0.0; 3]),
             last_reading: ([0.0; 3], [0.0; 3]),
             stats: LinkStats::default(),
-            buf: [0u8; 2048],
         })
-    }
-
-    fn send_record(&mut self) {
-        let Some(client) = self.client else { return };
-        if self.remaining == Some(0) {
-            self.client = None;
-            return;
-        }
-        let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-        let (reading, bias) = (self.last_reading, self.bias);
-        let (counts, saturated) = self
-            .counts
-            .to_counts(&sub(reading.0, bias.0), &sub(reading.1, bias.1));
-        self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
-        let record = RdtRecord {
-            rdt_sequence: self.rdt_sequence,
-            ft_sequence: self.ft_sequence,
-            // bit 31 (error) and bit 16 (saturation) when a gauge is out of range
-            status: if saturated { 0x8001_0000 } else { 0 },
-            counts,
-        };
-        let sent = self.socket.send_to(&record.encode(), client);
-        self.stats.count_send(sent);
-        if let Some(n) = self.remaining.as_mut() {
-            *n -= 1;
-        }
     }
 }
 
@@ -478,10 +470,8 @@ impl SensorEndpoint for RdtEndpoint {
             self.stats.send_errors += send;
             self.stats.io_errors += receive + send;
         }
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            let Ok(request) = RdtRequest::decode(&self.buf[..n]) else {
-                self.stats.malformed += 1;
+        while let Some((bytes, from)) = self.inbox.next(&mut self.stats, |_| true) {
+            let Some(request) = decode_counted(RdtRequest::decode(bytes), &mut self.stats) else {
                 continue;
             };
             self.stats.accepted += 1;
@@ -509,34 +499,5 @@ impl SensorEndpoint for RdtEndpoint {
 
     fn stats(&self) -> &LinkStats {
         &self.stats
-    }
-}
-
-/// ATI Net F/T over RDT: the protocol as the registry ([`crate::devices`]) sees it.
-pub struct Rdt;
-
-impl SensorProtocol for Rdt {
-    type Options = RdtOptions;
-    type Config = RdtConfig;
-    type EndpointOptions = RdtEndpointOptions;
-    type EndpointConfig = RdtEndpointConfig;
-
-    fn parse(options: &RdtOptions) -> Result<RdtConfig> {
-        options.parse()
-    }
-
-    fn open(config: &RdtConfig, context: &LinkContext) -> Result<Box<dyn SensorLink>> {
-        Ok(Box::new(RdtSensor::open_parsed(config, context)?))
-    }
-
-    fn parse_endpoint(options: &RdtEndpointOptions) -> Result<RdtEndpointConfig> {
-        options.parse()
-    }
-
-    fn open_endpoint(
-        config: &RdtEndpointConfig,
-        context: &EndpointContext,
-    ) -> Result<Box<dyn SensorEndpoint>> {
-        Ok(Box::new(RdtEndpoint::open_parsed(config, context)?))
     }
 }

@@ -26,12 +26,13 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use self::codec::{
-    parse_matrix, FrameReader, PackageTracker, SriAck, SriCommand, SriFrame, SriRateCommand,
-    SriRequest, MAX_LINE, SRI_PORT,
+    parse_matrix, FrameReader, SriAck, SriCommand, SriFrame, SriRateCommand, SriRequest, MAX_LINE,
+    SRI_PORT,
 };
+use super::transport::SequenceTracker;
 use super::{
-    check_host, resolve, EndpointContext, LinkContext, LinkStats, SensorEndpoint, SensorLink,
-    SensorProtocol, Wrench,
+    check_host, resolve, EmulatedSensor, EndpointContext, LinkContext, LinkStats, SensorDevice,
+    SensorEndpoint, SensorLink, Transport, Wrench,
 };
 use crate::error::{Result, RtError};
 
@@ -77,14 +78,14 @@ pub struct SriSensor {
     rate_command: SriRateCommand,
     matrix_sent: bool,
     reader: FrameReader,
-    packages: PackageTracker,
+    packages: SequenceTracker<u16>,
     /// The connection was closed or failed: nothing more is read.
     closed: bool,
     stats: LinkStats,
     line: [u8; MAX_LINE],
 }
 
-/// An SRI link's options once parsed ([`SriOptions::parse`]): the host's form, the sample rate
+/// An SRI link's options once parsed ([`SensorDevice::parse`] of [`SriSensor`]): the host's form, the sample rate
 /// (if given) and the decoupling matrix checked.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SriConfig {
@@ -102,27 +103,6 @@ fn check_rate(hz: f64) -> Result<u32> {
     Ok(hz.round() as u32)
 }
 
-impl SriOptions {
-    /// Checks the host's form, the sample rate (if given) and the decoupling matrix, once.
-    pub fn parse(&self) -> Result<SriConfig> {
-        check_host("sensor host", &self.host)?;
-        if let Some(hz) = self.sample_rate {
-            check_rate(hz)?;
-        }
-        if let Some(m) = &self.decoupling_matrix {
-            if !m.iter().flatten().all(|v| v.is_finite()) {
-                return Err(RtError::option(
-                    "decoupling_matrix",
-                    "must be 6 rows of 6 finite numbers",
-                ));
-            }
-        }
-        Ok(SriConfig {
-            options: self.clone(),
-        })
-    }
-}
-
 impl SriConfig {
     /// The sample rate asked of the box with the scenario's control period `period` (s), Hz:
     /// the one given, else the loop's rate; an error if the box does not take it.
@@ -132,59 +112,10 @@ impl SriConfig {
 }
 
 impl SriSensor {
-    /// Parses the options ([`SriOptions::parse`]) and opens the link
+    /// Parses the options ([`SensorDevice::parse`] of [`SriSensor`]) and opens the link
     /// ([`SriSensor::open_parsed`]).
     pub fn open(o: &SriOptions, context: &LinkContext) -> Result<Self> {
-        Self::open_parsed(&o.parse()?, context)
-    }
-
-    /// Connects (within `context.connect_timeout`), configures the box (blocking, each answer
-    /// checked) and leaves the socket non-blocking, not yet streaming.
-    pub fn open_parsed(c: &SriConfig, context: &LinkContext) -> Result<Self> {
-        let o = &c.options;
-        let rate = c.sample_rate(context.period)?;
-        let peer = resolve("sensor_host", &o.host, o.port)?;
-        let timeout = Duration::from_secs_f64(context.connect_timeout.max(0.1));
-        let stream = TcpStream::connect_timeout(&peer, timeout).map_err(|e| {
-            RtError::Connect(format!(
-                "cannot connect to the SRI box at {peer} (TCP): {e}"
-            ))
-        })?;
-        let io = |e: std::io::Error| RtError::io(format!("SRI box at {peer}"), &e);
-        stream.set_nodelay(true).map_err(io)?;
-        stream
-            .set_read_timeout(Some(timeout.min(Duration::from_secs(2))))
-            .map_err(io)?;
-        let mut link = SriSensor {
-            stream,
-            peer,
-            rate,
-            rate_command: o.rate_command,
-            matrix_sent: o.decoupling_matrix.is_some(),
-            reader: FrameReader::new(),
-            packages: PackageTracker::new(),
-            closed: false,
-            stats: LinkStats::default(),
-            line: [0u8; MAX_LINE],
-        };
-        // a stream left running by an earlier client would bury the answers
-        link.send(SriCommand::StopStream);
-        let mut configuration = vec![
-            SriCommand::ChecksumSum,
-            SriCommand::DataMode,
-            SriCommand::SampleRate(o.rate_command, link.rate),
-        ];
-        if let Some(m) = &o.decoupling_matrix {
-            configuration.push(SriCommand::ComputeUnitMvpv);
-            configuration.push(SriCommand::DecouplingMatrix(**m));
-        }
-        let mut pending = Vec::new();
-        for command in configuration {
-            link.send(command);
-            link.expect_ack(command, &mut pending, timeout)?;
-        }
-        link.stream.set_nonblocking(true).map_err(io)?;
-        Ok(link)
+        Self::open_parsed(&Self::parse(o)?, context)
     }
 
     /// The sample rate set, Hz.
@@ -273,7 +204,7 @@ impl SriSensor {
                 self.stats.malformed += 1;
                 continue;
             };
-            self.stats.lost += self.packages.check(frame.package) as u64;
+            self.stats.lost += self.packages.advance(frame.package) as u64;
             let v = frame.values;
             if !v.iter().all(|x| x.is_finite()) {
                 self.stats.invalid += 1;
@@ -288,7 +219,88 @@ impl SriSensor {
     }
 }
 
+impl SensorDevice for SriSensor {
+    type Options = SriOptions;
+    type Config = SriConfig;
+
+    /// Checks the host's form, the sample rate (if given) and the decoupling matrix, once.
+    fn parse(options: &SriOptions) -> Result<SriConfig> {
+        check_host("sensor host", &options.host)?;
+        if let Some(hz) = options.sample_rate {
+            check_rate(hz)?;
+        }
+        if let Some(m) = &options.decoupling_matrix {
+            if !m.iter().flatten().all(|v| v.is_finite()) {
+                return Err(RtError::option(
+                    "decoupling_matrix",
+                    "must be 6 rows of 6 finite numbers",
+                ));
+            }
+        }
+        Ok(SriConfig {
+            options: options.clone(),
+        })
+    }
+
+    fn check_period(config: &SriConfig, period: f64) -> Result<()> {
+        config.sample_rate(period).map(|_| ())
+    }
+
+    /// Connects (within `context.connect_timeout`), configures the box (blocking, each answer
+    /// checked) and leaves the socket non-blocking, not yet streaming.
+    fn open_parsed(c: &SriConfig, context: &LinkContext) -> Result<Self> {
+        let o = &c.options;
+        let rate = c.sample_rate(context.period)?;
+        let peer = resolve("sensor_host", &o.host, o.port)?;
+        let timeout = Duration::from_secs_f64(context.connect_timeout.max(0.1));
+        let stream = TcpStream::connect_timeout(&peer, timeout).map_err(|e| {
+            RtError::Connect(format!(
+                "cannot connect to the SRI box at {peer} (TCP): {e}"
+            ))
+        })?;
+        let io = |e: std::io::Error| RtError::io(format!("SRI box at {peer}"), &e);
+        stream.set_nodelay(true).map_err(io)?;
+        stream
+            .set_read_timeout(Some(timeout.min(Duration::from_secs(2))))
+            .map_err(io)?;
+        let mut link = SriSensor {
+            stream,
+            peer,
+            rate,
+            rate_command: o.rate_command,
+            matrix_sent: o.decoupling_matrix.is_some(),
+            reader: FrameReader::new(),
+            packages: SequenceTracker::new(),
+            closed: false,
+            stats: LinkStats::default(),
+            line: [0u8; MAX_LINE],
+        };
+        // a stream left running by an earlier client would bury the answers
+        link.send(SriCommand::StopStream);
+        let mut configuration = vec![
+            SriCommand::ChecksumSum,
+            SriCommand::DataMode,
+            SriCommand::SampleRate(o.rate_command, link.rate),
+        ];
+        if let Some(m) = &o.decoupling_matrix {
+            configuration.push(SriCommand::ComputeUnitMvpv);
+            configuration.push(SriCommand::DecouplingMatrix(**m));
+        }
+        let mut pending = Vec::new();
+        for command in configuration {
+            link.send(command);
+            link.expect_ack(command, &mut pending, timeout)?;
+        }
+        link.stream.set_nonblocking(true).map_err(io)?;
+        Ok(link)
+    }
+}
+
 impl SensorLink for SriSensor {
+    fn transport(&self) -> Transport {
+        Transport::TcpClient
+    }
+
     fn name(&self) -> &'static str {
         "SRI"
     }
@@ -586,7 +598,24 @@ impl SriEndpoint {
     }
 }
 
+impl EmulatedSensor for SriEndpoint {
+    type Options = SriEndpointOptions;
+    type Config = SriEndpointOptions;
+
+    fn parse(options: &SriEndpointOptions) -> Result<SriEndpointOptions> {
+        Ok(options.clone())
+    }
+
+    fn open_parsed(config: &SriEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open(config, context)
+    }
+}
+
 impl SensorEndpoint for SriEndpoint {
+    fn transport(&self) -> Transport {
+        Transport::TcpServer
+    }
+
     fn name(&self) -> &'static str {
         "SRI"
     }
@@ -691,38 +720,5 @@ impl SensorEndpoint for SriEndpoint {
 
     fn stats(&self) -> &LinkStats {
         &self.stats
-    }
-}
-
-/// SRI M812x interface box over TCP: the protocol as the registry ([`crate::devices`]) sees it.
-pub struct Sri;
-
-impl SensorProtocol for Sri {
-    type Options = SriOptions;
-    type Config = SriConfig;
-    type EndpointOptions = SriEndpointOptions;
-    type EndpointConfig = SriEndpointOptions;
-
-    fn parse(options: &SriOptions) -> Result<SriConfig> {
-        options.parse()
-    }
-
-    fn check_period(config: &SriConfig, period: f64) -> Result<()> {
-        config.sample_rate(period).map(|_| ())
-    }
-
-    fn open(config: &SriConfig, context: &LinkContext) -> Result<Box<dyn SensorLink>> {
-        Ok(Box::new(SriSensor::open_parsed(config, context)?))
-    }
-
-    fn parse_endpoint(options: &SriEndpointOptions) -> Result<SriEndpointOptions> {
-        Ok(options.clone())
-    }
-
-    fn open_endpoint(
-        config: &SriEndpointOptions,
-        context: &EndpointContext,
-    ) -> Result<Box<dyn SensorEndpoint>> {
-        Ok(Box::new(SriEndpoint::open(config, context)?))
     }
 }
