@@ -25,7 +25,7 @@ from mcap.exceptions import McapError  # noqa: E402
 from test_cli import assert_one_error_line, invoke  # noqa: E402
 from test_realtime_e2e import ROBOT_DELAY, facility_process, hil_command, run_hil  # noqa: E402
 
-#: The channels written once per tick by every run (the Rust `recording::CHANNELS`).
+#: The channels written once per tick by every run (the Rust `output::mcap::CHANNELS`).
 PER_TICK = [
     "/hil/measured_wrench",
     "/hil/applied_wrench",

@@ -7,13 +7,18 @@ frame, in the sensor frame ``s``, about the sensor origin.
 
 from typing import Any
 
-def simulate(scenario_json: str) -> dict[str, Any]:
+def simulate(scenario_json: str, outputs: str | None = None) -> dict[str, Any]:
     """Run one HIL simulation and its ideal reference.
 
     ``scenario_json`` is the fully resolved scenario as JSON (``Scenario.to_json()``).
     Returns ``{"timeseries": {column: float64 array}, "reference": {column: float64 array},
     "metrics": str}`` where ``metrics`` is JSON text (the core's ``Metrics``; every field is
     described in docs/model.md, "Metrics"). The columns and their units: :func:`table_columns`.
+
+    ``outputs``: JSON of the outputs to also write the run to, each under its key with a
+    real-time run's options for it (``{"mcap": {"path": ..., "overwrite": false}}``); the
+    result then has, under each output's key (``"mcap"``), what it wrote as JSON text (else
+    None). An unknown key or an existing file raises RealtimeOptionError.
 
     Raises ``hilcontact.errors.ScenarioError`` for an invalid scenario.
     """
@@ -156,6 +161,14 @@ def check(scenario_json: str, options_json: str, duration: float) -> str:
 
 def realtime_defaults() -> str:
     """The default runtime and facility options as JSON: ``{"runtime": {...}, "facility": {...}}``."""
+
+
+def realtime_schema() -> str:
+    """The JSON Schema of the real-time options (draft 2020-12), as JSON text:
+    ``{"runtime": <schema of the runtime's options>, "facility": <schema of the emulator's>}``,
+    every key with its description (units), default, allowed values and range (``minimum``,
+    ``exclusiveMinimum``, ``maximum``, ``exclusiveMaximum``); ``sensor`` and ``robot`` are a
+    ``oneOf`` tagged by ``kind``, one variant per protocol."""
 
 
 def replay(scenario_json: str, columns: dict[str, Any]) -> dict[str, Any]:

@@ -202,6 +202,7 @@ def simulate(
     scenario: Scenario | str | os.PathLike[str],
     mcap: str | os.PathLike[str] | None = None,
     overwrite: bool = False,
+    outputs: dict[str, Any] | None = None,
 ) -> Run:
     """Simulate a scenario (a :class:`Scenario`, a preset name or a TOML path).
 
@@ -210,14 +211,21 @@ def simulate(
     recorder as a real-time run; the file is created before the run, and an existing one is
     refused (RealtimeOptionError) unless ``overwrite``. ``Run.mcap`` then says what was written.
 
+    ``outputs``: more outputs to write the run to, each under its key with the options a
+    real-time run has under that key (the outputs of ``hilcontact_rt::output::OUTPUTS``), e.g.
+    ``{"mcap": {"path": "run.mcap", "chunk_interval": 1.0}}``; ``mcap`` above is the same as
+    ``outputs={"mcap": {"path": mcap, "overwrite": overwrite}}``.
+
     Raises ScenarioError for an invalid scenario. A diverging loop is not an error: the run's
     ``status`` is ``"diverged"`` and ``metrics["reason"]`` says why.
     """
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
-    options = None if mcap is None else json.dumps({"path": os.fspath(mcap), "overwrite": bool(overwrite)})
+    wanted = dict(outputs or {})
+    if mcap is not None:
+        wanted["mcap"] = {"path": os.fspath(mcap), "overwrite": bool(overwrite)}
     core = _core()
-    result = core.simulate(scenario.to_json()) if options is None else core.simulate(scenario.to_json(), options)
+    result = core.simulate(scenario.to_json(), json.dumps(wanted)) if wanted else core.simulate(scenario.to_json())
     metrics = json.loads(result["metrics"])
     recorded = result.get("mcap")
     return Run(

@@ -7,15 +7,17 @@ use std::path::Path;
 
 /// Module name -> the crate modules its files refer to (`crate::name`).
 fn module_graph(src: &Path) -> BTreeMap<String, BTreeSet<String>> {
+    // every file under src/, folders of folders included (e.g. crates/rt/src/devices/egm/)
     let mut files = Vec::new();
-    for entry in std::fs::read_dir(src).expect("src") {
-        let path = entry.expect("entry").path();
-        if path.is_dir() {
-            for sub in std::fs::read_dir(&path).expect("module dir") {
-                files.push(sub.expect("entry").path());
+    let mut folders = vec![src.to_path_buf()];
+    while let Some(folder) = folders.pop() {
+        for entry in std::fs::read_dir(&folder).expect("module dir") {
+            let path = entry.expect("entry").path();
+            if path.is_dir() {
+                folders.push(path);
+            } else {
+                files.push(path);
             }
-        } else {
-            files.push(path);
         }
     }
     let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();

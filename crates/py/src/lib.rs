@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use hilcontact_core::{CoreError, Plan, Scenario, Table};
-use hilcontact_rt::recording::{McapOptions, McapRecorder, RunInfo};
+use hilcontact_rt::output::{Outputs, RunInfo, OUTPUTS};
 use hilcontact_rt::{EmulatorOptions, FacilityHandle, HilHandle, RtError, RuntimeOptions};
 use numpy::IntoPyArray;
 use pyo3::exceptions::{PyException, PyOSError, PyValueError};
@@ -298,8 +298,8 @@ impl PyFacilityHandle {
         d.set_item("sensor", a.sensor.to_string())?;
         d.set_item("http", a.http.map(|h| h.to_string()))?;
         d.set_item("robot", a.robot.to_string())?;
-        d.set_item("robot_peer", a.robot_peer.to_string())?;
-        d.set_item("egm_peer", a.robot_peer.to_string())?;
+        d.set_item("robot_peer", a.robot_peer.map(|p| p.to_string()))?;
+        d.set_item("egm_peer", a.robot_peer.map(|p| p.to_string()))?;
         Ok(d)
     }
 
@@ -354,12 +354,21 @@ fn realtime_defaults() -> PyResult<String> {
         "runtime": RuntimeOptions::default(),
         "facility": EmulatorOptions::default(),
         "protocols": {
-            "sensor": hilcontact_rt::links::SENSOR_KINDS,
-            "robot": hilcontact_rt::links::ROBOT_KINDS,
+            "sensor": hilcontact_rt::devices::SENSOR_KINDS,
+            "robot": hilcontact_rt::devices::ROBOT_KINDS,
         },
-        "kinds": hilcontact_rt::links::protocol_defaults(),
+        "kinds": hilcontact_rt::devices::protocol_defaults(),
     });
     Ok(value.to_string())
+}
+
+/// The JSON Schema (draft 2020-12) of the real-time options, as JSON text:
+/// `{"runtime": <RuntimeOptions>, "facility": <EmulatorOptions>}`, every key with its
+/// description (units), default, allowed values and range; `sensor` and `robot` are `oneOf`
+/// tagged by `kind` (one variant per protocol).
+#[pyfunction]
+fn realtime_schema() -> PyResult<String> {
+    Ok(hilcontact_rt::options::schema().to_string())
 }
 
 fn table_to_dict<'py>(py: Python<'py>, table: Table) -> PyResult<Bound<'py, PyDict>> {
@@ -371,53 +380,58 @@ fn table_to_dict<'py>(py: Python<'py>, table: Table) -> PyResult<Bound<'py, PyDi
 }
 
 /// Runs a scenario (its fully resolved form as JSON): the ideal reference and the HIL loop.
-/// Returns `{"timeseries": {column: ndarray}, "reference": {column: ndarray}, "metrics": str,
-/// "mcap": str | None}`.
+/// Returns `{"timeseries": {column: ndarray}, "reference": {column: ndarray}, "metrics": str}`
+/// and, for each output a run can have (`hilcontact_rt::output::OUTPUTS`: `"mcap"`, ...),
+/// what it wrote (JSON) or None.
 ///
-/// `mcap`: JSON of the recording's options (`{"path": ..., "overwrite": false,
-/// "chunk_interval": 0.5}`, the runtime's `mcap` option): the run is also written as MCAP by
-/// the real-time runtime's recorder, from its records; `"mcap"` is then what was written
-/// (JSON: path, messages, chunks, bytes, write_errors, error, complete). The file is created
-/// before the simulation runs: an existing file (without `overwrite`) raises
-/// RealtimeOptionError, a path that cannot be created RealtimeError, both naming it.
+/// `outputs`: JSON of the outputs to write the run to, each under its key, with the options a
+/// real-time run has under the same key, e.g. `{"mcap": {"path": ..., "overwrite": false,
+/// "chunk_interval": 0.5}}`: an MCAP recording by the real-time runtime's recorder, from the
+/// run's records; `"mcap"` is then what was written (path, messages, chunks, bytes,
+/// write_errors, error, complete). The outputs are opened before the simulation runs: an
+/// unknown key or an existing file (without `overwrite`) raises RealtimeOptionError, a path
+/// that cannot be created RealtimeError, both naming it.
 #[pyfunction]
-#[pyo3(signature = (scenario_json, mcap=None))]
+#[pyo3(signature = (scenario_json, outputs=None))]
 fn simulate<'py>(
     py: Python<'py>,
     scenario_json: &str,
-    mcap: Option<&str>,
+    outputs: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let plan = parse_scenario(py, scenario_json)?;
-    let recorder = match mcap {
+    let outputs = match outputs {
         Some(json) => {
-            let options: McapOptions = parse_options(py, json)?;
+            let options: serde_json::Value = parse_options(py, json)?;
             let info = RunInfo::new(&plan, false);
-            let recorder = py
-                .allow_threads(|| McapRecorder::create(&options, &info))
+            let opened = py
+                .allow_threads(|| Outputs::open_only(&plan, &info, &options))
                 .map_err(|e| rt_err(py, e))?;
-            Some(recorder)
+            Some((opened, info))
         }
         None => None,
     };
-    let (output, stats) = py.allow_threads(|| match recorder {
-        Some(recorder) => {
+    let (output, reports) = py.allow_threads(|| match outputs {
+        Some((outputs, info)) if !outputs.is_empty() => {
             let (output, records) = hilcontact_core::sim::simulate_plan_with_records(&plan);
-            let stats = recorder.record_run(&records, &output.metrics);
-            (output, Some(stats))
+            let reports = outputs.record_simulation(&info, &records, &output.metrics);
+            (output, reports)
         }
-        None => (hilcontact_core::sim::simulate_plan(&plan), None),
+        _ => (hilcontact_core::sim::simulate_plan(&plan), Vec::new()),
     });
     let metrics =
         serde_json::to_string(&output.metrics).map_err(|e| PyValueError::new_err(e.to_string()))?;
-    let stats = stats
-        .map(|s| serde_json::to_string(&s))
-        .transpose()
-        .map_err(|e| PyValueError::new_err(e.to_string()))?;
     let result = PyDict::new(py);
     result.set_item("timeseries", table_to_dict(py, output.timeseries)?)?;
     result.set_item("reference", table_to_dict(py, output.reference)?)?;
     result.set_item("metrics", metrics)?;
-    result.set_item("mcap", stats)?;
+    for o in OUTPUTS {
+        result.set_item(o.key, py.None())?;
+    }
+    for (key, report) in reports {
+        let report =
+            serde_json::to_string(&report).map_err(|e| PyValueError::new_err(e.to_string()))?;
+        result.set_item(key, report)?;
+    }
     Ok(result)
 }
 
@@ -681,6 +695,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(start_facility, m)?)?;
     m.add_function(wrap_pyfunction!(check, m)?)?;
     m.add_function(wrap_pyfunction!(realtime_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(realtime_schema, m)?)?;
     m.add_function(wrap_pyfunction!(replay, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_class::<PyHilHandle>()?;

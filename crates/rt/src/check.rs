@@ -1,9 +1,9 @@
 //! A dry run (`hilcontact check`): connects to the sensor and the robot exactly as a run would
-//! (the same options, links and [`crate::links::LinkContext`]), listens for a while, and tells
+//! (the same options, links and [`crate::devices::LinkContext`]), listens for a while, and tells
 //! whether a run would start, and if not, why, with the same checks as the run's start.
 //!
 //! Nothing is commanded to the robot, not even a hold: the robot link is only polled (its
-//! [`crate::links::RobotLink::send`] and [`crate::links::RobotLink::hold`] are never called). The sensor is asked to
+//! [`crate::devices::RobotLink::send`] and [`crate::devices::RobotLink::hold`] are never called). The sensor is asked to
 //! stream and to stop, as at a run's start and end.
 
 use std::time::Duration;
@@ -14,12 +14,13 @@ use hilcontact_core::hil::VirtualDynamics;
 use hilcontact_core::Scenario;
 
 use crate::clock::now_ns;
+use crate::devices::{open_robot, open_sensor, LinkStats, Wrench};
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
-use crate::links::{open_robot, open_sensor, LinkStats, Wrench};
 use crate::offset::{OffsetMode, WrenchStats};
-use crate::runtime::{
-    check_pacing, check_start_distance, link_context, missing_peers, HilHandle, RuntimeOptions,
+use crate::options::{RuntimeOptions, MAX_CONNECT_TIMEOUT};
+use crate::runtime::start::{
+    check_pacing, check_start_distance, link_context, missing_peers, validate_options,
 };
 
 /// What `hilcontact check` found: both links, and the verdict.
@@ -131,7 +132,7 @@ fn six(w: &Wrench) -> [f64; 6] {
 }
 
 /// Checks that a run of `scenario` with `options` would start, commanding nothing: opens the
-/// links as [`HilHandle::start`] does, asks the sensor to stream, listens to both links for
+/// links as [`crate::HilHandle::start`] does, asks the sensor to stream, listens to both links for
 /// `duration` s, stops the streaming, and applies the run's start checks to what arrived (a
 /// record and feedback, the start distance, the offset, the scenario's start in contact with
 /// `offset.mode = measure`, the robot's pacing).
@@ -139,16 +140,16 @@ fn six(w: &Wrench) -> [f64; 6] {
 /// Errors are bad input (scenario, options, `duration`) and links that cannot be opened (a
 /// port in use, the sensor's counts per unit unreadable); everything else is in the report.
 pub fn check(scenario: &Scenario, options: &RuntimeOptions, duration: f64) -> Result<CheckReport> {
-    let plan = HilHandle::validate_options(scenario, options)?;
-    if !(duration.is_finite() && duration > 0.0 && duration <= 3600.0) {
+    let (plan, parsed) = validate_options(scenario, options)?;
+    if !(duration.is_finite() && duration > 0.0 && duration <= MAX_CONNECT_TIMEOUT) {
         return Err(RtError::option(
             "duration",
-            format!("must be a number of seconds > 0 and <= 3600, got {duration}"),
+            format!("must be a number of seconds > 0 and <= {MAX_CONNECT_TIMEOUT}, got {duration}"),
         ));
     }
     let context = link_context(&plan, options);
-    let mut sensor = open_sensor(&options.sensor, &context)?;
-    let mut robot = open_robot(&options.robot, &context)?;
+    let mut sensor = open_sensor(&parsed.sensor, &context)?;
+    let mut robot = open_robot(&parsed.robot, &context)?;
     let mut estimator = FeedbackEstimator::new(options.extrapolation);
     let mut wrenches = WrenchStats::default();
     let (mut sensor_rate, mut robot_rate) = (RateMeter::default(), RateMeter::default());

@@ -4,9 +4,9 @@
 //! the core's [`FacilityLoop`], the tick loop the simulation runs too.
 //!
 //! The emulator names no protocol: it holds a [`SensorEndpoint`] and a [`RobotEndpoint`]
-//! ([`crate::links`]), opened from the options' `sensor` and `robot` groups by their `kind`
-//! (RDT: [`crate::links::rdt::RdtEndpoint`], EGM: [`crate::links::egm::EgmEndpoint`], KUKA RSI:
-//! [`crate::links::rsi::RsiEndpoint`]).
+//! ([`crate::devices`]), opened from the options' `sensor` and `robot` groups by their `kind`
+//! (RDT: [`crate::devices::rdt::RdtEndpoint`], EGM: [`crate::devices::egm::EgmEndpoint`], KUKA RSI:
+//! [`crate::devices::rsi::RsiEndpoint`]).
 //!
 //! One control period k (`simulation.period`, on the monotonic clock; a late wake-up is caught
 //! up by running the missed periods at once, as time goes on for hardware):
@@ -28,85 +28,21 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use hilcontact_core::facility::FacilityLoop;
 use hilcontact_core::world::RelativeMotion;
 use hilcontact_core::Scenario;
 
 use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack};
-use crate::error::{Result, RtError};
-use crate::links::{
-    open_robot_endpoint, open_sensor_endpoint, EmulatedRobotOptions, EmulatedSensorOptions,
-    EndpointContext, LinkStats, RobotEndpoint, SensorEndpoint, Wrench,
+use crate::devices::{
+    open_robot_endpoint, open_sensor_endpoint, EndpointContext, LinkStats, RobotEndpoint,
+    SensorEndpoint, Wrench,
 };
+use crate::error::{Result, RtError};
 
-/// Options of the emulated facility (defaults: RDT sensor and EGM robot with their defaults, no
-/// fault injection), grouped per device like
-/// [`crate::runtime::RuntimeOptions`].
-///
-/// As TOML: `[sensor] kind = "rdt"`, `port = 49152`, ...; `[robot] kind = "egm"`, `port =
-/// 6510`, ...; the fault injection at the top level.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct EmulatorOptions {
-    /// The emulated sensor: its protocol (`kind`) and that protocol's options.
-    pub sensor: EmulatedSensorOptions,
-    /// The emulated robot: its protocol (`kind`) and that protocol's options.
-    pub robot: EmulatedRobotOptions,
-    /// Fault injection: the sensor stops sending this many seconds after the first command
-    /// the robot received (the run's start, whenever the loop is started; None = never).
-    pub silence_sensor_after: Option<f64>,
-    /// Fault injection: the robot stops sending this many seconds after the first command it
-    /// received (None = never).
-    pub silence_robot_after: Option<f64>,
-    /// Fault injection: an offset added to every measured wrench (an unbiased sensor),
-    /// `[Fx, Fy, Fz]` N then `[Mx, My, Mz]` N·m, sensor frame.
-    pub sensor_offset: [f64; 6],
-}
-
-/// [`LinkStats`] as atomics: the emulator thread stores its endpoints' counters after each
-/// control period, [`FacilityHandle::status`] loads them.
-#[derive(Debug, Default)]
-struct SharedStats([AtomicU64; 11]);
-
-impl SharedStats {
-    fn store(&self, s: &LinkStats) {
-        let values = [
-            s.received,
-            s.accepted,
-            s.malformed,
-            s.invalid,
-            s.foreign,
-            s.stale,
-            s.lost,
-            s.late,
-            s.sent,
-            s.send_errors,
-            s.io_errors,
-        ];
-        for (a, v) in self.0.iter().zip(values) {
-            a.store(v, Ordering::Relaxed);
-        }
-    }
-
-    fn load(&self) -> LinkStats {
-        let v = |i: usize| self.0[i].load(Ordering::Relaxed);
-        LinkStats {
-            received: v(0),
-            accepted: v(1),
-            malformed: v(2),
-            invalid: v(3),
-            foreign: v(4),
-            stale: v(5),
-            lost: v(6),
-            late: v(7),
-            sent: v(8),
-            send_errors: v(9),
-            io_errors: v(10),
-        }
-    }
-}
+use crate::counters::SharedLinkStats;
+pub use crate::options::EmulatorOptions;
 
 /// Counters of the emulator (read them with [`FacilityHandle::status`]).
 #[derive(Debug, Default)]
@@ -115,8 +51,8 @@ struct Shared {
     finished: AtomicBool,
     tick: AtomicU64,
     contact_force_bits: AtomicU64,
-    sensor: SharedStats,
-    robot: SharedStats,
+    sensor: SharedLinkStats,
+    robot: SharedLinkStats,
     overruns: AtomicU64,
     max_latency_ns: AtomicU64,
 }
@@ -173,8 +109,8 @@ pub struct FacilityAddresses {
     pub http: Option<SocketAddr>,
     /// The robot's socket.
     pub robot: SocketAddr,
-    /// Where the robot's feedback goes (the PC).
-    pub robot_peer: SocketAddr,
+    /// Where the robot's feedback goes (the PC; None: a TCP server no client connected to yet).
+    pub robot_peer: Option<SocketAddr>,
 }
 
 /// A running emulated facility.
@@ -193,23 +129,7 @@ impl FacilityHandle {
     pub fn start(scenario: &Scenario, options: &EmulatorOptions) -> Result<Self> {
         let plan = scenario.resolve()?;
         let o = options;
-        for (key, v) in [
-            ("silence_sensor_after", o.silence_sensor_after),
-            ("silence_robot_after", o.silence_robot_after),
-        ] {
-            if v.is_some_and(|v| !(v.is_finite() && v >= 0.0)) {
-                return Err(RtError::option(
-                    key,
-                    format!("must be a number of seconds >= 0, got {v:?}"),
-                ));
-            }
-        }
-        if !o.sensor_offset.iter().all(|v| v.is_finite()) {
-            return Err(RtError::option(
-                "sensor_offset",
-                format!("must be 6 finite numbers, got {:?}", o.sensor_offset),
-            ));
-        }
+        let parsed = o.parse()?;
         let period = plan.period;
         let initial = plan.system.relative_motion(&plan.initial);
         let initial = RelativeMotion {
@@ -218,8 +138,8 @@ impl FacilityHandle {
             ..initial
         };
         let context = EndpointContext { period, initial };
-        let sensor = open_sensor_endpoint(&o.sensor, &context)?;
-        let robot = open_robot_endpoint(&o.robot, &context)?;
+        let sensor = open_sensor_endpoint(&parsed.sensor, &context)?;
+        let robot = open_robot_endpoint(&parsed.robot, &context)?;
         let addresses = FacilityAddresses {
             sensor: sensor.address(),
             http: sensor.http_address(),

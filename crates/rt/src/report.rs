@@ -20,8 +20,8 @@ use hilcontact_core::Plan;
 use std::net::SocketAddr;
 
 use crate::clock::{SchedulingReport, TimingSummary};
+use crate::devices::{LinkStats, Pacing};
 use crate::error::{Result, RtError};
-use crate::links::{LinkStats, Pacing};
 use crate::safety::StopEvent;
 
 /// One tick of the loop, as logged (fixed size, `Copy`): the simulation's record of a tick

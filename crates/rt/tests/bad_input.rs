@@ -9,16 +9,16 @@ use std::net::{SocketAddr, UdpSocket};
 use std::time::{Duration, Instant};
 
 use common::{free_udp_port, preset};
-use hilcontact_rt::egm::{CorrectionDecoder, FeedbackEncoder};
-use hilcontact_rt::links::egm::EgmOptions;
-use hilcontact_rt::links::rdt::RdtOptions;
-use hilcontact_rt::mapping::EgmPoseMm;
-use hilcontact_rt::rdt::{RdtCommand, RdtRecord, RdtRequest};
+use hilcontact_rt::devices::egm::codec::{CorrectionDecoder, FeedbackEncoder};
+use hilcontact_rt::devices::egm::EgmOptions;
+use hilcontact_rt::devices::pose::PoseMm;
+use hilcontact_rt::devices::rdt::codec::{RdtCommand, RdtRecord, RdtRequest};
+use hilcontact_rt::devices::rdt::RdtOptions;
 use hilcontact_rt::safety::SafetyLimits;
 use hilcontact_rt::{HilHandle, RobotOptions, RuntimeOptions, SensorOptions};
 
-fn pose(x: f64, w: f64) -> EgmPoseMm {
-    EgmPoseMm {
+fn pose(x: f64, w: f64) -> PoseMm {
+    PoseMm {
         position_mm: [x, 0.0, 0.0],
         orientation: [w, 0.0, 0.0, 0.0],
     }
@@ -260,7 +260,7 @@ fn a_refused_start_commands_no_motion() {
 
 /// A start refused because the robot is 50 mm short of the scenario's start (-995 mm), with
 /// the robot named (`robot_host`) or not: the error, the corrections received, the robot's pose.
-fn refused_start(named: bool) -> (String, Vec<hilcontact_rt::mapping::EgmTarget>, EgmPoseMm) {
+fn refused_start(named: bool) -> (String, Vec<hilcontact_rt::devices::pose::TargetMm>, PoseMm) {
     let mut s = preset("paper-table1");
     s.simulation.duration = 2.0;
     let sensor = UdpSocket::bind("127.0.0.1:0").unwrap();
@@ -407,7 +407,7 @@ fn a_foreign_sender_that_starts_first_is_not_the_robot() {
 /// What a scripted run saw: the output (or the error) and every correction the robot got.
 struct Scripted {
     output: hilcontact_rt::Result<hilcontact_rt::report::HilOutput>,
-    corrections: Vec<hilcontact_rt::egm::Correction>,
+    corrections: Vec<hilcontact_rt::devices::egm::codec::Correction>,
 }
 
 /// Runs `s` against a scripted sensor (zero wrench, a record per ms) and a scripted robot that
@@ -415,7 +415,7 @@ struct Scripted {
 fn run_scripted(
     s: &hilcontact_core::Scenario,
     limits: SafetyLimits,
-    mut robot_pose: impl FnMut(u32) -> Option<EgmPoseMm>,
+    mut robot_pose: impl FnMut(u32) -> Option<PoseMm>,
 ) -> Scripted {
     let sensor = UdpSocket::bind("127.0.0.1:0").unwrap();
     let robot = UdpSocket::bind("127.0.0.1:0").unwrap();
@@ -553,7 +553,7 @@ fn a_300_mm_feedback_jump_is_counted_and_never_held() {
 /// socket is opened or any peer is asked: not as a connection error after trying to connect.
 #[test]
 fn bad_options_are_refused_before_any_socket_is_opened() {
-    use hilcontact_rt::links::rsi::RsiOptions;
+    use hilcontact_rt::devices::rsi::RsiOptions;
     use hilcontact_rt::RtError;
 
     let s = preset("paper-table1");

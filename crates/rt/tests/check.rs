@@ -8,11 +8,11 @@ use std::net::{SocketAddr, UdpSocket};
 use std::time::{Duration, Instant};
 
 use common::{free_udp_port, loopback_options, preset};
-use hilcontact_rt::egm::FeedbackEncoder;
-use hilcontact_rt::links::egm::EgmOptions;
-use hilcontact_rt::links::rdt::RdtOptions;
-use hilcontact_rt::mapping::EgmPoseMm;
-use hilcontact_rt::rdt::RdtRecord;
+use hilcontact_rt::devices::egm::codec::FeedbackEncoder;
+use hilcontact_rt::devices::egm::EgmOptions;
+use hilcontact_rt::devices::pose::PoseMm;
+use hilcontact_rt::devices::rdt::codec::RdtRecord;
+use hilcontact_rt::devices::rdt::RdtOptions;
 use hilcontact_rt::{check, FacilityHandle, RobotOptions, RuntimeOptions, SensorOptions};
 
 /// Against the emulator with an unbiased sensor: a run would start; the offset is the injected
@@ -131,7 +131,7 @@ fn scripted_check(named: bool) -> (Vec<String>, usize) {
     let checker = std::thread::spawn(move || check(&s, &options, 0.5));
     let mut buf = [0u8; 64];
     let (_, client) = sensor.recv_from(&mut buf).unwrap();
-    let away = EgmPoseMm {
+    let away = PoseMm {
         position_mm: [-1045.0, 0.0, 0.0],
         orientation: [1.0, 0.0, 0.0, 0.0],
     };

@@ -2,9 +2,9 @@
 #![allow(dead_code)]
 
 use hilcontact_core::Scenario;
-use hilcontact_rt::links::egm::{EgmEndpointOptions, EgmOptions};
-use hilcontact_rt::links::rdt::{RdtEndpointOptions, RdtOptions};
-use hilcontact_rt::links::{EmulatedRobotOptions, EmulatedSensorOptions};
+use hilcontact_rt::devices::egm::{EgmEndpointOptions, EgmOptions};
+use hilcontact_rt::devices::rdt::{RdtEndpointOptions, RdtOptions};
+use hilcontact_rt::devices::{EmulatedRobotOptions, EmulatedSensorOptions};
 use hilcontact_rt::safety::SafetyLimits;
 use hilcontact_rt::{EmulatorOptions, RobotOptions, RuntimeOptions, SensorOptions};
 
@@ -78,7 +78,7 @@ pub fn free_tcp_port() -> u16 {
 
 /// [`loopback_options`] with the sensor an SRI M812x box (TCP) instead of a Net F/T.
 pub fn loopback_sri_options() -> (EmulatorOptions, RuntimeOptions) {
-    use hilcontact_rt::links::sri::{SriEndpointOptions, SriOptions};
+    use hilcontact_rt::devices::sri::{SriEndpointOptions, SriOptions};
     let (mut emulator, mut runtime) = loopback_options();
     let port = free_tcp_port();
     emulator.sensor = EmulatedSensorOptions::Sri(SriEndpointOptions {
@@ -95,7 +95,7 @@ pub fn loopback_sri_options() -> (EmulatorOptions, RuntimeOptions) {
 /// Emulator and runtime options that meet on loopback with the robot on KUKA RSI (sensor RDT,
 /// without HTTP); the scenario's period must be the RSI cycle (0.004 s).
 pub fn rsi_loopback_options() -> (EmulatorOptions, RuntimeOptions) {
-    use hilcontact_rt::links::rsi::{RsiEndpointOptions, RsiOptions};
+    use hilcontact_rt::devices::rsi::{RsiEndpointOptions, RsiOptions};
     let (mut emulator, mut runtime) = loopback_options();
     let port = free_udp_port();
     runtime.robot = RobotOptions::Rsi(RsiOptions {

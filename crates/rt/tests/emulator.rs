@@ -8,9 +8,9 @@ use std::io::ErrorKind;
 use std::time::{Duration, Instant};
 
 use common::{free_udp_port, preset};
-use hilcontact_rt::links::egm::EgmEndpointOptions;
-use hilcontact_rt::links::rdt::RdtEndpointOptions;
-use hilcontact_rt::links::{
+use hilcontact_rt::devices::egm::EgmEndpointOptions;
+use hilcontact_rt::devices::rdt::RdtEndpointOptions;
+use hilcontact_rt::devices::{
     EmulatedRobotOptions, EmulatedSensorOptions, ROBOT_KINDS, SENSOR_KINDS,
 };
 use hilcontact_rt::{
@@ -310,7 +310,7 @@ fn the_robotware_generation_is_6_or_7() {
 
 #[test]
 fn every_protocol_has_its_defaults_listed() {
-    let d = hilcontact_rt::links::protocol_defaults();
+    let d = hilcontact_rt::devices::protocol_defaults();
     for side in ["runtime", "facility"] {
         for (link, kinds) in [("sensor", SENSOR_KINDS), ("robot", ROBOT_KINDS)] {
             let listed = d[side][link].as_object().expect("a table per link");

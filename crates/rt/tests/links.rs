@@ -14,15 +14,15 @@ use common::{free_udp_port, preset};
 use hilcontact_core::compensator::CompensatorConfig;
 use hilcontact_core::world::RelativeMotion;
 use hilcontact_rt::clock::now_ns;
-use hilcontact_rt::feedback::FeedbackEstimator;
-use hilcontact_rt::links::egm::EgmOptions;
-use hilcontact_rt::links::rdt::{RdtEndpoint, RdtEndpointOptions, RdtOptions, RdtSensor};
-use hilcontact_rt::links::{
+use hilcontact_rt::devices::egm::EgmOptions;
+use hilcontact_rt::devices::rdt::codec::{RdtCommand, RdtRecord, RdtRequest};
+use hilcontact_rt::devices::rdt::netftapi::{ForceUnit, TorqueUnit};
+use hilcontact_rt::devices::rdt::{RdtEndpoint, RdtEndpointOptions, RdtOptions, RdtSensor};
+use hilcontact_rt::devices::{
     wait_readable, EndpointContext, LinkContext, LinkStats, Pacing, SensorEndpoint, Wrench,
 };
-use hilcontact_rt::netftapi::{ForceUnit, TorqueUnit};
+use hilcontact_rt::feedback::FeedbackEstimator;
 use hilcontact_rt::offset::{OffsetMode, OffsetOptions};
-use hilcontact_rt::rdt::{RdtCommand, RdtRecord, RdtRequest};
 use hilcontact_rt::safety::SafetyLimits;
 use hilcontact_rt::{
     HilHandle, RobotLink, RobotOptions, RuntimeOptions, SensorLink, SensorOptions,
@@ -61,7 +61,7 @@ impl RobotLink for FakePacedRobot {
     fn poll(&mut self, now: u64, estimator: &mut FeedbackEstimator) -> usize {
         let mut accepted = 0;
         while let Some((n, from)) =
-            hilcontact_rt::links::recv_counted(&self.socket, &mut self.buf, &mut self.stats)
+            hilcontact_rt::devices::recv_counted(&self.socket, &mut self.buf, &mut self.stats)
         {
             self.stats.received += 1;
             if n != PACKET {

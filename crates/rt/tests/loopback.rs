@@ -5,7 +5,7 @@ mod common;
 
 use common::{loopback_options, preset};
 use hilcontact_core::compensator::{CompensatorConfig, ModelParams};
-use hilcontact_rt::links::EmulatedRobotOptions;
+use hilcontact_rt::devices::EmulatedRobotOptions;
 use hilcontact_rt::safety::StopKind;
 use hilcontact_rt::{FacilityHandle, HilHandle, RuntimeOptions};
 use serde_json::Value;
@@ -370,7 +370,7 @@ fn a_real_time_run_is_recorded_as_mcap() {
     s.compensator = CompensatorConfig::Pida(ModelParams::default());
     let (emu, rt) = loopback_options();
     let rt = RuntimeOptions {
-        mcap: Some(hilcontact_rt::recording::McapOptions::new(&path)),
+        mcap: Some(hilcontact_rt::output::mcap::McapOptions::new(&path)),
         ..rt
     };
     let facility = FacilityHandle::start(&s, &emu).unwrap();
@@ -395,8 +395,8 @@ fn a_real_time_run_is_recorded_as_mcap() {
             events.push(String::from_utf8_lossy(&message.data).to_string());
         }
     }
-    for spec in hilcontact_rt::recording::CHANNELS {
-        use hilcontact_rt::recording::ChannelScope;
+    for spec in hilcontact_rt::output::mcap::CHANNELS {
+        use hilcontact_rt::output::mcap::ChannelScope;
         match spec.scope {
             ChannelScope::Always | ChannelScope::Estimates | ChannelScope::Realtime => {
                 assert_eq!(counts.get(spec.topic), Some(&samples), "{}", spec.topic)
@@ -426,7 +426,7 @@ fn a_run_that_never_starts_removes_its_mcap_file() {
     let (_, rt) = loopback_options();
     let rt = RuntimeOptions {
         connect_timeout: 0.3,
-        mcap: Some(hilcontact_rt::recording::McapOptions::new(&path)),
+        mcap: Some(hilcontact_rt::output::mcap::McapOptions::new(&path)),
         ..rt
     };
     let hil = HilHandle::start(&preset("paper-table1"), &rt).unwrap();

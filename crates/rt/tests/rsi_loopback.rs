@@ -11,9 +11,9 @@ use std::time::{Duration, Instant};
 use common::{preset, rsi_loopback_options};
 use hilcontact_core::compensator::{CompensatorConfig, ModelParams};
 use hilcontact_core::Scenario;
-use hilcontact_rt::links::rsi::{CorrectionMode, RsiEndpointOptions, RsiOptions};
-use hilcontact_rt::links::EmulatedRobotOptions;
-use hilcontact_rt::rsi::{decode_state, AnswerEncoder, RsiNames};
+use hilcontact_rt::devices::rsi::codec::{decode_state, AnswerEncoder, RsiNames};
+use hilcontact_rt::devices::rsi::{CorrectionMode, RsiEndpointOptions, RsiOptions};
+use hilcontact_rt::devices::EmulatedRobotOptions;
 use hilcontact_rt::{EmulatorOptions, FacilityHandle, HilHandle, RobotOptions};
 use serde_json::Value;
 

@@ -13,8 +13,8 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use hilcontact_core::world::RelativeMotion;
-use hilcontact_rt::links::sri::{SriEndpoint, SriEndpointOptions, SriOptions, SriSensor};
-use hilcontact_rt::links::{
+use hilcontact_rt::devices::sri::{SriEndpoint, SriEndpointOptions, SriOptions, SriSensor};
+use hilcontact_rt::devices::{
     EmulatedSensorOptions, EndpointContext, LinkContext, SensorEndpoint, SensorLink, Wrench,
 };
 use hilcontact_rt::{EmulatorOptions, RtError, RuntimeOptions, SensorOptions};

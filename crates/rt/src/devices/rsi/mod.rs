@@ -1,6 +1,6 @@
 //! KUKA RobotSensorInterface (RSI) over Ethernet, both sides: [`RsiRobot`] is the
 //! [`RobotLink`] of the loop (the controller's XML state in, the PC's XML correction out, codec
-//! in [`crate::rsi`]), [`RsiEndpoint`] the emulated controller's [`RobotEndpoint`].
+//! in [`self::codec`]), [`RsiEndpoint`] the emulated controller's [`RobotEndpoint`].
 //!
 //! The controller sends its state every interpolation cycle (IPO_FAST 4 ms, or 12 ms: the
 //! `period` option) to the PC's port and stops, as a real one does, when too many answers are
@@ -30,29 +30,34 @@
 //! `robot_host` if given; else it is identified, not raced for, as with EGM: the first sender
 //! whose valid state puts the rod tip within the start region ([`LinkContext::start`]).
 
-use std::net::{IpAddr, SocketAddr, UdpSocket};
+pub mod codec;
+
+use std::net::SocketAddr;
 
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
 
+use self::codec::{
+    abc_to_quaternion, decode_answer, decode_state, quaternion_to_abc, AnswerEncoder, KukaPose,
+    RsiNames, StateEncoder, RSI_MAX_DATAGRAM, RSI_PERIOD, RSI_PERIODS, RSI_PORT,
+};
+use super::transport::{bind_address_for, decode_counted, Ipoc, SequenceTracker, UdpInbox};
 use super::{
-    bind_udp, check_host, local_addr, recv_counted, resolve, wait_readable, EndpointContext,
-    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
+    check_host, local_addr, resolve, wait_readable, EmulatedRobot, EndpointContext, FeedbackPose,
+    LinkContext, LinkStats, Pacing, RobotDevice, RobotEndpoint, RobotIdentity, RobotLink,
 };
 use crate::clock::{now_ns, Histogram};
+use crate::devices::pose::{PoseMapping, PoseMm};
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
-use crate::mapping::{EgmPoseMm, PoseMapping};
-use crate::rsi::{
-    abc_to_quaternion, decode_answer, decode_state, quaternion_to_abc, AnswerEncoder, KukaPose,
-    RsiError, RsiNames, StateEncoder, RSI_MAX_DATAGRAM, RSI_PERIOD, RSI_PERIODS, RSI_PORT,
-};
 
 /// How the answer's correction (`RKorr`) relates to the target pose (the controller's RSI
 /// correction object must be configured the same way).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum CorrectionMode {
     /// The target relative to the pose where the RSI motion started (the setpoint in the
@@ -64,7 +69,7 @@ pub enum CorrectionMode {
 }
 
 /// Options of a KUKA RSI robot link (`[robot] kind = "rsi"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RsiOptions {
     /// Address the PC's RSI socket binds to.
@@ -77,9 +82,12 @@ pub struct RsiOptions {
     pub robot_host: Option<String>,
     /// The controller's cycle, s: 0.004 (IPO_FAST) or 0.012 (IPO). The scenario's period must
     /// equal it (the robot paces the loop).
+    #[schemars(extend("enum" = [0.004, 0.012]))]
     pub period: f64,
     /// An answer sent later than this after its state message was read is counted late, s
-    /// (the controller's own limit is its cycle, minus its network and processing time).
+    /// (the controller's own limit is its cycle, minus its network and processing time; > 0
+    /// and <= `period`).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub deadline: f64,
     /// `Type` of the answer's `<Sen>` (the configuration file's `SENTYPE`).
     pub sen_type: String,
@@ -138,33 +146,33 @@ fn checked_names(names: RsiNames) -> Result<RsiNames> {
 }
 
 /// A KUKA pose (mm, A/B/C degrees) as a pose in `e` (mm, quaternion `[w, x, y, z]`).
-fn from_kuka(p: &KukaPose) -> EgmPoseMm {
+fn from_kuka(p: &KukaPose) -> PoseMm {
     let q = abc_to_quaternion(p[3], p[4], p[5]);
-    EgmPoseMm {
+    PoseMm {
         position_mm: [p[0], p[1], p[2]],
         orientation: [q.w, q.i, q.j, q.k],
     }
 }
 
-fn quaternion(p: &EgmPoseMm) -> UnitQuaternion<f64> {
+fn quaternion(p: &PoseMm) -> UnitQuaternion<f64> {
     let [w, x, y, z] = p.orientation;
     UnitQuaternion::new_normalize(nalgebra::Quaternion::new(w, x, y, z))
 }
 
 /// The correction that takes `reference` to `target` (both in `e`): translation in mm, then
 /// the ZYX angles (degrees) of `R_target · R_reference⁻¹`.
-pub fn correction(reference: &EgmPoseMm, target: &EgmPoseMm) -> KukaPose {
+pub fn correction(reference: &PoseMm, target: &PoseMm) -> KukaPose {
     let d = Vector3::from(target.position_mm) - Vector3::from(reference.position_mm);
     let [a, b, c] = quaternion_to_abc(&(quaternion(target) * quaternion(reference).inverse()));
     [d.x, d.y, d.z, a, b, c]
 }
 
 /// The pose a correction takes `reference` to (the inverse of [`correction`]).
-pub fn corrected(reference: &EgmPoseMm, correction: &KukaPose) -> EgmPoseMm {
+pub fn corrected(reference: &PoseMm, correction: &KukaPose) -> PoseMm {
     let p = Vector3::from(reference.position_mm)
         + Vector3::new(correction[0], correction[1], correction[2]);
     let q = abc_to_quaternion(correction[3], correction[4], correction[5]) * quaternion(reference);
-    EgmPoseMm {
+    PoseMm {
         position_mm: [p.x, p.y, p.z],
         orientation: [q.w, q.i, q.j, q.k],
     }
@@ -172,7 +180,7 @@ pub fn corrected(reference: &EgmPoseMm, correction: &KukaPose) -> EgmPoseMm {
 
 /// The PC side of KUKA RSI.
 pub struct RsiRobot {
-    socket: UdpSocket,
+    inbox: UdpInbox<{ RSI_MAX_DATAGRAM + 1 }>,
     port: u16,
     /// Which sender is the robot.
     identity: RobotIdentity,
@@ -183,8 +191,8 @@ pub struct RsiRobot {
     state_element: String,
     /// The pose the corrections are relative to: the start (absolute) or the previous
     /// answer's target (relative), in `e`.
-    reference: Option<EgmPoseMm>,
-    last_ipoc: Option<u64>,
+    reference: Option<PoseMm>,
+    ipoc: SequenceTracker<Ipoc>,
     /// The newest accepted message not answered yet: its IPOC and when it was read, ns.
     pending: Option<(u64, u64)>,
     /// The controller's own count of late answers (`Delay D`), as last sent.
@@ -194,12 +202,34 @@ pub struct RsiRobot {
     unanswered: u64,
     encoder: AnswerEncoder,
     stats: LinkStats,
-    buf: [u8; RSI_MAX_DATAGRAM + 1],
+}
+
+/// An RSI link's options once parsed ([`RobotDevice::parse`] of [`RsiRobot`]): hosts' form, cycle and deadline
+/// checked, the XML names and the pose mapping built.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RsiConfig {
+    options: RsiOptions,
+    names: RsiNames,
+    mapping: PoseMapping,
 }
 
 impl RsiRobot {
-    /// Checks the options without opening anything (hosts, cycle, deadline, names, mapping).
-    pub fn validate(o: &RsiOptions) -> Result<()> {
+    /// Parses the options ([`RobotDevice::parse`] of [`RsiRobot`]) and binds the PC's RSI socket
+    /// ([`RsiRobot::open_parsed`]).
+    pub fn open(o: &RsiOptions, context: &LinkContext) -> Result<Self> {
+        Self::open_parsed(&Self::parse(o)?, context)
+    }
+}
+
+impl RobotDevice for RsiRobot {
+    const PACING: Pacing = Pacing::Robot;
+    type Options = RsiOptions;
+    type Config = RsiConfig;
+
+    /// Checks the options without opening anything (hosts, cycle, deadline, names, mapping),
+    /// once.
+    fn parse(options: &RsiOptions) -> Result<RsiConfig> {
+        let o = options;
         check_host("rsi bind_host", &o.bind_host)?;
         if let Some(host) = &o.robot_host {
             check_host("robot_host", host)?;
@@ -214,26 +244,29 @@ impl RsiRobot {
                 ),
             ));
         }
-        PoseMapping::new(o.offset_mm, o.rotation)?;
-        Ok(())
-    }
-
-    /// Validates the options and binds the PC's RSI socket.
-    pub fn open(o: &RsiOptions, context: &LinkContext) -> Result<Self> {
-        Self::validate(o)?;
+        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
         let names = checked_names(RsiNames {
             sen_type: o.sen_type.clone(),
             state: o.state_element.clone(),
             correction: o.correction_element.clone(),
         })?;
-        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
-        let socket = bind_udp(
+        Ok(RsiConfig {
+            options: options.clone(),
+            names,
+            mapping,
+        })
+    }
+
+    /// Binds the PC's RSI socket.
+    fn open_parsed(c: &RsiConfig, context: &LinkContext) -> Result<Self> {
+        let (o, names, mapping) = (&c.options, c.names.clone(), c.mapping);
+        let inbox = UdpInbox::bind(
             "RSI endpoint",
             resolve("rsi bind_host", &o.bind_host, o.port)?,
         )?;
         let identity = RobotIdentity::new(o.robot_host.as_deref(), context.start)?;
         Ok(RsiRobot {
-            socket,
+            inbox,
             port: o.port,
             identity,
             mapping,
@@ -242,7 +275,7 @@ impl RsiRobot {
             deadline_ns: (o.deadline * 1e9).round() as u64,
             state_element: names.state.clone(),
             reference: None,
-            last_ipoc: None,
+            ipoc: SequenceTracker::new(),
             pending: None,
             controller_delay: None,
             latency: Histogram::new(20_000),
@@ -250,7 +283,6 @@ impl RsiRobot {
             unanswered: 0,
             encoder: AnswerEncoder::new(names),
             stats: LinkStats::default(),
-            buf: [0; RSI_MAX_DATAGRAM + 1],
         })
     }
 }
@@ -278,39 +310,31 @@ impl RobotLink for RsiRobot {
 
     fn poll(&mut self, now_ns: u64, estimator: &mut FeedbackEstimator) -> usize {
         let mut accepted = 0;
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            if !self.identity.admits(from, &mut self.stats) {
+        while let Some((bytes, from)) = self
+            .inbox
+            .next(&mut self.stats, |from| self.identity.admits(from))
+        {
+            let decoded = decode_state(bytes, &self.state_element);
+            let Some(state) = decode_counted(decoded, &mut self.stats) else {
                 continue;
-            }
-            let state = match decode_state(&self.buf[..n], &self.state_element) {
-                Ok(state) => state,
-                Err(e) => {
-                    count_error(&e, &mut self.stats);
-                    continue;
-                }
             };
             let actual = from_kuka(&state.actual);
-            let (position, orientation) = self.mapping.from_egm(&actual);
+            let (position, orientation) = self.mapping.from_device(&actual);
+            let pose = FeedbackPose {
+                from,
+                seq: Ipoc {
+                    ms: state.ipoc,
+                    step_ms: (self.period * 1e3).round() as u64,
+                },
+                robot_time: state.ipoc as f64 * 1e-3,
+                position,
+                orientation,
+            };
+            let (sequence, stats) = (&mut self.ipoc, &mut self.stats);
             if !self
                 .identity
-                .at_start(from, position, orientation, &mut self.stats)
+                .accept(&pose, sequence, now_ns, estimator, stats)
             {
-                continue; // not locked yet: the robot is the sender at the scenario's start
-            }
-            if let Some(last) = self.last_ipoc {
-                if state.ipoc <= last {
-                    self.stats.stale += 1;
-                    continue;
-                }
-                let step_ms = (self.period * 1e3).round() as u64;
-                let cycles = (state.ipoc - last + step_ms / 2) / step_ms;
-                self.stats.lost += cycles.saturating_sub(1);
-            }
-            self.last_ipoc = Some(state.ipoc);
-            self.identity.lock(from);
-            if !estimator.push(state.ipoc as f64 * 1e-3, now_ns, position, orientation) {
-                self.stats.invalid += 1; // a jump no robot makes in one cycle
                 continue;
             }
             if self.reference.is_none() {
@@ -321,7 +345,6 @@ impl RobotLink for RsiRobot {
             }
             self.pending = Some((state.ipoc, now_ns));
             self.controller_delay = state.delay.or(self.controller_delay);
-            self.stats.accepted += 1;
             accepted += 1;
         }
         accepted
@@ -333,7 +356,7 @@ impl RobotLink for RsiRobot {
             if n > 0 {
                 return n;
             }
-            if !wait_readable(&self.socket, deadline_ns) {
+            if !wait_readable(self.inbox.socket(), deadline_ns) {
                 return self.poll(now_ns(), estimator);
             }
         }
@@ -346,13 +369,13 @@ impl RobotLink for RsiRobot {
         else {
             return;
         };
-        let target = self.mapping.to_egm(command).pose;
+        let target = self.mapping.to_device(command).pose;
         let korr = correction(&reference, &target);
         if self.mode == CorrectionMode::Relative {
             self.reference = Some(target);
         }
         let bytes = self.encoder.encode(&korr, ipoc);
-        let sent = self.socket.send_to(bytes, addr);
+        let sent = self.inbox.socket().send_to(bytes, addr);
         self.stats.count_send(sent);
         self.pending = None;
         let latency = now_ns().saturating_sub(read_ns);
@@ -397,19 +420,9 @@ impl RobotLink for RsiRobot {
     }
 }
 
-/// Counts a decoding error: `malformed` (not an RSI message of this configuration) or
-/// `invalid` (unusable values).
-fn count_error(e: &RsiError, stats: &mut LinkStats) {
-    if e.is_malformed() {
-        stats.malformed += 1;
-    } else {
-        stats.invalid += 1;
-    }
-}
-
 /// Options of the emulated KUKA controller's RSI side (`[robot] kind = "rsi"` of the
 /// emulator's options).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RsiEndpointOptions {
     /// Host the controller sends its state to: the PC running the loop (the configuration
@@ -420,6 +433,7 @@ pub struct RsiEndpointOptions {
     /// The controller's own UDP port (0 = any free port).
     pub local_port: u16,
     /// The cycle, s: 0.004 (IPO_FAST) or 0.012 (IPO), rounded to whole control periods.
+    #[schemars(extend("enum" = [0.004, 0.012]))]
     pub period: f64,
     /// `Type` the answers' `<Sen>` must have (`SENTYPE`).
     pub sen_type: String,
@@ -431,7 +445,8 @@ pub struct RsiEndpointOptions {
     pub correction: CorrectionMode,
     /// Consecutive cycles without a timely answer after which the controller stops sending
     /// (the ETHERNET object's `Timeout` parameter; 100 in KUKA's and ROS-Industrial's
-    /// examples).
+    /// examples; >= 1).
+    #[schemars(range(min = 1))]
     pub max_late: u64,
     /// Origin of `t` in the correction frame `e`, mm.
     pub offset_mm: [f64; 3],
@@ -472,7 +487,7 @@ const FIRST_IPOC: u64 = 1_000_000;
 /// has answered once: on a real cell the operator starts the KRL program (`RSI_MOVECORR`)
 /// after the PC side is listening, so here the emulator and the PC may start in either order.
 pub struct RsiEndpoint {
-    socket: UdpSocket,
+    inbox: UdpInbox<{ RSI_MAX_DATAGRAM + 1 }>,
     address: SocketAddr,
     peer: SocketAddr,
     mapping: PoseMapping,
@@ -484,9 +499,9 @@ pub struct RsiEndpoint {
     /// The cycle in IPOC units (ms).
     step_ms: u64,
     /// The pose corrections apply to (absolute: the start), in `e`.
-    reference: EgmPoseMm,
+    reference: PoseMm,
     /// The setpoint: the reference corrected by the newest answer (`RSol`), in `e`.
-    setpoint: EgmPoseMm,
+    setpoint: PoseMm,
     ipoc: u64,
     /// The IPOC of the last message sent, while it is unanswered.
     outstanding: Option<u64>,
@@ -494,13 +509,32 @@ pub struct RsiEndpoint {
     stopped: bool,
     encoder: StateEncoder,
     stats: LinkStats,
-    buf: [u8; RSI_MAX_DATAGRAM + 1],
+}
+
+/// The emulated RSI controller's options once parsed ([`EmulatedRobot::parse`] of [`RsiEndpoint`]): cycle
+/// and `max_late` checked, the XML names and the pose mapping built.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RsiEndpointConfig {
+    options: RsiEndpointOptions,
+    names: RsiNames,
+    mapping: PoseMapping,
 }
 
 impl RsiEndpoint {
-    /// Validates the options, resolves the PC's address and binds the controller's socket (on
-    /// loopback when the PC is).
+    /// Parses the options ([`EmulatedRobot::parse`] of [`RsiEndpoint`]) and opens the controller
+    /// ([`RsiEndpoint::open_parsed`]).
     pub fn open(o: &RsiEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open_parsed(&Self::parse(o)?, context)
+    }
+}
+
+impl EmulatedRobot for RsiEndpoint {
+    type Options = RsiEndpointOptions;
+    type Config = RsiEndpointConfig;
+
+    /// Checks the cycle, `max_late`, the names and the mapping, once.
+    fn parse(options: &RsiEndpointOptions) -> Result<RsiEndpointConfig> {
+        let o = options;
         check_period("rsi.period", o.period)?;
         if o.max_late == 0 {
             return Err(RtError::option("rsi.max_late", "must be at least 1"));
@@ -510,18 +544,23 @@ impl RsiEndpoint {
             state: o.state_element.clone(),
             correction: o.correction_element.clone(),
         })?;
-        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
+        Ok(RsiEndpointConfig {
+            options: options.clone(),
+            names,
+            mapping: PoseMapping::new(o.offset_mm, o.rotation)?,
+        })
+    }
+
+    /// Resolves the PC's address and binds the controller's socket (on loopback when the PC
+    /// is).
+    fn open_parsed(c: &RsiEndpointConfig, context: &EndpointContext) -> Result<Self> {
+        let (o, names, mapping) = (&c.options, c.names.clone(), c.mapping);
         let peer = resolve("rsi host", &o.host, o.port)?;
-        let bind: SocketAddr = match peer.ip() {
-            IpAddr::V4(ip) if ip.is_loopback() => SocketAddr::from(([127, 0, 0, 1], o.local_port)),
-            IpAddr::V4(_) => SocketAddr::from(([0, 0, 0, 0], o.local_port)),
-            IpAddr::V6(_) => SocketAddr::from(([0u16; 8], o.local_port)),
-        };
-        let socket = bind_udp("robot (RSI)", bind)?;
-        let address = local_addr("robot (RSI)", &socket)?;
-        let start = mapping.to_egm(&context.initial).pose;
+        let inbox = UdpInbox::bind("robot (RSI)", bind_address_for(peer, o.local_port))?;
+        let address = local_addr("robot (RSI)", inbox.socket())?;
+        let start = mapping.to_device(&context.initial).pose;
         Ok(RsiEndpoint {
-            socket,
+            inbox,
             address,
             peer,
             mapping,
@@ -538,12 +577,11 @@ impl RsiEndpoint {
             consecutive_late: 0,
             stopped: false,
             stats: LinkStats::default(),
-            buf: [0; RSI_MAX_DATAGRAM + 1],
         })
     }
 }
 
-fn to_kuka(p: &EgmPoseMm) -> KukaPose {
+fn to_kuka(p: &PoseMm) -> KukaPose {
     let [a, b, c] = quaternion_to_abc(&quaternion(p));
     let [x, y, z] = p.position_mm;
     [x, y, z, a, b, c]
@@ -558,24 +596,17 @@ impl RobotEndpoint for RsiEndpoint {
         self.address
     }
 
-    fn peer(&self) -> SocketAddr {
-        self.peer
+    fn peer(&self) -> Option<SocketAddr> {
+        Some(self.peer)
     }
 
     fn receive(&mut self) -> Option<RelativeMotion> {
         let mut newest = None;
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            if from != self.peer {
-                self.stats.foreign += 1;
+        let peer = self.peer;
+        while let Some((bytes, _)) = self.inbox.next(&mut self.stats, |from| from == peer) {
+            let decoded = decode_answer(bytes, &self.names);
+            let Some(answer) = decode_counted(decoded, &mut self.stats) else {
                 continue;
-            }
-            let answer = match decode_answer(&self.buf[..n], &self.names) {
-                Ok(a) => a,
-                Err(e) => {
-                    count_error(&e, &mut self.stats);
-                    continue;
-                }
             };
             if self.outstanding != Some(answer.ipoc) {
                 if answer.ipoc <= self.ipoc {
@@ -595,7 +626,7 @@ impl RobotEndpoint for RsiEndpoint {
         if self.mode == CorrectionMode::Relative {
             self.reference = self.setpoint;
         }
-        let (position, orientation) = self.mapping.from_egm(&self.setpoint);
+        let (position, orientation) = self.mapping.from_device(&self.setpoint);
         Some(RelativeMotion {
             position,
             orientation,
@@ -617,12 +648,12 @@ impl RobotEndpoint for RsiEndpoint {
             }
         }
         self.ipoc = FIRST_IPOC + k / self.every * self.step_ms;
-        let actual = to_kuka(&self.mapping.to_egm(actual).pose);
+        let actual = to_kuka(&self.mapping.to_device(actual).pose);
         let setpoint = to_kuka(&self.setpoint);
         let bytes = self
             .encoder
             .encode(&actual, &setpoint, self.stats.late, self.ipoc);
-        let sent = self.socket.send_to(bytes, self.peer);
+        let sent = self.inbox.socket().send_to(bytes, self.peer);
         self.stats.count_send(sent);
         self.outstanding = Some(self.ipoc);
     }

@@ -1,6 +1,6 @@
 //! ATI Net F/T over RDT, both sides: [`RdtSensor`] is the [`SensorLink`] of the loop (RDT over
-//! UDP, codec in [`crate::rdt`]; counts per unit and the configured units from
-//! `/netftapi2.xml` over HTTP, [`crate::netftapi`], unless given), [`RdtEndpoint`] the emulated
+//! UDP, codec in [`self::codec`]; counts per unit and the configured units from
+//! `/netftapi2.xml` over HTTP, [`self::netftapi`], unless given), [`RdtEndpoint`] the emulated
 //! sensor's [`SensorEndpoint`] (configurable units: fault injection for clients that ignore
 //! them).
 //!
@@ -8,24 +8,28 @@
 //! number newer than the last accepted one (gaps are counted as `lost`) and status 0; its
 //! counts divided by the counts per unit are the wrench (sensor frame, N and N·m).
 
-use std::net::{SocketAddr, UdpSocket};
+pub mod codec;
+pub mod netftapi;
+
+use std::net::SocketAddr;
 use std::time::Duration;
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use super::{
-    bind_udp, local_addr, recv_counted, resolve, sequence_counted, EndpointContext, LinkContext,
-    LinkStats, SensorEndpoint, SensorLink, Wrench,
-};
-use crate::error::{Result, RtError};
-use crate::netftapi::{
+use self::codec::{CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, RDT_PORT};
+use self::netftapi::{
     fetch_counts, netftapi_xml, ForceUnit, NetFtApiServer, SensorCalibration, TorqueUnit,
 };
-use crate::rdt::{CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, SequenceTracker, RDT_PORT};
+use super::transport::{bind_address_for, decode_counted, SequenceTracker, UdpInbox};
+use super::{
+    check_host, local_addr, resolve, sequence_counted, EmulatedSensor, EndpointContext,
+    LinkContext, LinkStats, SensorDevice, SensorEndpoint, SensorLink, Wrench,
+};
+use crate::error::{Result, RtError};
 
 /// Options of an RDT sensor link (`[sensor] kind = "rdt"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RdtOptions {
     /// Host of the F/T sensor (Net F/T) (CLI `--sensor`).
@@ -34,9 +38,11 @@ pub struct RdtOptions {
     pub port: u16,
     /// HTTP port of the sensor's `/netftapi2.xml` (80) (CLI `--http-port`).
     pub http_port: u16,
-    /// Counts per N; with `counts_per_torque`, skips reading `/netftapi2.xml`.
+    /// Counts per N (> 0); with `counts_per_torque`, skips reading `/netftapi2.xml`.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub counts_per_force: Option<f64>,
-    /// Counts per N·m.
+    /// Counts per N·m (> 0); with `counts_per_force`.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub counts_per_torque: Option<f64>,
     /// Local UDP port of the RDT client (0 = any free port) (CLI `--rdt-local-port`).
     pub local_port: u16,
@@ -60,7 +66,7 @@ impl Default for RdtOptions {
 
 /// The RDT client of an ATI Net F/T sensor.
 pub struct RdtSensor {
-    socket: UdpSocket,
+    inbox: UdpInbox<2048>,
     peer: SocketAddr,
     /// Counts per N and per N·m.
     counts: CountsPerUnit,
@@ -69,51 +75,21 @@ pub struct RdtSensor {
     sequence: SequenceTracker,
     stats: LinkStats,
     bias_pending: bool,
-    buf: [u8; 2048],
+}
+
+/// An RDT link's options once parsed ([`SensorDevice::parse`] of [`RdtSensor`]): the host's form checked, the
+/// counts per unit given (both positive) or to be read from `/netftapi2.xml`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RdtConfig {
+    options: RdtOptions,
+    /// Counts per N and per N·m, when given in the options.
+    counts: Option<CountsPerUnit>,
 }
 
 impl RdtSensor {
-    /// Validates the options, reads the counts per unit and the configured units (HTTP,
-    /// unless both counts are given, then per N and N·m) and binds the client socket.
+    /// Parses the options ([`SensorDevice::parse`] of [`RdtSensor`]) and opens the link ([`RdtSensor::open_parsed`]).
     pub fn open(o: &RdtOptions, context: &LinkContext) -> Result<Self> {
-        let (counts, calibration) = match (o.counts_per_force, o.counts_per_torque) {
-            (Some(force), Some(torque)) => {
-                if !(force.is_finite() && force > 0.0 && torque.is_finite() && torque > 0.0) {
-                    return Err(RtError::option(
-                        "counts_per_force",
-                        "counts per unit must be positive numbers",
-                    ));
-                }
-                (CountsPerUnit { force, torque }, None)
-            }
-            (None, None) => {
-                let c = fetch_counts(&o.host, o.http_port, Duration::from_secs_f64(context.connect_timeout.min(5.0)))
-                    .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit: {e} (or give counts_per_force and counts_per_torque)")))?;
-                (c.counts, Some(c))
-            }
-            _ => {
-                return Err(RtError::option(
-                    "counts_per_force",
-                    "give both counts_per_force and counts_per_torque, or neither",
-                ))
-            }
-        };
-        let peer = resolve("sensor_host", &o.host, o.port)?;
-        let bind: SocketAddr = if peer.ip().is_loopback() {
-            ([127, 0, 0, 1], o.local_port).into()
-        } else {
-            ([0, 0, 0, 0], o.local_port).into()
-        };
-        Ok(RdtSensor {
-            socket: bind_udp("RDT client", bind)?,
-            peer,
-            counts,
-            calibration,
-            sequence: SequenceTracker::new(),
-            stats: LinkStats::default(),
-            bias_pending: o.bias,
-            buf: [0u8; 2048],
-        })
+        Self::open_parsed(&Self::parse(o)?, context)
     }
 
     /// The counts per N and per N·m in use.
@@ -134,8 +110,64 @@ impl RdtSensor {
             sample_count: 0,
         }
         .encode();
-        let sent = self.socket.send_to(&bytes, self.peer);
+        let sent = self.inbox.socket().send_to(&bytes, self.peer);
         self.stats.count_send(sent);
+    }
+}
+
+impl SensorDevice for RdtSensor {
+    type Options = RdtOptions;
+    type Config = RdtConfig;
+
+    /// Checks the host's form and the counts per unit (both positive, or neither), once.
+    fn parse(options: &RdtOptions) -> Result<RdtConfig> {
+        check_host("sensor host", &options.host)?;
+        let counts = match (options.counts_per_force, options.counts_per_torque) {
+            (Some(force), Some(torque)) => {
+                if !(force.is_finite() && force > 0.0 && torque.is_finite() && torque > 0.0) {
+                    return Err(RtError::option(
+                        "counts_per_force",
+                        "counts per unit must be positive numbers",
+                    ));
+                }
+                Some(CountsPerUnit { force, torque })
+            }
+            (None, None) => None,
+            _ => {
+                return Err(RtError::option(
+                    "counts_per_force",
+                    "give both counts_per_force and counts_per_torque, or neither",
+                ))
+            }
+        };
+        Ok(RdtConfig {
+            options: options.clone(),
+            counts,
+        })
+    }
+
+    /// Reads the counts per unit and the configured units (HTTP, unless both counts are given,
+    /// then per N and N·m) and binds the client socket.
+    fn open_parsed(c: &RdtConfig, context: &LinkContext) -> Result<Self> {
+        let o = &c.options;
+        let (counts, calibration) = match c.counts {
+            Some(counts) => (counts, None),
+            None => {
+                let c = fetch_counts(&o.host, o.http_port, Duration::from_secs_f64(context.connect_timeout.min(5.0)))
+                    .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit: {e} (or give counts_per_force and counts_per_torque)")))?;
+                (c.counts, Some(c))
+            }
+        };
+        let peer = resolve("sensor_host", &o.host, o.port)?;
+        Ok(RdtSensor {
+            inbox: UdpInbox::bind("RDT client", bind_address_for(peer, o.local_port))?,
+            peer,
+            counts,
+            calibration,
+            sequence: SequenceTracker::new(),
+            stats: LinkStats::default(),
+            bias_pending: o.bias,
+        })
     }
 }
 
@@ -167,14 +199,9 @@ impl SensorLink for RdtSensor {
 
     fn poll(&mut self, _now_ns: u64) -> Option<Wrench> {
         let mut newest = None;
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            if from != self.peer {
-                self.stats.foreign += 1;
-                continue;
-            }
-            let Ok(record) = RdtRecord::decode(&self.buf[..n]) else {
-                self.stats.malformed += 1;
+        let peer = self.peer;
+        while let Some((bytes, _)) = self.inbox.next(&mut self.stats, |from| from == peer) {
+            let Some(record) = decode_counted(RdtRecord::decode(bytes), &mut self.stats) else {
                 continue;
             };
             if !sequence_counted(&mut self.sequence, record.rdt_sequence, &mut self.stats) {
@@ -226,7 +253,7 @@ impl SensorLink for RdtSensor {
 }
 
 /// Options of the emulated RDT sensor (`[sensor] kind = "rdt"` of the emulator's options).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RdtEndpointOptions {
     /// Address the sensor's RDT and HTTP servers bind to (CLI `--bind-host`).
@@ -237,14 +264,18 @@ pub struct RdtEndpointOptions {
     /// `--http-port`).
     pub http_port: u16,
     /// Counts per `force_unit` of the records (`cfgcpf`, > 0) (CLI `--counts-per-force`).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub counts_per_force: f64,
     /// Counts per `torque_unit` of the records (`cfgcpt`, > 0) (CLI `--counts-per-torque`).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub counts_per_torque: f64,
     /// The configured force unit (`scfgfu`/`cfgfu`): `"N"` (default), `"lbf"`, `"klbf"`,
     /// `"kN"`, `"kgf"`, `"gf"`. Another unit than N tests that a client reads the units.
+    #[schemars(extend("enum" = ["lbf", "N", "klbf", "kN", "kgf", "gf"]))]
     pub force_unit: String,
     /// The configured torque unit (`scfgtu`/`cfgtu`): `"N-m"` (default), `"lbf-in"`,
     /// `"lbf-ft"`, `"N-mm"`, `"kgf-cm"`, `"kN-m"`.
+    #[schemars(extend("enum" = ["lbf-in", "lbf-ft", "N-m", "N-mm", "kgf-cm", "kN-m"]))]
     pub torque_unit: String,
 }
 
@@ -270,7 +301,7 @@ impl Default for RdtEndpointOptions {
 /// per configured unit and the units; the records count in those units. A count beyond the
 /// `i32` range saturates and sets status `0x80010000`.
 pub struct RdtEndpoint {
-    socket: UdpSocket,
+    inbox: UdpInbox<2048>,
     address: SocketAddr,
     http: Option<NetFtApiServer>,
     /// Counts per N and per N·m (the options' counts per configured unit, converted).
@@ -286,13 +317,58 @@ pub struct RdtEndpoint {
     /// The newest sample: force N, moment N·m.
     last_reading: ([f64; 3], [f64; 3]),
     stats: LinkStats,
-    buf: [u8; 2048],
+}
+
+/// The emulated RDT sensor's options once parsed ([`EmulatedSensor::parse`] of [`RdtEndpoint`]): positive
+/// counts per configured unit, and the units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RdtEndpointConfig {
+    options: RdtEndpointOptions,
+    force_unit: ForceUnit,
+    torque_unit: TorqueUnit,
 }
 
 impl RdtEndpoint {
-    /// Validates the counts per unit and the units, binds the RDT socket and starts the HTTP
-    /// server (unless `http_port` is 0).
+    /// Parses the options ([`EmulatedSensor::parse`] of [`RdtEndpoint`]) and opens the endpoint
+    /// ([`RdtEndpoint::open_parsed`]).
     pub fn open(o: &RdtEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open_parsed(&Self::parse(o)?, context)
+    }
+
+    fn send_record(&mut self) {
+        let Some(client) = self.client else { return };
+        if self.remaining == Some(0) {
+            self.client = None;
+            return;
+        }
+        let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+        let (reading, bias) = (self.last_reading, self.bias);
+        let (counts, saturated) = self
+            .counts
+            .to_counts(&sub(reading.0, bias.0), &sub(reading.1, bias.1));
+        self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
+        let record = RdtRecord {
+            rdt_sequence: self.rdt_sequence,
+            ft_sequence: self.ft_sequence,
+            // bit 31 (error) and bit 16 (saturation) when a gauge is out of range
+            status: if saturated { 0x8001_0000 } else { 0 },
+            counts,
+        };
+        let sent = self.inbox.socket().send_to(&record.encode(), client);
+        self.stats.count_send(sent);
+        if let Some(n) = self.remaining.as_mut() {
+            *n -= 1;
+        }
+    }
+}
+
+impl EmulatedSensor for RdtEndpoint {
+    type Options = RdtEndpointOptions;
+    type Config = RdtEndpointConfig;
+
+    /// Checks the counts per unit (positive) and the units (known names), once.
+    fn parse(options: &RdtEndpointOptions) -> Result<RdtEndpointConfig> {
+        let o = options;
         for (key, v) in [
             ("counts_per_force", o.counts_per_force),
             ("counts_per_torque", o.counts_per_torque),
@@ -322,6 +398,16 @@ impl RdtEndpoint {
                 ),
             )
         })?;
+        Ok(RdtEndpointConfig {
+            options: options.clone(),
+            force_unit,
+            torque_unit,
+        })
+    }
+
+    /// Binds the RDT socket and starts the HTTP server (unless `http_port` is 0).
+    fn open_parsed(c: &RdtEndpointConfig, context: &EndpointContext) -> Result<Self> {
+        let (o, force_unit, torque_unit) = (&c.options, c.force_unit, c.torque_unit);
         // the page's counts are per configured unit; the records count the wrench in those units
         let per_unit = CountsPerUnit {
             force: o.counts_per_force,
@@ -331,8 +417,8 @@ impl RdtEndpoint {
             force: o.counts_per_force / force_unit.newtons(),
             torque: o.counts_per_torque / torque_unit.newton_metres(),
         };
-        let socket = bind_udp("sensor (RDT)", resolve("bind_host", &o.bind_host, o.port)?)?;
-        let address = local_addr("sensor (RDT)", &socket)?;
+        let inbox = UdpInbox::bind("sensor (RDT)", resolve("bind_host", &o.bind_host, o.port)?)?;
+        let address = local_addr("sensor (RDT)", inbox.socket())?;
         let http = if o.http_port == 0 {
             None
         } else {
@@ -349,7 +435,7 @@ impl RdtEndpoint {
             })?)
         };
         Ok(RdtEndpoint {
-            socket,
+            inbox,
             address,
             http,
             counts,
@@ -360,34 +446,7 @@ impl RdtEndpoint {
             bias: ([0.0; 3], [0.0; 3]),
             last_reading: ([0.0; 3], [0.0; 3]),
             stats: LinkStats::default(),
-            buf: [0u8; 2048],
         })
-    }
-
-    fn send_record(&mut self) {
-        let Some(client) = self.client else { return };
-        if self.remaining == Some(0) {
-            self.client = None;
-            return;
-        }
-        let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
-        let (reading, bias) = (self.last_reading, self.bias);
-        let (counts, saturated) = self
-            .counts
-            .to_counts(&sub(reading.0, bias.0), &sub(reading.1, bias.1));
-        self.rdt_sequence = self.rdt_sequence.wrapping_add(1);
-        let record = RdtRecord {
-            rdt_sequence: self.rdt_sequence,
-            ft_sequence: self.ft_sequence,
-            // bit 31 (error) and bit 16 (saturation) when a gauge is out of range
-            status: if saturated { 0x8001_0000 } else { 0 },
-            counts,
-        };
-        let sent = self.socket.send_to(&record.encode(), client);
-        self.stats.count_send(sent);
-        if let Some(n) = self.remaining.as_mut() {
-            *n -= 1;
-        }
     }
 }
 
@@ -411,10 +470,8 @@ impl SensorEndpoint for RdtEndpoint {
             self.stats.send_errors += send;
             self.stats.io_errors += receive + send;
         }
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            let Ok(request) = RdtRequest::decode(&self.buf[..n]) else {
-                self.stats.malformed += 1;
+        while let Some((bytes, from)) = self.inbox.next(&mut self.stats, |_| true) {
+            let Some(request) = decode_counted(RdtRequest::decode(bytes), &mut self.stats) else {
                 continue;
             };
             self.stats.accepted += 1;

@@ -265,45 +265,18 @@ impl FrameReader {
     }
 }
 
-/// Tracks the frames' 16-bit package numbers: counts the missing ones. Over TCP a package
-/// number that is not newer (wrapping comparison) means the box restarted its count: taken as
-/// the new reference, nothing counted lost.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct PackageTracker {
-    last: Option<u16>,
-}
-
-impl PackageTracker {
-    /// A tracker that has seen nothing.
-    pub fn new() -> Self {
-        PackageTracker { last: None }
-    }
-
-    /// Accepts `package` as the newest; returns how many packages are missing before it.
-    pub fn check(&mut self, package: u16) -> u32 {
-        let lost = match self.last {
-            Some(last) => {
-                let ahead = package.wrapping_sub(last) as i16;
-                if ahead > 0 {
-                    ahead as u32 - 1
-                } else {
-                    0
-                }
-            }
-            None => 0,
-        };
-        self.last = Some(package);
-        lost
-    }
-
-    /// The last package number seen.
-    pub fn last(&self) -> Option<u16> {
-        self.last
-    }
-}
-
 /// Which command sets the sample rate: the sources disagree (see the module doc).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
 pub enum SriRateCommand {
     /// `AT+SMPR=<Hz>` (most clients; an answer `ACK+SMPR=300$OK` is published).
     #[default]
@@ -603,14 +576,15 @@ mod tests {
 
     #[test]
     fn package_gaps_are_counted_lost_and_wrap() {
-        let mut t = PackageTracker::new();
-        assert_eq!(t.check(10), 0);
-        assert_eq!(t.check(11), 0);
-        assert_eq!(t.check(15), 3);
-        assert_eq!(t.check(15), 0); // a repeat (box restart): nothing lost
-        let mut w = PackageTracker::new();
-        w.check(65534);
-        assert_eq!(w.check(1), 2); // 65535, 0 missing
+        // the package numbers' rule: every frame accepted, gaps counted (the one tracker)
+        let mut t = crate::devices::transport::SequenceTracker::<u16>::new();
+        assert_eq!(t.advance(10), 0);
+        assert_eq!(t.advance(11), 0);
+        assert_eq!(t.advance(15), 3);
+        assert_eq!(t.advance(15), 0); // a repeat (box restart): nothing lost
+        let mut w = crate::devices::transport::SequenceTracker::<u16>::new();
+        w.advance(65534);
+        assert_eq!(w.advance(1), 2); // 65535, 0 missing
         assert_eq!(w.last(), Some(1));
     }
 

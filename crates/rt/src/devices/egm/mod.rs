@@ -1,6 +1,6 @@
 //! ABB Externally Guided Motion (EGM), both sides: [`EgmRobot`] is the [`RobotLink`] of the
 //! loop (`EgmRobot` feedback in, `EgmSensor` corrections out, protobuf over UDP, codec in
-//! [`crate::egm`]), [`EgmEndpoint`] the emulated controller's [`RobotEndpoint`] (feedback out,
+//! [`self::codec`]), [`EgmEndpoint`] the emulated controller's [`RobotEndpoint`] (feedback out,
 //! corrections in).
 //!
 //! The controller sends feedback every 4 ms ([`EGM_PERIOD`]) to the PC's EGM port; the loop
@@ -16,27 +16,31 @@
 //! earlier (another robot, a simulator) is counted `foreign` and never locked onto. Every
 //! other sender is counted `foreign`.
 
-use std::net::{IpAddr, SocketAddr, UdpSocket};
+pub mod codec;
+pub mod proto;
+
+use std::net::SocketAddr;
 
 use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
 
-use super::{
-    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EndpointContext,
-    LinkContext, LinkStats, Pacing, RobotEndpoint, RobotIdentity, RobotLink,
-};
-use crate::egm::{
+use self::codec::{
     CorrectionDecoder, CorrectionEncoder, EgmError, FeedbackEncoder, RobotDecoder, EGM_PERIOD,
     EGM_PORT,
 };
+use super::transport::{bind_address_for, decode_counted, DecodeError, SequenceTracker, UdpInbox};
+use super::{
+    check_host, local_addr, resolve, sequence_counted, EmulatedRobot, EndpointContext,
+    FeedbackPose, LinkContext, LinkStats, Pacing, RobotDevice, RobotEndpoint, RobotIdentity,
+    RobotLink,
+};
+use crate::devices::pose::{PoseMapping, PoseMm};
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
-use crate::mapping::{EgmPoseMm, PoseMapping};
-use crate::rdt::SequenceTracker;
 
 /// Options of an EGM robot link (`[robot] kind = "egm"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct EgmOptions {
     /// Address the EGM endpoint binds to (CLI `--egm-bind`).
@@ -66,7 +70,7 @@ impl Default for EgmOptions {
 
 /// The PC side of ABB EGM.
 pub struct EgmRobot {
-    socket: UdpSocket,
+    inbox: UdpInbox<2048>,
     port: u16,
     /// Which sender is the robot.
     identity: RobotIdentity,
@@ -76,31 +80,52 @@ pub struct EgmRobot {
     encoder: CorrectionEncoder,
     send_seq: u32,
     stats: LinkStats,
-    buf: [u8; 2048],
+}
+
+/// An EGM link's options once parsed ([`RobotDevice::parse`] of [`EgmRobot`]): the hosts' form checked, the
+/// pose mapping built.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EgmConfig {
+    options: EgmOptions,
+    mapping: PoseMapping,
 }
 
 impl EgmRobot {
-    /// Checks the options without opening anything (hosts, mapping).
-    pub fn validate(o: &EgmOptions) -> Result<()> {
-        check_host("egm_bind_host", &o.bind_host)?;
-        if let Some(host) = &o.robot_host {
+    /// Parses the options ([`RobotDevice::parse`] of [`EgmRobot`]) and binds the EGM endpoint
+    /// ([`EgmRobot::open_parsed`]).
+    pub fn open(o: &EgmOptions, context: &LinkContext) -> Result<Self> {
+        Self::open_parsed(&Self::parse(o)?, context)
+    }
+}
+
+impl RobotDevice for EgmRobot {
+    const PACING: Pacing = Pacing::Clock;
+    type Options = EgmOptions;
+    type Config = EgmConfig;
+
+    /// Checks the hosts' form and builds the pose mapping, once, without opening anything.
+    fn parse(options: &EgmOptions) -> Result<EgmConfig> {
+        check_host("egm_bind_host", &options.bind_host)?;
+        if let Some(host) = &options.robot_host {
             check_host("robot_host", host)?;
         }
-        PoseMapping::new(o.offset_mm, o.rotation).map(|_| ())
+        Ok(EgmConfig {
+            options: options.clone(),
+            mapping: PoseMapping::new(options.offset_mm, options.rotation)?,
+        })
     }
 
-    /// Validates the mapping and binds the EGM endpoint.
-    pub fn open(o: &EgmOptions, context: &LinkContext) -> Result<Self> {
-        Self::validate(o)?;
-        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
-        let socket = bind_udp(
+    /// Binds the EGM endpoint.
+    fn open_parsed(c: &EgmConfig, context: &LinkContext) -> Result<Self> {
+        let (o, mapping) = (&c.options, c.mapping);
+        let inbox = UdpInbox::bind(
             "EGM endpoint",
             resolve("egm_bind_host", &o.bind_host, o.port)?,
         )?;
         let identity = RobotIdentity::new(o.robot_host.as_deref(), context.start)?;
         Ok(EgmRobot {
             port: o.port,
-            socket,
+            inbox,
             identity,
             mapping,
             sequence: SequenceTracker::new(),
@@ -108,7 +133,6 @@ impl EgmRobot {
             encoder: CorrectionEncoder::new(),
             send_seq: 0,
             stats: LinkStats::default(),
-            buf: [0u8; 2048],
         })
     }
 }
@@ -136,33 +160,28 @@ impl RobotLink for EgmRobot {
 
     fn poll(&mut self, now_ns: u64, estimator: &mut FeedbackEstimator) -> usize {
         let mut accepted = 0;
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            if !self.identity.admits(from, &mut self.stats) {
-                continue;
-            }
-            let Some(feedback) =
-                decode_counted(self.decoder.decode(&self.buf[..n]), &mut self.stats)
-            else {
+        while let Some((bytes, from)) = self
+            .inbox
+            .next(&mut self.stats, |from| self.identity.admits(from))
+        {
+            let Some(feedback) = decode_counted(self.decoder.decode(bytes), &mut self.stats) else {
                 continue;
             };
-            let (position, orientation) = self.mapping.from_egm(&feedback.actual);
-            if !self
+            let (position, orientation) = self.mapping.from_device(&feedback.actual);
+            let pose = FeedbackPose {
+                from,
+                seq: feedback.seqno,
+                robot_time: feedback.robot_time(),
+                position,
+                orientation,
+            };
+            let (sequence, stats) = (&mut self.sequence, &mut self.stats);
+            if self
                 .identity
-                .at_start(from, position, orientation, &mut self.stats)
+                .accept(&pose, sequence, now_ns, estimator, stats)
             {
-                continue; // not locked yet: the robot is the sender at the scenario's start
+                accepted += 1;
             }
-            if !sequence_counted(&mut self.sequence, feedback.seqno, &mut self.stats) {
-                continue;
-            }
-            self.identity.lock(from);
-            if !estimator.push(feedback.robot_time(), now_ns, position, orientation) {
-                self.stats.invalid += 1; // a jump no robot makes in one cycle
-                continue;
-            }
-            self.stats.accepted += 1;
-            accepted += 1;
         }
         accepted
     }
@@ -173,9 +192,9 @@ impl RobotLink for EgmRobot {
         };
         self.send_seq = self.send_seq.wrapping_add(1);
         let tm = (clock_ns / 1_000_000) as u32;
-        let target = self.mapping.to_egm(command);
+        let target = self.mapping.to_device(command);
         let bytes = self.encoder.encode(self.send_seq, tm, &target);
-        let sent = self.socket.send_to(bytes, addr);
+        let sent = self.inbox.socket().send_to(bytes, addr);
         self.stats.count_send(sent);
     }
 
@@ -192,39 +211,23 @@ impl RobotLink for EgmRobot {
     }
 }
 
-/// A decoded message, or None with the error counted: `malformed` for a datagram that is not
-/// an EGM message, `invalid` for one whose values are not usable.
-fn decode_counted<T>(
-    decoded: std::result::Result<T, EgmError>,
-    stats: &mut LinkStats,
-) -> Option<T> {
-    match decoded {
-        Ok(message) => Some(message),
-        Err(e) if is_malformed(&e) => {
-            stats.malformed += 1;
-            None
-        }
-        Err(_) => {
-            stats.invalid += 1;
-            None
-        }
+/// EGM decoding errors as the counters see them: a wrong size, bytes that are not protobuf, a
+/// missing header or a wrong type are malformed, the rest invalid.
+impl DecodeError for EgmError {
+    fn is_malformed(&self) -> bool {
+        matches!(
+            self,
+            EgmError::WrongSize(_)
+                | EgmError::Decode
+                | EgmError::MissingHeader
+                | EgmError::WrongType(_)
+        )
     }
-}
-
-/// Whether an EGM decoding error means a malformed datagram (else: invalid values).
-fn is_malformed(e: &EgmError) -> bool {
-    matches!(
-        e,
-        EgmError::WrongSize(_)
-            | EgmError::Decode
-            | EgmError::MissingHeader
-            | EgmError::WrongType(_)
-    )
 }
 
 /// Options of the emulated EGM robot controller (`[robot] kind = "egm"` of the emulator's
 /// options).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct EgmEndpointOptions {
     /// Host the robot sends its feedback to: the PC running the loop (CLI `--egm-host`).
@@ -233,15 +236,17 @@ pub struct EgmEndpointOptions {
     pub port: u16,
     /// The robot's own UDP port (0 = any free port) (CLI `--egm-local-port`).
     pub local_port: u16,
-    /// Feedback period, s (0.004 = 250 Hz), rounded to whole control periods.
+    /// Feedback period, s (> 0; 0.004 = 250 Hz), rounded to whole control periods.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub period: f64,
     /// Origin of the target frame `t` in the EGM frame, mm (CLI `--egm-offset`; see
-    /// [`crate::mapping`]).
+    /// [`crate::devices::pose`]).
     pub offset_mm: [f64; 3],
     /// Rotation from `t` to the EGM frame, quaternion `[w, x, y, z]` (CLI `--egm-rotation`).
     pub rotation: [f64; 4],
     /// RobotWare generation of the feedback's `egm.proto`, 6 or 7 (fault injection: 6 sends
     /// `measuredForce` in RobotWare 6's layout, which RobotWare 7's proto cannot decode).
+    #[schemars(range(min = 6, max = 7))]
     pub robotware: u8,
 }
 
@@ -265,7 +270,7 @@ impl Default for EgmEndpointOptions {
 /// (by sequence number; gaps are counted as `lost`, older ones as `stale`) becomes the command
 /// the robot follows. With `robotware = 6` the feedback carries RobotWare 6's `measuredForce`.
 pub struct EgmEndpoint {
-    socket: UdpSocket,
+    inbox: UdpInbox<2048>,
     address: SocketAddr,
     peer: SocketAddr,
     mapping: PoseMapping,
@@ -274,58 +279,78 @@ pub struct EgmEndpoint {
     /// Control period, ns.
     period_ns: u64,
     /// The newest commanded pose, mm (`planned` in the feedback).
-    planned: EgmPoseMm,
+    planned: PoseMm,
     seqno: u32,
     sequence: SequenceTracker,
     decoder: CorrectionDecoder,
     encoder: FeedbackEncoder,
     stats: LinkStats,
-    buf: [u8; 2048],
+}
+
+/// The emulated EGM robot's options once parsed ([`EmulatedRobot::parse`] of [`EgmEndpoint`]): a positive
+/// feedback period, the RobotWare generation's encoder, the pose mapping.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EgmEndpointConfig {
+    options: EgmEndpointOptions,
+    mapping: PoseMapping,
 }
 
 impl EgmEndpoint {
-    /// Validates the period, the RobotWare generation and the mapping, resolves the PC's
-    /// address and binds the robot's socket (on loopback when the PC is).
+    /// Parses the options ([`EmulatedRobot::parse`] of [`EgmEndpoint`]) and opens the endpoint
+    /// ([`EgmEndpoint::open_parsed`]).
     pub fn open(o: &EgmEndpointOptions, context: &EndpointContext) -> Result<Self> {
-        if !(o.period.is_finite() && o.period > 0.0) {
+        Self::open_parsed(&Self::parse(o)?, context)
+    }
+}
+
+impl EmulatedRobot for EgmEndpoint {
+    type Options = EgmEndpointOptions;
+    type Config = EgmEndpointConfig;
+
+    /// Checks the period and the RobotWare generation and builds the mapping, once.
+    fn parse(options: &EgmEndpointOptions) -> Result<EgmEndpointConfig> {
+        if !(options.period.is_finite() && options.period > 0.0) {
             return Err(RtError::option(
                 "egm_period",
-                format!("must be a positive number, got {}", o.period),
+                format!("must be a positive number, got {}", options.period),
             ));
         }
-        let encoder = match o.robotware {
-            6 => FeedbackEncoder::robotware6(),
-            7 => FeedbackEncoder::new(),
-            other => {
-                return Err(RtError::option(
-                    "robotware",
-                    format!("must be 6 or 7, got {other}"),
-                ))
-            }
+        if !matches!(options.robotware, 6 | 7) {
+            return Err(RtError::option(
+                "robotware",
+                format!("must be 6 or 7, got {}", options.robotware),
+            ));
+        }
+        Ok(EgmEndpointConfig {
+            options: options.clone(),
+            mapping: PoseMapping::new(options.offset_mm, options.rotation)?,
+        })
+    }
+
+    /// Resolves the PC's address and binds the robot's socket (on loopback when the PC is).
+    fn open_parsed(c: &EgmEndpointConfig, context: &EndpointContext) -> Result<Self> {
+        let (o, mapping) = (&c.options, c.mapping);
+        let encoder = if o.robotware == 6 {
+            FeedbackEncoder::robotware6()
+        } else {
+            FeedbackEncoder::new()
         };
-        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
         let peer = resolve("egm_host", &o.host, o.port)?;
-        let bind: SocketAddr = match peer.ip() {
-            IpAddr::V4(ip) if ip.is_loopback() => SocketAddr::from(([127, 0, 0, 1], o.local_port)),
-            IpAddr::V4(_) => SocketAddr::from(([0, 0, 0, 0], o.local_port)),
-            IpAddr::V6(_) => SocketAddr::from(([0u16; 8], o.local_port)),
-        };
-        let socket = bind_udp("robot (EGM)", bind)?;
-        let address = local_addr("robot (EGM)", &socket)?;
+        let inbox = UdpInbox::bind("robot (EGM)", bind_address_for(peer, o.local_port))?;
+        let address = local_addr("robot (EGM)", inbox.socket())?;
         Ok(EgmEndpoint {
-            socket,
+            inbox,
             address,
             peer,
             mapping,
             every: ((o.period / context.period).round() as u64).max(1),
             period_ns: (context.period * 1e9).round() as u64,
-            planned: mapping.to_egm(&context.initial).pose,
+            planned: mapping.to_device(&context.initial).pose,
             seqno: 0,
             sequence: SequenceTracker::new(),
             decoder: CorrectionDecoder::new(),
             encoder,
             stats: LinkStats::default(),
-            buf: [0u8; 2048],
         })
     }
 }
@@ -339,20 +364,15 @@ impl RobotEndpoint for EgmEndpoint {
         self.address
     }
 
-    fn peer(&self) -> SocketAddr {
-        self.peer
+    fn peer(&self) -> Option<SocketAddr> {
+        Some(self.peer)
     }
 
     fn receive(&mut self) -> Option<RelativeMotion> {
         let mut newest = None;
-        while let Some((n, from)) = recv_counted(&self.socket, &mut self.buf, &mut self.stats) {
-            self.stats.received += 1;
-            if from != self.peer {
-                self.stats.foreign += 1;
-                continue;
-            }
-            let Some(correction) =
-                decode_counted(self.decoder.decode(&self.buf[..n]), &mut self.stats)
+        let peer = self.peer;
+        while let Some((bytes, _)) = self.inbox.next(&mut self.stats, |from| from == peer) {
+            let Some(correction) = decode_counted(self.decoder.decode(bytes), &mut self.stats)
             else {
                 continue;
             };
@@ -364,20 +384,20 @@ impl RobotEndpoint for EgmEndpoint {
         }
         let c = newest?;
         self.planned = c.target.pose;
-        Some(self.mapping.motion_from_egm(&c.target))
+        Some(self.mapping.motion_from_device(&c.target))
     }
 
     fn feedback(&mut self, k: u64, actual: &RelativeMotion, send: bool) {
         if !send || !k.is_multiple_of(self.every) {
             return;
         }
-        let actual = self.mapping.to_egm(actual).pose;
+        let actual = self.mapping.to_device(actual).pose;
         let time_us = k * self.period_ns / 1000;
         self.seqno = self.seqno.wrapping_add(1);
         let bytes = self
             .encoder
             .encode(self.seqno, time_us, &actual, &self.planned);
-        let sent = self.socket.send_to(bytes, self.peer);
+        let sent = self.inbox.socket().send_to(bytes, self.peer);
         self.stats.count_send(sent);
     }
 

@@ -17,8 +17,8 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use super::codec::CountsPerUnit;
 use crate::error::{Result, RtError};
-use crate::rdt::CountsPerUnit;
 
 /// Path of the configuration page.
 pub const NETFTAPI_PATH: &str = "/netftapi2.xml";

@@ -1,5 +1,5 @@
 //! SRI (Sunrise Instruments) M812x interface box (M8126, M8128) over TCP, both sides:
-//! [`SriSensor`] is the [`SensorLink`] of the loop (codec and sources in [`crate::sri`]),
+//! [`SriSensor`] is the [`SensorLink`] of the loop (codec and sources in [`self::codec`]),
 //! [`SriEndpoint`] the emulated box's [`SensorEndpoint`].
 //!
 //! At open the link connects (within `connect_timeout`) and configures the box with AT
@@ -16,6 +16,8 @@
 //! decoupling matrix gives them (SRI calibrates in N and N·m; the box cannot be asked its
 //! units: `realtime.sensor.sensor_units` records the assumption).
 
+pub mod codec;
+
 use std::io::{ErrorKind, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
 use std::time::{Duration, Instant};
@@ -23,15 +25,19 @@ use std::time::{Duration, Instant};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use super::{resolve, EndpointContext, LinkContext, LinkStats, SensorEndpoint, SensorLink, Wrench};
-use crate::error::{Result, RtError};
-use crate::sri::{
-    parse_matrix, FrameReader, PackageTracker, SriAck, SriCommand, SriFrame, SriRateCommand,
-    SriRequest, MAX_LINE, SRI_PORT,
+use self::codec::{
+    parse_matrix, FrameReader, SriAck, SriCommand, SriFrame, SriRateCommand, SriRequest, MAX_LINE,
+    SRI_PORT,
 };
+use super::transport::SequenceTracker;
+use super::{
+    check_host, resolve, EmulatedSensor, EndpointContext, LinkContext, LinkStats, SensorDevice,
+    SensorEndpoint, SensorLink, Transport, Wrench,
+};
+use crate::error::{Result, RtError};
 
 /// Options of an SRI M812x sensor link (`[sensor] kind = "sri"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SriOptions {
     /// Host of the M812x box (CLI `--sensor`; SRI's factory address is 192.168.0.108).
@@ -39,7 +45,8 @@ pub struct SriOptions {
     /// TCP port of the box (4008) (CLI `--sensor-port`).
     pub port: u16,
     /// Sample rate asked of the box, Hz (sent as an integer; None: the loop's rate,
-    /// 1 / period).
+    /// 1 / period; 1 to 100000 once rounded).
+    #[schemars(range(min = 0.5), extend("exclusiveMaximum" = 100000.5))]
     pub sample_rate: Option<f64>,
     /// The sample rate command: `"SMPR"` (default) or `"SMPF"` (the sources disagree; see
     /// docs/realtime.md).
@@ -71,74 +78,44 @@ pub struct SriSensor {
     rate_command: SriRateCommand,
     matrix_sent: bool,
     reader: FrameReader,
-    packages: PackageTracker,
+    packages: SequenceTracker<u16>,
     /// The connection was closed or failed: nothing more is read.
     closed: bool,
     stats: LinkStats,
     line: [u8; MAX_LINE],
 }
 
+/// An SRI link's options once parsed ([`SensorDevice::parse`] of [`SriSensor`]): the host's form, the sample rate
+/// (if given) and the decoupling matrix checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SriConfig {
+    options: SriOptions,
+}
+
+/// The sample rate `hz` (Hz) if the box takes it (1 to 100000 once rounded).
+fn check_rate(hz: f64) -> Result<u32> {
+    if !(hz.is_finite() && (1.0..=100_000.0).contains(&hz.round())) {
+        return Err(RtError::option(
+            "sample_rate",
+            format!("must be between 1 and 100000 Hz, got {hz}"),
+        ));
+    }
+    Ok(hz.round() as u32)
+}
+
+impl SriConfig {
+    /// The sample rate asked of the box with the scenario's control period `period` (s), Hz:
+    /// the one given, else the loop's rate; an error if the box does not take it.
+    pub fn sample_rate(&self, period: f64) -> Result<u32> {
+        check_rate(self.options.sample_rate.unwrap_or(1.0 / period))
+    }
+}
+
 impl SriSensor {
-    /// Validates the options, connects (within `context.connect_timeout`), configures the box
-    /// (blocking, each answer checked) and leaves the socket non-blocking, not yet streaming.
+    /// Parses the options ([`SensorDevice::parse`] of [`SriSensor`]) and opens the link
+    /// ([`SriSensor::open_parsed`]).
     pub fn open(o: &SriOptions, context: &LinkContext) -> Result<Self> {
-        let hz = o.sample_rate.unwrap_or(1.0 / context.period);
-        if !(hz.is_finite() && (1.0..=100_000.0).contains(&hz.round())) {
-            return Err(RtError::option(
-                "sample_rate",
-                format!("must be between 1 and 100000 Hz, got {hz}"),
-            ));
-        }
-        if let Some(m) = &o.decoupling_matrix {
-            if !m.iter().flatten().all(|v| v.is_finite()) {
-                return Err(RtError::option(
-                    "decoupling_matrix",
-                    "must be 6 rows of 6 finite numbers",
-                ));
-            }
-        }
-        let peer = resolve("sensor_host", &o.host, o.port)?;
-        let timeout = Duration::from_secs_f64(context.connect_timeout.max(0.1));
-        let stream = TcpStream::connect_timeout(&peer, timeout).map_err(|e| {
-            RtError::Connect(format!(
-                "cannot connect to the SRI box at {peer} (TCP): {e}"
-            ))
-        })?;
-        let io = |e: std::io::Error| RtError::io(format!("SRI box at {peer}"), &e);
-        stream.set_nodelay(true).map_err(io)?;
-        stream
-            .set_read_timeout(Some(timeout.min(Duration::from_secs(2))))
-            .map_err(io)?;
-        let mut link = SriSensor {
-            stream,
-            peer,
-            rate: hz.round() as u32,
-            rate_command: o.rate_command,
-            matrix_sent: o.decoupling_matrix.is_some(),
-            reader: FrameReader::new(),
-            packages: PackageTracker::new(),
-            closed: false,
-            stats: LinkStats::default(),
-            line: [0u8; MAX_LINE],
-        };
-        // a stream left running by an earlier client would bury the answers
-        link.send(SriCommand::StopStream);
-        let mut configuration = vec![
-            SriCommand::ChecksumSum,
-            SriCommand::DataMode,
-            SriCommand::SampleRate(o.rate_command, link.rate),
-        ];
-        if let Some(m) = &o.decoupling_matrix {
-            configuration.push(SriCommand::ComputeUnitMvpv);
-            configuration.push(SriCommand::DecouplingMatrix(**m));
-        }
-        let mut pending = Vec::new();
-        for command in configuration {
-            link.send(command);
-            link.expect_ack(command, &mut pending, timeout)?;
-        }
-        link.stream.set_nonblocking(true).map_err(io)?;
-        Ok(link)
+        Self::open_parsed(&Self::parse(o)?, context)
     }
 
     /// The sample rate set, Hz.
@@ -227,7 +204,7 @@ impl SriSensor {
                 self.stats.malformed += 1;
                 continue;
             };
-            self.stats.lost += self.packages.check(frame.package) as u64;
+            self.stats.lost += self.packages.advance(frame.package) as u64;
             let v = frame.values;
             if !v.iter().all(|x| x.is_finite()) {
                 self.stats.invalid += 1;
@@ -242,7 +219,88 @@ impl SriSensor {
     }
 }
 
+impl SensorDevice for SriSensor {
+    type Options = SriOptions;
+    type Config = SriConfig;
+
+    /// Checks the host's form, the sample rate (if given) and the decoupling matrix, once.
+    fn parse(options: &SriOptions) -> Result<SriConfig> {
+        check_host("sensor host", &options.host)?;
+        if let Some(hz) = options.sample_rate {
+            check_rate(hz)?;
+        }
+        if let Some(m) = &options.decoupling_matrix {
+            if !m.iter().flatten().all(|v| v.is_finite()) {
+                return Err(RtError::option(
+                    "decoupling_matrix",
+                    "must be 6 rows of 6 finite numbers",
+                ));
+            }
+        }
+        Ok(SriConfig {
+            options: options.clone(),
+        })
+    }
+
+    fn check_period(config: &SriConfig, period: f64) -> Result<()> {
+        config.sample_rate(period).map(|_| ())
+    }
+
+    /// Connects (within `context.connect_timeout`), configures the box (blocking, each answer
+    /// checked) and leaves the socket non-blocking, not yet streaming.
+    fn open_parsed(c: &SriConfig, context: &LinkContext) -> Result<Self> {
+        let o = &c.options;
+        let rate = c.sample_rate(context.period)?;
+        let peer = resolve("sensor_host", &o.host, o.port)?;
+        let timeout = Duration::from_secs_f64(context.connect_timeout.max(0.1));
+        let stream = TcpStream::connect_timeout(&peer, timeout).map_err(|e| {
+            RtError::Connect(format!(
+                "cannot connect to the SRI box at {peer} (TCP): {e}"
+            ))
+        })?;
+        let io = |e: std::io::Error| RtError::io(format!("SRI box at {peer}"), &e);
+        stream.set_nodelay(true).map_err(io)?;
+        stream
+            .set_read_timeout(Some(timeout.min(Duration::from_secs(2))))
+            .map_err(io)?;
+        let mut link = SriSensor {
+            stream,
+            peer,
+            rate,
+            rate_command: o.rate_command,
+            matrix_sent: o.decoupling_matrix.is_some(),
+            reader: FrameReader::new(),
+            packages: SequenceTracker::new(),
+            closed: false,
+            stats: LinkStats::default(),
+            line: [0u8; MAX_LINE],
+        };
+        // a stream left running by an earlier client would bury the answers
+        link.send(SriCommand::StopStream);
+        let mut configuration = vec![
+            SriCommand::ChecksumSum,
+            SriCommand::DataMode,
+            SriCommand::SampleRate(o.rate_command, link.rate),
+        ];
+        if let Some(m) = &o.decoupling_matrix {
+            configuration.push(SriCommand::ComputeUnitMvpv);
+            configuration.push(SriCommand::DecouplingMatrix(**m));
+        }
+        let mut pending = Vec::new();
+        for command in configuration {
+            link.send(command);
+            link.expect_ack(command, &mut pending, timeout)?;
+        }
+        link.stream.set_nonblocking(true).map_err(io)?;
+        Ok(link)
+    }
+}
+
 impl SensorLink for SriSensor {
+    fn transport(&self) -> Transport {
+        Transport::TcpClient
+    }
+
     fn name(&self) -> &'static str {
         "SRI"
     }
@@ -328,7 +386,7 @@ impl SensorLink for SriSensor {
 }
 
 /// Options of the emulated SRI box (`[sensor] kind = "sri"` of the emulator's options).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SriEndpointOptions {
     /// Address the box's TCP server binds to (CLI `--bind-host`).
@@ -540,7 +598,24 @@ impl SriEndpoint {
     }
 }
 
+impl EmulatedSensor for SriEndpoint {
+    type Options = SriEndpointOptions;
+    type Config = SriEndpointOptions;
+
+    fn parse(options: &SriEndpointOptions) -> Result<SriEndpointOptions> {
+        Ok(options.clone())
+    }
+
+    fn open_parsed(config: &SriEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open(config, context)
+    }
+}
+
 impl SensorEndpoint for SriEndpoint {
+    fn transport(&self) -> Transport {
+        Transport::TcpServer
+    }
+
     fn name(&self) -> &'static str {
         "SRI"
     }

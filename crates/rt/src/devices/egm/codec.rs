@@ -16,14 +16,14 @@
 //! Feedback of both `egm.proto` generations decodes: RobotWare 6 and 7 differ, for the fields
 //! a controller sends, only in `EgmMeasuredForce`, whose field 1 is RobotWare 6's `force` and
 //! RobotWare 7's `fcActive`; [`EgmMeasuredForce`] tells them apart by wire type (see
-//! [`crate::egm_proto`]). The measured force is reported when it has six finite values; it is
+//! [`super::proto`]). The measured force is reported when it has six finite values; it is
 //! not validated further, as the loop does not use it.
 
 use prost::Message;
 use thiserror::Error;
 
-use crate::egm_proto::*;
-use crate::mapping::{EgmPoseMm, EgmTarget};
+use super::proto::*;
+use crate::devices::pose::{PoseMm, TargetMm};
 
 /// Default UDP port of the PC side (the port the controller's EGM transmission is configured to).
 pub const EGM_PORT: u16 = 6510;
@@ -80,9 +80,9 @@ pub struct RobotFeedback {
     /// `feedBack.time` in seconds, if sent.
     pub clock: Option<f64>,
     /// The actual (measured) pose.
-    pub actual: EgmPoseMm,
+    pub actual: PoseMm,
     /// The planned pose, if sent.
-    pub planned: Option<EgmPoseMm>,
+    pub planned: Option<PoseMm>,
     /// Motors on (`None` if not sent).
     pub motors_on: Option<bool>,
     /// `measuredForce`, `[Fx, Fy, Fz, Tx, Ty, Tz]` (N, N·m) in either generation's layout;
@@ -103,7 +103,7 @@ pub struct Correction {
     /// Header sequence number.
     pub seqno: u32,
     /// The commanded pose and speed reference (zero speed if none was sent).
-    pub target: EgmTarget,
+    pub target: TargetMm,
 }
 
 fn repeated() -> Vec<f64> {
@@ -148,7 +148,7 @@ fn clear_rapid(r: &mut Option<EgmRapiDdata>) {
     r.dnum.clear();
 }
 
-fn check_pose(pose: &EgmPose) -> Result<EgmPoseMm, EgmError> {
+fn check_pose(pose: &EgmPose) -> Result<PoseMm, EgmError> {
     let (Some(p), Some(q)) = (pose.pos, pose.orient) else {
         return Err(EgmError::MissingPose);
     };
@@ -168,7 +168,7 @@ fn check_pose(pose: &EgmPose) -> Result<EgmPoseMm, EgmError> {
     if (norm - 1.0).abs() > QUATERNION_TOLERANCE {
         return Err(EgmError::BadQuaternion);
     }
-    Ok(EgmPoseMm {
+    Ok(PoseMm {
         position_mm,
         orientation: orientation.map(|v| v / norm),
     })
@@ -401,12 +401,12 @@ impl CorrectionDecoder {
         }
         Ok(Correction {
             seqno,
-            target: EgmTarget { pose, speed },
+            target: TargetMm { pose, speed },
         })
     }
 }
 
-fn pose_message(p: &EgmPoseMm) -> EgmPose {
+fn pose_message(p: &PoseMm) -> EgmPose {
     let [x, y, z] = p.position_mm;
     let [u0, u1, u2, u3] = p.orientation;
     EgmPose {
@@ -439,7 +439,7 @@ impl CorrectionEncoder {
             }),
             planned: Some(EgmPlanned {
                 joints: None,
-                cartesian: Some(pose_message(&EgmPoseMm::default())),
+                cartesian: Some(pose_message(&PoseMm::default())),
                 external_joints: None,
                 time: None,
             }),
@@ -459,7 +459,7 @@ impl CorrectionEncoder {
     }
 
     /// The datagram of a correction: sequence number, time stamp (ms) and target.
-    pub fn encode(&mut self, seqno: u32, tm_ms: u32, target: &EgmTarget) -> &[u8] {
+    pub fn encode(&mut self, seqno: u32, tm_ms: u32, target: &TargetMm) -> &[u8] {
         if let Some(h) = self.msg.header.as_mut() {
             h.seqno = Some(seqno);
             h.tm = Some(tm_ms);
@@ -554,13 +554,7 @@ impl FeedbackEncoder {
 
     /// The datagram of a feedback message: sequence number, time stamp (ms), controller time
     /// (µs), actual and planned pose.
-    pub fn encode(
-        &mut self,
-        seqno: u32,
-        time_us: u64,
-        actual: &EgmPoseMm,
-        planned: &EgmPoseMm,
-    ) -> &[u8] {
+    pub fn encode(&mut self, seqno: u32, time_us: u64, actual: &PoseMm, planned: &PoseMm) -> &[u8] {
         let clock = EgmClock {
             sec: time_us / 1_000_000,
             usec: time_us % 1_000_000,
@@ -592,8 +586,8 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
-    fn pose(x: f64) -> EgmPoseMm {
-        EgmPoseMm {
+    fn pose(x: f64) -> PoseMm {
+        PoseMm {
             position_mm: [x, 2.0, -3.0],
             orientation: [1.0, 0.0, 0.0, 0.0],
         }
@@ -618,7 +612,7 @@ mod tests {
     #[test]
     fn correction_round_trips_and_decoder_forgets_old_values() {
         let mut enc = CorrectionEncoder::new();
-        let target = EgmTarget {
+        let target = TargetMm {
             pose: pose(5.0),
             speed: [20.0, 0.0, 0.0, 0.0, 0.0, 1.0],
         };
@@ -700,7 +694,10 @@ mod tests {
             Err(EgmError::BadQuaternion)
         );
         // an RDT record is not EGM
-        assert!(d(crate::rdt::RdtRecord::default().encode().to_vec()).is_err());
+        assert!(d(crate::devices::rdt::codec::RdtRecord::default()
+            .encode()
+            .to_vec())
+        .is_err());
         // the decoder still works after errors
         assert!(dec.decode(&good).is_ok());
     }

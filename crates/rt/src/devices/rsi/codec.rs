@@ -24,6 +24,7 @@
 //! [`RsiError::NonFinite`] mean a malformed datagram); every number finite and within
 //! [`RSI_MAX_VALUE`].
 
+use crate::devices::transport::DecodeError;
 use std::io::Write;
 
 use nalgebra::UnitQuaternion;
@@ -71,9 +72,10 @@ pub enum RsiError {
     NonFinite,
 }
 
-impl RsiError {
-    /// Whether the datagram is malformed (else: its values are not usable).
-    pub fn is_malformed(&self) -> bool {
+/// RSI decoding errors as the counters see them: every error but non-finite values is a
+/// malformed datagram.
+impl DecodeError for RsiError {
+    fn is_malformed(&self) -> bool {
         !matches!(self, RsiError::NonFinite)
     }
 }

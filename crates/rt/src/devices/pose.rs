@@ -1,10 +1,13 @@
-//! The one place where the scenario's relative motion meets the robot's EGM poses.
+//! The one place where the scenario's relative motion meets a robot's poses, for every robot
+//! protocol (ABB EGM, KUKA RSI, ...).
 //!
 //! The robot reproduces the pose of the servicer relative to the target mockup frame `t`
-//! ([`RelativeMotion`]: servicer body frame in `t`, metres, SI). EGM speaks poses of the tool
-//! frame in the frame the EGM motion was activated in (its work object, call it `e`), in
-//! millimetres and unit quaternions `[u0, u1, u2, u3] = [w, x, y, z]`, and speeds in mm/s and
-//! deg/s. The mapping is
+//! ([`RelativeMotion`]: servicer body frame in `t`, metres, SI). A robot's external-motion
+//! interface speaks poses of the tool frame in the frame the motion was activated in (a work
+//! object or base, call it `e`), in millimetres and unit quaternions `[w, x, y, z]`
+//! ([`PoseMm`]), and speeds in mm/s and deg/s ([`TargetMm`]); each protocol converts these to
+//! its own wire form (EGM: the same; RSI: X, Y, Z and A, B, C angles). The mapping
+//! ([`PoseMapping`], built once from the options' `offset_mm` and `rotation`) is
 //!
 //! ```text
 //! p_e [mm]     = 1000 · (o + R · p_t [m])          o: origin of t in e (the base offset)
@@ -13,9 +16,13 @@
 //! ω_e [deg/s]  = (180/π) · R · ω_t [rad/s]
 //! ```
 //!
-//! so the EGM tool frame is the servicer's body frame (origin at the servicer's centre of mass
-//! of the virtual model, the rod tip at `rod.tip` in it): define the robot's tool data that way.
-//! With the defaults (`o = 0`, `R = I`) an EGM pose is the relative pose itself, in mm.
+//! so the robot's tool frame is the servicer's body frame (origin at the servicer's centre of
+//! mass of the virtual model, the rod tip at `rod.tip` in it): define the robot's tool data
+//! that way. With the defaults (`o = 0`, `R = I`) a device pose is the relative pose itself, in
+//! mm.
+//!
+//! The error keys of a bad mapping stay `egm_offset_mm` and `egm_rotation` for every protocol
+//! (the tests and the CLI's messages name them so).
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
@@ -23,25 +30,26 @@ use hilcontact_core::world::RelativeMotion;
 
 use crate::error::{Result, RtError};
 
-/// An EGM pose: tool position (mm) and orientation (`[w, x, y, z]`) in the EGM frame `e`.
+/// A device pose: tool position (mm) and orientation (`[w, x, y, z]`) in the robot's frame
+/// `e`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct EgmPoseMm {
+pub struct PoseMm {
     /// Position, mm.
     pub position_mm: [f64; 3],
     /// Unit quaternion `[w, x, y, z]` (tool to `e`).
     pub orientation: [f64; 4],
 }
 
-/// An EGM target: pose plus speed reference `[vx, vy, vz]` mm/s and `[wx, wy, wz]` deg/s.
+/// A device target: pose plus speed reference `[vx, vy, vz]` mm/s and `[wx, wy, wz]` deg/s.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct EgmTarget {
+pub struct TargetMm {
     /// The pose.
-    pub pose: EgmPoseMm,
+    pub pose: PoseMm,
     /// Speed reference: linear mm/s, then angular deg/s (frame `e`).
     pub speed: [f64; 6],
 }
 
-/// The mapping between `t` (metres) and the EGM frame `e` (millimetres).
+/// The mapping between `t` (metres) and the robot's frame `e` (millimetres).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PoseMapping {
     /// Origin of `t` in `e`, m.
@@ -51,7 +59,7 @@ pub struct PoseMapping {
 }
 
 impl Default for PoseMapping {
-    /// The identity: an EGM pose is the relative pose in mm.
+    /// The identity: a device pose is the relative pose in mm.
     fn default() -> Self {
         PoseMapping {
             offset: Vector3::zeros(),
@@ -83,14 +91,14 @@ impl PoseMapping {
         })
     }
 
-    /// The EGM target of a relative motion (pose and speed reference).
-    pub fn to_egm(&self, m: &RelativeMotion) -> EgmTarget {
+    /// The device target of a relative motion (pose and speed reference).
+    pub fn to_device(&self, m: &RelativeMotion) -> TargetMm {
         let p = (self.offset + self.rotation * m.position) * 1e3;
         let q = self.rotation * m.orientation;
         let v = self.rotation * m.velocity * 1e3;
         let w = (self.rotation * m.angular_velocity).map(f64::to_degrees);
-        EgmTarget {
-            pose: EgmPoseMm {
+        TargetMm {
+            pose: PoseMm {
                 position_mm: [p.x, p.y, p.z],
                 orientation: [q.w, q.i, q.j, q.k],
             },
@@ -98,8 +106,8 @@ impl PoseMapping {
         }
     }
 
-    /// Position (m) and orientation in `t` of an EGM pose (its quaternion is normalised).
-    pub fn from_egm(&self, pose: &EgmPoseMm) -> (Vector3<f64>, UnitQuaternion<f64>) {
+    /// Position (m) and orientation in `t` of a device pose (its quaternion is normalised).
+    pub fn from_device(&self, pose: &PoseMm) -> (Vector3<f64>, UnitQuaternion<f64>) {
         let p_e = Vector3::from(pose.position_mm) * 1e-3;
         let [w, x, y, z] = pose.orientation;
         let q_e = UnitQuaternion::new_normalize(Quaternion::new(w, x, y, z));
@@ -109,17 +117,17 @@ impl PoseMapping {
         )
     }
 
-    /// Linear (m/s) and angular (rad/s) velocity in `t` of an EGM speed reference.
-    pub fn speed_from_egm(&self, speed: &[f64; 6]) -> (Vector3<f64>, Vector3<f64>) {
+    /// Linear (m/s) and angular (rad/s) velocity in `t` of a device speed reference.
+    pub fn speed_from_device(&self, speed: &[f64; 6]) -> (Vector3<f64>, Vector3<f64>) {
         let v = Vector3::new(speed[0], speed[1], speed[2]) * 1e-3;
         let w = Vector3::new(speed[3], speed[4], speed[5]).map(f64::to_radians);
         (self.rotation.inverse() * v, self.rotation.inverse() * w)
     }
 
-    /// The relative motion of an EGM target (the inverse of [`PoseMapping::to_egm`]).
-    pub fn motion_from_egm(&self, target: &EgmTarget) -> RelativeMotion {
-        let (position, orientation) = self.from_egm(&target.pose);
-        let (velocity, angular_velocity) = self.speed_from_egm(&target.speed);
+    /// The relative motion of a device target (the inverse of [`PoseMapping::to_device`]).
+    pub fn motion_from_device(&self, target: &TargetMm) -> RelativeMotion {
+        let (position, orientation) = self.from_device(&target.pose);
+        let (velocity, angular_velocity) = self.speed_from_device(&target.speed);
         RelativeMotion {
             position,
             orientation,
@@ -144,7 +152,7 @@ mod tests {
 
     #[test]
     fn identity_mapping_is_millimetres() {
-        let t = PoseMapping::default().to_egm(&motion());
+        let t = PoseMapping::default().to_device(&motion());
         assert!((t.pose.position_mm[0] + 995.0).abs() < 1e-9);
         assert!((t.speed[0] - 20.0).abs() < 1e-12);
         assert!((t.speed[5] - 0.05f64.to_degrees()).abs() < 1e-12);
@@ -155,7 +163,7 @@ mod tests {
         let s = std::f64::consts::FRAC_1_SQRT_2;
         let map = PoseMapping::new([1500.0, -200.0, 800.0], [s, 0.0, 0.0, s]).unwrap(); // 90° about z
         let m = motion();
-        let t = map.to_egm(&m);
+        let t = map.to_device(&m);
         // t's x axis is e's y axis: p_e = o + R p_t
         assert!(
             (t.pose.position_mm[0] - (1500.0 - 10.0)).abs() < 1e-9,
@@ -163,7 +171,7 @@ mod tests {
             t.pose
         );
         assert!((t.pose.position_mm[1] - (-200.0 - 995.0)).abs() < 1e-9);
-        let back = map.motion_from_egm(&t);
+        let back = map.motion_from_device(&t);
         assert!((back.position - m.position).norm() < 1e-12);
         assert!(back.orientation.angle_to(&m.orientation) < 1e-12);
         assert!((back.velocity - m.velocity).norm() < 1e-15);

@@ -1,9 +1,10 @@
 //! MCAP recordings of a run, for robotics viewers (Foxglove, Lichtblick, PlotJuggler) and ROS 2
 //! tools (`rosbags`, `mcap-ros2-support`).
 //!
-//! One writer, [`McapRecorder`], for both kinds of run: the real-time runtime's writer thread
-//! feeds it every [`Sample`] as it drains the loop's ring buffer (never the loop thread), and a
-//! simulation is written from its finished records ([`McapRecorder::record_run`]).
+//! One writer, [`McapRecorder`], for both kinds of run: an output [`Sink`] (registered in
+//! [`super::OUTPUTS`] under the `mcap` option), which the real-time runtime's writer thread
+//! feeds every [`Sample`] as it drains the loop's ring buffer (never the loop thread), and a
+//! simulation from its finished records ([`super::feed_simulation`]).
 //!
 //! **Encoding.** ROS 2 messages, CDR-encoded (`message_encoding = "cdr"`), with their `ros2msg`
 //! definitions as the schemas (profile `ros2`): `geometry_msgs` for the wrenches, poses,
@@ -38,15 +39,15 @@ use mcap::{WriteOptions, Writer};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
-use hilcontact_core::hil::{HilRecord, VirtualDynamics};
+use hilcontact_core::hil::HilRecord;
 use hilcontact_core::metrics::Metrics;
-use hilcontact_core::Plan;
 
+use super::{feed_simulation, Event, EventLevel, RunInfo, Sink, SinkContext};
 use crate::error::{Result, RtError};
 use crate::report::Sample;
 
 /// Where and how a run is recorded as MCAP (`RuntimeOptions::mcap`; `--mcap FILE` on the CLI).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct McapOptions {
     /// The file to write (its folder is created if missing).
@@ -233,66 +234,12 @@ pub const CHANNELS: [ChannelSpec; 12] = [
     },
 ];
 
-/// Severity of an event (`rcl_interfaces/msg/Log` levels).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum EventLevel {
-    /// Something the run did (start, normal end): 20.
-    Info = 20,
-    /// Something to look at (lost packets, overruns, a user stop): 30.
-    Warn = 30,
-    /// A fault or a safety stop: 40.
-    Error = 40,
-}
-
-/// What a recording knows of its run, from the plan.
-#[derive(Debug, Clone)]
-pub struct RunInfo {
-    /// `simulation` or `realtime`.
-    pub kind: &'static str,
-    /// The scenario's name.
-    pub scenario: String,
-    /// The compensator's kind.
-    pub compensator: &'static str,
-    /// The control period, s.
-    pub period: f64,
-    /// The run's duration, s.
-    pub duration: f64,
-    /// The sensor origin in `t`, m.
-    pub sensor_position: Vector3<f64>,
-    /// The sensor's attitude in `t` (sensor to `t`).
-    pub sensor_orientation: UnitQuaternion<f64>,
-    /// Whether the compensator identifies the contact (the `/hil/estimates` channel).
-    pub estimates_contact: bool,
-    /// The resolved scenario as JSON (the file's metadata).
-    pub scenario_json: String,
-}
-
-impl RunInfo {
-    /// The run of `plan`: a real-time one (`/hil/loop_timing`) if `realtime`.
-    pub fn new(plan: &Plan, realtime: bool) -> Self {
-        RunInfo {
-            kind: if realtime { "realtime" } else { "simulation" },
-            scenario: plan.scenario.name.clone(),
-            compensator: plan.compensator.kind(),
-            period: plan.period,
-            duration: plan.ticks as f64 * plan.period,
-            sensor_position: plan.system.sensor_origin,
-            sensor_orientation: plan.sensor.orientation,
-            estimates_contact: VirtualDynamics::new(plan).estimates_contact(),
-            scenario_json: serde_json::to_string(&plan.scenario).unwrap_or_default(),
-        }
-    }
-
-    fn realtime(&self) -> bool {
-        self.kind == "realtime"
-    }
-
-    fn has(&self, scope: ChannelScope) -> bool {
-        match scope {
-            ChannelScope::Estimates => self.estimates_contact,
-            ChannelScope::Realtime => self.realtime(),
-            _ => true,
-        }
+/// Whether the run of `info` has a channel of `scope`.
+fn has(info: &RunInfo, scope: ChannelScope) -> bool {
+    match scope {
+        ChannelScope::Estimates => info.estimates_contact,
+        ChannelScope::Realtime => info.realtime(),
+        _ => true,
     }
 }
 
@@ -691,7 +638,7 @@ impl McapRecorder {
             .map_err(|e| e.to_string())?;
         let mut schemas: BTreeMap<&str, u16> = BTreeMap::new();
         for (i, spec) in CHANNELS.iter().enumerate() {
-            if !info.has(spec.scope) {
+            if !has(&info, spec.scope) {
                 continue;
             }
             let schema_id = match schemas.get(spec.schema) {
@@ -914,50 +861,41 @@ impl McapRecorder {
         let _ = std::fs::remove_file(&self.path);
     }
 
-    /// A simulation's whole recording from its records and metrics: a start event, one message
-    /// per record and channel, the end event (status and reason) at the last record's time, then
-    /// [`McapRecorder::finish`].
+    /// A simulation's whole recording from its records and metrics, as every output of a
+    /// simulation is fed ([`super::feed_simulation`]: a start event, one message per record and
+    /// channel, the end event at the last record's time), then [`McapRecorder::finish`].
     pub fn record_run(mut self, records: &[HilRecord], metrics: &Metrics) -> RecordingStats {
         let info = self.info.clone();
-        self.event(0.0, EventLevel::Info, &start_text(&info));
-        for record in records {
-            self.sample(&Sample {
-                record: *record,
-                ..Sample::default()
-            });
-        }
-        let end = records.last().map_or(0.0, |r| r.time);
-        let status = serde_json::to_value(metrics.status)
-            .ok()
-            .and_then(|v| v.as_str().map(str::to_string))
-            .unwrap_or_default();
-        let level = match status.as_str() {
-            "ok" => EventLevel::Info,
-            "unfaithful" => EventLevel::Warn,
-            _ => EventLevel::Error,
-        };
-        let text = format!(
-            "run ended at {end:.3} s: status {status}; {}",
-            metrics
-                .reason
-                .as_deref()
-                .unwrap_or("ran its whole duration")
-        );
-        self.event(end, level, &text);
+        feed_simulation(&mut self, &info, records, metrics);
         self.finish()
     }
 }
 
-/// The start event's text.
-pub fn start_text(info: &RunInfo) -> String {
-    format!(
-        "{} run of {} started: compensator {}, period {} ms, duration {} s",
-        info.kind,
-        info.scenario,
-        info.compensator,
-        info.period * 1e3,
-        info.duration
-    )
+/// Opens the run's MCAP recording if its options have `mcap` (`{"path", "overwrite",
+/// "chunk_interval"}`): the file is created (or the start refused, naming it) before anything
+/// else is opened.
+pub fn open(context: &SinkContext<'_>, options: &serde_json::Value) -> Result<Box<dyn Sink>> {
+    let options: McapOptions = serde_json::from_value(options.clone())
+        .map_err(|e| RtError::option("mcap", e.to_string()))?;
+    Ok(Box::new(McapRecorder::create(&options, context.info)?))
+}
+
+impl Sink for McapRecorder {
+    fn sample(&mut self, s: &Sample) {
+        McapRecorder::sample(self, s);
+    }
+
+    fn event(&mut self, e: &Event<'_>) {
+        McapRecorder::event(self, e.time, e.level, e.text);
+    }
+
+    fn finish(self: Box<Self>) -> serde_json::Value {
+        serde_json::to_value(McapRecorder::finish(*self)).unwrap_or_default()
+    }
+
+    fn discard(self: Box<Self>) {
+        McapRecorder::discard(*self);
+    }
 }
 
 /// Opens `path` for writing (its folder created): a new file, or an existing one replaced if
@@ -996,7 +934,8 @@ fn open_file(path: &Path, overwrite: bool) -> Result<File> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use hilcontact_core::Scenario;
+    use crate::output::start_text;
+    use hilcontact_core::{Plan, Scenario};
 
     /// paper-table1, 1.3 s, with the compensator `kind`.
     fn plan(kind: &str) -> Plan {

@@ -10,11 +10,12 @@
 //!   sent), `u32 status` (0 = healthy), then `Fx, Fy, Fz, Tx, Ty, Tz` as `i32` counts.
 //!
 //! Counts convert to N and N·m through the counts per force/torque (`cfgcpf`, `cfgcpt`) that
-//! the sensor serves in `/netftapi2.xml` (see [`crate::netftapi`]).
+//! the sensor serves in `/netftapi2.xml` (see [`super::netftapi`]).
 //!
 //! Decoding never allocates and never panics: a datagram of the wrong size or header is an
 //! [`RdtError`].
 
+use crate::devices::transport::DecodeError;
 use thiserror::Error;
 
 /// The sensor's RDT port (fixed on a real Net F/T).
@@ -79,6 +80,14 @@ pub enum RdtError {
     /// A request carries a command this crate does not handle.
     #[error("unknown command 0x{0:04x}")]
     UnknownCommand(u16),
+}
+
+/// RDT decoding errors as the counters see them: every one is a malformed datagram (a record's
+/// error status is checked after decoding, and counted invalid).
+impl DecodeError for RdtError {
+    fn is_malformed(&self) -> bool {
+        true
+    }
 }
 
 /// A request from a client.
@@ -213,60 +222,10 @@ impl CountsPerUnit {
     }
 }
 
-/// What a sequence number says about a packet.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SequenceVerdict {
-    /// The first packet seen.
-    First,
-    /// The packet after the last accepted one.
-    Next,
-    /// Newer than the last accepted one, with this many packets missing in between.
-    Gap(u32),
-    /// The same as the last accepted one (a duplicate) or older (reordered): drop it.
-    Stale,
-}
-
-/// Tracks a stream's sequence numbers (wrapping `u32`): accepts only newer packets and
-/// counts the missing ones. Never allocates.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub struct SequenceTracker {
-    last: Option<u32>,
-}
-
-impl SequenceTracker {
-    /// A tracker that has seen nothing.
-    pub fn new() -> Self {
-        SequenceTracker { last: None }
-    }
-
-    /// The last accepted sequence number.
-    pub fn last(&self) -> Option<u32> {
-        self.last
-    }
-
-    /// Classifies `seq` and, unless it is stale, accepts it as the newest. A jump of more
-    /// than 2³¹ backwards is taken as older (wrapping comparison).
-    pub fn check(&mut self, seq: u32) -> SequenceVerdict {
-        let Some(last) = self.last else {
-            self.last = Some(seq);
-            return SequenceVerdict::First;
-        };
-        let ahead = seq.wrapping_sub(last) as i32;
-        if ahead <= 0 {
-            return SequenceVerdict::Stale;
-        }
-        self.last = Some(seq);
-        if ahead == 1 {
-            SequenceVerdict::Next
-        } else {
-            SequenceVerdict::Gap(ahead as u32 - 1)
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::devices::transport::{SequenceTracker, SequenceVerdict};
     use proptest::prelude::*;
 
     #[test]
@@ -360,14 +319,14 @@ mod tests {
 
     #[test]
     fn sequences_accept_newer_count_gaps_drop_duplicates() {
-        let mut s = SequenceTracker::new();
+        let mut s: SequenceTracker = SequenceTracker::new();
         assert_eq!(s.check(10), SequenceVerdict::First);
         assert_eq!(s.check(11), SequenceVerdict::Next);
         assert_eq!(s.check(11), SequenceVerdict::Stale);
         assert_eq!(s.check(9), SequenceVerdict::Stale);
         assert_eq!(s.check(15), SequenceVerdict::Gap(3));
         assert_eq!(s.last(), Some(15));
-        let mut w = SequenceTracker::new();
+        let mut w: SequenceTracker = SequenceTracker::new();
         w.check(u32::MAX);
         assert_eq!(w.check(0), SequenceVerdict::Next); // wraps
         assert_eq!(w.check(u32::MAX), SequenceVerdict::Stale);
@@ -392,7 +351,7 @@ mod tests {
 
         #[test]
         fn sequence_tracker_accepts_only_increasing(seqs in proptest::collection::vec(any::<u16>(), 1..50)) {
-            let mut s = SequenceTracker::new();
+            let mut s: SequenceTracker = SequenceTracker::new();
             let mut last: Option<u32> = None;
             for q in seqs {
                 let q = q as u32;

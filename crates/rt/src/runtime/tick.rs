@@ -1,0 +1,312 @@
+//! The loop thread ([`Loop`]): the run's ticks from the first to the stop, and one tick
+//! ([`Loop::tick`]: poll the links, the measurement, [`Loop::virtual_step`], the command sent).
+//! Its start-up is in [`super::connect`], its stop's hold and retreat in [`super::hold`].
+//! Never allocates, locks or logs once the first tick has started.
+
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+
+use nalgebra::Vector3;
+
+use hilcontact_core::facility::Measurement;
+use hilcontact_core::hil::HilStep;
+use hilcontact_core::world::RelativeMotion;
+
+use super::status::SharedStatus;
+use crate::clock::{now_ns, sleep_until_ns, Histogram, SchedulingReport};
+use crate::devices::{Pacing, RobotLink, SensorLink, Wrench};
+use crate::error::Result;
+use crate::feedback::FeedbackEstimator;
+use crate::offset::{OffsetMode, OffsetOptions};
+use crate::report::{RunOutcome, Sample};
+use crate::safety::{check_workspace, check_wrench, SafetyLimits, StopEvent, StopKind, Tracking};
+
+/// Below this measured force magnitude the rod is taken as free of contact (the retreat
+/// target of a force stop), N.
+pub const CONTACT_FREE_FORCE: f64 = 5.0;
+
+/// The loop thread's state: the virtual side, the two links and the timing statistics.
+pub(super) struct Loop {
+    /// The virtual side of a tick: the core's one HIL step.
+    pub(super) step: HilStep,
+    pub(super) rod: Vector3<f64>,
+    pub(super) period: f64,
+    pub(super) period_ns: u64,
+    pub(super) ticks: u64,
+    pub(super) limits: SafetyLimits,
+    pub(super) start_tip: Vector3<f64>,
+    pub(super) initial: RelativeMotion,
+    pub(super) connect_timeout: f64,
+    pub(super) start_tolerance: f64,
+    pub(super) hold_time: f64,
+    pub(super) offset: OffsetOptions,
+    /// The sensor's offset measured at start (subtracted from every record), N and N·m.
+    pub(super) sensor_offset: Wrench,
+    // the links
+    pub(super) pacing: Pacing,
+    /// Robot feedback later than this after the previous one is `late`, ns.
+    pub(super) late_ns: u64,
+    pub(super) sensor: Box<dyn SensorLink>,
+    pub(super) last_sensor_ns: u64,
+    pub(super) force: Vector3<f64>,
+    pub(super) moment: Vector3<f64>,
+    pub(super) robot: Box<dyn RobotLink>,
+    pub(super) last_robot_ns: u64,
+    pub(super) estimator: FeedbackEstimator,
+    /// The last command sent (it passed every check), m and rad in `t`.
+    pub(super) last_command: Option<RelativeMotion>,
+    /// The robot's fed-back pose at the last tick whose measured force was below
+    /// [`CONTACT_FREE_FORCE`] (the retreat target of a force stop).
+    pub(super) last_free: Option<RelativeMotion>,
+    /// The commands of the tracking window, against which the feedback is checked.
+    pub(super) tracking: Tracking,
+    // log and timing
+    pub(super) producer: rtrb::Producer<Sample>,
+    pub(super) samples_dropped: u64,
+    pub(super) shared: Arc<SharedStatus>,
+    pub(super) wake: Histogram,
+    pub(super) period_hist: Histogram,
+    pub(super) compute: Histogram,
+    pub(super) overruns: u64,
+    pub(super) t0_ns: u64,
+    /// What the OS granted this thread (asked for at its start).
+    pub(super) scheduling: SchedulingReport,
+}
+
+impl Loop {
+    pub(super) fn run(&mut self) -> Result<RunOutcome> {
+        let connected = self.connect();
+        if let Err(e) = connected {
+            self.sensor.stop_streaming();
+            return Err(e);
+        }
+        self.shared.phase.store(1, Ordering::Release);
+        self.t0_ns = now_ns() + self.period_ns;
+        let mut stop = StopEvent::plain(StopKind::Completed, self.ticks as f64 * self.period);
+        let mut last_wake: Option<u64> = None;
+        let mut k = 0u64;
+        while k <= self.ticks {
+            let (wake, deadline) = match self.pacing {
+                Pacing::Clock => {
+                    let deadline = self.t0_ns + k * self.period_ns;
+                    sleep_until_ns(deadline);
+                    (now_ns(), deadline)
+                }
+                Pacing::Robot => self.wait_for_robot(last_wake),
+            };
+            let latency = wake.saturating_sub(deadline);
+            self.wake.record(latency);
+            if let Some(prev) = last_wake {
+                self.period_hist
+                    .record((wake - prev).abs_diff(self.period_ns));
+            }
+            last_wake = Some(wake);
+            let outcome = self.tick(k, wake, latency);
+            let end = now_ns();
+            self.compute.record(end - wake);
+            if end > deadline + self.period_ns {
+                self.overruns += 1;
+            }
+            self.publish(k + 1, latency);
+            if let Some(event) = outcome {
+                stop = event;
+                break;
+            }
+            k += 1;
+        }
+        let wall_time = (now_ns() - self.t0_ns) as f64 * 1e-9;
+        self.shared
+            .stop_code
+            .store(stop.kind.code(), Ordering::Release);
+        self.shared.phase.store(2, Ordering::Release);
+        // a force or moment stop first backs away from the contact, then holds there
+        let retreated = matches!(stop.kind, StopKind::ForceLimit | StopKind::MomentLimit)
+            .then(|| self.retreat())
+            .flatten();
+        self.hold(retreated);
+        self.sensor.stop_streaming();
+        let robot = *self.robot.stats();
+        Ok(RunOutcome {
+            stop,
+            ticks: k.min(self.ticks) + 1,
+            wall_time,
+            wake_latency: self.wake.summary(),
+            period_error: self.period_hist.summary(),
+            compute: self.compute.summary(),
+            overruns: self.overruns,
+            sensor: *self.sensor.stats(),
+            robot,
+            commands_sent: robot.sent,
+            send_errors: robot.send_errors,
+            samples_dropped: self.samples_dropped,
+            sensor_name: self.sensor.name(),
+            robot_name: self.robot.name(),
+            pacing: self.pacing,
+            sensor_report: self.sensor.report(),
+            robot_report: self.robot.report(),
+            robot_address: self.robot.peer(),
+            sensor_offset: (self.offset.mode == OffsetMode::Measure).then(|| {
+                let (f, m) = (self.sensor_offset.force, self.sensor_offset.moment);
+                [f.x, f.y, f.z, m.x, m.y, m.z]
+            }),
+            scheduling: self.scheduling.clone(),
+        })
+    }
+
+    /// Robot pacing: waits for the robot's next packet, at most the watchdog (then the tick
+    /// runs and the watchdog stops the run). Returns the wake-up time and the tick's nominal
+    /// deadline (one period after the previous wake-up; the first tick has none), ns.
+    pub(super) fn wait_for_robot(&mut self, last_wake: Option<u64>) -> (u64, u64) {
+        let start = now_ns();
+        let n = self
+            .robot
+            .wait(start + self.limits.watchdog_ns(), &mut self.estimator);
+        let wake = now_ns();
+        self.robot_arrived(n, wake);
+        let deadline = last_wake.map_or(wake, |w| w + self.period_ns);
+        (wake, deadline)
+    }
+
+    /// Polls both links; returns whether a new sensor record arrived.
+    pub(super) fn poll_links(&mut self, now: u64) -> bool {
+        let new_record = match self.sensor.poll(now) {
+            Some(Wrench { force, moment }) => {
+                self.force = force - self.sensor_offset.force;
+                self.moment = moment - self.sensor_offset.moment;
+                self.last_sensor_ns = now;
+                true
+            }
+            None => false,
+        };
+        let n = self.robot.poll(now, &mut self.estimator);
+        self.robot_arrived(n, now);
+        new_record
+    }
+
+    /// Bookkeeping of `n` feedback messages accepted at `now`: lateness and the watchdog.
+    pub(super) fn robot_arrived(&mut self, n: usize, now: u64) {
+        if n == 0 {
+            return;
+        }
+        if self.last_robot_ns > 0 && now - self.last_robot_ns > self.late_ns {
+            self.robot.stats_mut().late += 1;
+        }
+        self.last_robot_ns = now;
+    }
+
+    /// One control tick; returns a stop, if any. Never allocates.
+    pub(super) fn tick(&mut self, k: u64, wake: u64, latency: u64) -> Option<StopEvent> {
+        if !self.poll_links(wake) {
+            self.sensor.stats_mut().late += 1;
+        }
+        let actual = self.estimator.estimate(wake).unwrap_or(self.initial);
+        if self.force.norm() < CONTACT_FREE_FORCE {
+            self.last_free = self.estimator.last_pose();
+        }
+        let m = Measurement {
+            force: self.force,
+            moment: self.moment,
+            actual,
+        };
+        match self.virtual_step(k, &m, wake, latency) {
+            Ok(command) => {
+                self.robot
+                    .send(&command, now_ns().saturating_sub(self.t0_ns));
+                self.last_command = Some(command);
+                None
+            }
+            Err(stop) => Some(stop),
+        }
+    }
+
+    /// Stops that are the loop's, not the dynamics': `stop()` and the links' watchdogs.
+    pub(super) fn loop_checks(&self, time: f64, wake: u64) -> Option<StopEvent> {
+        if self.shared.stop_requested.load(Ordering::Acquire) {
+            return Some(StopEvent::plain(StopKind::User, time));
+        }
+        let watchdog = self.limits.watchdog_ns();
+        let sensor_silence = wake.saturating_sub(self.last_sensor_ns);
+        if sensor_silence > watchdog {
+            return Some(StopEvent {
+                kind: StopKind::SensorWatchdog,
+                time,
+                value: sensor_silence as f64 * 1e-6,
+                limit: self.limits.watchdog_ms,
+            });
+        }
+        let robot_silence = wake.saturating_sub(self.last_robot_ns);
+        if robot_silence > watchdog {
+            return Some(StopEvent {
+                kind: StopKind::RobotWatchdog,
+                time,
+                value: robot_silence as f64 * 1e-6,
+                limit: self.limits.watchdog_ms,
+            });
+        }
+        None
+    }
+
+    /// The virtual side of tick `k` (virtual time `k·T`): compensate the measurement, log the
+    /// sample, the checks, integrate, check the new command (workspace, energy bound); returns
+    /// the command (relative motion in `t`) to send, or the stop. Never allocates.
+    pub(super) fn virtual_step(
+        &mut self,
+        k: u64,
+        m: &Measurement,
+        wake: u64,
+        latency: u64,
+    ) -> std::result::Result<RelativeMotion, StopEvent> {
+        let time = k as f64 * self.period;
+        let (record, verdict) = self.step.observe(k as usize, m, None);
+        let sample = Sample {
+            record,
+            wake_latency: latency as f64 * 1e-9,
+            sensor_age: wake.saturating_sub(self.last_sensor_ns) as f64 * 1e-9,
+            robot_age: wake.saturating_sub(self.last_robot_ns) as f64 * 1e-9,
+        };
+        if self.producer.push(sample).is_err() {
+            self.samples_dropped += 1;
+        }
+
+        if let Some(stop) = self.loop_checks(time, wake) {
+            return Err(stop);
+        }
+        if let Some(stop) = check_wrench(&self.limits, &m.force, &m.moment, time) {
+            return Err(stop);
+        }
+        if let Some(fed_back) = self.estimator.last_pose() {
+            if let Some(stop) = self.tracking.check(&fed_back.point(&self.rod), time) {
+                return Err(stop);
+            }
+        }
+        // divergence, a non-finite record, or the end of the run
+        if let Some(stop) = verdict {
+            return Err(stop);
+        }
+        let command = self.step.advance(k as usize)?;
+        if let Some(stop) = check_workspace(
+            &self.limits,
+            &command.point(&self.rod),
+            &self.start_tip,
+            time,
+        ) {
+            return Err(stop);
+        }
+        self.tracking.push(command.point(&self.rod));
+        Ok(command)
+    }
+
+    pub(super) fn publish(&self, tick: u64, latency: u64) {
+        let s = &self.shared;
+        let (sensor, robot) = (self.sensor.stats(), self.robot.stats());
+        s.tick.store(tick, Ordering::Relaxed);
+        s.force_bits
+            .store(self.force.norm().to_bits(), Ordering::Relaxed);
+        s.energy_bits
+            .store(self.step.dynamics().energy().to_bits(), Ordering::Relaxed);
+        s.max_latency_ns.fetch_max(latency, Ordering::Relaxed);
+        s.overruns.store(self.overruns, Ordering::Relaxed);
+        s.sensor.store(sensor);
+        s.robot.store(robot);
+    }
+}
