@@ -34,7 +34,8 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from .errors import RealtimeOptionError
-from .run import OPTIONAL_TIMESERIES_COLUMNS, REFERENCE_COLUMNS, TIMESERIES_COLUMNS, Run, _core, _frame
+from .native import core as _core
+from .run import OPTIONAL_TIMESERIES_COLUMNS, REFERENCE_COLUMNS, TIMESERIES_COLUMNS, Run, _frame
 from .scenario import Scenario, load_scenario
 
 __all__ = [

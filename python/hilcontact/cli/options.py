@@ -17,11 +17,10 @@ from typing import Any
 
 import click
 
-from .. import __version__
 from ..errors import HilContactError, RealtimeOptionError, ScenarioError
 from ..limits import Limits
 from ..output import OutputError, check_output_folder
-from ..run import core_version
+from ..native import VERSION, core_version
 
 
 def parse_set_options(items: Sequence[str], option: str = "--set",
@@ -192,7 +191,7 @@ def _mcap_file(mcap: str | None, folder: Path, force: bool) -> Path | None:
 def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
     if not value or ctx.resilient_parsing:
         return
-    click.echo(f"hilcontact {__version__} (core {core_version() or 'not built'})")
+    click.echo(f"hilcontact {VERSION} (core {core_version() or 'not built'})")
     ctx.exit()
 
 
