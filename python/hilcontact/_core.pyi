@@ -158,6 +158,14 @@ def realtime_defaults() -> str:
     """The default runtime and facility options as JSON: ``{"runtime": {...}, "facility": {...}}``."""
 
 
+def realtime_schema() -> str:
+    """The JSON Schema of the real-time options (draft 2020-12), as JSON text:
+    ``{"runtime": <schema of the runtime's options>, "facility": <schema of the emulator's>}``,
+    every key with its description (units), default, allowed values and range (``minimum``,
+    ``exclusiveMinimum``, ``maximum``, ``exclusiveMaximum``); ``sensor`` and ``robot`` are a
+    ``oneOf`` tagged by ``kind``, one variant per protocol."""
+
+
 def replay(scenario_json: str, columns: dict[str, Any]) -> dict[str, Any]:
     """Replay a recording (``{column: 1-D float array}``: time, measured_force_*,
     measured_moment_* in the sensor frame, actual_tip_position_*, actual_tip_velocity_*,

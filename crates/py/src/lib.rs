@@ -362,6 +362,15 @@ fn realtime_defaults() -> PyResult<String> {
     Ok(value.to_string())
 }
 
+/// The JSON Schema (draft 2020-12) of the real-time options, as JSON text:
+/// `{"runtime": <RuntimeOptions>, "facility": <EmulatorOptions>}`, every key with its
+/// description (units), default, allowed values and range; `sensor` and `robot` are `oneOf`
+/// tagged by `kind` (one variant per protocol).
+#[pyfunction]
+fn realtime_schema() -> PyResult<String> {
+    Ok(hilcontact_rt::options::schema().to_string())
+}
+
 fn table_to_dict<'py>(py: Python<'py>, table: Table) -> PyResult<Bound<'py, PyDict>> {
     let dict = PyDict::new(py);
     for (name, values) in table.columns {
@@ -754,6 +763,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(start_facility, m)?)?;
     m.add_function(wrap_pyfunction!(check, m)?)?;
     m.add_function(wrap_pyfunction!(realtime_defaults, m)?)?;
+    m.add_function(wrap_pyfunction!(realtime_schema, m)?)?;
     m.add_function(wrap_pyfunction!(replay, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_function(wrap_pyfunction!(frames, m)?)?;

@@ -59,11 +59,12 @@ pub fn tighten_timer_slack() -> bool {
 /// Real-time scheduling of the loop thread (`[scheduling]`; CLI `--rt-priority`,
 /// `--no-lock-memory`, `--cpu`). What the OS refuses is reported in `metrics.json`
 /// (`realtime.scheduling`), and the run goes on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SchedulingOptions {
     /// `SCHED_FIFO` priority of the loop thread, 1–99 (99 highest); 0 = do not ask, normal
     /// scheduling (`SCHED_OTHER`).
+    #[schemars(range(max = 99))]
     pub priority: u8,
     /// Lock the process's memory (`mlockall(MCL_CURRENT | MCL_FUTURE)`), so that no page fault
     /// stalls a tick.

@@ -47,7 +47,7 @@ use crate::links::{
 ///
 /// As TOML: `[sensor] kind = "rdt"`, `port = 49152`, ...; `[robot] kind = "egm"`, `port =
 /// 6510`, ...; the fault injection at the top level.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct EmulatorOptions {
     /// The emulated sensor: its protocol (`kind`) and that protocol's options.
@@ -56,9 +56,11 @@ pub struct EmulatorOptions {
     pub robot: EmulatedRobotOptions,
     /// Fault injection: the sensor stops sending this many seconds after the first command
     /// the robot received (the run's start, whenever the loop is started; None = never).
+    #[schemars(range(min = 0.0))]
     pub silence_sensor_after: Option<f64>,
     /// Fault injection: the robot stops sending this many seconds after the first command it
     /// received (None = never).
+    #[schemars(range(min = 0.0))]
     pub silence_robot_after: Option<f64>,
     /// Fault injection: an offset added to every measured wrench (an unbiased sensor),
     /// `[Fx, Fy, Fz]` N then `[Mx, My, Mz]` N·m, sensor frame.

@@ -27,7 +27,9 @@ pub const FEEDBACK_MIN_INTERVAL: f64 = 0.004;
 const FEEDBACK_MARGIN: (f64, f64) = (0.001, 0.01);
 
 /// How the actual motion between feedback messages is estimated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum Extrapolation {
     /// The last fed-back pose, with the velocity of the last two (no extrapolation).

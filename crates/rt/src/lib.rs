@@ -12,6 +12,7 @@
 //! - [`mapping`]: the scenario's relative motion (`t` frame, m) as EGM poses (mm, quaternion);
 //! - [`emulator`]: robot, contact and sensor (the core's facility model) in real time behind
 //!   those protocols;
+//! - [`options`]: the real-time options at the edge ([`RuntimeOptions`]) and their JSON Schema;
 //! - [`runtime`]: the HIL loop thread (the core's [`hilcontact_core::hil::VirtualDynamics`]) on a
 //!   monotonic clock, with [`safety`] limits, a lock-free sample log and timing statistics;
 //! - [`recording`]: MCAP recordings of a run (ROS 2 messages, crash-safe chunks) for robotics viewers;
@@ -34,6 +35,7 @@ pub mod links;
 pub mod mapping;
 pub mod netftapi;
 pub mod offset;
+pub mod options;
 pub mod rdt;
 pub mod recording;
 pub mod report;
@@ -46,4 +48,5 @@ pub use check::{check, CheckReport};
 pub use emulator::{EmulatorOptions, FacilityHandle};
 pub use error::{Result, RtError};
 pub use links::{LinkStats, Pacing, RobotLink, RobotOptions, SensorLink, SensorOptions};
-pub use runtime::{HilHandle, RuntimeOptions};
+pub use options::RuntimeOptions;
+pub use runtime::HilHandle;

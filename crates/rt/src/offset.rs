@@ -14,7 +14,9 @@ use crate::error::{Result, RtError};
 use crate::links::Wrench;
 
 /// How the runtime handles the sensor's offset at start.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum OffsetMode {
     /// Average the wrench over `offset.time` at start (rod free, nothing commanded) and subtract
@@ -29,16 +31,19 @@ pub enum OffsetMode {
 
 /// Options of the sensor's offset at start (`[offset]`; CLI `--offset`, `--offset-time`,
 /// `--max-offset-force`, `--max-offset-moment`).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct OffsetOptions {
     /// Measure and subtract the offset, or not.
     pub mode: OffsetMode,
     /// How long the wrench is averaged at start, s (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub time: f64,
     /// Largest force offset accepted, N (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub max_force: f64,
     /// Largest moment offset accepted, N·m (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub max_moment: f64,
 }
 

@@ -46,7 +46,7 @@ use crate::error::{Result, RtError};
 use crate::report::Sample;
 
 /// Where and how a run is recorded as MCAP (`RuntimeOptions::mcap`; `--mcap FILE` on the CLI).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct McapOptions {
     /// The file to write (its folder is created if missing).

@@ -32,7 +32,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use hilcontact_core::facility::Measurement;
 use hilcontact_core::hil::{HilStep, VirtualDynamics};
@@ -40,73 +40,22 @@ use hilcontact_core::world::RelativeMotion;
 use hilcontact_core::{metrics, sim, Plan, Scenario};
 
 use crate::clock::{
-    now_ns, request_realtime, sleep_until_ns, tighten_timer_slack, Histogram, SchedulingOptions,
-    SchedulingReport,
+    now_ns, request_realtime, sleep_until_ns, tighten_timer_slack, Histogram, SchedulingReport,
 };
 use crate::error::{Result, RtError};
-use crate::feedback::{Extrapolation, FeedbackEstimator};
+use crate::feedback::FeedbackEstimator;
 pub use crate::links::LinkStats;
 use crate::links::{
-    open_robot, open_sensor, LinkContext, Pacing, RobotLink, RobotOptions, SensorLink,
-    SensorOptions, StartRegion, Wrench,
+    open_robot, open_sensor, LinkContext, Pacing, RobotLink, SensorLink, StartRegion, Wrench,
 };
 use crate::offset::{OffsetMode, OffsetOptions, WrenchStats};
-use crate::recording::{start_text, EventLevel, McapOptions, McapRecorder, RunInfo};
+pub use crate::options::RuntimeOptions;
+use crate::recording::{start_text, EventLevel, McapRecorder, RunInfo};
 use crate::report::{build_output, HilOutput};
 pub use crate::report::{RunOutcome, Sample};
 use crate::safety::{
     check_workspace, check_wrench, hold_target, SafetyLimits, StopEvent, StopKind, Tracking,
 };
-
-/// Options of the real-time runtime (defaults in [`Default`]; the CLI documents each).
-///
-/// As TOML: `[sensor] kind = "rdt"`, `port = 49152`, ...; `[robot] kind = "egm"`, ...; the
-/// other keys at the top level.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct RuntimeOptions {
-    /// The sensor link: its protocol (`kind`) and that protocol's options.
-    pub sensor: SensorOptions,
-    /// The robot link: its protocol (`kind`) and that protocol's options.
-    pub robot: RobotOptions,
-    /// How the actual motion is estimated between feedback messages.
-    pub extrapolation: Extrapolation,
-    /// Safety limits.
-    pub limits: SafetyLimits,
-    /// Longest wait for the first sensor record and robot feedback, s.
-    pub connect_timeout: f64,
-    /// Largest distance between the robot's fed-back pose and the scenario's initial pose at
-    /// start, m.
-    pub start_tolerance: f64,
-    /// How long the hold command is streamed after a stop, s.
-    pub hold_time: f64,
-    /// The sensor's offset at start: measured with the rod free and subtracted, or not.
-    pub offset: OffsetOptions,
-    /// Real-time scheduling of the loop thread (`SCHED_FIFO` priority, locked memory, CPU); a
-    /// refusal by the OS is reported in `metrics.json` (`realtime.scheduling`), not an error.
-    pub scheduling: SchedulingOptions,
-    /// An MCAP recording of the run (`--mcap FILE`), written by the writer thread: None, or
-    /// the file and its chunk interval ([`crate::recording`]). The file is created before
-    /// anything is opened or started; `metrics.json` reports it in `realtime.mcap`.
-    pub mcap: Option<McapOptions>,
-}
-
-impl Default for RuntimeOptions {
-    fn default() -> Self {
-        RuntimeOptions {
-            sensor: SensorOptions::default(),
-            robot: RobotOptions::default(),
-            extrapolation: Extrapolation::default(),
-            limits: SafetyLimits::default(),
-            connect_timeout: 5.0,
-            start_tolerance: 0.005,
-            hold_time: 0.1,
-            offset: OffsetOptions::default(),
-            scheduling: SchedulingOptions::default(),
-            mcap: None,
-        }
-    }
-}
 
 #[derive(Debug, Default)]
 struct SharedStatus {
@@ -174,8 +123,7 @@ pub struct HilHandle {
 /// Capacity of the sample ring buffer (8 s at 1 kHz; the writer drains it every 5 ms).
 const RING_CAPACITY: usize = 8192;
 
-/// Longest `connect_timeout`, s (an hour).
-pub const MAX_CONNECT_TIMEOUT: f64 = 3600.0;
+pub use crate::options::MAX_CONNECT_TIMEOUT;
 
 impl HilHandle {
     /// Validates, creates the MCAP file if asked for, opens the links of `options` (binds the

@@ -20,34 +20,43 @@ use crate::error::{Result, RtError};
 
 /// The limits, with units. Defaults: 500 N, 100 N·m, 50 ms, 0.1 m workspace, 20 mm hold
 /// deviation, 20 mm/s and 20 mm retreat, 10 mm tracking over a 0.5 s window.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SafetyLimits {
     /// Largest measured force magnitude, N (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub force_limit: f64,
     /// Largest measured moment magnitude about the sensor origin, N·m (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub moment_limit: f64,
     /// Longest time without a valid sensor record or robot feedback, ms (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub watchdog_ms: f64,
     /// Largest distance of the commanded rod tip from its initial position, m (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub workspace: f64,
     /// Largest distance between the robot's fed-back rod tip and the last command's for a
     /// stop to hold the robot where it reports to be, m (> 0); beyond it (or outside the
     /// workspace) the feedback is not trusted and the last command, which passed every
     /// check, is held instead.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub hold_deviation: f64,
     /// Speed at which a force or moment stop backs the robot away to its last contact-free
     /// pose, m/s (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub retreat_speed: f64,
     /// Longest retreat of a force or moment stop, m (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub retreat_distance: f64,
     /// Largest distance between the robot's fed-back rod tip and the nearest commanded rod
     /// tip of the last `tracking_window` seconds, m (> 0): beyond it the feedback is frozen or
     /// wrong, or the robot does not follow ([`Tracking`]).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub tracking_limit: f64,
     /// How far back the commands are compared with the feedback, s (> 0): longer than the
     /// robot's response delay (feedback shows a command that old), shorter than the time
     /// the command needs to move `tracking_limit`.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub tracking_window: f64,
 }
 

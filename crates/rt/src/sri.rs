@@ -303,7 +303,17 @@ impl PackageTracker {
 }
 
 /// Which command sets the sample rate: the sources disagree (see the module doc).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
 pub enum SriRateCommand {
     /// `AT+SMPR=<Hz>` (most clients; an answer `ACK+SMPR=300$OK` is published).
     #[default]

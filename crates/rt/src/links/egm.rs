@@ -36,7 +36,7 @@ use crate::mapping::{EgmPoseMm, PoseMapping};
 use crate::rdt::SequenceTracker;
 
 /// Options of an EGM robot link (`[robot] kind = "egm"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct EgmOptions {
     /// Address the EGM endpoint binds to (CLI `--egm-bind`).
@@ -224,7 +224,7 @@ fn is_malformed(e: &EgmError) -> bool {
 
 /// Options of the emulated EGM robot controller (`[robot] kind = "egm"` of the emulator's
 /// options).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct EgmEndpointOptions {
     /// Host the robot sends its feedback to: the PC running the loop (CLI `--egm-host`).
@@ -233,7 +233,8 @@ pub struct EgmEndpointOptions {
     pub port: u16,
     /// The robot's own UDP port (0 = any free port) (CLI `--egm-local-port`).
     pub local_port: u16,
-    /// Feedback period, s (0.004 = 250 Hz), rounded to whole control periods.
+    /// Feedback period, s (> 0; 0.004 = 250 Hz), rounded to whole control periods.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub period: f64,
     /// Origin of the target frame `t` in the EGM frame, mm (CLI `--egm-offset`; see
     /// [`crate::mapping`]).
@@ -242,6 +243,7 @@ pub struct EgmEndpointOptions {
     pub rotation: [f64; 4],
     /// RobotWare generation of the feedback's `egm.proto`, 6 or 7 (fault injection: 6 sends
     /// `measuredForce` in RobotWare 6's layout, which RobotWare 7's proto cannot decode).
+    #[schemars(range(min = 6, max = 7))]
     pub robotware: u8,
 }
 

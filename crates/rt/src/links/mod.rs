@@ -260,7 +260,7 @@ pub trait RobotLink: Send {
 }
 
 /// Options of the sensor link, one variant per protocol (`kind`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum SensorOptions {
     /// ATI Net F/T over RDT.
@@ -276,7 +276,7 @@ impl Default for SensorOptions {
 }
 
 /// Options of the robot link, one variant per protocol (`kind`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum RobotOptions {
     /// ABB Externally Guided Motion.
@@ -545,7 +545,7 @@ pub trait RobotEndpoint: Send {
 
 /// Options of the emulated sensor, one variant per protocol (`kind`, the same kinds as
 /// [`SensorOptions`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum EmulatedSensorOptions {
     /// ATI Net F/T over RDT, with `/netftapi2.xml` over HTTP.
@@ -562,7 +562,7 @@ impl Default for EmulatedSensorOptions {
 
 /// Options of the emulated robot, one variant per protocol (`kind`, the same kinds as
 /// [`RobotOptions`]).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum EmulatedRobotOptions {
     /// ABB Externally Guided Motion.

@@ -25,7 +25,7 @@ use crate::netftapi::{
 use crate::rdt::{CountsPerUnit, RdtCommand, RdtRecord, RdtRequest, SequenceTracker, RDT_PORT};
 
 /// Options of an RDT sensor link (`[sensor] kind = "rdt"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RdtOptions {
     /// Host of the F/T sensor (Net F/T) (CLI `--sensor`).
@@ -34,9 +34,11 @@ pub struct RdtOptions {
     pub port: u16,
     /// HTTP port of the sensor's `/netftapi2.xml` (80) (CLI `--http-port`).
     pub http_port: u16,
-    /// Counts per N; with `counts_per_torque`, skips reading `/netftapi2.xml`.
+    /// Counts per N (> 0); with `counts_per_torque`, skips reading `/netftapi2.xml`.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub counts_per_force: Option<f64>,
-    /// Counts per N·m.
+    /// Counts per N·m (> 0); with `counts_per_force`.
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub counts_per_torque: Option<f64>,
     /// Local UDP port of the RDT client (0 = any free port) (CLI `--rdt-local-port`).
     pub local_port: u16,
@@ -226,7 +228,7 @@ impl SensorLink for RdtSensor {
 }
 
 /// Options of the emulated RDT sensor (`[sensor] kind = "rdt"` of the emulator's options).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RdtEndpointOptions {
     /// Address the sensor's RDT and HTTP servers bind to (CLI `--bind-host`).
@@ -237,14 +239,18 @@ pub struct RdtEndpointOptions {
     /// `--http-port`).
     pub http_port: u16,
     /// Counts per `force_unit` of the records (`cfgcpf`, > 0) (CLI `--counts-per-force`).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub counts_per_force: f64,
     /// Counts per `torque_unit` of the records (`cfgcpt`, > 0) (CLI `--counts-per-torque`).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub counts_per_torque: f64,
     /// The configured force unit (`scfgfu`/`cfgfu`): `"N"` (default), `"lbf"`, `"klbf"`,
     /// `"kN"`, `"kgf"`, `"gf"`. Another unit than N tests that a client reads the units.
+    #[schemars(extend("enum" = ["lbf", "N", "klbf", "kN", "kgf", "gf"]))]
     pub force_unit: String,
     /// The configured torque unit (`scfgtu`/`cfgtu`): `"N-m"` (default), `"lbf-in"`,
     /// `"lbf-ft"`, `"N-mm"`, `"kgf-cm"`, `"kN-m"`.
+    #[schemars(extend("enum" = ["lbf-in", "lbf-ft", "N-m", "N-mm", "kgf-cm", "kN-m"]))]
     pub torque_unit: String,
 }
 

@@ -52,7 +52,9 @@ use crate::rsi::{
 
 /// How the answer's correction (`RKorr`) relates to the target pose (the controller's RSI
 /// correction object must be configured the same way).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum CorrectionMode {
     /// The target relative to the pose where the RSI motion started (the setpoint in the
@@ -64,7 +66,7 @@ pub enum CorrectionMode {
 }
 
 /// Options of a KUKA RSI robot link (`[robot] kind = "rsi"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RsiOptions {
     /// Address the PC's RSI socket binds to.
@@ -77,9 +79,12 @@ pub struct RsiOptions {
     pub robot_host: Option<String>,
     /// The controller's cycle, s: 0.004 (IPO_FAST) or 0.012 (IPO). The scenario's period must
     /// equal it (the robot paces the loop).
+    #[schemars(extend("enum" = [0.004, 0.012]))]
     pub period: f64,
     /// An answer sent later than this after its state message was read is counted late, s
-    /// (the controller's own limit is its cycle, minus its network and processing time).
+    /// (the controller's own limit is its cycle, minus its network and processing time; > 0
+    /// and <= `period`).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub deadline: f64,
     /// `Type` of the answer's `<Sen>` (the configuration file's `SENTYPE`).
     pub sen_type: String,
@@ -409,7 +414,7 @@ fn count_error(e: &RsiError, stats: &mut LinkStats) {
 
 /// Options of the emulated KUKA controller's RSI side (`[robot] kind = "rsi"` of the
 /// emulator's options).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct RsiEndpointOptions {
     /// Host the controller sends its state to: the PC running the loop (the configuration
@@ -420,6 +425,7 @@ pub struct RsiEndpointOptions {
     /// The controller's own UDP port (0 = any free port).
     pub local_port: u16,
     /// The cycle, s: 0.004 (IPO_FAST) or 0.012 (IPO), rounded to whole control periods.
+    #[schemars(extend("enum" = [0.004, 0.012]))]
     pub period: f64,
     /// `Type` the answers' `<Sen>` must have (`SENTYPE`).
     pub sen_type: String,
@@ -431,7 +437,8 @@ pub struct RsiEndpointOptions {
     pub correction: CorrectionMode,
     /// Consecutive cycles without a timely answer after which the controller stops sending
     /// (the ETHERNET object's `Timeout` parameter; 100 in KUKA's and ROS-Industrial's
-    /// examples).
+    /// examples; >= 1).
+    #[schemars(range(min = 1))]
     pub max_late: u64,
     /// Origin of `t` in the correction frame `e`, mm.
     pub offset_mm: [f64; 3],

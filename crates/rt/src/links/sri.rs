@@ -31,7 +31,7 @@ use crate::sri::{
 };
 
 /// Options of an SRI M812x sensor link (`[sensor] kind = "sri"`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SriOptions {
     /// Host of the M812x box (CLI `--sensor`; SRI's factory address is 192.168.0.108).
@@ -39,7 +39,8 @@ pub struct SriOptions {
     /// TCP port of the box (4008) (CLI `--sensor-port`).
     pub port: u16,
     /// Sample rate asked of the box, Hz (sent as an integer; None: the loop's rate,
-    /// 1 / period).
+    /// 1 / period; 1 to 100000 once rounded).
+    #[schemars(range(min = 0.5), extend("exclusiveMaximum" = 100000.5))]
     pub sample_rate: Option<f64>,
     /// The sample rate command: `"SMPR"` (default) or `"SMPF"` (the sources disagree; see
     /// docs/realtime.md).
@@ -328,7 +329,7 @@ impl SensorLink for SriSensor {
 }
 
 /// Options of the emulated SRI box (`[sensor] kind = "sri"` of the emulator's options).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct SriEndpointOptions {
     /// Address the box's TCP server binds to (CLI `--bind-host`).
