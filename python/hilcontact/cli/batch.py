@@ -36,6 +36,12 @@ from .options import (
 from .reports import _number, _report, _report_comparison, _report_mcap, _report_sweep
 
 
+def _compensators_option(help: str) -> Any:
+    """``--compensators LIST`` (every kind by default)."""
+    return click.option("--compensators", "kinds", metavar="LIST", default=",".join(ALL_KINDS), show_default=True,
+                        help=help)
+
+
 @cli.command(short_help="Simulate a scenario and save the results.")
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
@@ -109,14 +115,7 @@ def plot(folder: Path, force: bool) -> None:
 @cli.command(name="compare", short_help="Run several compensators on one scenario and compare them.")
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
-@click.option(
-    "--compensators",
-    "kinds",
-    metavar="LIST",
-    default=",".join(ALL_KINDS),
-    show_default=True,
-    help="Comma-separated compensator kinds to run.",
-)
+@_compensators_option("Comma-separated compensator kinds to run.")
 @click.option(
     "--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-compare]."
 )
@@ -173,14 +172,7 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
     help="A swept key: KEY=START:STOP:COUNT (both ends included) or KEY=A,B,C. Repeatable; "
     "the grid is every combination.",
 )
-@click.option(
-    "--compensators",
-    "kinds",
-    metavar="LIST",
-    default=",".join(ALL_KINDS),
-    show_default=True,
-    help="Comma-separated compensator kinds to run at every grid point.",
-)
+@_compensators_option("Comma-separated compensator kinds to run at every grid point.")
 @click.option("--seeds", default=1, show_default=True, type=int, help="Noise seeds per grid point.")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @click.option("--out", "out", metavar="DIR", required=True, help="Sweep folder (results.parquet, sweep.json).")

@@ -24,19 +24,17 @@ from .options import (
     _MCAP_HELP,
     _SET_HELP,
     NON_NEGATIVE,
-    NUMBER,
-    PORT,
     POSITIVE,
     _errors,
     _mcap_file,
     _Number,
-    _numbers,
     _out_folder,
     _raise_keyboard_interrupt,
     _with,
     cli,
     parse_set_options,
 )
+from .realtime_flags import RealtimeFlag, flags_from_schema, options_from_flags
 from .reports import (
     _facility_errors,
     _facility_line,
@@ -60,21 +58,15 @@ def _rt_defaults() -> dict[str, dict[str, Any]]:
 _RT_DEFAULTS = _rt_defaults()
 
 
-def _dflt(section: str, key: str, unit: str = "") -> str:
-    """``[default: VALUE UNIT]`` from the Rust defaults (the one place they live)."""
-    value: Any = _RT_DEFAULTS.get(section, {})
-    for part in key.split("."):
-        value = value.get(part) if isinstance(value, dict) else None
-    if value is None:
-        return ""
-    if isinstance(value, list):
-        value = ",".join(f"{v:g}" for v in value)
-    return f" [default: {value}{' ' + unit if unit else ''}]"
-
-
 def _protocols(link: str) -> list[str]:
     """The protocols of a link (``sensor``/``robot``), from the Rust registry (the one list)."""
     return list(_RT_DEFAULTS.get("protocols", {}).get(link, []))
+
+
+def _default_kind(section: str, link: str) -> str:
+    """`` [default: KIND]``: a link's default protocol (from the Rust defaults)."""
+    kind = (_RT_DEFAULTS.get(section, {}).get(link) or {}).get("kind")
+    return f" [default: {kind}]" if kind else ""
 
 
 def _protocol_option(link: str, section: str) -> Any:
@@ -82,7 +74,7 @@ def _protocol_option(link: str, section: str) -> Any:
     return click.option(
         f"--{link}-protocol", f"{link}_protocol", default=None,
         type=click.Choice(choices) if choices else str,
-        help=f"Protocol of the {link}." + _dflt(section, f"{link}.kind"),
+        help=f"Protocol of the {link}." + _default_kind(section, link),
     )
 
 
@@ -106,12 +98,9 @@ def _sensor_scheme(kind: str) -> str:
 
 
 def _link_option_flags(section: str) -> list[Any]:
-    """``--robot-port`` (any robot protocol) and ``--sensor-option``/``--robot-option
-    KEY=VALUE`` (any key of the protocol's options, e.g. the RSI element names: docs/realtime.md,
-    "Options of each protocol")."""
+    """``--sensor-option``/``--robot-option KEY=VALUE``: any key of the protocol's options, those
+    without a flag of their own too (docs/realtime.md, "Options of each protocol")."""
     return [
-        click.option("--robot-port", type=click.IntRange(0, 65535), default=None, metavar="PORT",
-                     help="UDP port the robot sends its feedback to (the PC's port), any robot protocol [default: the protocol's: EGM 6510, RSI 59152]."),
         click.option("--sensor-option", "sensor_options", multiple=True, metavar="KEY=VALUE",
                      help=f"An option of the {section}'s sensor protocol (repeatable), e.g. sample_rate=1000 for SRI; keys per protocol in docs/realtime.md."),
         click.option("--robot-option", "robot_options", multiple=True, metavar="KEY=VALUE",
@@ -119,54 +108,45 @@ def _link_option_flags(section: str) -> list[Any]:
     ]
 
 
-def _link_groups(sensor_protocol: str | None, robot_protocol: str | None, robot_port: int | None,
+def _link_groups(sensor_protocol: str | None, robot_protocol: str | None,
                  sensor_options: Sequence[str], robot_options: Sequence[str]) -> dict[str, Any]:
-    """The ``sensor``/``robot`` option groups from the protocol, port and KEY=VALUE flags (None
-    where nothing was given: the defaults)."""
+    """The ``sensor``/``robot`` option groups from the protocol and KEY=VALUE flags (None where
+    nothing was given: the defaults)."""
     sensor = parse_set_options(sensor_options, "--sensor-option", "sample_rate=1000")
     robot = parse_set_options(robot_options, "--robot-option", "correction=relative")
     if sensor_protocol:
         sensor["kind"] = sensor_protocol
     if robot_protocol:
         robot["kind"] = robot_protocol
-    if robot_port is not None:
-        robot["port"] = robot_port
     return {"sensor": sensor or None, "robot": robot or None}
 
 
-_FACILITY_OPTIONS = [
-    click.option("--bind-host", default=None, help="Address the sensor's RDT and HTTP servers bind to." + _dflt("facility", "bind_host")),
-    click.option("--sensor-port", type=PORT, default=None, help="RDT (UDP) port of the sensor." + _dflt("facility", "sensor_port")),
-    click.option("--http-port", type=PORT, default=None, help="HTTP port of /netftapi2.xml (0 = none)." + _dflt("facility", "http_port")),
-    click.option("--egm-host", default=None, help="Host the robot sends EGM feedback to (the PC)." + _dflt("facility", "egm_host")),
-    click.option("--egm-port", type=PORT, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("facility", "egm_port")),
-    click.option("--egm-local-port", type=PORT, default=None, help="The robot's own UDP port (0 = any)." + _dflt("facility", "egm_local_port")),
-    click.option("--counts-per-force", type=NUMBER, default=None, help="RDT counts per N (cfgcpf)." + _dflt("facility", "counts_per_force")),
-    click.option("--counts-per-torque", type=NUMBER, default=None, help="RDT counts per N m (cfgcpt)." + _dflt("facility", "counts_per_torque")),
-]
+#: The flags of the options of the emulated facility, of the loop, of the loop's scheduling
+#: (from the options' schema: hilcontact.cli.realtime_flags).
+_FACILITY_FLAGS = flags_from_schema("facility")
+_RUNTIME_FLAGS = flags_from_schema("runtime")
+_SCHEDULING_FLAGS = flags_from_schema("runtime", only=("scheduling",))
 
 
-_MAPPING_OPTIONS = [
-    click.option("--egm-offset", default=None, metavar="X,Y,Z", help="Origin of the target frame t in the EGM frame, mm." + _dflt("runtime", "robot.offset_mm")),
-    click.option("--egm-rotation", default=None, metavar="W,X,Y,Z", help="Rotation from t to the EGM frame, quaternion." + _dflt("runtime", "robot.rotation")),
-]
+def _link_flags(section: str, flags: list[RealtimeFlag]) -> list[Any]:
+    """A section's flags: the protocols, each option's, ``--sensor-option``/``--robot-option``."""
+    return ([_protocol_option("sensor", section), _protocol_option("robot", section)]
+            + [flag.option for flag in flags] + _link_option_flags(section))
+
+
+def _realtime_options(section: str, flags: list[RealtimeFlag], kw: dict[str, Any]) -> dict[str, Any]:
+    """The options of a section from its flags' values (taken out of ``kw``)."""
+    groups = _link_groups(kw.pop("sensor_protocol"), kw.pop("robot_protocol"), kw.pop("sensor_options"),
+                          kw.pop("robot_options"))
+    return options_from_flags(section, flags, kw, groups)
 
 
 @cli.command(name="facility", short_help="Run the emulated facility (Net F/T sensor + ABB EGM robot) in real time.")
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
-@_with([_protocol_option("sensor", "facility"), _protocol_option("robot", "facility")] + _FACILITY_OPTIONS + _MAPPING_OPTIONS
-       + _link_option_flags("facility"))
-@click.option("--silence-sensor-after", type=NON_NEGATIVE, default=None, metavar="S", help="Fault injection: the sensor stops sending S seconds after the robot's first command (the run's start).")
-@click.option("--silence-robot-after", type=NON_NEGATIVE, default=None, metavar="S", help="Fault injection: the robot stops sending S seconds after its first command.")
+@_with(_link_flags("facility", _FACILITY_FLAGS))
 @click.option("--duration", type=POSITIVE, default=None, metavar="S", help="Stop after S seconds [default: run until Ctrl-C].")
-def facility_command(scenario: str, sets: tuple[str, ...], sensor_protocol: str | None, robot_protocol: str | None,
-                     bind_host: str | None, sensor_port: int | None,
-                     http_port: int | None, egm_host: str | None, egm_port: int | None, egm_local_port: int | None,
-                     counts_per_force: float | None, counts_per_torque: float | None, egm_offset: str | None,
-                     egm_rotation: str | None, robot_port: int | None, sensor_options: tuple[str, ...],
-                     robot_options: tuple[str, ...], silence_sensor_after: float | None,
-                     silence_robot_after: float | None, duration: float | None) -> None:
+def facility_command(scenario: str, sets: tuple[str, ...], duration: float | None, **kw: Any) -> None:
     """Emulate the facility of SCENARIO in real time: an F/T sensor speaking ATI's Net F/T RDT
     protocol (UDP, 1 record per control period, /netftapi2.xml over HTTP) and a robot speaking
     ABB's EGM (UDP + protobuf, feedback every 4 ms to --egm-host:--egm-port, corrections back),
@@ -180,15 +160,7 @@ def facility_command(scenario: str, sets: tuple[str, ...], sensor_protocol: str 
 
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
-        # the flags keep their flat keys; hilcontact.realtime.LEGACY_KEYS moves them into the devices
-        options = {
-            **_link_groups(sensor_protocol, robot_protocol, robot_port, sensor_options, robot_options),
-            "bind_host": bind_host, "sensor_port": sensor_port, "http_port": http_port, "egm_host": egm_host,
-            "egm_port": egm_port, "egm_local_port": egm_local_port, "counts_per_force": counts_per_force,
-            "counts_per_torque": counts_per_torque, "egm_offset_mm": _numbers(egm_offset, 3, "--egm-offset"),
-            "egm_rotation": _numbers(egm_rotation, 4, "--egm-rotation"),
-            "silence_sensor_after": silence_sensor_after, "silence_robot_after": silence_robot_after,
-        }
+        options = _realtime_options("facility", _FACILITY_FLAGS, kw)
         facility = start_facility(resolved, options)
     _stop_on_signals()
     a = facility.addresses
@@ -217,85 +189,11 @@ def facility_command(scenario: str, sets: tuple[str, ...], sensor_protocol: str 
     click.echo("endpoints: " + _facility_errors(final))
 
 
-_SCHEDULING_OPTIONS = [
-    click.option("--rt-priority", type=click.IntRange(0, 99), default=None, metavar="N",
-                 help="SCHED_FIFO priority of the loop thread, 1-99 (0 = normal scheduling); a refusal by the OS is reported, not an error (docs/realtime.md)." + _dflt("runtime", "scheduling.priority")),
-    click.option("--no-lock-memory", is_flag=True, default=False, help="Do not lock the process's memory (mlockall) [default: locked]."),
-    click.option("--cpu", type=click.IntRange(min=0), default=None, metavar="N", help="Pin the loop thread to this CPU (0-based) [default: any CPU]."),
-]
-
-
-def _scheduling_options(rt_priority: int | None, no_lock_memory: bool, cpu: int | None) -> dict[str, Any] | None:
-    """``{"scheduling": ...}``'s value from the CLI flags (None: the Rust defaults)."""
-    scheduling = {k: v for k, v in (("priority", rt_priority), ("cpu", cpu)) if v is not None}
-    if no_lock_memory:
-        scheduling["lock_memory"] = False
-    return scheduling or None
-
-
-_HIL_OPTIONS = [
-    _protocol_option("sensor", "runtime"),
-    _protocol_option("robot", "runtime"),
-    click.option("--sensor", "sensor_host", default=None, metavar="HOST", help="Host of the F/T sensor (Net F/T)." + _dflt("runtime", "sensor.host")),
-    click.option("--sensor-port", type=PORT, default=None, help="RDT port of the sensor." + _dflt("runtime", "sensor.port")),
-    click.option("--http-port", type=PORT, default=None, help="HTTP port of the sensor's /netftapi2.xml." + _dflt("runtime", "sensor.http_port")),
-    click.option("--counts-per-force", type=NUMBER, default=None, help="Counts per N; with --counts-per-torque, /netftapi2.xml is not read."),
-    click.option("--counts-per-torque", type=NUMBER, default=None, help="Counts per N m."),
-    click.option("--rdt-local-port", type=PORT, default=None, help="Local UDP port of the RDT client (0 = any)." + _dflt("runtime", "sensor.local_port")),
-    click.option("--bias", is_flag=True, default=None, help="Bias the sensor (RDT 0x0042) before streaming; the rod must be free."),
-    click.option("--egm-port", type=PORT, default=None, help="UDP port the robot sends EGM feedback to." + _dflt("runtime", "robot.port")),
-    click.option("--egm-bind", "egm_bind_host", default=None, metavar="HOST", help="Address the EGM endpoint binds to." + _dflt("runtime", "robot.bind_host")),
-    click.option("--robot", "robot_host", default=None, metavar="HOST", help="Accept robot feedback (EGM, RSI) only from this host [default: the first sender whose feedback is at the scenario's start (within --start-tolerance)]."),
-    click.option("--extrapolation", type=click.Choice(["quadratic", "linear", "hold"]), default=None, help="Actual motion between EGM feedback messages." + _dflt("runtime", "extrapolation")),
-    click.option("--force-limit", type=NUMBER, default=None, help="Safety stop above this measured force." + _dflt("runtime", "limits.force_limit", "N")),
-    click.option("--moment-limit", type=NUMBER, default=None, help="Safety stop above this measured moment." + _dflt("runtime", "limits.moment_limit", "N m")),
-    click.option("--watchdog-ms", type=NUMBER, default=None, help="Safety stop after this long without sensor records or robot feedback." + _dflt("runtime", "limits.watchdog_ms", "ms")),
-    click.option("--workspace", type=NUMBER, default=None, help="Safety stop when the commanded rod tip is this far from its start." + _dflt("runtime", "limits.workspace", "m")),
-    click.option("--hold-deviation", type=NUMBER, default=None, help="A stop holds the robot at its fed-back pose only within this distance of the last command (else at the last command)." + _dflt("runtime", "limits.hold_deviation", "m")),
-    click.option("--retreat-speed", type=NUMBER, default=None, help="After a force or moment stop, back away to the last contact-free pose at this speed." + _dflt("runtime", "limits.retreat_speed", "m/s")),
-    click.option("--retreat-distance", type=NUMBER, default=None, help="Longest retreat after a force or moment stop." + _dflt("runtime", "limits.retreat_distance", "m")),
-    click.option("--tracking-limit", type=NUMBER, default=None, help="Safety stop when the fed-back rod tip is this far from every command of the tracking window (frozen feedback, a robot that does not follow)." + _dflt("runtime", "limits.tracking_limit", "m")),
-    click.option("--tracking-window", type=NUMBER, default=None, help="How far back commands are compared with the feedback (longer than the robot's delay)." + _dflt("runtime", "limits.tracking_window", "s")),
-    click.option("--offset", "offset_mode", type=click.Choice(["measure", "off"]), default=None, help="The sensor's offset at start: measured with the rod free (nothing commanded) and subtracted, or used as it comes." + _dflt("runtime", "offset.mode")),
-    click.option("--offset-time", type=NUMBER, default=None, help="How long the offset is averaged at start." + _dflt("runtime", "offset.time", "s")),
-    click.option("--max-offset-force", type=NUMBER, default=None, help="Refuse the start when the force offset is larger (the rod may touch something)." + _dflt("runtime", "offset.max_force", "N")),
-    click.option("--max-offset-moment", type=NUMBER, default=None, help="Refuse the start when the moment offset is larger." + _dflt("runtime", "offset.max_moment", "N m")),
-    click.option("--connect-timeout", type=_Number(min=0.0, max=3600.0, min_open=True), default=None, help="Longest wait for the sensor and the robot." + _dflt("runtime", "connect_timeout", "s")),
-    click.option("--start-tolerance", type=NUMBER, default=None, help="Largest distance of the robot from the initial pose at start." + _dflt("runtime", "start_tolerance", "m")),
-    *_SCHEDULING_OPTIONS,
-    *_link_option_flags("runtime"),
-]
-
-
-def _runtime_options(sensor_protocol: str | None, robot_protocol: str | None, sensor_host: str | None, sensor_port: int | None, http_port: int | None,
-                     counts_per_force: float | None, counts_per_torque: float | None, rdt_local_port: int | None,
-                     bias: bool | None, egm_port: int | None, egm_bind_host: str | None, robot_host: str | None,
-                     extrapolation: str | None, force_limit: float | None, moment_limit: float | None,
-                     watchdog_ms: float | None, workspace: float | None, hold_deviation: float | None,
-                     retreat_speed: float | None, retreat_distance: float | None, tracking_limit: float | None,
-                     tracking_window: float | None, offset_mode: str | None, offset_time: float | None,
-                     max_offset_force: float | None, max_offset_moment: float | None, connect_timeout: float | None, start_tolerance: float | None, egm_offset: str | None,
-                     egm_rotation: str | None, rt_priority: int | None, no_lock_memory: bool, cpu: int | None,
-                     robot_port: int | None, sensor_options: tuple[str, ...], robot_options: tuple[str, ...]) -> dict[str, Any]:
-    limits = {k: v for k, v in (("force_limit", force_limit), ("moment_limit", moment_limit),
-                                ("watchdog_ms", watchdog_ms), ("workspace", workspace),
-                                ("hold_deviation", hold_deviation), ("retreat_speed", retreat_speed),
-                                ("retreat_distance", retreat_distance), ("tracking_limit", tracking_limit),
-                                ("tracking_window", tracking_window)) if v is not None}
-    offset = {k: v for k, v in (("mode", offset_mode), ("time", offset_time), ("max_force", max_offset_force),
-                                ("max_moment", max_offset_moment)) if v is not None}
-    # the flags keep their flat keys; hilcontact.realtime.LEGACY_KEYS moves them into the links
-    return {
-        "offset": offset or None,
-        "scheduling": _scheduling_options(rt_priority, no_lock_memory, cpu),
-        **_link_groups(sensor_protocol, robot_protocol, robot_port, sensor_options, robot_options),
-        "sensor_host": sensor_host, "sensor_port": sensor_port, "http_port": http_port,
-        "counts_per_force": counts_per_force, "counts_per_torque": counts_per_torque,
-        "rdt_local_port": rdt_local_port, "bias": bias, "egm_port": egm_port, "egm_bind_host": egm_bind_host,
-        "robot_host": robot_host, "extrapolation": extrapolation, "limits": limits or None,
-        "connect_timeout": connect_timeout, "start_tolerance": start_tolerance,
-        "egm_offset_mm": _numbers(egm_offset, 3, "--egm-offset"), "egm_rotation": _numbers(egm_rotation, 4, "--egm-rotation"),
-    }
+def _scheduling_options(rt_priority: int | None, no_lock_memory: bool | None, cpu: int | None) -> dict[str, Any] | None:
+    """``{"scheduling": ...}``'s value from the values of --rt-priority, --no-lock-memory and
+    --cpu (None: the Rust defaults)."""
+    given = {"opt_rt_priority": rt_priority, "opt_no_lock_memory": no_lock_memory, "opt_cpu": cpu}
+    return options_from_flags("runtime", _SCHEDULING_FLAGS, given).get("scheduling")
 
 
 def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots: bool, force: bool,
@@ -321,7 +219,7 @@ def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots
 @cli.command(name="hil", short_help="Run the HIL loop in real time against a facility (real or emulated).")
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
-@_with(_HIL_OPTIONS + _MAPPING_OPTIONS)
+@_with(_link_flags("runtime", _RUNTIME_FLAGS))
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-rt].")
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
 @click.option("--mcap", "mcap", metavar="FILE", default=None, help=_MCAP_HELP)
@@ -349,14 +247,14 @@ def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots:
         check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-rt", force)
         mcap_path = _mcap_file(mcap, folder, force)
-        _run_realtime(resolved, _runtime_options(**kw), folder, no_plots, force, mcap_path)
+        _run_realtime(resolved, _realtime_options("runtime", _RUNTIME_FLAGS, kw), folder, no_plots, force, mcap_path)
 
 
 
 @cli.command(name="check", short_help="Dry run: connect to the sensor and the robot as `hil` would, command nothing, report.")
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
-@_with(_HIL_OPTIONS + _MAPPING_OPTIONS)
+@_with(_link_flags("runtime", _RUNTIME_FLAGS))
 @click.option("--duration", type=_Number(min=0.0, max=3600.0, min_open=True), default=1.0, show_default=True, metavar="S", help="How long to listen to the sensor and the robot, s.")
 @click.option("--out", "out", metavar="DIR", default=None, help="Write check.json (the report) to this folder.")
 def check_command(scenario: str, sets: tuple[str, ...], duration: float, out: str | None, **kw: Any) -> None:
@@ -381,7 +279,7 @@ def check_command(scenario: str, sets: tuple[str, ...], duration: float, out: st
         if folder is not None and folder.exists() and not folder.is_dir():
             raise ScenarioError(f"--out {folder}: exists and is not a directory")
         with Console(stderr=True).status(f"{escape(resolved.name)}: listening to the sensor and the robot for {duration:g} s ..."):
-            report = check(resolved, _runtime_options(**kw), duration)
+            report = check(resolved, _realtime_options("runtime", _RUNTIME_FLAGS, kw), duration)
         if folder is not None:
             folder.mkdir(parents=True, exist_ok=True)
             (folder / "check.json").write_text(json.dumps(report, indent=2) + "\n")
@@ -419,14 +317,14 @@ def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tu
 @click.option("--robot-delay", type=NON_NEGATIVE, default=0.02, show_default=True, help="The emulated robot's response delay, s.")
 @_protocol_option("sensor", "facility")
 @_protocol_option("robot", "facility")
-@_with(_SCHEDULING_OPTIONS)
+@_with([flag.option for flag in _SCHEDULING_FLAGS])
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-demo-rt].")
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
 @click.option("--mcap", "mcap", metavar="FILE", default=None, help=_MCAP_HELP)
 @click.option("--force", is_flag=True, help=_FORCE_HELP + " Replace --mcap FILE.")
 @_with(_LIMIT_OPTIONS)
 def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay: float, sensor_protocol: str | None,
-            robot_protocol: str | None, rt_priority: int | None, no_lock_memory: bool, cpu: int | None,
+            robot_protocol: str | None, opt_rt_priority: int | None, opt_no_lock_memory: bool | None, opt_cpu: int | None,
             out: str | None, no_plots: bool, mcap: str | None, force: bool, max_memory: float, max_time: float) -> None:
     """Run the emulated facility and the real-time HIL loop on loopback in one process (free
     ports, HTTP included): `hilcontact facility` and `hilcontact hil` together.
@@ -452,7 +350,7 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
         check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-demo-rt", force)
         mcap_path = _mcap_file(mcap, folder, force)
-        scheduling = _scheduling_options(rt_priority, no_lock_memory, cpu)
+        scheduling = _scheduling_options(opt_rt_priority, opt_no_lock_memory, opt_cpu)
         if scheduling:
             runtime_options["scheduling"] = scheduling
         with start_facility(resolved, facility_options) as facility:
