@@ -20,7 +20,6 @@ from ..scenario import load_scenario, presets
 from .options import (
     _FORCE_HELP,
     _LIMIT_OPTIONS,
-    _MCAP_HELP,
     _SET_HELP,
     NON_NEGATIVE,
     POSITIVE,
@@ -29,6 +28,7 @@ from .options import (
     _mcap_file,
     _out_folder,
     _stop_on_sigterm,
+    _run_output_options,
     _with,
     cli,
     parse_set_options,
@@ -45,11 +45,7 @@ def _compensators_option(help: str) -> Any:
 @cli.command(short_help="Simulate a scenario and save the results.")
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
-@click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>].")
-@click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
-@click.option("--mcap", "mcap", metavar="FILE", default=None, help=_MCAP_HELP)
-@click.option("--force", is_flag=True, help=_FORCE_HELP + " Replace --mcap FILE.")
-@_with(_LIMIT_OPTIONS)
+@_with(_run_output_options("runs/<scenario name>"))
 def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool,
         max_memory: float, max_time: float) -> None:
     """Simulate SCENARIO (a preset name or a TOML file) and save the results."""

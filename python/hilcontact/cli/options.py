@@ -137,6 +137,19 @@ _LIMIT_OPTIONS = [
 ]
 
 
+def _run_output_options(default_out: str) -> list[Any]:
+    """The options of a command that runs a scenario and saves it (``run``, ``hil``,
+    ``demo-rt``): ``--out DIR`` (``default_out`` shown as its default), ``--no-plots``,
+    ``--mcap FILE``, ``--force``, then the limits."""
+    return [
+        click.option("--out", "out", metavar="DIR", default=None, help=f"Output folder [default: {default_out}]."),
+        click.option("--no-plots", is_flag=True, help="Do not write the PNG figures."),
+        click.option("--mcap", "mcap", metavar="FILE", default=None, help=_MCAP_HELP),
+        click.option("--force", is_flag=True, help=_FORCE_HELP + " Replace --mcap FILE."),
+        *_LIMIT_OPTIONS,
+    ]
+
+
 @contextmanager
 def _errors() -> Iterator[None]:
     try:

@@ -19,9 +19,6 @@ from ..errors import HilContactError, ScenarioError
 from ..limits import Limits, check_run
 from ..scenario import load_scenario
 from .options import (
-    _FORCE_HELP,
-    _LIMIT_OPTIONS,
-    _MCAP_HELP,
     _SET_HELP,
     NON_NEGATIVE,
     POSITIVE,
@@ -30,6 +27,7 @@ from .options import (
     _Number,
     _out_folder,
     _raise_keyboard_interrupt,
+    _run_output_options,
     _with,
     cli,
     parse_set_options,
@@ -220,11 +218,7 @@ def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @_with(_link_flags("runtime", _RUNTIME_FLAGS))
-@click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-rt].")
-@click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
-@click.option("--mcap", "mcap", metavar="FILE", default=None, help=_MCAP_HELP)
-@click.option("--force", is_flag=True, help=_FORCE_HELP + " Replace --mcap FILE.")
-@_with(_LIMIT_OPTIONS)
+@_with(_run_output_options("runs/<scenario name>-rt"))
 def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool,
                 max_memory: float, max_time: float, **kw: Any) -> None:
     """Run the HIL loop of SCENARIO in real time: RDT client of the F/T sensor at --sensor,
@@ -296,14 +290,15 @@ def _free_port(kind: int) -> int:
 
 def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tuple[dict[str, Any], dict[str, Any]]:
     """Emulator and runtime options that meet on loopback on free ports, grouped per device
-    (every protocol's options have a ``port``; RDT also an HTTP port for /netftapi2.xml)."""
+    (every protocol's options have a ``port``; a sensor protocol with an ``http_port`` in the
+    options' schema, RDT's /netftapi2.xml, gets a free one too)."""
     defaults = _RT_DEFAULTS.get("facility", {})
     sensor_kind = sensor_protocol or defaults.get("sensor", {}).get("kind", "rdt")
     robot_kind = robot_protocol or defaults.get("robot", {}).get("kind", "egm")
     sensor_socket = socket.SOCK_STREAM if _sensor_scheme(sensor_kind) == "tcp" else socket.SOCK_DGRAM
     sensor = {"kind": sensor_kind, "port": _free_port(sensor_socket)}
     robot = {"kind": robot_kind, "port": _free_port(socket.SOCK_DGRAM)}
-    if sensor_kind == "rdt":
+    if any(flag.path[:2] == ("sensor", sensor_kind) and flag.path[-1] == "http_port" for flag in _FACILITY_FLAGS):
         sensor["http_port"] = _free_port(socket.SOCK_STREAM)
     facility = {"sensor": dict(sensor), "robot": dict(robot)}
     runtime = {"sensor": dict(sensor), "robot": {**robot, "bind_host": "127.0.0.1"}}
@@ -318,11 +313,7 @@ def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tu
 @_protocol_option("sensor", "facility")
 @_protocol_option("robot", "facility")
 @_with([flag.option for flag in _SCHEDULING_FLAGS])
-@click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: runs/<scenario name>-demo-rt].")
-@click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
-@click.option("--mcap", "mcap", metavar="FILE", default=None, help=_MCAP_HELP)
-@click.option("--force", is_flag=True, help=_FORCE_HELP + " Replace --mcap FILE.")
-@_with(_LIMIT_OPTIONS)
+@_with(_run_output_options("runs/<scenario name>-demo-rt"))
 def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay: float, sensor_protocol: str | None,
             robot_protocol: str | None, opt_rt_priority: int | None, opt_no_lock_memory: bool | None, opt_cpu: int | None,
             out: str | None, no_plots: bool, mcap: str | None, force: bool, max_memory: float, max_time: float) -> None:
