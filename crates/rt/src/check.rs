@@ -18,6 +18,7 @@ use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
 use crate::links::{open_robot, open_sensor, LinkStats, Wrench};
 use crate::offset::{OffsetMode, WrenchStats};
+use crate::options::MAX_CONNECT_TIMEOUT;
 use crate::runtime::{
     check_pacing, check_start_distance, link_context, missing_peers, HilHandle, RuntimeOptions,
 };
@@ -139,16 +140,16 @@ fn six(w: &Wrench) -> [f64; 6] {
 /// Errors are bad input (scenario, options, `duration`) and links that cannot be opened (a
 /// port in use, the sensor's counts per unit unreadable); everything else is in the report.
 pub fn check(scenario: &Scenario, options: &RuntimeOptions, duration: f64) -> Result<CheckReport> {
-    let plan = HilHandle::validate_options(scenario, options)?;
-    if !(duration.is_finite() && duration > 0.0 && duration <= 3600.0) {
+    let (plan, parsed) = HilHandle::validate_options(scenario, options)?;
+    if !(duration.is_finite() && duration > 0.0 && duration <= MAX_CONNECT_TIMEOUT) {
         return Err(RtError::option(
             "duration",
-            format!("must be a number of seconds > 0 and <= 3600, got {duration}"),
+            format!("must be a number of seconds > 0 and <= {MAX_CONNECT_TIMEOUT}, got {duration}"),
         ));
     }
     let context = link_context(&plan, options);
-    let mut sensor = open_sensor(&options.sensor, &context)?;
-    let mut robot = open_robot(&options.robot, &context)?;
+    let mut sensor = open_sensor(&parsed.sensor, &context)?;
+    let mut robot = open_robot(&parsed.robot, &context)?;
     let mut estimator = FeedbackEstimator::new(options.extrapolation);
     let mut wrenches = WrenchStats::default();
     let (mut sensor_rate, mut robot_rate) = (RateMeter::default(), RateMeter::default());

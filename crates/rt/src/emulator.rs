@@ -27,7 +27,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use nalgebra::Vector3;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use hilcontact_core::facility::FacilityModel;
 use hilcontact_core::hil::VirtualDynamics;
@@ -37,35 +37,11 @@ use hilcontact_core::Scenario;
 use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack};
 use crate::error::{Result, RtError};
 use crate::links::{
-    open_robot_endpoint, open_sensor_endpoint, EmulatedRobotOptions, EmulatedSensorOptions,
-    EndpointContext, LinkStats, RobotEndpoint, SensorEndpoint, Wrench,
+    open_robot_endpoint, open_sensor_endpoint, EndpointContext, LinkStats, RobotEndpoint,
+    SensorEndpoint, Wrench,
 };
 
-/// Options of the emulated facility (defaults: RDT sensor and EGM robot with their defaults, no
-/// fault injection), grouped per device like
-/// [`crate::runtime::RuntimeOptions`].
-///
-/// As TOML: `[sensor] kind = "rdt"`, `port = 49152`, ...; `[robot] kind = "egm"`, `port =
-/// 6510`, ...; the fault injection at the top level.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields, default)]
-pub struct EmulatorOptions {
-    /// The emulated sensor: its protocol (`kind`) and that protocol's options.
-    pub sensor: EmulatedSensorOptions,
-    /// The emulated robot: its protocol (`kind`) and that protocol's options.
-    pub robot: EmulatedRobotOptions,
-    /// Fault injection: the sensor stops sending this many seconds after the first command
-    /// the robot received (the run's start, whenever the loop is started; None = never).
-    #[schemars(range(min = 0.0))]
-    pub silence_sensor_after: Option<f64>,
-    /// Fault injection: the robot stops sending this many seconds after the first command it
-    /// received (None = never).
-    #[schemars(range(min = 0.0))]
-    pub silence_robot_after: Option<f64>,
-    /// Fault injection: an offset added to every measured wrench (an unbiased sensor),
-    /// `[Fx, Fy, Fz]` N then `[Mx, My, Mz]` N·m, sensor frame.
-    pub sensor_offset: [f64; 6],
-}
+pub use crate::options::EmulatorOptions;
 
 /// [`LinkStats`] as atomics: the emulator thread stores its endpoints' counters after each
 /// control period, [`FacilityHandle::status`] loads them.
@@ -195,23 +171,7 @@ impl FacilityHandle {
     pub fn start(scenario: &Scenario, options: &EmulatorOptions) -> Result<Self> {
         let plan = scenario.resolve()?;
         let o = options;
-        for (key, v) in [
-            ("silence_sensor_after", o.silence_sensor_after),
-            ("silence_robot_after", o.silence_robot_after),
-        ] {
-            if v.is_some_and(|v| !(v.is_finite() && v >= 0.0)) {
-                return Err(RtError::option(
-                    key,
-                    format!("must be a number of seconds >= 0, got {v:?}"),
-                ));
-            }
-        }
-        if !o.sensor_offset.iter().all(|v| v.is_finite()) {
-            return Err(RtError::option(
-                "sensor_offset",
-                format!("must be 6 finite numbers, got {:?}", o.sensor_offset),
-            ));
-        }
+        let parsed = o.parse()?;
         let period = plan.period;
         let initial = VirtualDynamics::new(&plan).command();
         let initial = RelativeMotion {
@@ -220,8 +180,8 @@ impl FacilityHandle {
             ..initial
         };
         let context = EndpointContext { period, initial };
-        let sensor = open_sensor_endpoint(&o.sensor, &context)?;
-        let robot = open_robot_endpoint(&o.robot, &context)?;
+        let sensor = open_sensor_endpoint(&parsed.sensor, &context)?;
+        let robot = open_robot_endpoint(&parsed.robot, &context)?;
         let addresses = FacilityAddresses {
             sensor: sensor.address(),
             http: sensor.http_address(),

@@ -1,7 +1,9 @@
-//! The real-time options at the edge: [`RuntimeOptions`] (the HIL loop's, `hilcontact run-rt`)
-//! and their JSON Schema with the emulator's ([`schema`]): the one place where the real-time
-//! options' names, defaults, units (in the descriptions), allowed values and ranges are
-//! written. The bindings export [`schema`] as `_core.realtime_schema()`, from which the CLI
+//! The real-time options at the edge: [`RuntimeOptions`] (the HIL loop's) and
+//! [`EmulatorOptions`] (the emulated facility's), their parsing into typed configs
+//! ([`RuntimeOptions::parse`], [`EmulatorOptions::parse`]: every option checked once, before
+//! any file or socket is created; what is opened is built from the result) and their JSON
+//! Schema ([`schema`]): the one place where the real-time options' names, defaults, units (in
+//! the descriptions), allowed values and ranges are written. The bindings export [`schema`] as `_core.realtime_schema()`, from which the CLI
 //! builds its real-time flags.
 //!
 //! Ranges are the schema's `minimum`, `exclusiveMinimum`, `maximum` and `exclusiveMaximum`,
@@ -13,15 +15,19 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::clock::SchedulingOptions;
-use crate::emulator::EmulatorOptions;
+use crate::error::{Result, RtError};
 use crate::feedback::Extrapolation;
-use crate::links::{RobotOptions, SensorOptions};
+use crate::links::{
+    EmulatedRobotConfig, EmulatedRobotOptions, EmulatedSensorConfig, EmulatedSensorOptions,
+    RobotConfig, RobotOptions, SensorConfig, SensorOptions,
+};
 use crate::offset::OffsetOptions;
 use crate::recording::McapOptions;
 use crate::safety::SafetyLimits;
 
 /// Longest wait a real-time option or command accepts, s (an hour): `connect_timeout` and
-/// `hilcontact check --duration`.
+/// `hilcontact check --duration` (the one place this limit is written; the CLI reads it from
+/// the schema, `connect_timeout`'s `maximum`).
 pub const MAX_CONNECT_TIMEOUT: f64 = 3600.0;
 
 /// Options of the real-time runtime (defaults in [`Default`]; the CLI documents each).
@@ -77,6 +83,117 @@ impl Default for RuntimeOptions {
     }
 }
 
+/// The runtime's options once parsed ([`RuntimeOptions::parse`]): the links' typed configs,
+/// every other option checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParsedRuntime {
+    /// What the sensor link opens.
+    pub sensor: SensorConfig,
+    /// What the robot link opens.
+    pub robot: RobotConfig,
+}
+
+impl RuntimeOptions {
+    /// Checks every option alone (bad input, refused as an option error naming the key) and
+    /// types the links' options, once, before any file or socket is created.
+    pub fn parse(&self) -> Result<ParsedRuntime> {
+        let o = self;
+        o.limits.validate()?;
+        o.offset.validate()?;
+        o.scheduling.validate()?;
+        if let Some(mcap) = &o.mcap {
+            mcap.validate()?;
+        }
+        let sensor = o.sensor.parse()?;
+        let robot = o.robot.parse()?;
+        for (key, v, max) in [
+            ("connect_timeout", o.connect_timeout, MAX_CONNECT_TIMEOUT),
+            ("start_tolerance", o.start_tolerance, f64::MAX),
+        ] {
+            if !(v.is_finite() && v > 0.0 && v <= max) {
+                let allowed = if max < f64::MAX {
+                    format!("a number > 0 and <= {max}")
+                } else {
+                    "a positive number".to_string()
+                };
+                return Err(RtError::option(key, format!("must be {allowed}, got {v}")));
+            }
+        }
+        if !(o.hold_time.is_finite() && o.hold_time >= 0.0) {
+            return Err(RtError::option(
+                "hold_time",
+                format!("must be a number >= 0, got {}", o.hold_time),
+            ));
+        }
+        Ok(ParsedRuntime { sensor, robot })
+    }
+}
+
+/// Options of the emulated facility (defaults: RDT sensor and EGM robot with their defaults, no
+/// fault injection), grouped per device like
+/// [`RuntimeOptions`].
+///
+/// As TOML: `[sensor] kind = "rdt"`, `port = 49152`, ...; `[robot] kind = "egm"`, `port =
+/// 6510`, ...; the fault injection at the top level.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, default)]
+pub struct EmulatorOptions {
+    /// The emulated sensor: its protocol (`kind`) and that protocol's options.
+    pub sensor: EmulatedSensorOptions,
+    /// The emulated robot: its protocol (`kind`) and that protocol's options.
+    pub robot: EmulatedRobotOptions,
+    /// Fault injection: the sensor stops sending this many seconds after the first command
+    /// the robot received (the run's start, whenever the loop is started; None = never).
+    #[schemars(range(min = 0.0))]
+    pub silence_sensor_after: Option<f64>,
+    /// Fault injection: the robot stops sending this many seconds after the first command it
+    /// received (None = never).
+    #[schemars(range(min = 0.0))]
+    pub silence_robot_after: Option<f64>,
+    /// Fault injection: an offset added to every measured wrench (an unbiased sensor),
+    /// `[Fx, Fy, Fz]` N then `[Mx, My, Mz]` N·m, sensor frame.
+    pub sensor_offset: [f64; 6],
+}
+
+/// The emulator's options once parsed ([`EmulatorOptions::parse`]): the devices' typed
+/// configs, the fault injection checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParsedFacility {
+    /// What the emulated sensor opens.
+    pub sensor: EmulatedSensorConfig,
+    /// What the emulated robot opens.
+    pub robot: EmulatedRobotConfig,
+}
+
+impl EmulatorOptions {
+    /// Checks every option (an option error naming the key) and types the devices' options,
+    /// once, before any socket is created.
+    pub fn parse(&self) -> Result<ParsedFacility> {
+        let o = self;
+        for (key, v) in [
+            ("silence_sensor_after", o.silence_sensor_after),
+            ("silence_robot_after", o.silence_robot_after),
+        ] {
+            if v.is_some_and(|v| !(v.is_finite() && v >= 0.0)) {
+                return Err(RtError::option(
+                    key,
+                    format!("must be a number of seconds >= 0, got {v:?}"),
+                ));
+            }
+        }
+        if !o.sensor_offset.iter().all(|v| v.is_finite()) {
+            return Err(RtError::option(
+                "sensor_offset",
+                format!("must be 6 finite numbers, got {:?}", o.sensor_offset),
+            ));
+        }
+        Ok(ParsedFacility {
+            sensor: o.sensor.parse()?,
+            robot: o.robot.parse()?,
+        })
+    }
+}
+
 /// The JSON Schema (draft 2020-12) of the real-time options: `{"runtime": <RuntimeOptions>,
 /// "facility": <EmulatorOptions>}`, each with every default, description (units included),
 /// allowed value and range.
@@ -108,5 +225,66 @@ mod tests {
         assert_eq!(runtime["connect_timeout"]["exclusiveMinimum"], 0.0);
         assert_eq!(runtime["connect_timeout"]["default"], 5.0);
         assert!(s["facility"]["properties"]["robot"].is_object());
+    }
+
+    /// A bad sensor count, sample rate, host or pose mapping fails when the options are
+    /// parsed, naming the key: before any file or socket exists.
+    #[test]
+    fn bad_link_options_fail_when_parsed() {
+        use crate::links::{egm::EgmOptions, rdt::RdtOptions, sri::SriOptions};
+        let rdt = |o: RdtOptions| RuntimeOptions {
+            sensor: SensorOptions::Rdt(o),
+            ..Default::default()
+        };
+        let cases = [
+            (
+                rdt(RdtOptions {
+                    counts_per_force: Some(-1.0),
+                    counts_per_torque: Some(1.0),
+                    ..Default::default()
+                }),
+                "counts_per_force",
+            ),
+            (
+                rdt(RdtOptions {
+                    counts_per_force: Some(1.0),
+                    ..Default::default()
+                }),
+                "counts_per_force",
+            ),
+            (
+                RuntimeOptions {
+                    sensor: SensorOptions::Sri(SriOptions {
+                        sample_rate: Some(1e9),
+                        ..Default::default()
+                    }),
+                    ..Default::default()
+                },
+                "sample_rate",
+            ),
+            (
+                RuntimeOptions {
+                    robot: RobotOptions::Egm(EgmOptions {
+                        offset_mm: [f64::NAN, 0.0, 0.0],
+                        ..Default::default()
+                    }),
+                    ..Default::default()
+                },
+                "egm_offset_mm",
+            ),
+        ];
+        for (options, key) in cases {
+            match options.parse() {
+                Err(RtError::Option { key: k, .. }) => assert_eq!(k, key),
+                other => panic!("{key}: {other:?}"),
+            }
+        }
+        let emulator = EmulatorOptions {
+            silence_robot_after: Some(-1.0),
+            ..Default::default()
+        };
+        assert!(emulator.parse().is_err());
+        assert!(RuntimeOptions::default().parse().is_ok());
+        assert!(EmulatorOptions::default().parse().is_ok());
     }
 }

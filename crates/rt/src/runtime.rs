@@ -49,6 +49,7 @@ use crate::links::{
     open_robot, open_sensor, LinkContext, Pacing, RobotLink, SensorLink, StartRegion, Wrench,
 };
 use crate::offset::{OffsetMode, OffsetOptions, WrenchStats};
+use crate::options::ParsedRuntime;
 pub use crate::options::RuntimeOptions;
 use crate::recording::{start_text, EventLevel, McapRecorder, RunInfo};
 use crate::report::{build_output, HilOutput};
@@ -131,11 +132,11 @@ impl HilHandle {
     /// reference's energy bound, and starts the writer and loop threads. A start that fails
     /// after the MCAP file was created removes it.
     pub fn start(scenario: &Scenario, options: &RuntimeOptions) -> Result<Self> {
-        let plan = Self::validate(scenario, options)?;
+        let (plan, parsed) = Self::validate(scenario, options)?;
         let recorder = open_recorder(&plan, options)?;
         let context = link_context(&plan, options);
-        let links = open_sensor(&options.sensor, &context)
-            .and_then(|sensor| Ok((sensor, open_robot(&options.robot, &context)?)));
+        let links = open_sensor(&parsed.sensor, &context)
+            .and_then(|sensor| Ok((sensor, open_robot(&parsed.robot, &context)?)));
         match links {
             Ok((sensor, robot)) => Self::start_inner(plan, options, sensor, robot, recorder),
             Err(e) => {
@@ -156,51 +157,32 @@ impl HilHandle {
         sensor: Box<dyn SensorLink>,
         robot: Box<dyn RobotLink>,
     ) -> Result<Self> {
-        let plan = Self::validate(scenario, options)?;
+        let (plan, _) = Self::validate(scenario, options)?;
         let recorder = open_recorder(&plan, options)?;
         Self::start_inner(plan, options, sensor, robot, recorder)
     }
 
     /// The scenario's plan, once the options are checked too, and that the scenario can start
     /// with them ([`OffsetOptions::check_start`]).
-    pub(crate) fn validate(scenario: &Scenario, options: &RuntimeOptions) -> Result<Plan> {
-        let plan = Self::validate_options(scenario, options)?;
+    pub(crate) fn validate(
+        scenario: &Scenario,
+        options: &RuntimeOptions,
+    ) -> Result<(Plan, ParsedRuntime)> {
+        let (plan, parsed) = Self::validate_options(scenario, options)?;
         options.offset.check_start(&plan)?;
-        Ok(plan)
+        Ok((plan, parsed))
     }
 
-    /// The scenario's plan, once the options are checked (each alone: bad input).
-    pub(crate) fn validate_options(scenario: &Scenario, options: &RuntimeOptions) -> Result<Plan> {
+    /// The scenario's plan and the parsed options ([`RuntimeOptions::parse`]: each alone, bad
+    /// input), once the checks across them are done too (the sensor's rate from the period).
+    pub(crate) fn validate_options(
+        scenario: &Scenario,
+        options: &RuntimeOptions,
+    ) -> Result<(Plan, ParsedRuntime)> {
         let plan = scenario.resolve()?;
-        let o = options;
-        o.limits.validate()?;
-        o.offset.validate()?;
-        o.scheduling.validate()?;
-        if let Some(mcap) = &o.mcap {
-            mcap.validate()?;
-        }
-        o.sensor.validate()?;
-        o.robot.validate()?;
-        for (key, v, max) in [
-            ("connect_timeout", o.connect_timeout, MAX_CONNECT_TIMEOUT),
-            ("start_tolerance", o.start_tolerance, f64::MAX),
-        ] {
-            if !(v.is_finite() && v > 0.0 && v <= max) {
-                let allowed = if max < f64::MAX {
-                    format!("a number > 0 and <= {max}")
-                } else {
-                    "a positive number".to_string()
-                };
-                return Err(RtError::option(key, format!("must be {allowed}, got {v}")));
-            }
-        }
-        if !(o.hold_time.is_finite() && o.hold_time >= 0.0) {
-            return Err(RtError::option(
-                "hold_time",
-                format!("must be a number >= 0, got {}", o.hold_time),
-            ));
-        }
-        Ok(plan)
+        let parsed = options.parse()?;
+        parsed.sensor.check_period(plan.period)?;
+        Ok((plan, parsed))
     }
 
     fn start_inner(

@@ -79,20 +79,38 @@ pub struct EgmRobot {
     buf: [u8; 2048],
 }
 
-impl EgmRobot {
-    /// Checks the options without opening anything (hosts, mapping).
-    pub fn validate(o: &EgmOptions) -> Result<()> {
-        check_host("egm_bind_host", &o.bind_host)?;
-        if let Some(host) = &o.robot_host {
+/// An EGM link's options once parsed ([`EgmOptions::parse`]): the hosts' form checked, the
+/// pose mapping built.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EgmConfig {
+    options: EgmOptions,
+    mapping: PoseMapping,
+}
+
+impl EgmOptions {
+    /// Checks the hosts' form and builds the pose mapping, once, without opening anything.
+    pub fn parse(&self) -> Result<EgmConfig> {
+        check_host("egm_bind_host", &self.bind_host)?;
+        if let Some(host) = &self.robot_host {
             check_host("robot_host", host)?;
         }
-        PoseMapping::new(o.offset_mm, o.rotation).map(|_| ())
+        Ok(EgmConfig {
+            options: self.clone(),
+            mapping: PoseMapping::new(self.offset_mm, self.rotation)?,
+        })
+    }
+}
+
+impl EgmRobot {
+    /// Parses the options ([`EgmOptions::parse`]) and binds the EGM endpoint
+    /// ([`EgmRobot::open_parsed`]).
+    pub fn open(o: &EgmOptions, context: &LinkContext) -> Result<Self> {
+        Self::open_parsed(&o.parse()?, context)
     }
 
-    /// Validates the mapping and binds the EGM endpoint.
-    pub fn open(o: &EgmOptions, context: &LinkContext) -> Result<Self> {
-        Self::validate(o)?;
-        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
+    /// Binds the EGM endpoint.
+    pub fn open_parsed(c: &EgmConfig, context: &LinkContext) -> Result<Self> {
+        let (o, mapping) = (&c.options, c.mapping);
         let socket = bind_udp(
             "EGM endpoint",
             resolve("egm_bind_host", &o.bind_host, o.port)?,
@@ -285,27 +303,51 @@ pub struct EgmEndpoint {
     buf: [u8; 2048],
 }
 
-impl EgmEndpoint {
-    /// Validates the period, the RobotWare generation and the mapping, resolves the PC's
-    /// address and binds the robot's socket (on loopback when the PC is).
-    pub fn open(o: &EgmEndpointOptions, context: &EndpointContext) -> Result<Self> {
-        if !(o.period.is_finite() && o.period > 0.0) {
+/// The emulated EGM robot's options once parsed ([`EgmEndpointOptions::parse`]): a positive
+/// feedback period, the RobotWare generation's encoder, the pose mapping.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EgmEndpointConfig {
+    options: EgmEndpointOptions,
+    mapping: PoseMapping,
+}
+
+impl EgmEndpointOptions {
+    /// Checks the period and the RobotWare generation and builds the mapping, once.
+    pub fn parse(&self) -> Result<EgmEndpointConfig> {
+        if !(self.period.is_finite() && self.period > 0.0) {
             return Err(RtError::option(
                 "egm_period",
-                format!("must be a positive number, got {}", o.period),
+                format!("must be a positive number, got {}", self.period),
             ));
         }
-        let encoder = match o.robotware {
-            6 => FeedbackEncoder::robotware6(),
-            7 => FeedbackEncoder::new(),
-            other => {
-                return Err(RtError::option(
-                    "robotware",
-                    format!("must be 6 or 7, got {other}"),
-                ))
-            }
+        if !matches!(self.robotware, 6 | 7) {
+            return Err(RtError::option(
+                "robotware",
+                format!("must be 6 or 7, got {}", self.robotware),
+            ));
+        }
+        Ok(EgmEndpointConfig {
+            options: self.clone(),
+            mapping: PoseMapping::new(self.offset_mm, self.rotation)?,
+        })
+    }
+}
+
+impl EgmEndpoint {
+    /// Parses the options ([`EgmEndpointOptions::parse`]) and opens the endpoint
+    /// ([`EgmEndpoint::open_parsed`]).
+    pub fn open(o: &EgmEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open_parsed(&o.parse()?, context)
+    }
+
+    /// Resolves the PC's address and binds the robot's socket (on loopback when the PC is).
+    pub fn open_parsed(c: &EgmEndpointConfig, context: &EndpointContext) -> Result<Self> {
+        let (o, mapping) = (&c.options, c.mapping);
+        let encoder = if o.robotware == 6 {
+            FeedbackEncoder::robotware6()
+        } else {
+            FeedbackEncoder::new()
         };
-        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
         let peer = resolve("egm_host", &o.host, o.port)?;
         let bind: SocketAddr = match peer.ip() {
             IpAddr::V4(ip) if ip.is_loopback() => SocketAddr::from(([127, 0, 0, 1], o.local_port)),

@@ -431,25 +431,57 @@ impl RobotIdentity {
     }
 }
 
+/// The sensor link's options once parsed ([`SensorOptions::parse`]), one variant per protocol:
+/// what [`open_sensor`] opens, checked once.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SensorConfig {
+    /// ATI Net F/T over RDT.
+    Rdt(rdt::RdtConfig),
+    /// SRI M812x interface box over TCP.
+    Sri(sri::SriConfig),
+}
+
 impl SensorOptions {
-    /// Checks the options that need no socket (the host's form), so that bad input is
-    /// refused before any socket is opened.
-    pub fn validate(&self) -> Result<()> {
+    /// Checks the options that need no socket (the host's form, the protocol's own values) and
+    /// types them, once, so that bad input is refused before any file or socket is created.
+    pub fn parse(&self) -> Result<SensorConfig> {
+        Ok(match self {
+            SensorOptions::Rdt(o) => SensorConfig::Rdt(o.parse()?),
+            SensorOptions::Sri(o) => SensorConfig::Sri(o.parse()?),
+        })
+    }
+}
+
+impl SensorConfig {
+    /// The checks across the options and the scenario's control period `period` (s), e.g. a
+    /// sample rate taken from it; done once, before anything is opened.
+    pub fn check_period(&self, period: f64) -> Result<()> {
         match self {
-            SensorOptions::Rdt(o) => check_host("sensor host", &o.host),
-            SensorOptions::Sri(o) => check_host("sensor host", &o.host),
+            SensorConfig::Rdt(_) => Ok(()),
+            SensorConfig::Sri(c) => c.sample_rate(period).map(|_| ()),
         }
     }
 }
 
+/// The robot link's options once parsed ([`RobotOptions::parse`]), one variant per protocol:
+/// what [`open_robot`] opens, checked once.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RobotConfig {
+    /// ABB Externally Guided Motion.
+    Egm(egm::EgmConfig),
+    /// KUKA RobotSensorInterface over Ethernet.
+    Rsi(rsi::RsiConfig),
+}
+
 impl RobotOptions {
     /// Checks the options that need no socket (hosts, pose mapping, the protocol's own
-    /// values), so that bad input is refused before any socket is opened.
-    pub fn validate(&self) -> Result<()> {
-        match self {
-            RobotOptions::Egm(o) => egm::EgmRobot::validate(o),
-            RobotOptions::Rsi(o) => rsi::RsiRobot::validate(o),
-        }
+    /// values) and types them, once, so that bad input is refused before any file or socket is
+    /// created.
+    pub fn parse(&self) -> Result<RobotConfig> {
+        Ok(match self {
+            RobotOptions::Egm(o) => RobotConfig::Egm(o.parse()?),
+            RobotOptions::Rsi(o) => RobotConfig::Rsi(o.parse()?),
+        })
     }
 }
 
@@ -471,19 +503,19 @@ pub(crate) fn check_host(key: &str, host: &str) -> Result<()> {
     Ok(())
 }
 
-/// Opens the sensor link of `options` (binds, reads what it needs before the loop starts).
-pub fn open_sensor(options: &SensorOptions, context: &LinkContext) -> Result<Box<dyn SensorLink>> {
-    Ok(match options {
-        SensorOptions::Rdt(o) => Box::new(rdt::RdtSensor::open(o, context)?),
-        SensorOptions::Sri(o) => Box::new(sri::SriSensor::open(o, context)?),
+/// Opens the sensor link of `config` (binds, reads what it needs before the loop starts).
+pub fn open_sensor(config: &SensorConfig, context: &LinkContext) -> Result<Box<dyn SensorLink>> {
+    Ok(match config {
+        SensorConfig::Rdt(c) => Box::new(rdt::RdtSensor::open_parsed(c, context)?),
+        SensorConfig::Sri(c) => Box::new(sri::SriSensor::open_parsed(c, context)?),
     })
 }
 
-/// Opens the robot link of `options` (binds its endpoint).
-pub fn open_robot(options: &RobotOptions, context: &LinkContext) -> Result<Box<dyn RobotLink>> {
-    Ok(match options {
-        RobotOptions::Egm(o) => Box::new(egm::EgmRobot::open(o, context)?),
-        RobotOptions::Rsi(o) => Box::new(rsi::RsiRobot::open(o, context)?),
+/// Opens the robot link of `config` (binds its endpoint).
+pub fn open_robot(config: &RobotConfig, context: &LinkContext) -> Result<Box<dyn RobotLink>> {
+    Ok(match config {
+        RobotConfig::Egm(c) => Box::new(egm::EgmRobot::open_parsed(c, context)?),
+        RobotConfig::Rsi(c) => Box::new(rsi::RsiRobot::open_parsed(c, context)?),
     })
 }
 
@@ -587,25 +619,66 @@ pub struct EndpointContext {
     pub initial: RelativeMotion,
 }
 
-/// Opens the emulated sensor of `options` (binds its sockets and servers).
+/// The emulated sensor's options once parsed ([`EmulatedSensorOptions::parse`]), one variant
+/// per protocol: what [`open_sensor_endpoint`] opens, checked once.
+#[derive(Debug, Clone, PartialEq)]
+pub enum EmulatedSensorConfig {
+    /// ATI Net F/T over RDT, with `/netftapi2.xml` over HTTP.
+    Rdt(rdt::RdtEndpointConfig),
+    /// SRI M812x interface box over TCP.
+    Sri(sri::SriEndpointOptions),
+}
+
+impl EmulatedSensorOptions {
+    /// Checks and types the options (counts, units), once, before anything is opened.
+    pub fn parse(&self) -> Result<EmulatedSensorConfig> {
+        Ok(match self {
+            EmulatedSensorOptions::Rdt(o) => EmulatedSensorConfig::Rdt(o.parse()?),
+            EmulatedSensorOptions::Sri(o) => EmulatedSensorConfig::Sri(o.clone()),
+        })
+    }
+}
+
+/// The emulated robot's options once parsed ([`EmulatedRobotOptions::parse`]), one variant
+/// per protocol: what [`open_robot_endpoint`] opens, checked once.
+#[derive(Debug, Clone, PartialEq)]
+pub enum EmulatedRobotConfig {
+    /// ABB Externally Guided Motion.
+    Egm(egm::EgmEndpointConfig),
+    /// KUKA RobotSensorInterface over Ethernet.
+    Rsi(rsi::RsiEndpointConfig),
+}
+
+impl EmulatedRobotOptions {
+    /// Checks and types the options (period, names, pose mapping), once, before anything is
+    /// opened.
+    pub fn parse(&self) -> Result<EmulatedRobotConfig> {
+        Ok(match self {
+            EmulatedRobotOptions::Egm(o) => EmulatedRobotConfig::Egm(o.parse()?),
+            EmulatedRobotOptions::Rsi(o) => EmulatedRobotConfig::Rsi(o.parse()?),
+        })
+    }
+}
+
+/// Opens the emulated sensor of `config` (binds its sockets and servers).
 pub fn open_sensor_endpoint(
-    options: &EmulatedSensorOptions,
+    config: &EmulatedSensorConfig,
     context: &EndpointContext,
 ) -> Result<Box<dyn SensorEndpoint>> {
-    Ok(match options {
-        EmulatedSensorOptions::Rdt(o) => Box::new(rdt::RdtEndpoint::open(o, context)?),
-        EmulatedSensorOptions::Sri(o) => Box::new(sri::SriEndpoint::open(o, context)?),
+    Ok(match config {
+        EmulatedSensorConfig::Rdt(c) => Box::new(rdt::RdtEndpoint::open_parsed(c, context)?),
+        EmulatedSensorConfig::Sri(o) => Box::new(sri::SriEndpoint::open(o, context)?),
     })
 }
 
-/// Opens the emulated robot of `options` (binds its socket, resolves where feedback goes).
+/// Opens the emulated robot of `config` (binds its socket, resolves where feedback goes).
 pub fn open_robot_endpoint(
-    options: &EmulatedRobotOptions,
+    config: &EmulatedRobotConfig,
     context: &EndpointContext,
 ) -> Result<Box<dyn RobotEndpoint>> {
-    Ok(match options {
-        EmulatedRobotOptions::Egm(o) => Box::new(egm::EgmEndpoint::open(o, context)?),
-        EmulatedRobotOptions::Rsi(o) => Box::new(rsi::RsiEndpoint::open(o, context)?),
+    Ok(match config {
+        EmulatedRobotConfig::Egm(c) => Box::new(egm::EgmEndpoint::open_parsed(c, context)?),
+        EmulatedRobotConfig::Rsi(c) => Box::new(rsi::RsiEndpoint::open_parsed(c, context)?),
     })
 }
 

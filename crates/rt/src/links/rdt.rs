@@ -15,8 +15,8 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    bind_udp, local_addr, recv_counted, resolve, sequence_counted, EndpointContext, LinkContext,
-    LinkStats, SensorEndpoint, SensorLink, Wrench,
+    bind_udp, check_host, local_addr, recv_counted, resolve, sequence_counted, EndpointContext,
+    LinkContext, LinkStats, SensorEndpoint, SensorLink, Wrench,
 };
 use crate::error::{Result, RtError};
 use crate::netftapi::{
@@ -74,11 +74,20 @@ pub struct RdtSensor {
     buf: [u8; 2048],
 }
 
-impl RdtSensor {
-    /// Validates the options, reads the counts per unit and the configured units (HTTP,
-    /// unless both counts are given, then per N and N·m) and binds the client socket.
-    pub fn open(o: &RdtOptions, context: &LinkContext) -> Result<Self> {
-        let (counts, calibration) = match (o.counts_per_force, o.counts_per_torque) {
+/// An RDT link's options once parsed ([`RdtOptions::parse`]): the host's form checked, the
+/// counts per unit given (both positive) or to be read from `/netftapi2.xml`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RdtConfig {
+    options: RdtOptions,
+    /// Counts per N and per N·m, when given in the options.
+    counts: Option<CountsPerUnit>,
+}
+
+impl RdtOptions {
+    /// Checks the host's form and the counts per unit (both positive, or neither), once.
+    pub fn parse(&self) -> Result<RdtConfig> {
+        check_host("sensor host", &self.host)?;
+        let counts = match (self.counts_per_force, self.counts_per_torque) {
             (Some(force), Some(torque)) => {
                 if !(force.is_finite() && force > 0.0 && torque.is_finite() && torque > 0.0) {
                     return Err(RtError::option(
@@ -86,18 +95,39 @@ impl RdtSensor {
                         "counts per unit must be positive numbers",
                     ));
                 }
-                (CountsPerUnit { force, torque }, None)
+                Some(CountsPerUnit { force, torque })
             }
-            (None, None) => {
-                let c = fetch_counts(&o.host, o.http_port, Duration::from_secs_f64(context.connect_timeout.min(5.0)))
-                    .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit: {e} (or give counts_per_force and counts_per_torque)")))?;
-                (c.counts, Some(c))
-            }
+            (None, None) => None,
             _ => {
                 return Err(RtError::option(
                     "counts_per_force",
                     "give both counts_per_force and counts_per_torque, or neither",
                 ))
+            }
+        };
+        Ok(RdtConfig {
+            options: self.clone(),
+            counts,
+        })
+    }
+}
+
+impl RdtSensor {
+    /// Parses the options ([`RdtOptions::parse`]) and opens the link ([`RdtSensor::open_parsed`]).
+    pub fn open(o: &RdtOptions, context: &LinkContext) -> Result<Self> {
+        Self::open_parsed(&o.parse()?, context)
+    }
+
+    /// Reads the counts per unit and the configured units (HTTP, unless both counts are given,
+    /// then per N and N·m) and binds the client socket.
+    pub fn open_parsed(c: &RdtConfig, context: &LinkContext) -> Result<Self> {
+        let o = &c.options;
+        let (counts, calibration) = match c.counts {
+            Some(counts) => (counts, None),
+            None => {
+                let c = fetch_counts(&o.host, o.http_port, Duration::from_secs_f64(context.connect_timeout.min(5.0)))
+                    .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit: {e} (or give counts_per_force and counts_per_torque)")))?;
+                (c.counts, Some(c))
             }
         };
         let peer = resolve("sensor_host", &o.host, o.port)?;
@@ -295,10 +325,19 @@ pub struct RdtEndpoint {
     buf: [u8; 2048],
 }
 
-impl RdtEndpoint {
-    /// Validates the counts per unit and the units, binds the RDT socket and starts the HTTP
-    /// server (unless `http_port` is 0).
-    pub fn open(o: &RdtEndpointOptions, context: &EndpointContext) -> Result<Self> {
+/// The emulated RDT sensor's options once parsed ([`RdtEndpointOptions::parse`]): positive
+/// counts per configured unit, and the units.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RdtEndpointConfig {
+    options: RdtEndpointOptions,
+    force_unit: ForceUnit,
+    torque_unit: TorqueUnit,
+}
+
+impl RdtEndpointOptions {
+    /// Checks the counts per unit (positive) and the units (known names), once.
+    pub fn parse(&self) -> Result<RdtEndpointConfig> {
+        let o = self;
         for (key, v) in [
             ("counts_per_force", o.counts_per_force),
             ("counts_per_torque", o.counts_per_torque),
@@ -328,6 +367,24 @@ impl RdtEndpoint {
                 ),
             )
         })?;
+        Ok(RdtEndpointConfig {
+            options: self.clone(),
+            force_unit,
+            torque_unit,
+        })
+    }
+}
+
+impl RdtEndpoint {
+    /// Parses the options ([`RdtEndpointOptions::parse`]) and opens the endpoint
+    /// ([`RdtEndpoint::open_parsed`]).
+    pub fn open(o: &RdtEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open_parsed(&o.parse()?, context)
+    }
+
+    /// Binds the RDT socket and starts the HTTP server (unless `http_port` is 0).
+    pub fn open_parsed(c: &RdtEndpointConfig, context: &EndpointContext) -> Result<Self> {
+        let (o, force_unit, torque_unit) = (&c.options, c.force_unit, c.torque_unit);
         // the page's counts are per configured unit; the records count the wrench in those units
         let per_unit = CountsPerUnit {
             force: o.counts_per_force,

@@ -202,9 +202,20 @@ pub struct RsiRobot {
     buf: [u8; RSI_MAX_DATAGRAM + 1],
 }
 
-impl RsiRobot {
-    /// Checks the options without opening anything (hosts, cycle, deadline, names, mapping).
-    pub fn validate(o: &RsiOptions) -> Result<()> {
+/// An RSI link's options once parsed ([`RsiOptions::parse`]): hosts' form, cycle and deadline
+/// checked, the XML names and the pose mapping built.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RsiConfig {
+    options: RsiOptions,
+    names: RsiNames,
+    mapping: PoseMapping,
+}
+
+impl RsiOptions {
+    /// Checks the options without opening anything (hosts, cycle, deadline, names, mapping),
+    /// once.
+    pub fn parse(&self) -> Result<RsiConfig> {
+        let o = self;
         check_host("rsi bind_host", &o.bind_host)?;
         if let Some(host) = &o.robot_host {
             check_host("robot_host", host)?;
@@ -219,19 +230,30 @@ impl RsiRobot {
                 ),
             ));
         }
-        PoseMapping::new(o.offset_mm, o.rotation)?;
-        Ok(())
-    }
-
-    /// Validates the options and binds the PC's RSI socket.
-    pub fn open(o: &RsiOptions, context: &LinkContext) -> Result<Self> {
-        Self::validate(o)?;
+        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
         let names = checked_names(RsiNames {
             sen_type: o.sen_type.clone(),
             state: o.state_element.clone(),
             correction: o.correction_element.clone(),
         })?;
-        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
+        Ok(RsiConfig {
+            options: self.clone(),
+            names,
+            mapping,
+        })
+    }
+}
+
+impl RsiRobot {
+    /// Parses the options ([`RsiOptions::parse`]) and binds the PC's RSI socket
+    /// ([`RsiRobot::open_parsed`]).
+    pub fn open(o: &RsiOptions, context: &LinkContext) -> Result<Self> {
+        Self::open_parsed(&o.parse()?, context)
+    }
+
+    /// Binds the PC's RSI socket.
+    pub fn open_parsed(c: &RsiConfig, context: &LinkContext) -> Result<Self> {
+        let (o, names, mapping) = (&c.options, c.names.clone(), c.mapping);
         let socket = bind_udp(
             "RSI endpoint",
             resolve("rsi bind_host", &o.bind_host, o.port)?,
@@ -504,10 +526,19 @@ pub struct RsiEndpoint {
     buf: [u8; RSI_MAX_DATAGRAM + 1],
 }
 
-impl RsiEndpoint {
-    /// Validates the options, resolves the PC's address and binds the controller's socket (on
-    /// loopback when the PC is).
-    pub fn open(o: &RsiEndpointOptions, context: &EndpointContext) -> Result<Self> {
+/// The emulated RSI controller's options once parsed ([`RsiEndpointOptions::parse`]): cycle
+/// and `max_late` checked, the XML names and the pose mapping built.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RsiEndpointConfig {
+    options: RsiEndpointOptions,
+    names: RsiNames,
+    mapping: PoseMapping,
+}
+
+impl RsiEndpointOptions {
+    /// Checks the cycle, `max_late`, the names and the mapping, once.
+    pub fn parse(&self) -> Result<RsiEndpointConfig> {
+        let o = self;
         check_period("rsi.period", o.period)?;
         if o.max_late == 0 {
             return Err(RtError::option("rsi.max_late", "must be at least 1"));
@@ -517,7 +548,25 @@ impl RsiEndpoint {
             state: o.state_element.clone(),
             correction: o.correction_element.clone(),
         })?;
-        let mapping = PoseMapping::new(o.offset_mm, o.rotation)?;
+        Ok(RsiEndpointConfig {
+            options: self.clone(),
+            names,
+            mapping: PoseMapping::new(o.offset_mm, o.rotation)?,
+        })
+    }
+}
+
+impl RsiEndpoint {
+    /// Parses the options ([`RsiEndpointOptions::parse`]) and opens the controller
+    /// ([`RsiEndpoint::open_parsed`]).
+    pub fn open(o: &RsiEndpointOptions, context: &EndpointContext) -> Result<Self> {
+        Self::open_parsed(&o.parse()?, context)
+    }
+
+    /// Resolves the PC's address and binds the controller's socket (on loopback when the PC
+    /// is).
+    pub fn open_parsed(c: &RsiEndpointConfig, context: &EndpointContext) -> Result<Self> {
+        let (o, names, mapping) = (&c.options, c.names.clone(), c.mapping);
         let peer = resolve("rsi host", &o.host, o.port)?;
         let bind: SocketAddr = match peer.ip() {
             IpAddr::V4(ip) if ip.is_loopback() => SocketAddr::from(([127, 0, 0, 1], o.local_port)),

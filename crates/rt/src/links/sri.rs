@@ -23,7 +23,10 @@ use std::time::{Duration, Instant};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use super::{resolve, EndpointContext, LinkContext, LinkStats, SensorEndpoint, SensorLink, Wrench};
+use super::{
+    check_host, resolve, EndpointContext, LinkContext, LinkStats, SensorEndpoint, SensorLink,
+    Wrench,
+};
 use crate::error::{Result, RtError};
 use crate::sri::{
     parse_matrix, FrameReader, PackageTracker, SriAck, SriCommand, SriFrame, SriRateCommand,
@@ -79,18 +82,32 @@ pub struct SriSensor {
     line: [u8; MAX_LINE],
 }
 
-impl SriSensor {
-    /// Validates the options, connects (within `context.connect_timeout`), configures the box
-    /// (blocking, each answer checked) and leaves the socket non-blocking, not yet streaming.
-    pub fn open(o: &SriOptions, context: &LinkContext) -> Result<Self> {
-        let hz = o.sample_rate.unwrap_or(1.0 / context.period);
-        if !(hz.is_finite() && (1.0..=100_000.0).contains(&hz.round())) {
-            return Err(RtError::option(
-                "sample_rate",
-                format!("must be between 1 and 100000 Hz, got {hz}"),
-            ));
+/// An SRI link's options once parsed ([`SriOptions::parse`]): the host's form, the sample rate
+/// (if given) and the decoupling matrix checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SriConfig {
+    options: SriOptions,
+}
+
+/// The sample rate `hz` (Hz) if the box takes it (1 to 100000 once rounded).
+fn check_rate(hz: f64) -> Result<u32> {
+    if !(hz.is_finite() && (1.0..=100_000.0).contains(&hz.round())) {
+        return Err(RtError::option(
+            "sample_rate",
+            format!("must be between 1 and 100000 Hz, got {hz}"),
+        ));
+    }
+    Ok(hz.round() as u32)
+}
+
+impl SriOptions {
+    /// Checks the host's form, the sample rate (if given) and the decoupling matrix, once.
+    pub fn parse(&self) -> Result<SriConfig> {
+        check_host("sensor host", &self.host)?;
+        if let Some(hz) = self.sample_rate {
+            check_rate(hz)?;
         }
-        if let Some(m) = &o.decoupling_matrix {
+        if let Some(m) = &self.decoupling_matrix {
             if !m.iter().flatten().all(|v| v.is_finite()) {
                 return Err(RtError::option(
                     "decoupling_matrix",
@@ -98,6 +115,32 @@ impl SriSensor {
                 ));
             }
         }
+        Ok(SriConfig {
+            options: self.clone(),
+        })
+    }
+}
+
+impl SriConfig {
+    /// The sample rate asked of the box with the scenario's control period `period` (s), Hz:
+    /// the one given, else the loop's rate; an error if the box does not take it.
+    pub fn sample_rate(&self, period: f64) -> Result<u32> {
+        check_rate(self.options.sample_rate.unwrap_or(1.0 / period))
+    }
+}
+
+impl SriSensor {
+    /// Parses the options ([`SriOptions::parse`]) and opens the link
+    /// ([`SriSensor::open_parsed`]).
+    pub fn open(o: &SriOptions, context: &LinkContext) -> Result<Self> {
+        Self::open_parsed(&o.parse()?, context)
+    }
+
+    /// Connects (within `context.connect_timeout`), configures the box (blocking, each answer
+    /// checked) and leaves the socket non-blocking, not yet streaming.
+    pub fn open_parsed(c: &SriConfig, context: &LinkContext) -> Result<Self> {
+        let o = &c.options;
+        let rate = c.sample_rate(context.period)?;
         let peer = resolve("sensor_host", &o.host, o.port)?;
         let timeout = Duration::from_secs_f64(context.connect_timeout.max(0.1));
         let stream = TcpStream::connect_timeout(&peer, timeout).map_err(|e| {
@@ -113,7 +156,7 @@ impl SriSensor {
         let mut link = SriSensor {
             stream,
             peer,
-            rate: hz.round() as u32,
+            rate,
             rate_command: o.rate_command,
             matrix_sent: o.decoupling_matrix.is_some(),
             reader: FrameReader::new(),
