@@ -107,7 +107,6 @@ def plot(folder: Path, force: bool) -> None:
     click.echo(f"drew {len(written)} figures in {folder}/")
 
 
-
 @cli.command(name="compare", short_help="Run several compensators on one scenario and compare them.")
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
@@ -155,7 +154,6 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
             progress.update(task, completed=len(scenarios), description="Writing files")
             result.save(folder, plots=not no_plots, overwrite=force, run_plots=run_figures)
     _report_comparison(Console(), result, folder)
-
 
 
 @cli.command(name="sweep", short_help="Run a scenario over a grid of values, compensators and seeds.")
@@ -262,7 +260,6 @@ def sweep_command(
     _report_sweep(Console(), rows, out)
 
 
-
 @cli.command(name="stability-map", short_help="Map where each compensator stays faithful in a sweep.")
 @click.argument("sweep_dir", metavar="SWEEP_DIR")
 @click.option("--out", "out", metavar="DIR", default=None, help="Output folder [default: SWEEP_DIR].")
@@ -339,7 +336,6 @@ def show(scenario: str, sets: tuple[str, ...]) -> None:
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
     click.echo(resolved.to_toml(), nl=False)
-
 
 
 # ---- your own data: replay and identify (hilcontact.recording) ------------------------------

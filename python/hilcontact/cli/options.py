@@ -111,7 +111,6 @@ NON_NEGATIVE = _Number(min=0.0)
 PORT = click.IntRange(0, 65535)
 
 
-
 def _stop_on_sigterm() -> None:
     """SIGTERM (``kill``) stops a batch command as Ctrl-C does: whatever it was writing is
     removed (hilcontact.output) and nothing is left half-written. Only in the main thread (the
@@ -200,7 +199,6 @@ def _mcap_file(mcap: str | None, folder: Path, force: bool) -> Path | None:
     return path
 
 
-
 def _print_version(ctx: click.Context, _param: click.Parameter, value: bool) -> None:
     if not value or ctx.resilient_parsing:
         return
@@ -239,10 +237,8 @@ _SET_HELP = (
 )
 
 
-
 def _raise_keyboard_interrupt(_signum: int, _frame: Any) -> None:
     raise KeyboardInterrupt
-
 
 
 def _numbers(text: str | None, n: int, option: str) -> list[float] | None:

@@ -76,14 +76,12 @@ def _protocol_option(link: str, section: str) -> Any:
     )
 
 
-
 def _stop_on_signals() -> None:
     """Ctrl-C (SIGINT) and SIGTERM stop a real-time command cleanly (hold, stop streaming, save),
     even when the process was started with SIGINT ignored (a background job of a
     non-interactive shell inherits SIG_IGN, and Python then keeps it)."""
     signal.signal(signal.SIGINT, signal.default_int_handler)
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
-
 
 
 #: Sensor protocols that stream over TCP (the others over UDP): SRI M812x boxes.
@@ -242,7 +240,6 @@ def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots:
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-rt", force)
         mcap_path = _mcap_file(mcap, folder, force)
         _run_realtime(resolved, _realtime_options("runtime", _RUNTIME_FLAGS, kw), folder, no_plots, force, mcap_path)
-
 
 
 @cli.command(name="check", short_help="Dry run: connect to the sensor and the robot as `hil` would, command nothing, report.")

@@ -22,6 +22,7 @@ that key, so that its messages stay as they were.
 
 from __future__ import annotations
 
+import functools
 import json
 import re
 from collections.abc import Mapping, Sequence
@@ -31,6 +32,7 @@ from typing import Any
 import click
 
 from ..errors import HilContactError, RealtimeOptionError
+from ..native import core
 from ..realtime import ANY_KIND, LEGACY_KEYS
 from .options import _Number, _numbers
 
@@ -111,9 +113,9 @@ class RealtimeFlag:
         return given
 
 
+@functools.cache
 def _schema() -> dict[str, Any]:
-    from ..native import core
-
+    """The core's schema of the real-time options (``{}`` without the native core)."""
     try:
         return dict(json.loads(core().realtime_schema()))
     except HilContactError:  # native core not built: no generated flags

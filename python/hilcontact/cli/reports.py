@@ -71,7 +71,6 @@ def _report(console: Console, result: Run, folder: Path) -> None:
     console.print(f"saved to {escape(str(folder))}/ ({escape(files)})", soft_wrap=True)
 
 
-
 def _report_mcap(console: Console, recorded: dict[str, Any] | None) -> None:
     """One line on the run's MCAP file (and its write errors, if any)."""
     if not recorded:
@@ -86,7 +85,6 @@ def _report_mcap(console: Console, recorded: dict[str, Any] | None) -> None:
             f"{escape(str(recorded.get('error')))}[/bold yellow]"
         )
     console.print(line, soft_wrap=True)
-
 
 
 def _report_comparison(console: Console, result: Comparison, folder: Path) -> None:
@@ -128,7 +126,6 @@ def _report_comparison(console: Console, result: Comparison, folder: Path) -> No
     console.print(f"saved to {escape(str(folder))}/ ({escape(files)})", soft_wrap=True)
 
 
-
 def _report_sweep(console: Console, rows: Any, out: str) -> None:
     from ..stability import faithful
 
@@ -156,7 +153,6 @@ def _report_sweep(console: Console, rows: Any, out: str) -> None:
         soft_wrap=True,
     )
     console.print(f"saved to {escape(out)}/results.parquet", soft_wrap=True)
-
 
 
 def _hil_line(s: dict[str, Any]) -> str:
@@ -237,7 +233,6 @@ def _report_realtime(console: Console, run: Run) -> None:
             f"late (> {rsi.get('deadline_us', 0):.0f} µs) {rsi.get('answers_late')}, unanswered {rsi.get('unanswered')}",
             soft_wrap=True,
         )
-
 
 
 def _vector(values: Sequence[float] | None, scale: float = 1.0, fmt: str = ".2f") -> str:
