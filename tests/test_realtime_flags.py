@@ -92,7 +92,7 @@ def test_the_flags_make_the_grouped_options():
 
 
 @pytest.mark.parametrize(("args", "fragment"), [
-    (["--timeout", "0"], "--timeout"),
+    (["--timeout", "nan"], "finite"),
     (["--timeout", "11"], "<= 10"),
     (["--sensor-port", "70000"], "0<=x<=65535"),
     (["--count", "0"], "x>=1"),

@@ -5,8 +5,9 @@ Rust and nothing here.
 Each option of a section (``runtime``: the loop's, ``facility``: the emulator's) becomes one
 flag: its type from the JSON type (a number, a whole number, a string, a choice, a fixed list
 of numbers given as ``X,Y,Z``, a boolean as an on/off flag), its range from
-``minimum``/``maximum``/``exclusiveMinimum``, its help from the description and
-``[default: ...]`` from the default. The options of a group (``limits``, ``offset``,
+``minimum``/``maximum`` (a number's lower bound, e.g. "> 0", is left to the Rust parse of the
+options, whose message names the option's key as the messages of earlier versions did), its
+help from the description and ``[default: ...]`` from the default. The options of a group (``limits``, ``offset``,
 ``scheduling``) are flags of their own; the per-protocol options of ``sensor`` and ``robot``
 (the ``oneOf`` variants tagged by ``kind``) are one flag per option: ``--sensor-port`` for an
 option every protocol of the link has, ``--rsi-deadline`` for one protocol's (which then
@@ -194,9 +195,8 @@ def _flag(section: str, path: tuple[str, ...], name: str, node: Mapping[str, Any
         else:
             default, choices = "", {True: True}
         kwargs = {"is_flag": True, "default": None}
-    elif types == ["number"]:
-        low = node.get("exclusiveMinimum", node.get("minimum"))
-        kwargs["type"] = _Number(min=low, max=node.get("maximum"), min_open="exclusiveMinimum" in node)
+    elif types == ["number"]:  # a finite number up to the maximum; the lower bound in the Rust parse
+        kwargs["type"] = _Number(max=node.get("maximum"))
     elif types == ["integer"]:
         low = node.get("minimum")
         if "exclusiveMinimum" in node:
