@@ -9,7 +9,6 @@ from typing import Any
 import click
 from rich.console import Console
 from rich.markup import escape
-from rich.table import Table
 
 from ..comparison import ALL_KINDS, Comparison, comparison_scenarios, run_comparison
 from ..errors import HilContactError, ScenarioError
@@ -33,7 +32,14 @@ from .options import (
     cli,
     parse_set_options,
 )
-from .reports import _number, _report, _report_comparison, _report_mcap, _report_sweep
+from .reports import (
+    _report,
+    _report_comparison,
+    _report_identification,
+    _report_mcap,
+    _report_stability_map,
+    _report_sweep,
+)
 
 
 def _compensators_option(help: str) -> Any:
@@ -281,17 +287,7 @@ def stability_map_command(sweep_dir: str, out: str | None, cov_tolerance: float 
             raise ScenarioError(f"{sweep_dir}: not a sweep folder")
         result = stability_map(sweep_dir, cov_tolerance=cov_tolerance, cof_limit=cof_limit)
         folder = result.save(out if out is not None else sweep_dir)
-    best = result.max_faithful_delay()
-    table = Table(title=f"maximal faithful robot delay (ms): {criterion_text(cov_tolerance, cof_limit)}")
-    table.add_column("contact frequency (Hz)", justify="right")
-    for kind in best.columns:
-        table.add_column(escape(str(kind)), justify="right")
-    for freq, row in best.iterrows():
-        table.add_row(_number(freq, ".2f"), *(_number(v, "g", 1e3) for v in row))
-    console = Console()
-    console.print(table)
-    console.print("- : not faithful even at the smallest swept delay", soft_wrap=True)
-    console.print(f"saved to {escape(str(folder))}/ ({', '.join(MAP_FILES)})", soft_wrap=True)
+    _report_stability_map(Console(), result, folder, criterion_text(cov_tolerance, cof_limit), MAP_FILES)
 
 
 @cli.command(name="presets")
@@ -414,16 +410,4 @@ def identify_command(log: str, forgetting: float, scenario: str | None, sets: tu
         recording = read_recording(log, scenario, parse_set_options(sets), wrench_topic, pose_topic, twist_topic)
         ticks, collisions = identify(recording, forgetting)
         save_identification(recording, ticks, collisions, out, force)
-    console = Console()
-    table = Table(title=f"{log}: {len(collisions)} collision(s)")
-    for name in ("#", "start s", "k N/mm", "c N·s/mm", "normal", "±deg", "point mm", "±mm"):
-        table.add_column(name, justify="right")
-    for _, c in collisions.iterrows():
-        table.add_row(
-            str(int(c["index"])), f"{c['start']:.3f}",
-            f"{c['stiffness'] / 1e3:.3f} ± {c['stiffness_std'] / 1e3:.3f}",
-            f"{c['damping'] / 1e3:.4f} ± {c['damping_std'] / 1e3:.4f}",
-            f"({c['normal_x']:.4f}, {c['normal_y']:.4f}, {c['normal_z']:.4f})", f"{c['normal_std_deg']:.3g}",
-            f"({c['point_x'] * 1e3:.2f}, {c['point_y'] * 1e3:.2f}, {c['point_z'] * 1e3:.2f})", f"{c['offset_std'] * 1e3:.3g}",
-        )
-    console.print(table)
+    _report_identification(Console(), str(log), collisions)

@@ -155,6 +155,38 @@ def _report_sweep(console: Console, rows: Any, out: str) -> None:
     console.print(f"saved to {escape(out)}/results.parquet", soft_wrap=True)
 
 
+
+def _report_stability_map(console: Console, result: Any, folder: Path, criterion: str, files: Sequence[str]) -> None:
+    """`hilcontact stability-map`'s table: the maximal faithful robot delay (ms) per contact
+    frequency and compensator, then the files written."""
+    best = result.max_faithful_delay()
+    table = Table(title=f"maximal faithful robot delay (ms): {criterion}")
+    table.add_column("contact frequency (Hz)", justify="right")
+    for kind in best.columns:
+        table.add_column(escape(str(kind)), justify="right")
+    for freq, row in best.iterrows():
+        table.add_row(_number(freq, ".2f"), *(_number(v, "g", 1e3) for v in row))
+    console.print(table)
+    console.print("- : not faithful even at the smallest swept delay", soft_wrap=True)
+    console.print(f"saved to {escape(str(folder))}/ ({', '.join(files)})", soft_wrap=True)
+
+
+def _report_identification(console: Console, log: str, collisions: Any) -> None:
+    """`hilcontact identify`'s table: per collision, stiffness (N/mm) and damping (N s/mm) with
+    their uncertainty, the wall's normal (± deg) and point (mm, ± mm)."""
+    table = Table(title=f"{log}: {len(collisions)} collision(s)")
+    for name in ("#", "start s", "k N/mm", "c N·s/mm", "normal", "±deg", "point mm", "±mm"):
+        table.add_column(name, justify="right")
+    for _, c in collisions.iterrows():
+        table.add_row(
+            str(int(c["index"])), f"{c['start']:.3f}",
+            f"{c['stiffness'] / 1e3:.3f} ± {c['stiffness_std'] / 1e3:.3f}",
+            f"{c['damping'] / 1e3:.4f} ± {c['damping_std'] / 1e3:.4f}",
+            f"({c['normal_x']:.4f}, {c['normal_y']:.4f}, {c['normal_z']:.4f})", f"{c['normal_std_deg']:.3g}",
+            f"({c['point_x'] * 1e3:.2f}, {c['point_y'] * 1e3:.2f}, {c['point_z'] * 1e3:.2f})", f"{c['offset_std'] * 1e3:.3g}",
+        )
+    console.print(table)
+
 def _hil_line(s: dict[str, Any]) -> str:
     return (
         f"{s['phase']}  t {s['time']:7.3f} s | F {s['force']:7.1f} N | E {s['energy'] * 1e3:8.3f} mJ | "
