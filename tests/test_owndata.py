@@ -33,21 +33,23 @@ def assert_refused(result, out: Path, *fragments: str) -> None:
     assert not out.exists()
 
 
+def _pida_run_folder(tmp_path_factory, preset: str, name: str) -> Path:
+    """``preset`` with pida at 20 ms robot delay, simulated and saved (no figures) as ``name``."""
+    folder = tmp_path_factory.mktemp("runs") / name
+    sc = hc.load_scenario(preset, {"compensator.kind": "pida", "facility.robot_delay": 0.02})
+    hc.simulate(sc).save(folder, plots=False)
+    return folder
+
+
 @pytest.fixture(scope="module")
 def pida_run_folder(core, tmp_path_factory) -> Path:
     """paper-table1 with pida at 20 ms robot delay, simulated and saved once."""
-    folder = tmp_path_factory.mktemp("runs") / "pida20"
-    sc = hc.load_scenario("paper-table1", {"compensator.kind": "pida", "facility.robot_delay": 0.02})
-    hc.simulate(sc).save(folder, plots=False)
-    return folder
+    return _pida_run_folder(tmp_path_factory, "paper-table1", "pida20")
 
 
 @pytest.fixture(scope="module")
 def oblique_pida_folder(core, tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("runs") / "oblique"
-    sc = hc.load_scenario("oblique-6dof", {"compensator.kind": "pida", "facility.robot_delay": 0.02})
-    hc.simulate(sc).save(folder, plots=False)
-    return folder
+    return _pida_run_folder(tmp_path_factory, "oblique-6dof", "oblique")
 
 
 APPLIED = [f"applied_{q}_{a}" for q in ("force", "moment") for a in "xyz"]

@@ -106,16 +106,22 @@ def run_hil(
     return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
 
 
+def run_against_facility(tmp_path, out, code: int, *sets: str, **facility) -> tuple[subprocess.CompletedProcess, dict]:
+    """`hil` at ROBOT_DELAY against a `facility` process (its protocols in ``facility``): asserts
+    the exit code and returns the process and its metrics.json."""
+    with facility_process(tmp_path, **facility) as ports:
+        result = run_hil(ports, out, ROBOT_DELAY, *sets)
+    assert result.returncode == code, result.stderr + result.stdout
+    return result, json.loads((out / "metrics.json").read_text())
+
+
 def covs(metrics: dict) -> list[float]:
     return [c["cov"] for c in metrics["collisions"] if c["cov"] is not None]
 
 
 def test_pida_at_20ms_in_real_time_across_processes(core, tmp_path):
     out = tmp_path / "rt-pida"
-    with facility_process(tmp_path) as ports:
-        result = run_hil(ports, out, ROBOT_DELAY, "compensator.kind=pida", "simulation.duration=3.5")
-    assert result.returncode == 0, result.stderr + result.stdout
-    metrics = json.loads((out / "metrics.json").read_text())
+    result, metrics = run_against_facility(tmp_path, out, 0, "compensator.kind=pida", "simulation.duration=3.5")
     # ran to its end; on a busy machine late ticks may cost force fidelity (the verdict's CoF
     # 1.2), so the rebound speeds below are this test's measure
     assert metrics["status"] in ("ok", "unfaithful"), metrics["reason"]
@@ -155,10 +161,8 @@ def test_every_protocol_pair_runs_pida_faithfully_and_stops_none(core, tmp_path,
     """The issue's matrix: for each sensor × robot protocol pair, emulator and loop as separate
     processes, pida at 20 ms keeps at least three rebounds at the ideal speed and `none` is
     stopped by the force limit."""
-    with facility_process(tmp_path, sensor=sensor, robot=robot) as ports:
-        pida = run_hil(ports, tmp_path / "pida", ROBOT_DELAY, "compensator.kind=pida", "simulation.duration=3.5")
-    assert pida.returncode == 0, pida.stderr + pida.stdout
-    metrics = json.loads((tmp_path / "pida" / "metrics.json").read_text())
+    _, metrics = run_against_facility(tmp_path, tmp_path / "pida", 0, "compensator.kind=pida", "simulation.duration=3.5",
+                                      sensor=sensor, robot=robot)
     rt = metrics["realtime"]
     assert (rt["options"]["sensor"]["kind"], rt["options"]["robot"]["kind"]) == (sensor, robot)
     assert rt["pacing"] == ("robot" if robot == "rsi" else "clock")
@@ -169,19 +173,15 @@ def test_every_protocol_pair_runs_pida_faithfully_and_stops_none(core, tmp_path,
     for link in ("sensor", "robot"):
         assert rt[link]["malformed"] == 0 and rt[link]["accepted"] > 0, (link, rt[link])
 
-    with facility_process(tmp_path, sensor=sensor, robot=robot) as ports:
-        none = run_hil(ports, tmp_path / "none", ROBOT_DELAY, "compensator.kind=none", "simulation.duration=6")
-    assert none.returncode == 3, none.stderr + none.stdout
-    stop = json.loads((tmp_path / "none" / "metrics.json").read_text())["realtime"]["stop"]
+    _, none = run_against_facility(tmp_path, tmp_path / "none", 3, "compensator.kind=none", "simulation.duration=6",
+                                   sensor=sensor, robot=robot)
+    stop = none["realtime"]["stop"]
     assert stop["kind"] == "force-limit" and stop["value"] > stop["limit"] == 500.0, stop
 
 
 def test_uncompensated_loop_diverges_and_the_force_limit_stops_it(core, tmp_path):
     out = tmp_path / "rt-none"
-    with facility_process(tmp_path) as ports:
-        result = run_hil(ports, out, ROBOT_DELAY, "compensator.kind=none", "simulation.duration=6")
-    assert result.returncode == 3, result.stderr + result.stdout
-    metrics = json.loads((out / "metrics.json").read_text())
+    result, metrics = run_against_facility(tmp_path, out, 3, "compensator.kind=none", "simulation.duration=6")
     assert metrics["status"] == "stopped"
     assert metrics["reason"].startswith("force limit: |F| = ") and "> 500.0 N" in metrics["reason"]
     stop = metrics["realtime"]["stop"]

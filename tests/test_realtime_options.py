@@ -57,7 +57,7 @@ def test_the_rust_side_rejects_unknown_kinds_and_foreign_keys(tmp_path):
 
 def test_scheduling_defaults_and_the_cli_flags():
     assert realtime_defaults()["runtime"]["scheduling"] == {"priority": 80, "lock_memory": True, "cpu": None}
-    from hilcontact.cli import _scheduling_options
+    from hilcontact.cli.realtime_commands import _scheduling_options
 
     assert _scheduling_options(None, False, None) is None  # the Rust defaults
     assert _scheduling_options(0, True, 1) == {"priority": 0, "lock_memory": False, "cpu": 1}
@@ -79,7 +79,7 @@ def test_bad_scheduling_options_are_refused_before_connecting(scheduling, fragme
 
 
 def test_the_report_line_says_what_was_granted_and_what_was_refused():
-    from hilcontact.cli import _scheduling_line
+    from hilcontact.cli.reports import _scheduling_line
 
     granted = {"policy": "fifo", "priority": 80, "fifo_granted": True, "memory_locked": True, "cpu": None,
                "pinned": False, "refused": []}

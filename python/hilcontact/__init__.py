@@ -26,15 +26,9 @@ the target mockup frame ``t``; quaternions ``[w, x, y, z]``.
 
 from __future__ import annotations
 
-from importlib import metadata as _metadata
-
-try:
-    __version__ = _metadata.version("hilcontact")
-except _metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree
-    __version__ = "0+unknown"
-
 from .comparison import Comparison, compare
 from .errors import HilContactError, RealtimeError, RealtimeOptionError, ScenarioError
+from .native import VERSION as __version__
 from .realtime import Facility, run_hil, start_facility
 from .run import Run, simulate
 from .scenario import Scenario, apply_overrides, load_scenario, presets

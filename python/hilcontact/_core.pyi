@@ -187,3 +187,12 @@ def identify(scenario_json: str, columns: dict[str, Any]) -> dict[str, Any]:
     {column: ndarray}, "collisions": [dict]}`` (index, start, end, samples, updates,
     stiffness, stiffness_std, damping, damping_std, normal, normal_std (rad), point,
     offset_std (m), peak_force). Raises like :func:`replay`."""
+
+
+def frames(scenario_json: str, sensor_vectors: Any | None = None, points: list[Any] = ...) -> dict[str, Any]:
+    """The frame maths of a run's figures, from the core's resolved scenario:
+    ``{"in_t": ndarray | None, "normals": ndarray, "distances": [ndarray]}``: ``sensor_vectors``
+    (rows of x, y, z, sensor frame) turned into ``t``; the walls' unit normals (one row per
+    wall, ``t``); per array of ``points`` (rows of x, y, z in ``t``, m) the signed distance of
+    each point to each wall's plane (m, < 0 inside), shaped (walls, rows). Raises
+    ``ScenarioError`` for a bad scenario, ``ValueError`` for an array that is not (rows, 3)."""

@@ -29,9 +29,9 @@ from __future__ import annotations
 
 import math
 import os
-from pathlib import Path
 from collections.abc import Callable, Mapping
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import pandas as pd
@@ -39,12 +39,31 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from .native import core
+from .processes import in_two_processes
 from .registry import COMPENSATORS
 
 if TYPE_CHECKING:
-    from .run import Run
+    from .scenario import Scenario
 
-__all__ = ["comparison_figures", "make_figures", "moves_in_1d"]
+__all__ = ["RunData", "comparison_figures", "make_figures", "moves_in_1d"]
+
+
+class RunData(Protocol):
+    """What the figures draw: a run's resolved scenario, metrics, time series and ideal
+    reference (SI units), its status and compensator. A :class:`hilcontact.Run` is one."""
+
+    scenario: Scenario
+    metrics: dict[str, Any]
+    timeseries: pd.DataFrame
+    reference: pd.DataFrame
+
+    @property
+    def status(self) -> str: ...
+
+    @property
+    def compensator(self) -> str: ...
+
 
 _COLORS = {"x": "tab:blue", "y": "tab:orange", "z": "tab:green"}
 
@@ -82,13 +101,13 @@ def _figure(rows: int = 1) -> tuple[Figure, list[Axes]]:
     return figure, axes
 
 
-def _header(run: Run) -> str:
+def _header(run: RunData) -> str:
     delay_ms = run.scenario.facility.robot_delay * 1e3
     status = "" if run.status == "ok" else f" | {run.status.upper()}"
     return f"{run.scenario.name} | compensator: {run.compensator} | robot delay {delay_ms:g} ms{status}"
 
 
-def _finish(ax: Axes, title: str, run: Run, ylabel: str) -> None:
+def _finish(ax: Axes, title: str, run: RunData, ylabel: str) -> None:
     ax.set_title(f"{title}\n{_header(run)}", fontsize=11)
     ax.set_xlabel("time (s)")
     ax.set_ylabel(ylabel)
@@ -96,7 +115,7 @@ def _finish(ax: Axes, title: str, run: Run, ylabel: str) -> None:
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
 
 
-def _shade_collisions(ax: Axes, run: Run) -> None:
+def _shade_collisions(ax: Axes, run: RunData) -> None:
     end_of_run = float(run.timeseries["time"].iloc[-1]) if len(run.timeseries) else 0.0
     for i, collision in enumerate(run.metrics.get("collisions") or []):
         start = collision.get("start")
@@ -113,7 +132,7 @@ def _shade_collisions(ax: Axes, run: Run) -> None:
         )
 
 
-def _mark_divergence(ax: Axes, run: Run) -> None:
+def _mark_divergence(ax: Axes, run: RunData) -> None:
     at = run.metrics.get("diverged_at")
     if run.status != "ok" and at is not None:
         ax.axvline(at, color="tab:red", lw=1.0, ls=":", label=f"diverged at {at:.3f} s")
@@ -130,7 +149,7 @@ def _peak(values: np.ndarray | None) -> float:
     return float(finite.max()) if finite.size else 0.0
 
 
-def velocity_figure(run: Run) -> Figure:
+def velocity_figure(run: RunData) -> Figure:
     figure, (ax,) = _figure()
     ts, ref = run.timeseries, run.reference
     peaks = {
@@ -159,7 +178,7 @@ def _magnitude(frame: pd.DataFrame, name: str) -> np.ndarray | None:
     return np.sqrt(sum(p * p for p in parts))  # type: ignore[operator]
 
 
-def force_figure(run: Run) -> Figure:
+def force_figure(run: RunData) -> Figure:
     figure, (ax,) = _figure()
     hil = _magnitude(run.timeseries, "contact_force")
     ideal = _magnitude(run.reference, "contact_force")
@@ -178,7 +197,7 @@ def has_values(frame: pd.DataFrame, name: str) -> bool:
     return name in frame and bool(np.isfinite(frame[name].to_numpy(dtype=np.float64)).any())
 
 
-def energy_figure(run: Run) -> Figure:
+def energy_figure(run: RunData) -> Figure:
     figure, (ax,) = _figure()
     if "energy" in run.timeseries:
         ax.plot(run.timeseries["time"], run.timeseries["energy"], color="tab:blue", lw=1.4, label="energy HIL")
@@ -195,7 +214,7 @@ def energy_figure(run: Run) -> Figure:
     return figure
 
 
-def identification_figure(run: Run) -> Figure:
+def identification_figure(run: RunData) -> Figure:
     """Identified stiffness (N/mm) and damping (N s/mm) against the true contact values."""
     figure, (ax_k, ax_c) = _figure(rows=2)
     ts = run.timeseries
@@ -254,7 +273,7 @@ def _plot(ax: Axes, time: np.ndarray, values: np.ndarray, **style: object) -> No
     ax.plot(t, y, **style)
 
 
-def moves_in_1d(run: Run) -> bool:
+def moves_in_1d(run: RunData) -> bool:
     """Whether the run's motion is 1-D, decided from its ideal reference (the same for every
     compensator): no relative angular velocity above 1e-6 rad/s and a rod-tip velocity along
     one line (its second singular value below 1 % of the first). A run without a reference
@@ -274,24 +293,27 @@ def moves_in_1d(run: Run) -> bool:
     return bool(singular[0] == 0.0 or singular[1] <= _OFF_AXIS_FRACTION * singular[0])
 
 
-def _rotation(quaternion: object) -> np.ndarray:
-    """Rotation matrix of a quaternion ``[w, x, y, z]`` (normalised here)."""
-    w, x, y, z = np.asarray(quaternion, dtype=np.float64) / np.linalg.norm(np.asarray(quaternion, dtype=np.float64))
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+def _frames(run: RunData, sensor_vectors: np.ndarray | None = None,
+            points: list[np.ndarray] | None = None) -> dict[str, Any]:
+    """The core's frame maths for the run's scenario (``hilcontact._core.frames``): the sensor
+    vectors turned into ``t``, the walls' unit normals, the points' signed distances to each wall."""
+    def rows(values: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(values, dtype=np.float64)
+
+    return dict(core().frames(
+        run.scenario.to_json(),
+        None if sensor_vectors is None else rows(sensor_vectors),
+        [rows(p) for p in points or []],
+    ))
 
 
-def applied_moment_in_t(run: Run) -> np.ndarray | None:
+def applied_moment_in_t(run: RunData) -> np.ndarray | None:
     """The moment applied to the virtual dynamics (on the frame, about the sensor origin),
     turned from the sensor frame into ``t``: rows of (x, y, z), N m; None without the columns."""
-    parts = [_column(run.timeseries, f"applied_moment_{axis}") for axis in "xyz"]
-    if any(p is None for p in parts):
+    moment = _vectors(run.timeseries, "applied_moment")
+    if moment is None:
         return None
-    moment = np.column_stack(parts)  # type: ignore[arg-type]
-    return moment @ _rotation(run.scenario.facility.sensor_orientation).T
+    return np.asarray(_frames(run, sensor_vectors=moment)["in_t"])
 
 
 def _vector_panel(
@@ -324,7 +346,7 @@ def _vectors(frame: pd.DataFrame, name: str) -> np.ndarray | None:
     return None if any(p is None for p in parts) else np.column_stack(parts)  # type: ignore[arg-type]
 
 
-def rotation_figure(run: Run) -> Figure:
+def rotation_figure(run: RunData) -> Figure:
     """Relative angular velocity (mrad/s) above the moment on the frame (N m), t frame, per axis."""
     figure, (ax_w, ax_m) = _figure(rows=2)
     ax_m.sharex(ax_w)
@@ -349,17 +371,15 @@ def rotation_figure(run: Run) -> Figure:
     return figure
 
 
-def _tracked_wall(run: Run) -> tuple[int, np.ndarray, np.ndarray]:
-    """The wall of the first HIL collision (the one whose normal is closest to the contact
-    force at its peak), else the nearest to the rod tip at the start: (index, point, unit
-    normal), ``t`` frame."""
-    walls = run.scenario.walls
-    normals = np.array([np.asarray(w.normal, dtype=np.float64) / np.linalg.norm(w.normal) for w in walls])
-    points = np.array([np.asarray(w.point, dtype=np.float64) for w in walls])
+def _tracked_wall(run: RunData) -> int:
+    """The index of the wall of the first HIL collision (the one whose normal is closest to the
+    contact force at its peak), else of the wall nearest to the rod tip at the start."""
     ts = run.timeseries
+    tip = _vectors(ts, "tip_position")
+    start = tip[:1] if tip is not None and len(tip) else np.zeros((1, 3))
+    frames = _frames(run, points=[start])
     force = _vectors(ts, "contact_force")
     collision = _first_collision(run)
-    index = None
     if collision is not None and force is not None:
         time = ts["time"].to_numpy()
         inside = (time >= collision[0]) & (time <= collision[1])
@@ -367,15 +387,11 @@ def _tracked_wall(run: Run) -> tuple[int, np.ndarray, np.ndarray]:
             during = force[inside]
             peak = during[np.argmax(np.linalg.norm(during, axis=1))]
             if np.linalg.norm(peak) > 0:
-                index = int(np.argmax(normals @ (peak / np.linalg.norm(peak))))
-    if index is None:
-        tip = _vectors(ts, "tip_position")
-        start = tip[0] if tip is not None and len(tip) else np.zeros(3)
-        index = int(np.argmin(np.einsum("ij,ij->i", start - points, normals)))
-    return index, points[index], normals[index]
+                return int(np.argmax(frames["normals"] @ (peak / np.linalg.norm(peak))))
+    return int(np.argmin(frames["distances"][0][:, 0]))
 
 
-def _first_collision(run: Run) -> tuple[float, float] | None:
+def _first_collision(run: RunData) -> tuple[float, float] | None:
     """(start, end) of the first HIL collision (end of run if it does not end), or None."""
     for collision in run.metrics.get("collisions") or []:
         start = collision.get("start")
@@ -388,24 +404,23 @@ def _first_collision(run: Run) -> tuple[float, float] | None:
     return None
 
 
-def wall_distance(run: Run, column: str) -> np.ndarray | None:
+def wall_distance(run: RunData, column: str) -> np.ndarray | None:
     """The rod tip's signed distance to the tracked wall along its normal (m; < 0: inside),
     from ``<column>_x/y/z`` of the timeseries (tip_position or actual_tip_position)."""
     tip = _vectors(run.timeseries, column)
     if tip is None:
         return None
-    _, point, normal = _tracked_wall(run)
-    return (tip - point) @ normal
+    return np.asarray(_frames(run, points=[tip])["distances"][0][_tracked_wall(run)])
 
 
-def tracking_figure(run: Run) -> Figure:
+def tracking_figure(run: RunData) -> Figure:
     """Commanded vs actual rod tip, distance to the wall of the first collision (mm): the
     whole run, then a zoom on the first collision with the command shifted by the robot delay."""
     collision = _first_collision(run)
     figure, axes = _figure(rows=2 if collision is not None else 1)
     ts = run.timeseries
     time = ts["time"].to_numpy()
-    index, _, _ = _tracked_wall(run)
+    index = _tracked_wall(run)
     wall = run.scenario.walls[index]
     name = getattr(wall, "name", None) or f"walls[{index}]"
     commanded, actual = wall_distance(run, "tip_position"), wall_distance(run, "actual_tip_position")
@@ -447,7 +462,7 @@ def tracking_figure(run: Run) -> Figure:
     return figure
 
 
-def make_figures(run: Run) -> dict[str, Figure]:
+def make_figures(run: RunData) -> dict[str, Figure]:
     """All figures of a run, by file stem: contact_velocity, contact_force, energy, then
     identification (when the compensator estimates the contact) and, when the motion is not
     1-D, contact_rotation and tip_tracking."""
@@ -476,7 +491,7 @@ def _kind_color(kind: str, index: int) -> str:
     return _KIND_COLORS.get(kind, _EXTRA_COLORS[index % len(_EXTRA_COLORS)])
 
 
-def _comparison_header(runs: Mapping[str, Run]) -> str:
+def _comparison_header(runs: Mapping[str, RunData]) -> str:
     run = next(iter(runs.values()))
     f = run.scenario.facility
     return (
@@ -528,7 +543,7 @@ def _tidy_labels(panels: list[list[Axes]]) -> None:
                 ax.set_ylabel("")
 
 
-def _panel_title(kind: str, run: Run) -> str:
+def _panel_title(kind: str, run: RunData) -> str:
     if run.status == "ok":
         return f"{kind}: ok"
     at = run.metrics.get("diverged_at")
@@ -537,7 +552,7 @@ def _panel_title(kind: str, run: Run) -> str:
 
 
 def _clip_to_ok_runs(
-    panels: list[list[Axes]], runs: Mapping[str, Run], ranges: list[tuple[float, float]], row: int = 0
+    panels: list[list[Axes]], runs: Mapping[str, RunData], ranges: list[tuple[float, float]], row: int = 0
 ) -> None:
     """Share y limits fitted to the runs that stayed ok (and their references) when a diverged
     run would otherwise flatten every panel; its panel's title then says it is clipped."""
@@ -567,11 +582,11 @@ def _series_range(*series: np.ndarray | None) -> tuple[float, float]:
 
 
 def _time_panels(
-    runs: Mapping[str, Run],
+    runs: Mapping[str, RunData],
     title: str,
     ylabel: str,
     hil: Callable[[pd.DataFrame], np.ndarray | None],
-    extra: Callable[[Axes, Run], np.ndarray | None] | None = None,
+    extra: Callable[[Axes, RunData], np.ndarray | None] | None = None,
 ) -> Figure:
     figure, panels = _grid(len(runs))
     ranges = []
@@ -600,7 +615,7 @@ def _time_panels(
     return figure
 
 
-def compare_velocity_figure(runs: Mapping[str, Run]) -> Figure:
+def compare_velocity_figure(runs: Mapping[str, RunData]) -> Figure:
     def velocity(frame: pd.DataFrame) -> np.ndarray | None:
         values = _column(frame, "tip_velocity_x")
         return None if values is None else values * 1e3
@@ -608,14 +623,14 @@ def compare_velocity_figure(runs: Mapping[str, Run]) -> Figure:
     return _time_panels(runs, "Rod-tip relative velocity along x", "velocity x (mm/s)", velocity)
 
 
-def compare_force_figure(runs: Mapping[str, Run]) -> Figure:
+def compare_force_figure(runs: Mapping[str, RunData]) -> Figure:
     return _time_panels(
         runs, "Contact force magnitude", "|contact force| (N)", lambda frame: _magnitude(frame, "contact_force")
     )
 
 
-def compare_energy_figure(runs: Mapping[str, Run]) -> Figure:
-    def observed(ax: Axes, run: Run) -> np.ndarray | None:
+def compare_energy_figure(runs: Mapping[str, RunData]) -> Figure:
+    def observed(ax: Axes, run: RunData) -> np.ndarray | None:
         if not has_values(run.timeseries, "observed_energy"):
             return None
         values = run.timeseries["observed_energy"].to_numpy()
@@ -626,12 +641,12 @@ def compare_energy_figure(runs: Mapping[str, Run]) -> Figure:
     return _time_panels(runs, "Energy of the virtual relative motion", "energy (J)", lambda f: _column(f, "energy"), observed)
 
 
-def identifies(run: Run) -> bool:
+def identifies(run: RunData) -> bool:
     """Whether the run has contact estimates (stiffness or damping) with values."""
     return has_values(run.timeseries, "stiffness_estimate") or has_values(run.timeseries, "damping_estimate")
 
 
-def compare_identification_figure(runs: Mapping[str, Run]) -> Figure | None:
+def compare_identification_figure(runs: Mapping[str, RunData]) -> Figure | None:
     """k̂ (N/mm) and ĉ (N s/mm) against the true values, one column per compensator that
     identifies; None if none does."""
     chosen = {kind: run for kind, run in runs.items() if identifies(run)}
@@ -670,7 +685,7 @@ def _finite_number(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
-def _collision_count(runs: Mapping[str, Run], keys: tuple[str, ...]) -> int:
+def _collision_count(runs: Mapping[str, RunData], keys: tuple[str, ...]) -> int:
     """Collisions up to the last one with a value for one of ``keys`` (later ones have no
     ideal counterpart); at least 1."""
     return max(
@@ -685,7 +700,7 @@ def _collision_count(runs: Mapping[str, Run], keys: tuple[str, ...]) -> int:
 
 
 def _collision_bars(
-    ax: Axes, runs: Mapping[str, Run], key: str, label: str, count: int, line: float | None, scale: float = 1.0
+    ax: Axes, runs: Mapping[str, RunData], key: str, label: str, count: int, line: float | None, scale: float = 1.0
 ) -> None:
     """Grouped bars of ``metrics["collisions"][i][key] * scale`` per collision, one colour per
     compensator, a dashed line at ``line``. When a diverged run's bars dwarf the others, the
@@ -727,7 +742,7 @@ def _collision_bars(
 
 
 def _bars_figure(
-    runs: Mapping[str, Run], rows: list[tuple[str, str, float | None, float]], title: str
+    runs: Mapping[str, RunData], rows: list[tuple[str, str, float | None, float]], title: str
 ) -> Figure:
     """One axis of grouped bars per ``(key, label, line, scale)``, collisions across."""
     figure = Figure(figsize=(11.0, 7.0))
@@ -749,7 +764,7 @@ def _bars_figure(
     return figure
 
 
-def compare_cov_cof_figure(runs: Mapping[str, Run]) -> Figure:
+def compare_cov_cof_figure(runs: Mapping[str, RunData]) -> Figure:
     """Grouped bars of CoV and CoF per collision, one colour per compensator, a line at 1.
     When a diverged run's bars dwarf the others, the axis is cut and those bars are
     labelled with their value."""
@@ -758,7 +773,7 @@ def compare_cov_cof_figure(runs: Mapping[str, Run]) -> Figure:
     )
 
 
-def compare_velocity_error_figure(runs: Mapping[str, Run]) -> Figure:
+def compare_velocity_error_figure(runs: Mapping[str, RunData]) -> Figure:
     """Grouped bars of the rebound velocity error and angular velocity error per collision
     (%), one colour per compensator; a dashed line at the scenario's velocity tolerance."""
     run = next(iter(runs.values()))
@@ -774,7 +789,7 @@ def compare_velocity_error_figure(runs: Mapping[str, Run]) -> Figure:
     )
 
 
-def comparison_figure_makers(runs: Mapping[str, Run]) -> dict[str, Callable[[], Figure | None]]:
+def comparison_figure_makers(runs: Mapping[str, RunData]) -> dict[str, Callable[[], Figure | None]]:
     """Each comparison figure's maker by file stem (a maker may return None: no such figure
     for these runs)."""
     makers: dict[str, Callable[[], Figure | None]] = {
@@ -789,7 +804,7 @@ def comparison_figure_makers(runs: Mapping[str, Run]) -> dict[str, Callable[[], 
     return makers
 
 
-def comparison_figures(runs: Mapping[str, Run]) -> dict[str, Figure]:
+def comparison_figures(runs: Mapping[str, RunData]) -> dict[str, Figure]:
     """The comparison figures by file stem (compare_identification only if a compensator
     identifies the contact, compare_velocity_error only if the motion is not 1-D)."""
     figures = {name: make() for name, make in comparison_figure_makers(runs).items()}
@@ -799,13 +814,11 @@ def comparison_figures(runs: Mapping[str, Run]) -> dict[str, Figure]:
 def draw_in_two_processes(makers: Mapping[str, Callable[[], Figure | None]], directory: str | os.PathLike[str],
                           dpi: int) -> list[str]:
     """Make and save the figures (``<name>.png`` in ``directory``), half of them in a forked
-    child process when the machine has two cores or more: drawing is most of a comparison's
-    time and matplotlib draws on one core. A child that fails leaves its figures to this
-    process, which then draws them itself (a figure is never lost). Returns the names saved,
-    in the makers' order."""
+    child process when the machine has two cores or more (:func:`hilcontact.processes.in_two_processes`):
+    drawing is most of a comparison's time and matplotlib draws on one core. A figure is never
+    lost to a failing child. Returns the names saved, in the makers' order."""
     folder = Path(directory)
     folder.mkdir(parents=True, exist_ok=True)
-    names = list(makers)
 
     def draw(subset: list[str]) -> list[str]:
         saved = []
@@ -816,18 +829,4 @@ def draw_in_two_processes(makers: Mapping[str, Callable[[], Figure | None]], dir
                 saved.append(name)
         return saved
 
-    child_names = names[1::2] if len(names) > 1 and (os.cpu_count() or 1) > 1 and hasattr(os, "fork") else []
-    pid = os.fork() if child_names else -1
-    if pid == 0:  # the child: draw its half, report by exit code only, never return
-        code = 1
-        try:
-            draw(child_names)
-            code = 0
-        finally:
-            os._exit(code)
-    mine = draw([n for n in names if n not in child_names])
-    if pid > 0:
-        _, status = os.waitpid(pid, 0)
-        if not (os.WIFEXITED(status) and os.WEXITSTATUS(status) == 0):
-            mine += draw(child_names)  # the child failed: draw its figures here
-    return [n for n in names if n in mine or (n in child_names and (folder / f"{n}.png").is_file())]
+    return in_two_processes(list(makers), draw, lambda name: (folder / f"{name}.png").is_file())

@@ -34,7 +34,8 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 from .errors import RealtimeOptionError
-from .run import OPTIONAL_TIMESERIES_COLUMNS, REFERENCE_COLUMNS, TIMESERIES_COLUMNS, Run, _core, _frame
+from .native import core as _core
+from .run import OPTIONAL_TIMESERIES_COLUMNS, REFERENCE_COLUMNS, TIMESERIES_COLUMNS, Run, _frame
 from .scenario import Scenario, load_scenario
 
 __all__ = [
@@ -80,32 +81,30 @@ ANY_KIND = "*"
 LEGACY_KEYS: dict[str, dict[str, tuple[str, str, str]]] = {
     "runtime": {
         "sensor_host": ("sensor", ANY_KIND, "host"),
-        "sensor_port": ("sensor", ANY_KIND, "port"),
-        "http_port": ("sensor", "rdt", "http_port"),
-        "counts_per_force": ("sensor", "rdt", "counts_per_force"),
-        "counts_per_torque": ("sensor", "rdt", "counts_per_torque"),
         "rdt_local_port": ("sensor", "rdt", "local_port"),
         "bias": ("sensor", "rdt", "bias"),
         "egm_bind_host": ("robot", "egm", "bind_host"),
-        "egm_port": ("robot", "egm", "port"),
         "robot_host": ("robot", ANY_KIND, "robot_host"),
-        "egm_offset_mm": ("robot", "egm", "offset_mm"),
-        "egm_rotation": ("robot", "egm", "rotation"),
     },
     "facility": {
         "bind_host": ("sensor", ANY_KIND, "bind_host"),
-        "sensor_port": ("sensor", ANY_KIND, "port"),
-        "http_port": ("sensor", "rdt", "http_port"),
-        "counts_per_force": ("sensor", "rdt", "counts_per_force"),
-        "counts_per_torque": ("sensor", "rdt", "counts_per_torque"),
         "egm_host": ("robot", "egm", "host"),
-        "egm_port": ("robot", "egm", "port"),
         "egm_local_port": ("robot", "egm", "local_port"),
         "egm_period": ("robot", "egm", "period"),
-        "egm_offset_mm": ("robot", "egm", "offset_mm"),
-        "egm_rotation": ("robot", "egm", "rotation"),
     },
 }
+#: The flat keys both sections have.
+_SHARED_LEGACY_KEYS = {
+    "sensor_port": ("sensor", ANY_KIND, "port"),
+    "http_port": ("sensor", "rdt", "http_port"),
+    "counts_per_force": ("sensor", "rdt", "counts_per_force"),
+    "counts_per_torque": ("sensor", "rdt", "counts_per_torque"),
+    "egm_port": ("robot", "egm", "port"),
+    "egm_offset_mm": ("robot", "egm", "offset_mm"),
+    "egm_rotation": ("robot", "egm", "rotation"),
+}
+LEGACY_KEYS["runtime"].update(_SHARED_LEGACY_KEYS)
+LEGACY_KEYS["facility"].update(_SHARED_LEGACY_KEYS)
 
 #: The link groups of the options (each a dict with a ``kind``).
 LINKS = ("sensor", "robot")

@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import ScenarioError
+from .native import core as _core
 from .output import write_atomically
 from .scenario import Scenario, load_scenario
 
@@ -77,12 +78,6 @@ class Recording:
 
     def columns(self, names: list[str]) -> dict[str, np.ndarray]:
         return {n: np.ascontiguousarray(self.data[n].to_numpy(dtype=np.float64)) for n in names}
-
-
-def _core() -> Any:
-    from . import _core as core
-
-    return core
 
 
 def _read_table(path: Path) -> pd.DataFrame:

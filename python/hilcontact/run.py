@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from .errors import HilContactError, ScenarioError
+from .errors import ScenarioError
+from .native import core as _core
 from .output import write_atomically
 from .scenario import Scenario, load_scenario
 
@@ -22,17 +23,6 @@ if TYPE_CHECKING:
 __all__ = [
     "COLUMN_UNITS",
     "OPTIONAL_TIMESERIES_COLUMNS", "REFERENCE_COLUMNS", "TIMESERIES_COLUMNS", "Run", "simulate"]
-
-
-def _core() -> Any:
-    try:
-        from . import _core as core
-    except ImportError as exc:
-        raise HilContactError(
-            "the native extension hilcontact._core is not available; build it with "
-            f"`pip install .` or `maturin develop --release` ({exc})"
-        ) from None
-    return core
 
 
 def _table_columns() -> dict[str, list[tuple[str, str, str]]]:
@@ -75,14 +65,6 @@ def _frame(columns: dict[str, Any], order: list[str]) -> pd.DataFrame:
     data = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
     names = [c for c in order if c in data] + sorted(c for c in data if c not in order)
     return pd.DataFrame({name: data[name] for name in names})
-
-
-def core_version() -> str | None:
-    """Version of the native core, or None if it is not built."""
-    try:
-        return str(_core().version())
-    except HilContactError:
-        return None
 
 
 @dataclass

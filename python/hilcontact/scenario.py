@@ -56,6 +56,7 @@ from pydantic import (
 
 from . import _core
 from .errors import ScenarioError
+from .native import VERSION
 from .registry import KINDS
 
 # the table and compensator models (Simulation, Body, ..., PicCompensator, ...) are added below,
@@ -406,10 +407,8 @@ class _ScenarioBase(_Table):
 
     def to_toml(self) -> str:
         """The fully resolved scenario as TOML; loading it again gives an identical Scenario."""
-        from . import __version__
-
         header = (
-            f"# Resolved scenario {self.name!r}, written by hilcontact {__version__}.\n"  # type: ignore[attr-defined]
+            f"# Resolved scenario {self.name!r}, written by hilcontact {VERSION}.\n"
             "# Every value is explicit (defaults filled in); SI units, frames as in the docs.\n"
         )
         return header + _compact_arrays(tomli_w.dumps(self.to_dict()))

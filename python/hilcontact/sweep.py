@@ -30,7 +30,6 @@ import math
 import os
 import time
 import tomllib
-import uuid
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -53,7 +52,7 @@ from .limits import (
     run_estimate,
 )
 from .output import OutputError, mark_folder, marker_kind, remove_stale, staging_name
-from .run import _core
+from .native import core as _core
 from .scenario import Scenario, load_scenario
 
 __all__ = [
@@ -436,9 +435,7 @@ Progress = Callable[[int, int], None]
 
 def _run_chunk(scenarios: list[str], threads: int | None) -> dict[str, Any]:
     """Run a chunk of scenarios in the core (the task a Dask worker runs)."""
-    from . import _core as core
-
-    return dict(core.simulate_batch(scenarios, threads))
+    return dict(_core().simulate_batch(scenarios, threads))
 
 
 def _rows(plan: SweepPlan, chunk: list[tuple[str, int, str, int]], columns: Mapping[str, Any]) -> pd.DataFrame:

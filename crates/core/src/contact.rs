@@ -104,6 +104,12 @@ impl Wall {
     pub fn penetration_rate(&self, tip_velocity: &Vector3<f64>) -> f64 {
         -tip_velocity.dot(&self.normal)
     }
+
+    /// Signed distance `(p − p_wall)·n` of a point to the wall's plane along its normal, m
+    /// (negative inside the wall).
+    pub fn signed_distance(&self, point: &Vector3<f64>) -> f64 {
+        (point - self.point).dot(&self.normal)
+    }
 }
 
 /// The collision geometry and the contact law: everything needed to compute the physical

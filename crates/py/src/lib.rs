@@ -680,6 +680,79 @@ fn identify<'py>(
     Ok(result)
 }
 
+/// The frame maths of a run's figures, from the core's resolved scenario (its sensor attitude
+/// and its walls, normals normalised), vectorised over a run's rows:
+///
+/// - `in_t`: `sensor_vectors` (rows of x, y, z in the sensor frame, e.g. the applied moment,
+///   N m) turned into the target frame `t` (same unit); None without `sensor_vectors`.
+/// - `normals`: the walls' unit normals in `t`, one row per wall (`[[walls]]` order).
+/// - `distances`: per array of `points` (rows of x, y, z in `t`, m, e.g. the rod tip), the
+///   signed distance of each point to each wall's plane along its normal, m (< 0: inside),
+///   as an array of (walls, rows).
+///
+/// Raises ScenarioError for a bad scenario, ValueError for an array that is not (rows, 3).
+#[pyfunction]
+#[pyo3(signature = (scenario_json, sensor_vectors=None, points=Vec::new()))]
+fn frames<'py>(
+    py: Python<'py>,
+    scenario_json: &str,
+    sensor_vectors: Option<numpy::PyReadonlyArray2<'py, f64>>,
+    points: Vec<numpy::PyReadonlyArray2<'py, f64>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use numpy::ndarray::Array2;
+    use numpy::PyUntypedArrayMethods;
+
+    fn rows(array: &numpy::PyReadonlyArray2<'_, f64>) -> PyResult<Vec<nalgebra::Vector3<f64>>> {
+        let view = array.as_array();
+        if view.ncols() != 3 {
+            return Err(PyValueError::new_err(format!(
+                "expected rows of (x, y, z), got an array of shape {:?}",
+                array.shape()
+            )));
+        }
+        Ok(view
+            .rows()
+            .into_iter()
+            .map(|r| nalgebra::Vector3::new(r[0], r[1], r[2]))
+            .collect())
+    }
+    let plan = parse_scenario(py, scenario_json)?;
+    let walls = &plan.system.contact.walls;
+    let result = PyDict::new(py);
+    let in_t = match sensor_vectors {
+        None => None,
+        Some(array) => {
+            let q = plan.facility.sensor_orientation;
+            let turned = rows(&array)?.iter().map(|v| q * v).collect::<Vec<_>>();
+            let flat = turned.iter().flat_map(|v| [v.x, v.y, v.z]).collect();
+            let out = Array2::from_shape_vec((turned.len(), 3), flat)
+                .map_err(|e| PyValueError::new_err(e.to_string()))?;
+            Some(out.into_pyarray(py))
+        }
+    };
+    result.set_item("in_t", in_t)?;
+    let normals = walls
+        .iter()
+        .flat_map(|w| [w.normal.x, w.normal.y, w.normal.z])
+        .collect();
+    let normals = Array2::from_shape_vec((walls.len(), 3), normals)
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    result.set_item("normals", normals.into_pyarray(py))?;
+    let mut distances = Vec::new();
+    for array in &points {
+        let tips = rows(array)?;
+        let flat = walls
+            .iter()
+            .flat_map(|w| tips.iter().map(move |p| w.signed_distance(p)))
+            .collect();
+        let out = Array2::from_shape_vec((walls.len(), tips.len()), flat)
+            .map_err(|e| PyValueError::new_err(e.to_string()))?;
+        distances.push(out.into_pyarray(py));
+    }
+    result.set_item("distances", distances)?;
+    Ok(result)
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
@@ -698,6 +771,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(realtime_schema, m)?)?;
     m.add_function(wrap_pyfunction!(replay, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
+    m.add_function(wrap_pyfunction!(frames, m)?)?;
     m.add_class::<PyHilHandle>()?;
     m.add_class::<PyFacilityHandle>()?;
     let errors = error_classes(m.py())?;

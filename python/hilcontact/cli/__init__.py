@@ -1,0 +1,45 @@
+"""The ``hilcontact`` command line.
+
+    hilcontact run SCENARIO [--set KEY=VALUE ...] [--out DIR] [--no-plots] [--mcap FILE]
+    hilcontact compare SCENARIO [--set KEY=VALUE ...] [--compensators LIST] [--out DIR] [--no-plots] [--run-figures]
+    hilcontact plot RUN_OR_COMPARISON_DIR
+    hilcontact identify LOG --out DIR [--scenario FILE] [--wrench-topic T --pose-topic T ...]
+    hilcontact replay LOG --compensator KIND [--set compensator.KEY=VALUE ...] --out DIR
+    hilcontact sweep SCENARIO --grid KEY=START:STOP:COUNT|KEY=A,B,... [--compensators LIST]
+                     [--seeds N] [--set KEY=VALUE ...] --out DIR [--resume] [--dask ADDRESS]
+    hilcontact stability-map SWEEP_DIR [--out DIR] [--cov-tolerance 0.05] [--cof-limit 1.2]
+    hilcontact presets
+    hilcontact init FILE.toml [--from PRESET] [--set KEY=VALUE ...]
+    hilcontact show SCENARIO [--set KEY=VALUE ...]
+    hilcontact facility SCENARIO [--sensor-port 49152 --http-port 80 --egm-host H --egm-port 6510 ...]
+    hilcontact hil SCENARIO --sensor HOST [--sensor-protocol rdt|sri --robot-protocol egm|rsi --robot-port N
+                   --robot-option KEY=VALUE --force-limit N --rt-priority 80 --cpu N ...] [--out DIR] [--mcap FILE]
+    hilcontact check SCENARIO --sensor HOST [the options of hil] [--duration 1] [--out DIR]
+    hilcontact demo-rt [SCENARIO] [--compensator pida] [--rt-priority 80 --no-lock-memory --cpu N] [--out DIR] [--mcap FILE]
+    hilcontact --version
+
+Bad input (scenario, override, option, output folder) prints one ``error: ...`` line on stderr
+and exits with code 2; nothing is written then. ``hil`` and ``demo-rt`` exit with 3 after a
+safety stop and 130 after Ctrl-C (the run is saved in both cases); a facility that cannot be
+reached or a port in use exits with 1. ``check`` exits with 0 when a run would start, 1 when it
+would refuse. An interrupted sweep (Ctrl-C) keeps its finished rows
+and exits with code 130.
+
+The package: :mod:`.options` (the command group and the shared option machinery),
+:mod:`.batch` (the simulation and offline commands), :mod:`.realtime_commands` (``hil``,
+``check``, ``facility``, ``demo-rt``), :mod:`.reports` (what the commands print).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from . import batch, realtime_commands  # noqa: F401  (each registers its commands on the group)
+from .options import cli, parse_set_options
+
+__all__ = ["cli", "main", "parse_set_options"]
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """Console-script entry point."""
+    cli.main(args=list(argv) if argv is not None else None, prog_name="hilcontact")

@@ -1,0 +1,339 @@
+"""The console reports of the ``hilcontact`` commands: a run's collision table, a
+comparison, a sweep, the real-time live lines and summaries, `check`'s report."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+if TYPE_CHECKING:
+    from ..comparison import Comparison
+    from ..run import Run
+
+
+def _number(value: Any, fmt: str, scale: float = 1.0) -> str:
+    if value is None:
+        return "-"
+    try:
+        number = float(value) * scale
+    except (TypeError, ValueError):
+        return "-"
+    return format(number, fmt) if math.isfinite(number) else "-"
+
+
+def _report(console: Console, result: Run, folder: Path) -> None:
+    delay_ms = result.scenario.facility.robot_delay * 1e3
+    table = Table(
+        title=f"{result.scenario.name}: compensator {result.compensator}, robot delay {delay_ms:g} ms",
+    )
+    for header in ("#", "start (s)", "end (s)", "CoV", "CoF", "v error (%)", "peak force (N)",
+                   "rebound speed (mm/s)", "reference rebound (mm/s)"):
+        table.add_column(header, justify="right")
+    for number, row in result.collision_table().iterrows():
+        table.add_row(
+            str(number) if row["complete"] else f"{number}*",
+            _number(row["start"], ".3f"),
+            _number(row["end"], ".3f"),
+            _number(row["cov"], ".3f"),
+            _number(row["cof"], ".3f"),
+            _number(row["velocity_error"], ".1f", 1e2),
+            _number(row["peak_force"], ".1f"),
+            _number(row["rebound_speed"], ".2f", 1e3),
+            _number(row["reference_rebound_speed"], ".2f", 1e3),
+        )
+    if table.row_count:
+        console.print(table)
+        if not result.collision_table()["complete"].all():
+            console.print("*: still under way at the end of the run (no rebound, not compared)")
+    else:
+        console.print("no collisions")
+    if result.status == "ok":
+        console.print("status: [green]ok[/green]")
+    elif result.status == "unfaithful":
+        violations = result.metrics.get("violations") or []
+        console.print("[bold yellow]status: unfaithful[/bold yellow] (tolerances in the scenario's [metrics])")
+        for line in violations:
+            console.print(f"  [yellow]{escape(str(line))}[/yellow]", soft_wrap=True)
+    else:
+        at = result.metrics.get("diverged_at")
+        when = f" at {at:.3f} s" if isinstance(at, (int, float)) else ""
+        reason = result.metrics.get("reason") or "no reason given"
+        console.print(
+            f"[bold red]status: {escape(result.status)}{when}: {escape(str(reason))}[/bold red]", soft_wrap=True
+        )
+    files = ", ".join(sorted(p.name for p in folder.iterdir()))
+    console.print(f"saved to {escape(str(folder))}/ ({escape(files)})", soft_wrap=True)
+
+
+def _report_mcap(console: Console, recorded: dict[str, Any] | None) -> None:
+    """One line on the run's MCAP file (and its write errors, if any)."""
+    if not recorded:
+        return
+    line = (
+        f"mcap: {escape(str(recorded.get('path')))} ({recorded.get('messages')} messages in "
+        f"{recorded.get('chunks')} chunks, {_number(recorded.get('bytes'), '.1f', 1e-6)} MB)"
+    )
+    if recorded.get("write_errors") or not recorded.get("complete"):
+        line += (
+            f" [bold yellow]incomplete: {recorded.get('write_errors')} write errors: "
+            f"{escape(str(recorded.get('error')))}[/bold yellow]"
+        )
+    console.print(line, soft_wrap=True)
+
+
+def _report_comparison(console: Console, result: Comparison, folder: Path) -> None:
+    s = result.scenario
+    table = Table(
+        title=f"{s.name}: robot delay {s.facility.robot_delay * 1e3:g} ms, "
+        f"sensor delay {s.facility.sensor_delay * 1e3:g} ms",
+    )
+    table.add_column("compensator", no_wrap=True)
+    table.add_column("status", no_wrap=True)
+    table.add_column("CoV per collision")
+    for header in ("worst CoF", "v error (%)", "k error (%)", "c error (N·s/mm)"):
+        table.add_column(header, justify="right")
+    for kind, row in result.summary.iterrows():
+        if row["status"] == "ok":
+            status = "[green]ok[/green]"
+        elif row["status"] == "unfaithful":
+            status = "[yellow]unfaithful[/yellow]"
+        else:
+            at = row["diverged_at"]
+            when = f" {at:.2f} s" if math.isfinite(at) else ""
+            status = f"[bold red]{escape(str(row['status']))}{when}[/bold red]"
+        table.add_row(
+            escape(str(kind)),
+            status,
+            " ".join(_number(v, ".2f") for v in row["cov"]) or "-",
+            _number(row["worst_cof"], ".3f"),
+            _number(row["worst_velocity_error_pct"], ".2f"),
+            _number(row["stiffness_error_pct"], ".3g"),
+            _number(row["damping_error_Ns_mm"], ".3g"),
+        )
+    console.print(table)
+    console.print(
+        "CoV, CoF: rebound speed and peak force / ideal reference (1 is perfect); "
+        "mean CoV and worst |CoV-1| in comparison.md",
+        soft_wrap=True,
+    )
+    files = ", ".join(sorted(p.name + ("/" if p.is_dir() else "") for p in folder.iterdir()))
+    console.print(f"saved to {escape(str(folder))}/ ({escape(files)})", soft_wrap=True)
+
+
+def _report_sweep(console: Console, rows: Any, out: str) -> None:
+    from ..stability import faithful
+
+    table = Table(title=f"sweep: {len(rows)} runs")
+    for header in ("compensator", "runs", "ok", "unfaithful", "diverged", "faithful", "median wall time (ms)"):
+        table.add_column(header, justify="right" if header != "compensator" else "left")
+    marks = faithful(rows)
+    for kind, group in rows.groupby("compensator", sort=False):
+        ok = int((group["status"] == "ok").sum())
+        unfaithful = int((group["status"] == "unfaithful").sum())
+        table.add_row(
+            escape(str(kind)),
+            str(len(group)),
+            str(ok),
+            str(unfaithful),
+            str(len(group) - ok - unfaithful),
+            f"{int(marks[group.index].sum())}",
+            _number(group["wall_time"].median(), ".2f", 1e3),
+        )
+    console.print(table)
+    console.print(
+        "ok: faithful within the scenario's [metrics] tolerances (default |CoV-1| <= 5 %, CoF <= 1.2, "
+        "rebound velocity error <= 5 %, no lost or extra collision); faithful: ok with a compared "
+        "collision (see hilcontact stability-map)",
+        soft_wrap=True,
+    )
+    console.print(f"saved to {escape(out)}/results.parquet", soft_wrap=True)
+
+
+
+def _report_stability_map(console: Console, result: Any, folder: Path, criterion: str, files: Sequence[str]) -> None:
+    """`hilcontact stability-map`'s table: the maximal faithful robot delay (ms) per contact
+    frequency and compensator, then the files written."""
+    best = result.max_faithful_delay()
+    table = Table(title=f"maximal faithful robot delay (ms): {criterion}")
+    table.add_column("contact frequency (Hz)", justify="right")
+    for kind in best.columns:
+        table.add_column(escape(str(kind)), justify="right")
+    for freq, row in best.iterrows():
+        table.add_row(_number(freq, ".2f"), *(_number(v, "g", 1e3) for v in row))
+    console.print(table)
+    console.print("- : not faithful even at the smallest swept delay", soft_wrap=True)
+    console.print(f"saved to {escape(str(folder))}/ ({', '.join(files)})", soft_wrap=True)
+
+
+def _report_identification(console: Console, log: str, collisions: Any) -> None:
+    """`hilcontact identify`'s table: per collision, stiffness (N/mm) and damping (N s/mm) with
+    their uncertainty, the wall's normal (± deg) and point (mm, ± mm)."""
+    table = Table(title=f"{log}: {len(collisions)} collision(s)")
+    for name in ("#", "start s", "k N/mm", "c N·s/mm", "normal", "±deg", "point mm", "±mm"):
+        table.add_column(name, justify="right")
+    for _, c in collisions.iterrows():
+        table.add_row(
+            str(int(c["index"])), f"{c['start']:.3f}",
+            f"{c['stiffness'] / 1e3:.3f} ± {c['stiffness_std'] / 1e3:.3f}",
+            f"{c['damping'] / 1e3:.4f} ± {c['damping_std'] / 1e3:.4f}",
+            f"({c['normal_x']:.4f}, {c['normal_y']:.4f}, {c['normal_z']:.4f})", f"{c['normal_std_deg']:.3g}",
+            f"({c['point_x'] * 1e3:.2f}, {c['point_y'] * 1e3:.2f}, {c['point_z'] * 1e3:.2f})", f"{c['offset_std'] * 1e3:.3g}",
+        )
+    console.print(table)
+
+def _hil_line(s: dict[str, Any]) -> str:
+    return (
+        f"{s['phase']}  t {s['time']:7.3f} s | F {s['force']:7.1f} N | E {s['energy'] * 1e3:8.3f} mJ | "
+        f"latency max {s['max_latency_us']:.0f} µs, overruns {s['overruns']} | "
+        f"sensor lost {s['sensor_lost']} late {s['sensor_late']} | robot lost {s['robot_lost']} late {s['robot_late']} | "
+        f"dropped {s['dropped']}"
+    )
+
+
+def _facility_line(s: dict[str, Any]) -> str:
+    sensor, robot = s.get("sensor_protocol", "RDT"), s.get("robot_protocol", "EGM")
+    return (
+        f"facility  t {s['time']:8.3f} s | contact {s['contact_force']:7.1f} N | {sensor} sent {s['rdt_sent']} | "
+        f"{robot} sent {s['egm_sent']}, corrections {s['corrections']} (dropped {s['corrections_dropped']}) | "
+        f"io errors {s.get('io_errors', 0)} | overruns {s['overruns']}"
+    )
+
+
+def _facility_errors(s: dict[str, Any]) -> str:
+    """The emulator's socket errors per endpoint, for the summary after it stops."""
+    parts = []
+    for link in ("sensor", "robot"):
+        stats = s.get(link) or {}
+        parts.append(
+            f"{link} ({s.get(link + '_protocol', '?')}): sent {stats.get('sent')}, send errors {stats.get('send_errors')}, "
+            f"io errors {stats.get('io_errors')}, received {stats.get('received')}, dropped "
+            f"{sum(stats.get(k, 0) for k in ('malformed', 'invalid', 'foreign', 'stale'))}"
+        )
+    return "; ".join(parts)
+
+
+def _scheduling_line(s: dict[str, Any]) -> str:
+    """One line of what the OS granted the loop thread (``metrics.json`` ``realtime.scheduling``):
+    ``scheduling: SCHED_FIFO 80 granted, memory locked, not pinned``, with each refusal's reason."""
+    if s.get("policy") == "fifo":
+        parts = [f"SCHED_FIFO {s.get('priority')} " + ("granted" if s.get("fifo_granted") else "(inherited)")]
+    elif s.get("policy") == "rr":
+        parts = [f"SCHED_RR {s.get('priority')} (inherited)"]
+    else:
+        parts = ["normal priority"]
+    parts.append("memory locked" if s.get("memory_locked") else "memory not locked")
+    parts.append(f"pinned to CPU {s.get('cpu')}" if s.get("pinned") else "not pinned")
+    line = "scheduling: " + ", ".join(parts)
+    refused = s.get("refused") or []
+    if refused:
+        line += " (refused: " + "; ".join(refused) + ")"
+    return line
+
+
+def _report_realtime(console: Console, run: Run) -> None:
+    rt = run.metrics.get("realtime") or {}
+    timing = rt.get("timing", {})
+    lat, per, comp = (timing.get(k, {}) for k in ("wake_latency_us", "period_error_us", "compute_us"))
+    sensor, robot = rt.get("sensor", {}), rt.get("robot", {})
+    console.print(
+        f"loop: {rt.get('ticks')} ticks at {1.0 / rt.get('period', 1.0):g} Hz in {rt.get('wall_time', 0.0):.3f} s; "
+        f"wake latency p50/p99/max {lat.get('p50', 0):.0f}/{lat.get('p99', 0):.0f}/{lat.get('max', 0):.0f} µs; "
+        f"period jitter p50/p99/max {per.get('p50', 0):.0f}/{per.get('p99', 0):.0f}/{per.get('max', 0):.0f} µs; "
+        f"compute p99 {comp.get('p99', 0):.0f} µs; overruns {timing.get('overruns')}",
+        soft_wrap=True,
+    )
+    if rt.get("scheduling"):
+        console.print(_scheduling_line(rt["scheduling"]), soft_wrap=True)
+    kinds = {k: str((rt.get("options", {}).get(k) or {}).get("kind", d)).upper() for k, d in (("sensor", "rdt"), ("robot", "egm"))}
+    for name, link in ((f"sensor ({kinds['sensor']})", sensor), (f"robot ({kinds['robot']})", robot)):
+        console.print(
+            f"{name}: received {link.get('received')}, accepted {link.get('accepted')}, lost {link.get('lost')}, "
+            f"late {link.get('late')}, malformed {link.get('malformed')}, invalid {link.get('invalid')}, "
+            f"foreign {link.get('foreign')}, stale {link.get('stale')}",
+            soft_wrap=True,
+        )
+    if rsi := rt.get("rsi"):
+        ans = rsi.get("answer_latency_us", {})
+        console.print(
+            f"RSI answers: latency p50/p99/max {ans.get('p50', 0):.0f}/{ans.get('p99', 0):.0f}/{ans.get('max', 0):.0f} µs, "
+            f"late (> {rsi.get('deadline_us', 0):.0f} µs) {rsi.get('answers_late')}, unanswered {rsi.get('unanswered')}",
+            soft_wrap=True,
+        )
+
+
+def _vector(values: Sequence[float] | None, scale: float = 1.0, fmt: str = ".2f") -> str:
+    if values is None:
+        return "-"
+    return "(" + ", ".join(f"{v * scale:{fmt}}" for v in values) + ")"
+
+
+def _rate(hz: float | None) -> str:
+    return "-" if hz is None else f"{hz:.0f} Hz"
+
+
+def _stats_line(stats: dict[str, Any]) -> str:
+    """A link's counters: received, accepted, then every other non-zero counter (`sent` always:
+    the robot's must stay 0)."""
+    rest = [f"{k} {v}" for k, v in stats.items() if k not in ("received", "accepted", "sent") and v]
+    return ", ".join([f"received {stats.get('received')}", f"accepted {stats.get('accepted')}",
+                      f"sent {stats.get('sent')}", *rest])
+
+
+def _link_report(report: dict[str, Any]) -> str:
+    """What a link reports of its device (RDT: counts per unit, the sensor's units), as text."""
+    parts = []
+    for key, value in report.items():
+        if isinstance(value, dict):
+            value = ", ".join(f"{k} {v}" for k, v in value.items())
+        elif isinstance(value, float):
+            value = f"{value:g}"
+        parts.append(f"{key}: {value}")
+    return "; ".join(parts) or "-"
+
+
+def _report_check(console: Console, report: dict[str, Any]) -> None:
+    """`hilcontact check`'s report: both links, aligned, then the verdict."""
+    sensor, robot = report["sensor"], report["robot"]
+    table = Table.grid(padding=(0, 2))
+    table.add_column(style="bold")
+    table.add_column()
+    table.add_row(f"sensor ({escape(sensor['protocol'])})", escape(sensor["address"]))
+    table.add_row("  records", f"{_rate(sensor['rate'])}; {_stats_line(sensor['stats'])}")
+    table.add_row("  device", escape(_link_report(sensor["report"])))
+    offset, noise = sensor["offset"], sensor["noise"]
+    if offset is None:
+        table.add_row("  offset", "- (no record)")
+    else:
+        table.add_row(
+            "  offset",
+            f"F {_vector(offset[:3])} N, |F| {sensor['offset_force']:.2f} N (max {sensor['offset_max_force']:g} N); "
+            f"M {_vector(offset[3:], fmt='.3f')} N m, |M| {sensor['offset_moment']:.3f} N m (max {sensor['offset_max_moment']:g} N m); "
+            f"offset mode {sensor['offset_mode']}; {sensor['samples']} records",
+        )
+        table.add_row("  noise (std)", f"F {_vector(noise[:3], fmt='.3f')} N; M {_vector(noise[3:], fmt='.4f')} N m")
+    table.add_row(f"robot ({escape(robot['protocol'])})", escape(robot["address"]))
+    table.add_row("  locked onto", escape(robot["peer"] or "-"))
+    table.add_row("  feedback", f"{_rate(robot['rate'])}; {_stats_line(robot['stats'])}")
+    start = f"the scenario's start {_vector(robot['start_rod_tip'], 1e3, '.1f')} mm"
+    if robot["start_distance"] is None:
+        table.add_row("  rod tip", f"- (no feedback); {start}")
+    else:
+        table.add_row(
+            "  rod tip",
+            f"{_vector(robot['rod_tip'], 1e3, '.1f')} mm, {robot['start_distance'] * 1e3:.1f} mm from {start} "
+            f"(start_tolerance {robot['start_tolerance'] * 1e3:.1f} mm)",
+        )
+    console.print(f"check {escape(report['scenario'])}: listened {report['duration']:g} s, nothing commanded to the robot")
+    console.print(table)
+    if report["would_start"]:
+        console.print("[bold green]verdict: a run would start[/]")
+    else:
+        console.print("[bold red]verdict: a run would refuse:[/]")
+        for reason in report["reasons"]:
+            console.print("  - " + escape(reason), soft_wrap=True)
