@@ -722,7 +722,7 @@ fn frames<'py>(
     let in_t = match sensor_vectors {
         None => None,
         Some(array) => {
-            let q = plan.facility.sensor_orientation;
+            let q = plan.sensor.orientation;
             let turned = rows(&array)?.iter().map(|v| q * v).collect::<Vec<_>>();
             let flat = turned.iter().flat_map(|v| [v.x, v.y, v.z]).collect();
             let out = Array2::from_shape_vec((turned.len(), 3), flat)
