@@ -115,6 +115,34 @@ fn rt_modules_import_without_a_circle() {
     assert_acyclic("../rt");
 }
 
+/// Each device folder of the real-time crate (`crates/rt/src/devices/<kind>/`) names no other
+/// device: what devices share lives beside them (`devices/link.rs`, `transport.rs`,
+/// `pose.rs`), and a device is added or removed with its folder and its registry line.
+#[test]
+fn rt_device_folders_name_no_other_device() {
+    let devices = Path::new(env!("CARGO_MANIFEST_DIR")).join("../rt/src/devices");
+    let kinds: Vec<String> = std::fs::read_dir(&devices)
+        .expect("devices")
+        .map(|e| e.expect("entry").path())
+        .filter(|p| p.is_dir())
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    assert!(kinds.len() >= 4, "{kinds:?}");
+    for kind in &kinds {
+        for entry in std::fs::read_dir(devices.join(kind)).expect("device folder") {
+            let file = entry.expect("entry").path();
+            let text = std::fs::read_to_string(&file).expect("read");
+            for other in kinds.iter().filter(|k| *k != kind) {
+                let code = text
+                    .lines()
+                    .filter(|l| !l.trim_start().starts_with("//"))
+                    .any(|l| l.contains(&format!("devices::{other}")));
+                assert!(!code, "{} names the device {other}", file.display());
+            }
+        }
+    }
+}
+
 #[test]
 fn a_circle_is_found() {
     let mut graph = BTreeMap::new();
