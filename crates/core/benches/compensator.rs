@@ -13,8 +13,8 @@ use hilcontact_core::compensator::{
     CompensatorConfig, CompensatorContext, CompensatorInput, ModelMediatedParams, ModelParams,
     TdpaParams,
 };
-use hilcontact_core::facility::{Facility, FacilityModel};
-use hilcontact_core::hil::VirtualDynamics;
+use hilcontact_core::hil::compensator_context;
+use hilcontact_core::sim::compensator_inputs;
 use hilcontact_core::Scenario;
 
 fn preset(name: &str) -> Scenario {
@@ -25,27 +25,11 @@ fn preset(name: &str) -> Scenario {
     toml::from_str(&std::fs::read_to_string(path).expect("preset")).expect("parse")
 }
 
-/// The compensator inputs of every tick of a `pida` run, and its context.
+/// The compensator inputs of every tick of a run of `s` (its own compensator), and the
+/// context of its compensators.
 fn recorded_inputs(s: &Scenario) -> (Vec<CompensatorInput>, CompensatorContext) {
     let plan = s.resolve().expect("plan");
-    let system = &plan.system;
-    let mut virt = VirtualDynamics::new(&plan);
-    let mut facility = FacilityModel::new(&plan, &virt.command());
-    let mut inputs = Vec::with_capacity(plan.ticks);
-    for _ in 0..plan.ticks {
-        let m = facility.measure();
-        inputs.push(virt.input(&m));
-        let out = virt.compensate(&m);
-        virt.integrate(&out);
-        facility.advance(&virt.command());
-    }
-    let context = CompensatorContext {
-        period: s.simulation.period,
-        sensor_delay_ticks: plan.sensor.delay_ticks,
-        sensor_origin: system.sensor_origin,
-        reduced_mass: system.reduced_mass(),
-    };
-    (inputs, context)
+    (compensator_inputs(&plan), compensator_context(&plan))
 }
 
 fn bench(c: &mut Criterion) {

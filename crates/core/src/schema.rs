@@ -259,6 +259,15 @@ impl Compound {
 
 type R = Result<Node, CollectError>;
 
+/// Every number serialises as its value in f64 (exact for the integers of a scenario).
+macro_rules! numbers {
+    ($($method:ident: $t:ty),+) => {$(
+        fn $method(self, v: $t) -> R {
+            Ok(Node::Number(v as f64))
+        }
+    )+};
+}
+
 impl ser::Serializer for Collect {
     type Ok = Node;
     type Error = CollectError;
@@ -273,36 +282,18 @@ impl ser::Serializer for Collect {
     fn serialize_bool(self, _: bool) -> R {
         Ok(Node::Other)
     }
-    fn serialize_i8(self, v: i8) -> R {
-        Ok(Node::Number(v.into()))
-    }
-    fn serialize_i16(self, v: i16) -> R {
-        Ok(Node::Number(v.into()))
-    }
-    fn serialize_i32(self, v: i32) -> R {
-        Ok(Node::Number(v.into()))
-    }
-    fn serialize_i64(self, v: i64) -> R {
-        Ok(Node::Number(v as f64))
-    }
-    fn serialize_u8(self, v: u8) -> R {
-        Ok(Node::Number(v.into()))
-    }
-    fn serialize_u16(self, v: u16) -> R {
-        Ok(Node::Number(v.into()))
-    }
-    fn serialize_u32(self, v: u32) -> R {
-        Ok(Node::Number(v.into()))
-    }
-    fn serialize_u64(self, v: u64) -> R {
-        Ok(Node::Number(v as f64))
-    }
-    fn serialize_f32(self, v: f32) -> R {
-        Ok(Node::Number(v.into()))
-    }
-    fn serialize_f64(self, v: f64) -> R {
-        Ok(Node::Number(v))
-    }
+    numbers!(
+        serialize_i8: i8,
+        serialize_i16: i16,
+        serialize_i32: i32,
+        serialize_i64: i64,
+        serialize_u8: u8,
+        serialize_u16: u16,
+        serialize_u32: u32,
+        serialize_u64: u64,
+        serialize_f32: f32,
+        serialize_f64: f64
+    );
     fn serialize_char(self, v: char) -> R {
         Ok(Node::Text(v.to_string()))
     }
@@ -431,34 +422,25 @@ impl ser::SerializeMap for Compound {
     }
 }
 
-impl ser::SerializeStruct for Compound {
-    type Ok = Node;
-    type Error = CollectError;
-    fn serialize_field<T: ?Sized + Serialize>(
-        &mut self,
-        key: &'static str,
-        value: &T,
-    ) -> Result<(), CollectError> {
-        self.fields
-            .push((key.to_string(), value.serialize(Collect)?));
-        Ok(())
-    }
-    fn end(self) -> R {
-        Ok(self.table())
-    }
+/// Structs and struct variants serialise as tables, field by field.
+macro_rules! table_like {
+    ($($trait:ident),+) => {$(
+        impl ser::$trait for Compound {
+            type Ok = Node;
+            type Error = CollectError;
+            fn serialize_field<T: ?Sized + Serialize>(
+                &mut self,
+                key: &'static str,
+                value: &T,
+            ) -> Result<(), CollectError> {
+                self.fields.push((key.to_string(), value.serialize(Collect)?));
+                Ok(())
+            }
+            fn end(self) -> R {
+                Ok(self.table())
+            }
+        }
+    )+};
 }
 
-impl ser::SerializeStructVariant for Compound {
-    type Ok = Node;
-    type Error = CollectError;
-    fn serialize_field<T: ?Sized + Serialize>(
-        &mut self,
-        key: &'static str,
-        value: &T,
-    ) -> Result<(), CollectError> {
-        ser::SerializeStruct::serialize_field(self, key, value)
-    }
-    fn end(self) -> R {
-        Ok(self.table())
-    }
-}
+table_like!(SerializeStruct, SerializeStructVariant);

@@ -4,12 +4,13 @@
 
 use nalgebra::{UnitQuaternion, Vector3};
 
+use crate::compensator::CompensatorInput;
 use crate::config::{ContactModelKind, Scenario};
 use crate::error::Result;
 use crate::facility::FacilityLoop;
 use crate::frames::FrameWrench;
 pub use crate::hil::HilRecord;
-use crate::hil::HilStep;
+use crate::hil::{HilStep, VirtualDynamics};
 pub use crate::metrics::Trace;
 use crate::metrics::{self, EnergySummary, Metrics, TraceSample};
 use crate::plan::Plan;
@@ -207,6 +208,22 @@ pub fn run_hil_against(
         observes_energy: step.dynamics().observes_energy(),
         stop,
     }
+}
+
+/// The compensator input of every tick of a plan's HIL run with its own compensator, run to
+/// the end without its stops (no divergence check): what a benchmark or a test steps a
+/// compensator alone on.
+pub fn compensator_inputs(plan: &Plan) -> Vec<CompensatorInput> {
+    let mut virt = VirtualDynamics::new(plan);
+    let mut facility = FacilityLoop::new(plan);
+    let mut inputs = Vec::with_capacity(plan.ticks);
+    for _ in 0..plan.ticks {
+        let m = facility.tick(&virt.command());
+        inputs.push(virt.input(&m));
+        let out = virt.compensate(&m);
+        virt.integrate(&out);
+    }
+    inputs
 }
 
 /// Runs the reference and the HIL loop of a scenario and computes the metrics, without

@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{preset, table1};
+use common::{cofs, col, covs, oblique_6dof_cases, preset, table1};
 use hilcontact_core::compensator::{CompensatorConfig, DelayMode, ModelParams, TdpaParams};
 use hilcontact_core::stop::StopKind;
 use hilcontact_core::{simulate, Scenario, SimulationOutput};
@@ -26,34 +26,12 @@ fn run(mut s: Scenario, kind: CompensatorConfig) -> SimulationOutput {
     simulate(&s).expect("valid scenario")
 }
 
-fn covs(out: &SimulationOutput) -> Vec<f64> {
-    out.metrics
-        .collisions
-        .iter()
-        .filter_map(|c| c.cov)
-        .collect()
-}
-
-fn cofs(out: &SimulationOutput) -> Vec<f64> {
-    out.metrics
-        .collisions
-        .iter()
-        .filter_map(|c| c.cof)
-        .collect()
-}
-
 fn stiffness_error(out: &SimulationOutput) -> f64 {
     out.metrics
         .identification
         .as_ref()
         .expect("identified")
         .stiffness_error
-}
-
-fn col<'a>(out: &'a SimulationOutput, name: &str) -> &'a [f64] {
-    out.timeseries
-        .column(name)
-        .unwrap_or_else(|| panic!("no column {name}"))
 }
 
 #[test]
@@ -398,22 +376,12 @@ proptest! {
     /// from 0.3 N of noise lost one 5 s later).
     #[test]
     fn pida_keeps_every_collision_over_random_6dof_cases(
-        ts in proptest::array::uniform3(-0.02f64..0.02),
-        ss in proptest::array::uniform3(-0.02f64..0.02),
-        tv in proptest::array::uniform3(-0.002f64..0.002),
-        tilt in proptest::array::uniform2(-0.45f64..0.45),
-        offset in proptest::array::uniform2(-0.2f64..0.2),
+        case in oblique_6dof_cases(0.02, 0.002, 0.45, 0.2),
         robot_ticks in 0usize..=40,
         noise in 0.0f64..0.5,
         seed in 0u64..1000,
     ) {
-        let mut s = preset("oblique-6dof");
-        s.target.angular_velocity = ts;
-        s.servicer.angular_velocity = ss;
-        s.target.velocity = tv;
-        s.walls[0].normal = [-tilt[0].cos() * tilt[1].cos(), -tilt[0].sin(), tilt[1].sin()];
-        s.rod.tip = [1.0, offset[0], offset[1]];
-        s.walls[0].point = [0.010, offset[0] - 0.05, offset[1]];
+        let mut s = case;
         s.facility.robot_delay = robot_ticks as f64 * 1e-3;
         s.facility.sensor_noise = noise;
         s.facility.seed = seed;

@@ -3,23 +3,9 @@
 
 mod common;
 
-use common::{preset, table1};
+use common::{col, covs, oblique_6dof_cases, preset, table1};
 use hilcontact_core::stop::Status;
 use hilcontact_core::{simulate, CoreError, SimulationOutput};
-
-fn col<'a>(out: &'a SimulationOutput, name: &str) -> &'a [f64] {
-    out.timeseries
-        .column(name)
-        .unwrap_or_else(|| panic!("no column {name}"))
-}
-
-fn covs(out: &SimulationOutput) -> Vec<f64> {
-    out.metrics
-        .collisions
-        .iter()
-        .filter_map(|c| c.cov)
-        .collect()
-}
 
 #[test]
 fn without_facility_delay_the_loop_follows_the_reference() {
@@ -334,17 +320,11 @@ proptest::proptest! {
     /// every reference collision, with the rebound velocity within 0.1 % at a 1 ms period.
     #[test]
     fn without_delay_random_6dof_cases_keep_every_collision_to_a_thousandth(
-        ts in proptest::array::uniform3(-0.03f64..0.03),
-        ss in proptest::array::uniform3(-0.03f64..0.03),
-        tv in proptest::array::uniform3(-0.003f64..0.003),
-        tilt in proptest::array::uniform2(-0.5f64..0.5),
-        offset in proptest::array::uniform2(-0.2f64..0.2),
+        case in oblique_6dof_cases(0.03, 0.003, 0.5, 0.2),
     ) {
-        let mut s = general_6dof(ts, ss, tv);
-        // the front wall's normal tilted about z and y from -x, the rod tip off the axis
-        s.walls[0].normal = [-tilt[0].cos() * tilt[1].cos(), -tilt[0].sin(), tilt[1].sin()];
-        s.rod.tip = [1.0, offset[0], offset[1]];
-        s.walls[0].point = [0.010, offset[0] - 0.05, offset[1]];
+        let mut s = case;
+        s.facility.robot_delay = 0.0;
+        s.facility.sensor_delay = 0.0;
         let m = simulate(&s).unwrap().metrics;
         proptest::prop_assert!(m.lost_collisions.is_empty() && m.extra_collisions.is_empty(),
             "lost {:?} extra {:?}", m.lost_collisions, m.extra_collisions);

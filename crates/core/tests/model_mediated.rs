@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{preset, table1};
+use common::{oblique_6dof, preset, table1};
 use hilcontact_core::compensator::{
     Compensator, CompensatorConfig, CompensatorContext, CompensatorInput, LawForm, ModelMediated,
     ModelMediatedParams, ModelParams,
@@ -455,12 +455,7 @@ proptest::proptest! {
         delay in 0.01f64..0.12,
         noise in 0.0f64..0.5,
     ) {
-        let mut s = preset("oblique-6dof");
-        s.target.angular_velocity = ts;
-        s.servicer.angular_velocity = ss;
-        s.walls[0].normal = [-tilt[0].cos() * tilt[1].cos(), -tilt[0].sin(), tilt[1].sin()];
-        s.rod.tip = [1.0, offset[0], offset[1]];
-        s.walls[0].point = [0.010, offset[0] - 0.05, offset[1]];
+        let mut s = oblique_6dof((ts, ss), [0.0; 3], tilt, offset);
         s.facility.robot_delay = (delay * 1000.0).round() / 1000.0;
         s.facility.sensor_delay = 0.003;
         s.facility.sensor_noise = noise;

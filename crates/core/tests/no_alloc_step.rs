@@ -11,9 +11,10 @@ use std::cell::Cell;
 
 use common::table1;
 use hilcontact_core::compensator::{CompensatorConfig, ModelMediatedParams, REGISTRY};
-use hilcontact_core::facility::{Facility, FacilityLoop, FacilityModel};
+use hilcontact_core::facility::FacilityLoop;
+use hilcontact_core::hil::compensator_context;
 use hilcontact_core::hil::HilStep;
-use hilcontact_core::hil::{compensator_context, VirtualDynamics};
+use hilcontact_core::sim::compensator_inputs;
 
 struct Counting;
 
@@ -55,16 +56,7 @@ fn no_compensator_step_allocates() {
         ..ModelMediatedParams::default()
     });
     let plan = s.resolve().unwrap();
-    let mut virt = VirtualDynamics::new(&plan);
-    let mut facility = FacilityModel::new(&plan, &virt.command());
-    let mut inputs = Vec::with_capacity(plan.ticks);
-    for _ in 0..plan.ticks {
-        let m = facility.measure();
-        inputs.push(virt.input(&m));
-        let out = virt.compensate(&m);
-        virt.integrate(&out);
-        facility.advance(&virt.command());
-    }
+    let inputs = compensator_inputs(&plan);
     let context = compensator_context(&plan);
     for info in REGISTRY {
         let config = match (info.default)() {

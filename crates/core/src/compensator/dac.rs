@@ -5,11 +5,7 @@
 use super::delay::ContactEstimator;
 use super::energy::DampingAmendment;
 use super::params::ModelParams;
-use super::{
-    Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
-};
-use crate::frames::FrameWrench;
-use nalgebra::Vector3;
+use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
 
 /// Damping amendment control.
 #[derive(Debug, Clone)]
@@ -33,25 +29,9 @@ impl Compensator for Dac {
         let view = self.estimator.step(input); // steps 1-2
         let alpha = self.amendment.step(&view, &view.force, input); // steps 3-6
 
-        // steps 7-8: F_comp replaced by F_act in (29), (30); nothing outside the observer's
-        // window (the sensor's noise)
-        let applied = if self.amendment.applies() {
-            FrameWrench {
-                force: view.force + alpha.force,
-                moment: view.moment + alpha.moment,
-            }
-        } else {
-            FrameWrench::default()
-        };
-        CompensatorOutput {
-            applied,
-            velocity_correction: Vector3::zeros(),
-            estimate: Some(ContactEstimate {
-                stiffness: view.stiffness,
-                damping: view.damping,
-            }),
-            observed_energy: self.amendment.energy(),
-        }
+        // steps 7-8: F_comp replaced by F_act = (view.force, view.moment) in (29), (30)
+        self.amendment
+            .output(&view.force, &view.moment, &alpha, &view)
     }
 
     fn reset(&mut self) {

@@ -40,7 +40,7 @@ use nalgebra::Vector3;
 use super::delay::ContactView;
 use super::detect::ContactDetector;
 use super::params::{ControllerMode, ModelParams, ObserverMode};
-use super::{CompensatorContext, CompensatorInput};
+use super::{CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate};
 use crate::frames::FrameWrench;
 
 /// The window of an energy observer over one exchange with a wall, and the carried deficit.
@@ -420,6 +420,37 @@ impl DampingAmendment {
     /// outside the `work` observer's window the force is the sensor's noise.
     pub fn applies(&self) -> bool {
         self.observer.applies()
+    }
+
+    /// The output of an amended compensator: `F̂ = F + F_α` (29), `M̂ = M + M_α` (30) with
+    /// `force` F (N) and `moment` M (N·m, about the sensor origin) the wrench fed to the
+    /// dynamics before amendment (`F_comp` for `pida`, `F_act` for `dac`) and `alpha` = (F_α, M_α) of [`DampingAmendment::step`]; nothing
+    /// outside the observer's window (the force there is the sensor's noise). It reports the
+    /// identified contact of `view` and the observed energy.
+    pub fn output(
+        &self,
+        force: &Vector3<f64>,
+        moment: &Vector3<f64>,
+        alpha: &FrameWrench,
+        view: &ContactView,
+    ) -> CompensatorOutput {
+        let applied = if self.applies() {
+            FrameWrench {
+                force: force + alpha.force,
+                moment: moment + alpha.moment,
+            }
+        } else {
+            FrameWrench::default()
+        };
+        CompensatorOutput {
+            applied,
+            velocity_correction: Vector3::zeros(),
+            estimate: Some(ContactEstimate {
+                stiffness: view.stiffness,
+                damping: view.damping,
+            }),
+            observed_energy: self.energy(),
+        }
     }
 
     /// One tick: observes `force` (the force fed to the dynamics before amendment, N) and

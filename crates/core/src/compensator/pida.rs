@@ -6,10 +6,7 @@ use super::delay::ContactEstimator;
 use super::energy::DampingAmendment;
 use super::force::compensate_force;
 use super::params::ModelParams;
-use super::{
-    Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
-};
-use crate::frames::FrameWrench;
+use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
 use nalgebra::Vector3;
 
 /// Parameter identification and damping amendment.
@@ -36,23 +33,8 @@ impl Compensator for Pida {
         let view = self.estimator.step(input); // steps 1-4
         let comp = compensate_force(&view, input, &self.sensor_origin); // steps 5-6
         let alpha = self.amendment.step(&view, &comp.force, input); // steps 7-10
-        CompensatorOutput {
-            // (29), (30); nothing outside the observer's window (the sensor's noise)
-            applied: if self.amendment.applies() {
-                FrameWrench {
-                    force: comp.force + alpha.force,
-                    moment: comp.moment + alpha.moment,
-                }
-            } else {
-                FrameWrench::default()
-            },
-            velocity_correction: Vector3::zeros(),
-            estimate: Some(ContactEstimate {
-                stiffness: view.stiffness,
-                damping: view.damping,
-            }),
-            observed_energy: self.amendment.energy(),
-        }
+        self.amendment
+            .output(&comp.force, &comp.moment, &alpha, &view) // (29), (30)
     }
 
     fn reset(&mut self) {

@@ -99,15 +99,24 @@ impl TdpaImpedance {
     }
 }
 
+/// One tick of a TDPA's observer: observes the measured force and the desired tip velocity
+/// and gives the measured wrench as the output to amend, or None outside the observer's window
+/// (the force there is the sensor's noise: nothing is applied).
+fn observe_tick(
+    observer: &mut PassivityObserver,
+    input: &CompensatorInput,
+) -> Option<CompensatorOutput> {
+    observer
+        .observe(&input.measured.force, &input.tip_velocity_desired)
+        .then(|| CompensatorOutput::wrench(input.measured))
+}
+
 impl Compensator for TdpaImpedance {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
-        let (f, v) = (input.measured.force, input.tip_velocity_desired);
-        let mut out = CompensatorOutput::wrench(input.measured);
-        if !self.observer.observe(&f, &v) {
-            // out of the window: the sensor's noise, nothing applied
-            out.applied = FrameWrench::default();
-            return out;
-        }
+        let Some(mut out) = observe_tick(&mut self.observer, input) else {
+            return CompensatorOutput::wrench(FrameWrench::default()); // the sensor's noise
+        };
+        let v = input.tip_velocity_desired;
         let (t, e) = (self.observer.period, self.observer.energy());
         let alpha = if e < 0.0 {
             (-e / (t * v.norm_squared().max(self.params.velocity_floor.powi(2))))
@@ -171,13 +180,10 @@ fn admittance_impulse(energy: f64, uv: f64, kappa: f64) -> f64 {
 
 impl Compensator for TdpaAdmittance {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
+        let Some(mut out) = observe_tick(&mut self.observer, input) else {
+            return CompensatorOutput::wrench(FrameWrench::default()); // the sensor's noise
+        };
         let (f, v) = (input.measured.force, input.tip_velocity_desired);
-        let mut out = CompensatorOutput::wrench(input.measured);
-        if !self.observer.observe(&f, &v) {
-            // out of the window: the sensor's noise, nothing applied
-            out.applied = FrameWrench::default();
-            return out;
-        }
         let e = self.observer.energy();
         out.observed_energy = e;
         let magnitude = f.norm();
