@@ -20,10 +20,16 @@ use hilcontact_rt::devices::rdt::RdtOptions;
 use hilcontact_rt::safety::SafetyLimits;
 use hilcontact_rt::{HilHandle, RobotOptions, RuntimeOptions, SensorOptions};
 
+/// `paper-table1` run for `duration` s.
+fn table1_for(duration: f64) -> hilcontact_core::Scenario {
+    let mut s = preset("paper-table1");
+    s.simulation.duration = duration;
+    s
+}
+
 #[test]
 fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
-    let mut s = preset("paper-table1");
-    s.simulation.duration = 5.0;
+    let s = table1_for(5.0);
     let peers = ScriptedPeers::bind();
     let foreign = UdpSocket::bind("127.0.0.1:0").unwrap();
     let (sensor, robot, egm) = (&peers.sensor, &peers.robot, peers.egm);
@@ -31,9 +37,7 @@ fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
         limits: watchdog(200.0),
         ..peers.options(false)
     };
-    let hil = HilHandle::start(&s, &options).unwrap();
-
-    let (request, client) = peers.first_request();
+    let (hil, request, client) = peers.start(&s, &options);
     assert_eq!(
         RdtRequest::decode(&request).unwrap().command,
         RdtCommand::StartRealtime
@@ -75,27 +79,15 @@ fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
             // robot: 2 malformed, 2 invalid (NaN, quaternion norm 0.5), 1 stale, 1 foreign, a gap of 2
             robot.send_to(&[0xff, 0xff, 0xff], egm).unwrap();
             robot.send_to(&rdt_record(1, 0), egm).unwrap();
-            robot
-                .send_to(
-                    feedback.encode(egm_seq + 1, 0, &pose(f64::NAN, 1.0), &initial),
-                    egm,
-                )
-                .unwrap();
-            robot
-                .send_to(
-                    feedback.encode(egm_seq + 1, 0, &pose(-995.0, 0.5), &initial),
-                    egm,
-                )
-                .unwrap();
-            robot
-                .send_to(feedback.encode(egm_seq, 0, &initial, &initial), egm)
-                .unwrap();
-            foreign
-                .send_to(
-                    feedback.encode(egm_seq + 1, 0, &pose(-900.0, 1.0), &initial),
-                    egm,
-                )
-                .unwrap();
+            for (from, seq, actual) in [
+                (robot, egm_seq + 1, pose(f64::NAN, 1.0)),
+                (robot, egm_seq + 1, pose(-995.0, 0.5)),
+                (robot, egm_seq, initial),
+                (&foreign, egm_seq + 1, pose(-900.0, 1.0)),
+            ] {
+                let bytes = feedback.encode(seq, 0, &actual, &initial);
+                from.send_to(bytes, egm).unwrap();
+            }
             egm_seq += 2;
         }
         let next = start + Duration::from_millis(ms as u64 + 1);
@@ -114,41 +106,25 @@ fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
     assert_eq!(m["status"], "stopped", "{}", m["reason"]);
     assert_stop(m, "robot-watchdog");
     assert_eq!(out.exit_code, 3);
-    let (sensor_stats, robot_stats) = (&rt["sensor"], &rt["robot"]);
-    assert_eq!(
-        (
-            sensor_stats["malformed"].as_u64(),
-            sensor_stats["stale"].as_u64(),
-            sensor_stats["lost"].as_u64()
-        ),
-        (Some(3), Some(2), Some(4)),
-        "{sensor_stats}"
-    );
-    assert_eq!(
-        (
-            sensor_stats["invalid"].as_u64(),
-            sensor_stats["foreign"].as_u64()
-        ),
-        (Some(1), Some(2)),
-        "{sensor_stats}"
-    );
-    assert_eq!(
-        (
-            robot_stats["malformed"].as_u64(),
-            robot_stats["invalid"].as_u64()
-        ),
-        (Some(2), Some(2)),
-        "{robot_stats}"
-    );
-    assert_eq!(
-        (
-            robot_stats["stale"].as_u64(),
-            robot_stats["foreign"].as_u64(),
-            robot_stats["lost"].as_u64()
-        ),
-        (Some(1), Some(1), Some(2)),
-        "{robot_stats}"
-    );
+    let sensor_counts = [
+        ("malformed", 3),
+        ("stale", 2),
+        ("lost", 4),
+        ("invalid", 1),
+        ("foreign", 2),
+    ];
+    let robot_counts = [
+        ("malformed", 2),
+        ("invalid", 2),
+        ("stale", 1),
+        ("foreign", 1),
+        ("lost", 2),
+    ];
+    for (stats, counts) in [(&rt["sensor"], sensor_counts), (&rt["robot"], robot_counts)] {
+        for (key, n) in counts {
+            assert_eq!(stats[key].as_u64(), Some(n), "{key}: {stats}");
+        }
+    }
     // nothing bad reached the dynamics: the actual tip stayed where the robot is
     let column = |name: &str| out.timeseries.column(name).unwrap().to_vec();
     assert!(column("actual_tip_position_x")
@@ -216,29 +192,22 @@ fn a_refused_start_commands_no_motion() {
 /// A start refused because the robot is 50 mm short of the scenario's start (-995 mm), with
 /// the robot named (`robot_host`) or not: the error, the corrections received, the robot's pose.
 fn refused_start(named: bool) -> (String, Vec<hilcontact_rt::devices::pose::TargetMm>, PoseMm) {
-    let mut s = preset("paper-table1");
-    s.simulation.duration = 2.0;
+    let s = table1_for(2.0);
     let peers = ScriptedPeers::bind();
     let options = RuntimeOptions {
         connect_timeout: if named { 5.0 } else { 1.0 },
         ..peers.options(named)
     };
-    let hil = HilHandle::start(&s, &options).unwrap();
-    let (_, client) = peers.first_request();
+    let (hil, _, client) = peers.start(&s, &options);
     let away = pose(-1045.0, 1.0);
     let mut feedback = FeedbackEncoder::new();
     let mut corrections = Corrections::new();
-    peers.play(
-        client,
-        Duration::from_secs(10),
-        || hil.is_finished(),
-        |seq| {
-            if seq.is_multiple_of(4) {
-                send_feedback(&peers.robot, peers.egm, &mut feedback, seq / 4, seq, &away).unwrap();
-            }
-            corrections.drain(&peers.robot);
-        },
-    );
+    peers.play(client, 10, &hil, |seq| {
+        if seq.is_multiple_of(4) {
+            send_feedback(&peers.robot, peers.egm, &mut feedback, seq / 4, seq, &away).unwrap();
+        }
+        corrections.drain(&peers.robot);
+    });
     assert!(hil.wait(Duration::from_secs(5)));
     let Err(error) = hil.finish() else {
         panic!("the start must be refused")
@@ -253,49 +222,42 @@ fn refused_start(named: bool) -> (String, Vec<hilcontact_rt::devices::pose::Targ
 /// to it, and the foreign sender's datagrams are counted.
 #[test]
 fn a_foreign_sender_that_starts_first_is_not_the_robot() {
-    let mut s = preset("paper-table1");
-    s.simulation.duration = 0.5;
+    let s = table1_for(0.5);
     let peers = ScriptedPeers::bind();
     let foreign = UdpSocket::bind("127.0.0.1:0").unwrap();
     let options = RuntimeOptions {
         limits: watchdog(500.0),
         ..peers.options(false)
     };
-    let hil = HilHandle::start(&s, &options).unwrap();
-    let (_, client) = peers.first_request();
+    let (hil, _, client) = peers.start(&s, &options);
     let (mut robot_feedback, mut foreign_feedback) =
         (FeedbackEncoder::new(), FeedbackEncoder::new());
     let elsewhere = pose(-1195.0, 1.0);
     foreign.set_nonblocking(true).unwrap();
     let (mut to_robot, mut to_foreign) = (0, 0);
     let (robot, egm) = (&peers.robot, peers.egm);
-    peers.play(
-        client,
-        Duration::from_secs(15),
-        || hil.is_finished(),
-        |ms| {
-            if ms.is_multiple_of(4) {
-                // the foreign sender from the start, with a high sequence number; the robot 100 ms later
-                send_feedback(
-                    &foreign,
-                    egm,
-                    &mut foreign_feedback,
-                    1000 + ms,
-                    ms,
-                    &elsewhere,
-                )
-                .unwrap();
-                if ms > 100 {
-                    // the robot follows the command: 20 mm/s from the start
-                    let t = (ms - 100) as f64 * 1e-3;
-                    let p = pose(-995.0 + 20.0 * t, 1.0);
-                    send_feedback(robot, egm, &mut robot_feedback, ms / 4, ms, &p).unwrap();
-                }
+    peers.play(client, 15, &hil, |ms| {
+        if ms.is_multiple_of(4) {
+            // the foreign sender from the start, with a high sequence number; the robot 100 ms later
+            send_feedback(
+                &foreign,
+                egm,
+                &mut foreign_feedback,
+                1000 + ms,
+                ms,
+                &elsewhere,
+            )
+            .unwrap();
+            if ms > 100 {
+                // the robot follows the command: 20 mm/s from the start
+                let t = (ms - 100) as f64 * 1e-3;
+                let p = pose(-995.0 + 20.0 * t, 1.0);
+                send_feedback(robot, egm, &mut robot_feedback, ms / 4, ms, &p).unwrap();
             }
-            to_robot += count_datagrams(robot);
-            to_foreign += count_datagrams(&foreign);
-        },
-    );
+        }
+        to_robot += count_datagrams(robot);
+        to_foreign += count_datagrams(&foreign);
+    });
     assert!(hil.wait(Duration::from_secs(5)));
     let out = hil.finish().unwrap_or_else(|e| panic!("{e}"));
     let rt = &out.metrics["realtime"];
@@ -331,25 +293,19 @@ fn run_scripted(
         limits,
         ..peers.options(false)
     };
-    let hil = HilHandle::start(s, &options).unwrap();
-    let (_, client) = peers.first_request();
+    let (hil, _, client) = peers.start(s, &options);
     let mut feedback = FeedbackEncoder::new();
     let mut corrections = Corrections::new();
     let mut egm_seq = 0u32;
-    peers.play(
-        client,
-        Duration::from_secs(15),
-        || hil.is_finished(),
-        |ms| {
-            if ms.is_multiple_of(4) {
-                if let Some(p) = robot_pose(ms) {
-                    egm_seq += 1;
-                    send_feedback(&peers.robot, peers.egm, &mut feedback, egm_seq, ms, &p).unwrap();
-                }
+    peers.play(client, 15, &hil, |ms| {
+        if ms.is_multiple_of(4) {
+            if let Some(p) = robot_pose(ms) {
+                egm_seq += 1;
+                send_feedback(&peers.robot, peers.egm, &mut feedback, egm_seq, ms, &p).unwrap();
             }
-            corrections.drain(&peers.robot);
-        },
-    );
+        }
+        corrections.drain(&peers.robot);
+    });
     assert!(hil.wait(Duration::from_secs(5)), "the run did not end");
     let output = hil.finish();
     corrections.drain(&peers.robot);
@@ -365,8 +321,7 @@ fn run_scripted(
 /// follows targets a checked pose at rest.
 #[test]
 fn frozen_feedback_is_a_tracking_stop() {
-    let mut s = preset("paper-table1");
-    s.simulation.duration = 6.0;
+    let s = table1_for(6.0);
     let limits = watchdog(500.0); // a busy machine must not trip the watchdog first
     let frozen = pose(-995.0, 1.0);
     let run = run_scripted(&s, limits, |_| Some(frozen));
@@ -394,8 +349,7 @@ fn frozen_feedback_is_a_tracking_stop() {
 /// the run, and the hold never targets the bogus pose.
 #[test]
 fn a_300_mm_feedback_jump_is_counted_and_never_held() {
-    let mut s = preset("paper-table1");
-    s.simulation.duration = 6.0;
+    let s = table1_for(6.0);
     let limits = watchdog(200.0);
     // the robot follows the command (20 mm/s from -995 mm), then reports 300 mm off from 0.3 s
     let run = run_scripted(&s, limits, |ms| {

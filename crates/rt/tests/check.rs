@@ -107,17 +107,12 @@ fn scripted_check(named: bool) -> (Vec<String>, usize) {
     let away = pose(-1045.0, 1.0);
     let mut feedback = FeedbackEncoder::new();
     let mut received = 0;
-    peers.play(
-        client,
-        Duration::from_secs(10),
-        || checker.is_finished(),
-        |seq| {
-            if seq.is_multiple_of(4) {
-                let _ = send_feedback(&peers.robot, peers.egm, &mut feedback, seq / 4, seq, &away);
-            }
-            received += count_datagrams(&peers.robot);
-        },
-    );
+    peers.play(client, 10, &checker, |seq| {
+        if seq.is_multiple_of(4) {
+            let _ = send_feedback(&peers.robot, peers.egm, &mut feedback, seq / 4, seq, &away);
+        }
+        received += count_datagrams(&peers.robot);
+    });
     let report = checker.join().unwrap().unwrap();
     std::thread::sleep(Duration::from_millis(50));
     received += count_datagrams(&peers.robot);

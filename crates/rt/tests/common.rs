@@ -338,24 +338,53 @@ impl ScriptedPeers {
         (buf[..n].to_vec(), client)
     }
 
+    /// Starts the loop on `s` with `options` (met by these peers), and waits for its first
+    /// request to the sensor: the run, the request's bytes and the loop's address.
+    pub fn start(
+        &self,
+        s: &Scenario,
+        options: &RuntimeOptions,
+    ) -> (HilHandle, Vec<u8>, SocketAddr) {
+        let hil = HilHandle::start(s, options).unwrap();
+        let (request, client) = self.first_request();
+        (hil, request, client)
+    }
+
     /// The script, on its own millisecond count (a busy machine slows it, never skips it): every
     /// millisecond `ms` (from 1) a zero-wrench record numbered `ms` to `client`, then
-    /// `robot(ms)`, until `done()` or `limit` has passed.
+    /// `robot(ms)`, until `until` has ended or `limit_s` seconds have passed.
     pub fn play(
         &self,
         client: SocketAddr,
-        limit: Duration,
-        done: impl Fn() -> bool,
+        limit_s: u64,
+        until: &impl Ends,
         mut robot: impl FnMut(u32),
     ) {
         let start = Instant::now();
         let mut ms = 0u32;
-        while !done() && start.elapsed() < limit {
+        while !until.ended() && start.elapsed() < Duration::from_secs(limit_s) {
             ms += 1;
             self.sensor.send_to(&rdt_record(ms, 0), client).unwrap();
             robot(ms);
             std::thread::sleep(Duration::from_millis(1));
         }
+    }
+}
+
+/// What a script plays against until it ends: a run, or a thread (`check`).
+pub trait Ends {
+    fn ended(&self) -> bool;
+}
+
+impl Ends for HilHandle {
+    fn ended(&self) -> bool {
+        self.is_finished()
+    }
+}
+
+impl<T> Ends for std::thread::JoinHandle<T> {
+    fn ended(&self) -> bool {
+        self.is_finished()
     }
 }
 
