@@ -26,15 +26,16 @@ use hilcontact_rt::{
 use nalgebra::{UnitQuaternion, Vector3};
 use serde_json::Value;
 
-/// The core's test helpers (`preset`, `table1`), one file for both crates.
+/// The core's test helpers (`preset`), one file for both crates.
 #[path = "../../core/tests/common/mod.rs"]
 mod core_common;
-#[allow(unused_imports)] // not every test file uses both
-pub use core_common::{preset, table1};
+#[allow(unused_imports)] // not every test file reads a preset
+pub use core_common::preset;
 
 /// `paper-table1` with a 20 ms robot delay, run for `duration` s by `compensator`.
 pub fn delayed(compensator: CompensatorConfig, duration: f64) -> Scenario {
-    let mut s = table1(0.02, 0.0);
+    let mut s = preset("paper-table1");
+    s.facility.robot_delay = 0.02;
     s.simulation.duration = duration;
     s.compensator = compensator;
     s
