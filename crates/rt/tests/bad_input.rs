@@ -5,147 +5,89 @@
 
 mod common;
 
-use std::net::{SocketAddr, UdpSocket};
+use std::net::UdpSocket;
 use std::time::{Duration, Instant};
 
-use common::{free_udp_port, preset};
-use hilcontact_rt::devices::egm::codec::{CorrectionDecoder, FeedbackEncoder};
+use common::{
+    assert_stop, count_datagrams, pose, preset, rdt_record, send_feedback, watchdog, Corrections,
+    ScriptedPeers,
+};
+use hilcontact_rt::devices::egm::codec::FeedbackEncoder;
 use hilcontact_rt::devices::egm::EgmOptions;
 use hilcontact_rt::devices::pose::PoseMm;
-use hilcontact_rt::devices::rdt::codec::{RdtCommand, RdtRecord, RdtRequest};
+use hilcontact_rt::devices::rdt::codec::{RdtCommand, RdtRequest};
 use hilcontact_rt::devices::rdt::RdtOptions;
 use hilcontact_rt::safety::SafetyLimits;
 use hilcontact_rt::{HilHandle, RobotOptions, RuntimeOptions, SensorOptions};
 
-fn pose(x: f64, w: f64) -> PoseMm {
-    PoseMm {
-        position_mm: [x, 0.0, 0.0],
-        orientation: [w, 0.0, 0.0, 0.0],
-    }
-}
-
-/// Runtime options for a scripted RDT sensor on `sensor` and a scripted EGM robot sending to
-/// `egm_port` (counts of 1e6 per unit: no HTTP query).
-fn scripted(sensor: &UdpSocket, egm_port: u16) -> RuntimeOptions {
-    RuntimeOptions {
-        sensor: SensorOptions::Rdt(RdtOptions {
-            port: sensor.local_addr().unwrap().port(),
-            counts_per_force: Some(1e6),
-            counts_per_torque: Some(1e6),
-            ..Default::default()
-        }),
-        robot: RobotOptions::Egm(EgmOptions {
-            port: egm_port,
-            bind_host: "127.0.0.1".into(),
-            ..Default::default()
-        }),
-        ..Default::default()
-    }
+/// `paper-table1` run for `duration` s.
+fn table1_for(duration: f64) -> hilcontact_core::Scenario {
+    let mut s = preset("paper-table1");
+    s.simulation.duration = duration;
+    s
 }
 
 #[test]
 fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
-    let mut s = preset("paper-table1");
-    s.simulation.duration = 5.0;
-    let sensor = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let robot = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let s = table1_for(5.0);
+    let peers = ScriptedPeers::bind();
     let foreign = UdpSocket::bind("127.0.0.1:0").unwrap();
-    sensor
-        .set_read_timeout(Some(Duration::from_secs(5)))
-        .unwrap();
-    let egm_port = free_udp_port();
-    let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
+    let (sensor, robot, egm) = (&peers.sensor, &peers.robot, peers.egm);
     let options = RuntimeOptions {
-        limits: SafetyLimits {
-            watchdog_ms: 200.0,
-            ..Default::default()
-        },
-        ..scripted(&sensor, egm_port)
+        limits: watchdog(200.0),
+        ..peers.options(false)
     };
-    let hil = HilHandle::start(&s, &options).unwrap();
-
-    let mut buf = [0u8; 64];
-    let (n, client) = sensor.recv_from(&mut buf).unwrap();
+    let (hil, request, client) = peers.start(&s, &options);
     assert_eq!(
-        RdtRequest::decode(&buf[..n]).unwrap().command,
+        RdtRequest::decode(&request).unwrap().command,
         RdtCommand::StartRealtime
     );
 
     let mut feedback = FeedbackEncoder::new();
     let initial = pose(-995.0, 1.0); // the servicer's CoM in t, mm: where paper-table1 starts
     let (mut rdt_seq, mut egm_seq) = (0u32, 0u32);
-    let record = |seq: u32, status: u32| {
-        RdtRecord {
-            rdt_sequence: seq,
-            ft_sequence: seq,
-            status,
-            counts: [0; 6],
-        }
-        .encode()
-    };
     // the corrections the robot receives, drained as they come (the socket buffer is small)
-    robot.set_nonblocking(true).unwrap();
-    let mut decoder = CorrectionDecoder::new();
-    let mut last = None;
-    let mut big = [0u8; 2048];
-    let mut drain = |last: &mut Option<_>| {
-        while let Ok(n) = robot.recv(&mut big) {
-            *last = Some(decoder.decode(&big[..n]).unwrap());
-        }
-    };
+    let mut corrections = Corrections::new();
     let start = Instant::now();
     for ms in 0..700u32 {
-        drain(&mut last);
+        corrections.drain(robot);
         rdt_seq += 1;
-        sensor.send_to(&record(rdt_seq, 0), client).unwrap();
+        sensor.send_to(&rdt_record(rdt_seq, 0), client).unwrap();
         if ms % 4 == 0 && ms < 500 {
             egm_seq += 1;
-            robot
-                .send_to(
-                    feedback.encode(egm_seq, ms as u64 * 1000, &initial, &initial),
-                    egm,
-                )
-                .unwrap();
+            send_feedback(robot, egm, &mut feedback, egm_seq, ms, &initial).unwrap();
         }
         if ms == 200 {
             // sensor: 3 malformed, 2 stale, a gap of 4, 1 error status, 2 foreign
             for len in [35usize, 37, 72] {
                 sensor.send_to(&vec![0u8; len], client).unwrap();
             }
-            sensor.send_to(&record(rdt_seq, 0), client).unwrap();
-            sensor.send_to(&record(rdt_seq - 1, 0), client).unwrap();
+            sensor.send_to(&rdt_record(rdt_seq, 0), client).unwrap();
+            sensor.send_to(&rdt_record(rdt_seq - 1, 0), client).unwrap();
             rdt_seq += 5;
-            sensor.send_to(&record(rdt_seq, 0), client).unwrap();
+            sensor.send_to(&rdt_record(rdt_seq, 0), client).unwrap();
             rdt_seq += 1;
             sensor
-                .send_to(&record(rdt_seq, 0x8000_0000), client)
-                .unwrap();
-            foreign.send_to(&record(rdt_seq + 1, 0), client).unwrap();
-            foreign.send_to(&record(rdt_seq + 2, 0), client).unwrap();
-            // robot: 2 malformed, 2 invalid (NaN, quaternion norm 0.5), 1 stale, 1 foreign, a gap of 2
-            robot.send_to(&[0xff, 0xff, 0xff], egm).unwrap();
-            robot.send_to(&record(1, 0), egm).unwrap();
-            robot
-                .send_to(
-                    feedback.encode(egm_seq + 1, 0, &pose(f64::NAN, 1.0), &initial),
-                    egm,
-                )
-                .unwrap();
-            robot
-                .send_to(
-                    feedback.encode(egm_seq + 1, 0, &pose(-995.0, 0.5), &initial),
-                    egm,
-                )
-                .unwrap();
-            robot
-                .send_to(feedback.encode(egm_seq, 0, &initial, &initial), egm)
+                .send_to(&rdt_record(rdt_seq, 0x8000_0000), client)
                 .unwrap();
             foreign
-                .send_to(
-                    feedback.encode(egm_seq + 1, 0, &pose(-900.0, 1.0), &initial),
-                    egm,
-                )
+                .send_to(&rdt_record(rdt_seq + 1, 0), client)
                 .unwrap();
+            foreign
+                .send_to(&rdt_record(rdt_seq + 2, 0), client)
+                .unwrap();
+            // robot: 2 malformed, 2 invalid (NaN, quaternion norm 0.5), 1 stale, 1 foreign, a gap of 2
+            robot.send_to(&[0xff, 0xff, 0xff], egm).unwrap();
+            robot.send_to(&rdt_record(1, 0), egm).unwrap();
+            for (from, seq, actual) in [
+                (robot, egm_seq + 1, pose(f64::NAN, 1.0)),
+                (robot, egm_seq + 1, pose(-995.0, 0.5)),
+                (robot, egm_seq, initial),
+                (&foreign, egm_seq + 1, pose(-900.0, 1.0)),
+            ] {
+                let bytes = feedback.encode(seq, 0, &actual, &initial);
+                from.send_to(bytes, egm).unwrap();
+            }
             egm_seq += 2;
         }
         let next = start + Duration::from_millis(ms as u64 + 1);
@@ -162,43 +104,27 @@ fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
     let m = &out.metrics;
     let rt = &m["realtime"];
     assert_eq!(m["status"], "stopped", "{}", m["reason"]);
-    assert_eq!(rt["stop"]["kind"], "robot-watchdog");
+    assert_stop(m, "robot-watchdog");
     assert_eq!(out.exit_code, 3);
-    let (sensor_stats, robot_stats) = (&rt["sensor"], &rt["robot"]);
-    assert_eq!(
-        (
-            sensor_stats["malformed"].as_u64(),
-            sensor_stats["stale"].as_u64(),
-            sensor_stats["lost"].as_u64()
-        ),
-        (Some(3), Some(2), Some(4)),
-        "{sensor_stats}"
-    );
-    assert_eq!(
-        (
-            sensor_stats["invalid"].as_u64(),
-            sensor_stats["foreign"].as_u64()
-        ),
-        (Some(1), Some(2)),
-        "{sensor_stats}"
-    );
-    assert_eq!(
-        (
-            robot_stats["malformed"].as_u64(),
-            robot_stats["invalid"].as_u64()
-        ),
-        (Some(2), Some(2)),
-        "{robot_stats}"
-    );
-    assert_eq!(
-        (
-            robot_stats["stale"].as_u64(),
-            robot_stats["foreign"].as_u64(),
-            robot_stats["lost"].as_u64()
-        ),
-        (Some(1), Some(1), Some(2)),
-        "{robot_stats}"
-    );
+    let sensor_counts = [
+        ("malformed", 3),
+        ("stale", 2),
+        ("lost", 4),
+        ("invalid", 1),
+        ("foreign", 2),
+    ];
+    let robot_counts = [
+        ("malformed", 2),
+        ("invalid", 2),
+        ("stale", 1),
+        ("foreign", 1),
+        ("lost", 2),
+    ];
+    for (stats, counts) in [(&rt["sensor"], sensor_counts), (&rt["robot"], robot_counts)] {
+        for (key, n) in counts {
+            assert_eq!(stats[key].as_u64(), Some(n), "{key}: {stats}");
+        }
+    }
     // nothing bad reached the dynamics: the actual tip stayed where the robot is
     let column = |name: &str| out.timeseries.column(name).unwrap().to_vec();
     assert!(column("actual_tip_position_x")
@@ -212,12 +138,17 @@ fn bad_packets_are_counted_and_dropped_and_the_robot_watchdog_stops_the_run() {
     );
 
     // after the stop: hold corrections at the last fed-back pose, then an RDT stop request
-    drain(&mut last);
-    let hold = last.expect("no correction received").target;
+    corrections.drain(robot);
+    let hold = corrections
+        .all
+        .last()
+        .expect("no correction received")
+        .target;
     assert_eq!(hold.pose, initial);
     assert_eq!(hold.speed, [0.0; 6]);
     sensor.set_nonblocking(true).unwrap();
     let mut stops = 0;
+    let mut buf = [0u8; 64];
     while let Ok(n) = sensor.recv(&mut buf) {
         if RdtRequest::decode(&buf[..n]).is_ok_and(|r| r.command == RdtCommand::Stop) {
             stops += 1;
@@ -261,66 +192,29 @@ fn a_refused_start_commands_no_motion() {
 /// A start refused because the robot is 50 mm short of the scenario's start (-995 mm), with
 /// the robot named (`robot_host`) or not: the error, the corrections received, the robot's pose.
 fn refused_start(named: bool) -> (String, Vec<hilcontact_rt::devices::pose::TargetMm>, PoseMm) {
-    let mut s = preset("paper-table1");
-    s.simulation.duration = 2.0;
-    let sensor = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let robot = UdpSocket::bind("127.0.0.1:0").unwrap();
-    sensor
-        .set_read_timeout(Some(Duration::from_secs(5)))
-        .unwrap();
-    let egm_port = free_udp_port();
-    let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
-    let mut options = RuntimeOptions {
+    let s = table1_for(2.0);
+    let peers = ScriptedPeers::bind();
+    let options = RuntimeOptions {
         connect_timeout: if named { 5.0 } else { 1.0 },
-        ..scripted(&sensor, egm_port)
+        ..peers.options(named)
     };
-    if named {
-        let RobotOptions::Egm(o) = &mut options.robot else {
-            panic!("EGM options expected")
-        };
-        o.robot_host = Some("127.0.0.1".into());
-    }
-    let hil = HilHandle::start(&s, &options).unwrap();
-    let mut buf = [0u8; 64];
-    let (_, client) = sensor.recv_from(&mut buf).unwrap();
+    let (hil, _, client) = peers.start(&s, &options);
     let away = pose(-1045.0, 1.0);
     let mut feedback = FeedbackEncoder::new();
-    robot.set_nonblocking(true).unwrap();
-    let mut decoder = CorrectionDecoder::new();
-    let mut corrections = Vec::new();
-    let mut big = [0u8; 2048];
-    let start = Instant::now();
-    let mut seq = 0u32;
-    while !hil.is_finished() && start.elapsed() < Duration::from_secs(10) {
-        seq += 1;
-        let record = RdtRecord {
-            rdt_sequence: seq,
-            ft_sequence: seq,
-            status: 0,
-            counts: [0; 6],
-        };
-        sensor.send_to(&record.encode(), client).unwrap();
+    let mut corrections = Corrections::new();
+    peers.play(client, 10, &hil, |seq| {
         if seq.is_multiple_of(4) {
-            robot
-                .send_to(
-                    feedback.encode(seq / 4, seq as u64 * 1000, &away, &away),
-                    egm,
-                )
-                .unwrap();
+            send_feedback(&peers.robot, peers.egm, &mut feedback, seq / 4, seq, &away).unwrap();
         }
-        while let Ok(n) = robot.recv(&mut big) {
-            corrections.push(decoder.decode(&big[..n]).unwrap().target);
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    }
+        corrections.drain(&peers.robot);
+    });
     assert!(hil.wait(Duration::from_secs(5)));
     let Err(error) = hil.finish() else {
         panic!("the start must be refused")
     };
-    while let Ok(n) = robot.recv(&mut big) {
-        corrections.push(decoder.decode(&big[..n]).unwrap().target);
-    }
-    (error.to_string(), corrections, away)
+    corrections.drain(&peers.robot);
+    let targets = corrections.all.iter().map(|c| c.target).collect();
+    (error.to_string(), targets, away)
 }
 
 /// Without `--robot`, a foreign EGM sender that started first (another robot, 200 mm from the
@@ -328,69 +222,46 @@ fn refused_start(named: bool) -> (String, Vec<hilcontact_rt::devices::pose::Targ
 /// to it, and the foreign sender's datagrams are counted.
 #[test]
 fn a_foreign_sender_that_starts_first_is_not_the_robot() {
-    let mut s = preset("paper-table1");
-    s.simulation.duration = 0.5;
-    let sensor = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let robot = UdpSocket::bind("127.0.0.1:0").unwrap();
+    let s = table1_for(0.5);
+    let peers = ScriptedPeers::bind();
     let foreign = UdpSocket::bind("127.0.0.1:0").unwrap();
-    sensor
-        .set_read_timeout(Some(Duration::from_secs(5)))
-        .unwrap();
-    let egm_port = free_udp_port();
-    let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
     let options = RuntimeOptions {
-        limits: SafetyLimits {
-            watchdog_ms: 500.0,
-            ..Default::default()
-        },
-        ..scripted(&sensor, egm_port)
+        limits: watchdog(500.0),
+        ..peers.options(false)
     };
-    let hil = HilHandle::start(&s, &options).unwrap();
-    let mut buf = [0u8; 64];
-    let (_, client) = sensor.recv_from(&mut buf).unwrap();
+    let (hil, _, client) = peers.start(&s, &options);
     let (mut robot_feedback, mut foreign_feedback) =
         (FeedbackEncoder::new(), FeedbackEncoder::new());
     let elsewhere = pose(-1195.0, 1.0);
-    robot.set_nonblocking(true).unwrap();
     foreign.set_nonblocking(true).unwrap();
-    let mut big = [0u8; 2048];
     let (mut to_robot, mut to_foreign) = (0, 0);
-    let start = Instant::now();
-    let mut ms = 0u32;
-    while !hil.is_finished() && start.elapsed() < Duration::from_secs(15) {
-        ms += 1;
-        let record = RdtRecord {
-            rdt_sequence: ms,
-            ft_sequence: ms,
-            status: 0,
-            counts: [0; 6],
-        };
-        sensor.send_to(&record.encode(), client).unwrap();
+    let (robot, egm) = (&peers.robot, peers.egm);
+    peers.play(client, 15, &hil, |ms| {
         if ms.is_multiple_of(4) {
             // the foreign sender from the start, with a high sequence number; the robot 100 ms later
-            let bytes =
-                foreign_feedback.encode(1000 + ms, ms as u64 * 1000, &elsewhere, &elsewhere);
-            foreign.send_to(bytes, egm).unwrap();
+            send_feedback(
+                &foreign,
+                egm,
+                &mut foreign_feedback,
+                1000 + ms,
+                ms,
+                &elsewhere,
+            )
+            .unwrap();
             if ms > 100 {
                 // the robot follows the command: 20 mm/s from the start
                 let t = (ms - 100) as f64 * 1e-3;
                 let p = pose(-995.0 + 20.0 * t, 1.0);
-                let bytes = robot_feedback.encode(ms / 4, ms as u64 * 1000, &p, &p);
-                robot.send_to(bytes, egm).unwrap();
+                send_feedback(robot, egm, &mut robot_feedback, ms / 4, ms, &p).unwrap();
             }
         }
-        while robot.recv(&mut big).is_ok() {
-            to_robot += 1;
-        }
-        while foreign.recv(&mut big).is_ok() {
-            to_foreign += 1;
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    }
+        to_robot += count_datagrams(robot);
+        to_foreign += count_datagrams(&foreign);
+    });
     assert!(hil.wait(Duration::from_secs(5)));
     let out = hil.finish().unwrap_or_else(|e| panic!("{e}"));
     let rt = &out.metrics["realtime"];
-    assert_eq!(rt["stop"]["kind"], "completed", "{}", out.metrics["reason"]);
+    assert_stop(&out.metrics, "completed");
     assert_eq!(
         rt["robot_address"].as_str().unwrap(),
         robot.local_addr().unwrap().to_string()
@@ -417,59 +288,30 @@ fn run_scripted(
     limits: SafetyLimits,
     mut robot_pose: impl FnMut(u32) -> Option<PoseMm>,
 ) -> Scripted {
-    let sensor = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let robot = UdpSocket::bind("127.0.0.1:0").unwrap();
-    sensor
-        .set_read_timeout(Some(Duration::from_secs(5)))
-        .unwrap();
-    let egm_port = free_udp_port();
-    let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
+    let peers = ScriptedPeers::bind();
     let options = RuntimeOptions {
         limits,
-        ..scripted(&sensor, egm_port)
+        ..peers.options(false)
     };
-    let hil = HilHandle::start(s, &options).unwrap();
-    let mut buf = [0u8; 64];
-    let (_, client) = sensor.recv_from(&mut buf).unwrap();
+    let (hil, _, client) = peers.start(s, &options);
     let mut feedback = FeedbackEncoder::new();
-    robot.set_nonblocking(true).unwrap();
-    let mut decoder = CorrectionDecoder::new();
-    let mut corrections = Vec::new();
-    let mut big = [0u8; 2048];
-    let start = Instant::now();
+    let mut corrections = Corrections::new();
     let mut egm_seq = 0u32;
-    // the script runs on its own millisecond count: a busy machine slows it, never skips it
-    let mut ms = 0u32;
-    while !hil.is_finished() && start.elapsed() < Duration::from_secs(15) {
-        ms += 1;
-        let record = RdtRecord {
-            rdt_sequence: ms,
-            ft_sequence: ms,
-            status: 0,
-            counts: [0; 6],
-        };
-        sensor.send_to(&record.encode(), client).unwrap();
+    peers.play(client, 15, &hil, |ms| {
         if ms.is_multiple_of(4) {
             if let Some(p) = robot_pose(ms) {
                 egm_seq += 1;
-                robot
-                    .send_to(feedback.encode(egm_seq, ms as u64 * 1000, &p, &p), egm)
-                    .unwrap();
+                send_feedback(&peers.robot, peers.egm, &mut feedback, egm_seq, ms, &p).unwrap();
             }
         }
-        while let Ok(n) = robot.recv(&mut big) {
-            corrections.push(decoder.decode(&big[..n]).unwrap());
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    }
+        corrections.drain(&peers.robot);
+    });
     assert!(hil.wait(Duration::from_secs(5)), "the run did not end");
     let output = hil.finish();
-    while let Ok(n) = robot.recv(&mut big) {
-        corrections.push(decoder.decode(&big[..n]).unwrap());
-    }
+    corrections.drain(&peers.robot);
     Scripted {
         output,
-        corrections,
+        corrections: corrections.all,
     }
 }
 
@@ -479,17 +321,13 @@ fn run_scripted(
 /// follows targets a checked pose at rest.
 #[test]
 fn frozen_feedback_is_a_tracking_stop() {
-    let mut s = preset("paper-table1");
-    s.simulation.duration = 6.0;
-    let limits = SafetyLimits {
-        watchdog_ms: 500.0, // a busy machine must not trip the watchdog first
-        ..Default::default()
-    };
+    let s = table1_for(6.0);
+    let limits = watchdog(500.0); // a busy machine must not trip the watchdog first
     let frozen = pose(-995.0, 1.0);
     let run = run_scripted(&s, limits, |_| Some(frozen));
     let out = run.output.expect("the run starts");
     let rt = &out.metrics["realtime"];
-    assert_eq!(rt["stop"]["kind"], "tracking", "{}", out.metrics["reason"]);
+    assert_stop(&out.metrics, "tracking");
     assert_eq!(out.exit_code, 3);
     let time = rt["stop"]["time"].as_f64().unwrap();
     assert!((0.9..1.3).contains(&time), "stopped at {time} s");
@@ -511,12 +349,8 @@ fn frozen_feedback_is_a_tracking_stop() {
 /// the run, and the hold never targets the bogus pose.
 #[test]
 fn a_300_mm_feedback_jump_is_counted_and_never_held() {
-    let mut s = preset("paper-table1");
-    s.simulation.duration = 6.0;
-    let limits = SafetyLimits {
-        watchdog_ms: 200.0,
-        ..Default::default()
-    };
+    let s = table1_for(6.0);
+    let limits = watchdog(200.0);
     // the robot follows the command (20 mm/s from -995 mm), then reports 300 mm off from 0.3 s
     let run = run_scripted(&s, limits, |ms| {
         let t = ms as f64 * 1e-3;
@@ -525,11 +359,7 @@ fn a_300_mm_feedback_jump_is_counted_and_never_held() {
     });
     let out = run.output.expect("the run starts");
     let rt = &out.metrics["realtime"];
-    assert_eq!(
-        rt["stop"]["kind"], "robot-watchdog",
-        "{}",
-        out.metrics["reason"]
-    );
+    assert_stop(&out.metrics, "robot-watchdog");
     assert!(
         rt["robot"]["invalid"].as_u64().unwrap() >= 20,
         "{}",

@@ -4,16 +4,11 @@
 
 mod common;
 
-use std::net::{SocketAddr, UdpSocket};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use common::{free_udp_port, loopback_options, preset};
+use common::{count_datagrams, loopback_options, pose, preset, send_feedback, ScriptedPeers};
 use hilcontact_rt::devices::egm::codec::FeedbackEncoder;
-use hilcontact_rt::devices::egm::EgmOptions;
-use hilcontact_rt::devices::pose::PoseMm;
-use hilcontact_rt::devices::rdt::codec::RdtRecord;
-use hilcontact_rt::devices::rdt::RdtOptions;
-use hilcontact_rt::{check, FacilityHandle, RobotOptions, RuntimeOptions, SensorOptions};
+use hilcontact_rt::{check, FacilityHandle};
 
 /// Against the emulator with an unbiased sensor: a run would start; the offset is the injected
 /// one, the rates are the devices' (1 kHz RDT, 250 Hz EGM; generous bounds for a busy
@@ -105,66 +100,22 @@ fn a_robot_50_mm_from_the_start_would_refuse_and_receives_nothing() {
 /// -1045 mm; returns the reasons and the datagrams the robot received.
 fn scripted_check(named: bool) -> (Vec<String>, usize) {
     let s = preset("paper-table1");
-    let sensor = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let robot = UdpSocket::bind("127.0.0.1:0").unwrap();
-    sensor
-        .set_read_timeout(Some(Duration::from_secs(5)))
-        .unwrap();
-    robot.set_nonblocking(true).unwrap();
-    let egm_port = free_udp_port();
-    let egm: SocketAddr = ([127, 0, 0, 1], egm_port).into();
-    let options = RuntimeOptions {
-        sensor: SensorOptions::Rdt(RdtOptions {
-            port: sensor.local_addr().unwrap().port(),
-            counts_per_force: Some(1e6),
-            counts_per_torque: Some(1e6),
-            ..Default::default()
-        }),
-        robot: RobotOptions::Egm(EgmOptions {
-            port: egm_port,
-            bind_host: "127.0.0.1".into(),
-            robot_host: named.then(|| "127.0.0.1".into()),
-            ..Default::default()
-        }),
-        ..Default::default()
-    };
+    let peers = ScriptedPeers::bind();
+    let options = peers.options(named);
     let checker = std::thread::spawn(move || check(&s, &options, 0.5));
-    let mut buf = [0u8; 64];
-    let (_, client) = sensor.recv_from(&mut buf).unwrap();
-    let away = PoseMm {
-        position_mm: [-1045.0, 0.0, 0.0],
-        orientation: [1.0, 0.0, 0.0, 0.0],
-    };
+    let (_, client) = peers.first_request();
+    let away = pose(-1045.0, 1.0);
     let mut feedback = FeedbackEncoder::new();
-    let mut big = [0u8; 2048];
     let mut received = 0;
-    let start = Instant::now();
-    let mut seq = 0u32;
-    while !checker.is_finished() && start.elapsed() < Duration::from_secs(10) {
-        seq += 1;
-        let record = RdtRecord {
-            rdt_sequence: seq,
-            ft_sequence: seq,
-            status: 0,
-            counts: [0; 6],
-        };
-        let _ = sensor.send_to(&record.encode(), client);
+    peers.play(client, 10, &checker, |seq| {
         if seq.is_multiple_of(4) {
-            let _ = robot.send_to(
-                feedback.encode(seq / 4, seq as u64 * 1000, &away, &away),
-                egm,
-            );
+            let _ = send_feedback(&peers.robot, peers.egm, &mut feedback, seq / 4, seq, &away);
         }
-        while robot.recv(&mut big).is_ok() {
-            received += 1;
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    }
+        received += count_datagrams(&peers.robot);
+    });
     let report = checker.join().unwrap().unwrap();
     std::thread::sleep(Duration::from_millis(50));
-    while robot.recv(&mut big).is_ok() {
-        received += 1;
-    }
+    received += count_datagrams(&peers.robot);
     assert!(!report.would_start);
     assert_eq!(report.robot.stats.sent, 0);
     assert!(report.sensor.stats.accepted > 0);

@@ -10,7 +10,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use common::{free_udp_port, preset};
+use common::{
+    assert_stop, endpoint_context, free_tcp_port, free_udp_port, link_context, preset, watchdog,
+};
 use hilcontact_core::compensator::CompensatorConfig;
 use hilcontact_core::world::RelativeMotion;
 use hilcontact_rt::clock::now_ns;
@@ -18,12 +20,9 @@ use hilcontact_rt::devices::egm::EgmOptions;
 use hilcontact_rt::devices::rdt::codec::{RdtCommand, RdtRecord, RdtRequest};
 use hilcontact_rt::devices::rdt::netftapi::{ForceUnit, TorqueUnit};
 use hilcontact_rt::devices::rdt::{RdtEndpoint, RdtEndpointOptions, RdtOptions, RdtSensor};
-use hilcontact_rt::devices::{
-    wait_readable, EndpointContext, LinkContext, LinkStats, Pacing, SensorEndpoint, Wrench,
-};
+use hilcontact_rt::devices::{wait_readable, LinkStats, Pacing, SensorEndpoint, Wrench};
 use hilcontact_rt::feedback::FeedbackEstimator;
 use hilcontact_rt::offset::{OffsetMode, OffsetOptions};
-use hilcontact_rt::safety::SafetyLimits;
 use hilcontact_rt::{
     HilHandle, RobotLink, RobotOptions, RuntimeOptions, SensorLink, SensorOptions,
 };
@@ -43,6 +42,19 @@ struct FakePacedRobot {
     answered: Option<u64>,
     stats: LinkStats,
     buf: [u8; 256],
+}
+
+impl FakePacedRobot {
+    fn new(socket: UdpSocket) -> Self {
+        FakePacedRobot {
+            socket,
+            peer: None,
+            last_counter: None,
+            answered: None,
+            stats: LinkStats::default(),
+            buf: [0; 256],
+        }
+    }
 }
 
 impl RobotLink for FakePacedRobot {
@@ -121,6 +133,7 @@ impl RobotLink for FakePacedRobot {
 }
 
 /// A sensor that always has a new zero wrench (no contact in this test).
+#[derive(Default)]
 struct FreeSensor {
     stats: LinkStats,
 }
@@ -157,19 +170,9 @@ fn robot_paced_loop_runs_one_tick_per_robot_packet_and_answers_each() {
     let link_socket = UdpSocket::bind("127.0.0.1:0").unwrap();
     link_socket.set_nonblocking(true).unwrap();
     let link_addr = link_socket.local_addr().unwrap();
-    let robot = FakePacedRobot {
-        socket: link_socket,
-        peer: None,
-        last_counter: None,
-        answered: None,
-        stats: LinkStats::default(),
-        buf: [0; 256],
-    };
+    let robot = FakePacedRobot::new(link_socket);
     let options = RuntimeOptions {
-        limits: SafetyLimits {
-            watchdog_ms: 100.0,
-            ..Default::default()
-        },
+        limits: watchdog(100.0),
         // no offset measurement at start: its holds would be answered like the run's ticks
         offset: OffsetOptions {
             mode: OffsetMode::Off,
@@ -188,9 +191,7 @@ fn robot_paced_loop_runs_one_tick_per_robot_packet_and_answers_each() {
     let hil = HilHandle::start_with_links(
         &s,
         &options,
-        Box::new(FreeSensor {
-            stats: LinkStats::default(),
-        }),
+        Box::new(FreeSensor::default()),
         Box::new(robot),
     )
     .unwrap();
@@ -239,11 +240,7 @@ fn robot_paced_loop_runs_one_tick_per_robot_packet_and_answers_each() {
     let (sent, running_from, echoed, unanswered) = robot_thread.join().unwrap();
     let out = hil.finish().unwrap();
     let rt = &out.metrics["realtime"];
-    assert_eq!(
-        rt["stop"]["kind"], "robot-watchdog",
-        "{}",
-        out.metrics["reason"]
-    );
+    assert_stop(&out.metrics, "robot-watchdog");
     assert!(
         out.metrics["reason"]
             .as_str()
@@ -286,17 +283,8 @@ fn robot_paced_loop_runs_one_tick_per_robot_packet_and_answers_each() {
 fn robot_paced_link_needs_the_scenario_period_to_match() {
     let s = preset("paper-table1"); // 1 ms
     let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
-    let robot = FakePacedRobot {
-        socket,
-        peer: None,
-        last_counter: None,
-        answered: None,
-        stats: LinkStats::default(),
-        buf: [0; 256],
-    };
-    let sensor = FreeSensor {
-        stats: LinkStats::default(),
-    };
+    let robot = FakePacedRobot::new(socket);
+    let sensor = FreeSensor::default();
     let err = HilHandle::start_with_links(
         &s,
         &RuntimeOptions::default(),
@@ -321,11 +309,7 @@ fn socket_errors_are_counted_per_link() {
             counts_per_torque: Some(1e6),
             ..Default::default()
         },
-        &LinkContext {
-            period: 0.001,
-            connect_timeout: 1.0,
-            start: None,
-        },
+        &link_context(1.0),
     )
     .unwrap();
     sensor.start_streaming();
@@ -395,15 +379,6 @@ fn options_are_grouped_per_device_kind() {
     }
 }
 
-/// A TCP port that was free a moment ago.
-fn free_tcp_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
 #[test]
 fn rdt_link_reads_a_sensor_configured_in_lbf_and_lbf_in_in_n_and_n_m() {
     // the emulated sensor counts 1e6 per lbf and per lbf·in, and says so on its page
@@ -417,15 +392,7 @@ fn rdt_link_reads_a_sensor_configured_in_lbf_and_lbf_in_in_n_and_n_m() {
             torque_unit: "lbf-in".into(),
             ..Default::default()
         },
-        &EndpointContext {
-            period: 0.001,
-            initial: RelativeMotion {
-                position: Vector3::zeros(),
-                orientation: UnitQuaternion::identity(),
-                velocity: Vector3::zeros(),
-                angular_velocity: Vector3::zeros(),
-            },
-        },
+        &endpoint_context(),
     )
     .unwrap();
     let wrench = Wrench {
@@ -468,11 +435,7 @@ fn rdt_link_reads_a_sensor_configured_in_lbf_and_lbf_in_in_n_and_n_m() {
             http_port: endpoint.http_address().unwrap().port(),
             ..Default::default()
         },
-        &LinkContext {
-            period: 0.001,
-            connect_timeout: 2.0,
-            start: None,
-        },
+        &link_context(2.0),
     )
     .unwrap();
     let calibration = sensor.calibration().unwrap();
@@ -535,15 +498,7 @@ fn emulated_sensor_rejects_unknown_units() {
                 torque_unit: torque.into(),
                 ..Default::default()
             },
-            &EndpointContext {
-                period: 0.001,
-                initial: RelativeMotion {
-                    position: Vector3::zeros(),
-                    orientation: UnitQuaternion::identity(),
-                    velocity: Vector3::zeros(),
-                    angular_velocity: Vector3::zeros(),
-                },
-            },
+            &endpoint_context(),
         )
         .err()
         .unwrap()

@@ -3,11 +3,14 @@
 
 mod common;
 
-use common::{loopback_options, preset};
+use common::{
+    assert_ran_to_its_end, assert_rebound_kept, covs, delayed, finish_both, loopback_options,
+    preset, print_metrics, run_both, start_both,
+};
 use hilcontact_core::compensator::{CompensatorConfig, ModelParams};
 use hilcontact_rt::devices::EmulatedRobotOptions;
 use hilcontact_rt::safety::StopKind;
-use hilcontact_rt::{FacilityHandle, HilHandle, RuntimeOptions};
+use hilcontact_rt::{HilHandle, RuntimeOptions};
 use serde_json::Value;
 use std::time::{Duration, Instant};
 
@@ -15,13 +18,9 @@ use std::time::{Duration, Instant};
 /// force (N) sampled every millisecond for 0.6 s after the loop began its stop, with the time
 /// since then (s).
 fn run(kind: CompensatorConfig, duration: f64) -> (Value, Vec<(f64, f64)>) {
-    let mut s = preset("paper-table1");
-    s.facility.robot_delay = 0.02;
-    s.simulation.duration = duration;
-    s.compensator = kind;
+    let s = delayed(kind, duration);
     let (emu, rt) = loopback_options();
-    let facility = FacilityHandle::start(&s, &emu).unwrap();
-    let hil = HilHandle::start(&s, &rt).unwrap();
+    let (facility, hil) = start_both(&s, &emu, &rt);
     let begun = Instant::now();
     let mut stopping: Option<Instant> = None;
     let mut after_stop = Vec::new();
@@ -38,18 +37,10 @@ fn run(kind: CompensatorConfig, duration: f64) -> (Value, Vec<(f64, f64)>) {
         }
         std::thread::sleep(Duration::from_millis(1));
     }
-    assert!(hil.wait(Duration::from_secs(5)));
-    let out = hil.finish().unwrap();
-    let status = facility.join();
+    let (out, status) = finish_both(facility, hil, Duration::from_secs(5));
+    let out = out.unwrap_or_else(|e| panic!("{e}; emulator: {status:?}"));
     assert!(status.rdt_sent > 0 && status.corrections > 0, "{status:?}");
-    eprintln!(
-        "{}",
-        serde_json::to_string_pretty(&out.metrics["realtime"]).unwrap()
-    );
-    eprintln!(
-        "{}",
-        serde_json::to_string_pretty(&out.metrics["collisions"]).unwrap()
-    );
+    print_metrics(&out.metrics);
     (out.metrics, after_stop)
 }
 
@@ -58,22 +49,8 @@ fn pida_at_20ms_keeps_the_rebound_speed_in_real_time() {
     let (m, _) = run(CompensatorConfig::Pida(ModelParams::default()), 3.5);
     // ran to its end; the verdict's tolerances (CoF 1.2) are not this test's subject, as a
     // busy machine's late ticks may cost some force fidelity: the CoV bounds below are
-    assert!(
-        m["status"] == "ok" || m["status"] == "unfaithful",
-        "{}: {}",
-        m["status"],
-        m["reason"]
-    );
-    let covs: Vec<f64> = m["collisions"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|c| c["cov"].as_f64())
-        .collect();
-    assert!(covs.len() >= 3, "{covs:?}");
-    for cov in &covs {
-        assert!((0.9..=1.1).contains(cov), "CoV {cov} in {covs:?}");
-    }
+    assert_ran_to_its_end(&m);
+    assert_rebound_kept(&m, 3);
     let rt = &m["realtime"];
     assert_eq!(rt["ticks"], 3501);
     assert_eq!(rt["samples_dropped"], 0);
@@ -115,12 +92,7 @@ fn uncompensated_loop_is_stopped_by_the_force_limit() {
         after_stop.last()
     );
     assert_eq!(m["realtime"]["stop"]["exit_code"], 3);
-    let covs: Vec<f64> = m["collisions"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|c| c["cov"].as_f64())
-        .collect();
+    let covs = covs(&m);
     assert!(covs.first().is_some_and(|c| *c > 1.3), "{covs:?}");
 }
 
@@ -140,12 +112,7 @@ fn robotware6_feedback_is_accepted_and_the_loop_runs() {
         connect_timeout: 3.0,
         ..rt
     };
-    let facility = FacilityHandle::start(&s, &emu).unwrap();
-    let hil = HilHandle::start(&s, &rt).unwrap();
-    assert!(hil.wait(Duration::from_secs(20)));
-    let out = hil.finish();
-    let status = facility.join();
-    let out = out.unwrap_or_else(|e| panic!("{e}; emulator: {status:?}"));
+    let (out, _) = run_both(&s, &(emu, rt), Duration::from_secs(20));
     let rt = &out.metrics["realtime"];
     let robot = &rt["robot"];
     assert_eq!(robot["malformed"], 0, "{robot}");
@@ -166,10 +133,7 @@ fn robotware6_feedback_is_accepted_and_the_loop_runs() {
 /// the offset.
 #[test]
 fn a_sensor_offset_is_measured_at_start_and_subtracted() {
-    let mut s = preset("paper-table1");
-    s.facility.robot_delay = 0.02;
-    s.simulation.duration = 2.5;
-    s.compensator = CompensatorConfig::Pida(ModelParams::default());
+    let s = delayed(CompensatorConfig::Pida(ModelParams::default()), 2.5);
     let (mut emu, mut rt) = loopback_options();
     // this test is about the offset: a loop starved by a busy machine presses harder on the
     // wall (620 N once under a load of 7 on 2 cores), which must not end it on the force limit
@@ -177,18 +141,8 @@ fn a_sensor_offset_is_measured_at_start_and_subtracted() {
     rt.limits.moment_limit = 1000.0; // likewise (100.3 N·m once, the tests running in parallel)
     let offset = [3.0, -2.0, 20.0, 0.5, -0.3, 0.2];
     emu.sensor_offset = offset;
-    let facility = FacilityHandle::start(&s, &emu).unwrap();
-    let hil = HilHandle::start(&s, &rt).unwrap();
-    assert!(hil.wait(Duration::from_secs(30)));
-    let out = hil.finish();
-    facility.join();
-    let m = out.unwrap().metrics;
-    assert!(
-        m["status"] == "ok" || m["status"] == "unfaithful",
-        "{}: {}",
-        m["status"],
-        m["reason"]
-    );
+    let m = run_both(&s, &(emu, rt), Duration::from_secs(30)).0.metrics;
+    assert_ran_to_its_end(&m);
     assert_eq!(m["realtime"]["stop"]["kind"], "completed");
     let measured: Vec<f64> = m["realtime"]["sensor_offset"]
         .as_array()
@@ -202,27 +156,15 @@ fn a_sensor_offset_is_measured_at_start_and_subtracted() {
             "offset[{i}] measured {a}, injected {b}"
         );
     }
-    let covs: Vec<f64> = m["collisions"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|c| c["cov"].as_f64())
-        .collect();
-    assert!(!covs.is_empty());
-    for cov in &covs {
-        assert!((0.9..=1.1).contains(cov), "CoV {cov} in {covs:?}");
-    }
+    assert_rebound_kept(&m, 1);
 
     // 80 N with the rod free: refused, with the offset in the message
     let (mut emu, rt) = loopback_options();
     emu.sensor_offset = [0.0, 0.0, 80.0, 0.0, 0.0, 0.0];
-    let facility = FacilityHandle::start(&s, &emu).unwrap();
-    let hil = HilHandle::start(&s, &rt).unwrap();
-    assert!(hil.wait(Duration::from_secs(30)));
-    let Err(error) = hil.finish() else {
+    let (facility, hil) = start_both(&s, &emu, &rt);
+    let Err(error) = finish_both(facility, hil, Duration::from_secs(30)).0 else {
         panic!("an 80 N offset must refuse the start")
     };
-    facility.join();
     let error = error.to_string();
     assert!(
         error.contains("80.") && error.contains("offset.max_force"),
@@ -256,10 +198,7 @@ fn thread_policies(name: &str) -> Vec<u32> {
 /// emulator are never raised; invalid scheduling options are refused before anything starts.
 #[test]
 fn the_loop_reports_its_scheduling() {
-    let mut s = preset("paper-table1");
-    s.facility.robot_delay = 0.02;
-    s.simulation.duration = 1.0;
-    s.compensator = CompensatorConfig::Pida(ModelParams::default());
+    let s = delayed(CompensatorConfig::Pida(ModelParams::default()), 1.0);
 
     // the defaults: SCHED_FIFO 80, memory locked, no CPU
     let (emu, rt) = loopback_options();
@@ -271,8 +210,7 @@ fn the_loop_reports_its_scheduling() {
         ),
         (80, true, None)
     );
-    let facility = FacilityHandle::start(&s, &emu).unwrap();
-    let hil = HilHandle::start(&s, &rt).unwrap();
+    let (facility, hil) = start_both(&s, &emu, &rt);
     while hil.status().phase != "running" && !hil.is_finished() {
         std::thread::sleep(Duration::from_millis(5));
     }
@@ -284,9 +222,10 @@ fn the_loop_reports_its_scheduling() {
         writers.iter().chain(&facilities).all(|p| *p == 0),
         "writer {writers:?}, emulator {facilities:?}: must stay SCHED_OTHER"
     );
-    assert!(hil.wait(Duration::from_secs(30)));
-    let m = hil.finish().unwrap().metrics;
-    facility.join();
+    let m = finish_both(facility, hil, Duration::from_secs(30))
+        .0
+        .unwrap()
+        .metrics;
     let sched = &m["realtime"]["scheduling"];
     eprintln!("{}", serde_json::to_string_pretty(sched).unwrap());
     let refused: Vec<&str> = sched["refused"]
@@ -327,11 +266,7 @@ fn the_loop_reports_its_scheduling() {
     rt.scheduling.priority = 0;
     rt.scheduling.lock_memory = false;
     rt.scheduling.cpu = Some(0);
-    let facility = FacilityHandle::start(&s, &emu).unwrap();
-    let hil = HilHandle::start(&s, &rt).unwrap();
-    assert!(hil.wait(Duration::from_secs(30)));
-    let m = hil.finish().unwrap().metrics;
-    facility.join();
+    let m = run_both(&s, &(emu, rt), Duration::from_secs(30)).0.metrics;
     let sched = &m["realtime"]["scheduling"];
     assert_eq!(sched["policy"], "other", "{sched}");
     assert_eq!(sched["priority"], 0);
@@ -364,20 +299,13 @@ fn a_real_time_run_is_recorded_as_mcap() {
     let dir = std::env::temp_dir().join(format!("hilcontact-loopback-mcap-{}", std::process::id()));
     let path = dir.join("rt.mcap");
     let _ = std::fs::remove_file(&path);
-    let mut s = preset("paper-table1");
-    s.facility.robot_delay = 0.02;
-    s.simulation.duration = 1.2;
-    s.compensator = CompensatorConfig::Pida(ModelParams::default());
+    let s = delayed(CompensatorConfig::Pida(ModelParams::default()), 1.2);
     let (emu, rt) = loopback_options();
     let rt = RuntimeOptions {
         mcap: Some(hilcontact_rt::output::mcap::McapOptions::new(&path)),
         ..rt
     };
-    let facility = FacilityHandle::start(&s, &emu).unwrap();
-    let hil = HilHandle::start(&s, &rt).unwrap();
-    assert!(hil.wait(Duration::from_secs(60)));
-    let out = hil.finish().unwrap();
-    facility.join();
+    let (out, _) = run_both(&s, &(emu, rt), Duration::from_secs(60));
     let samples = out.metrics["realtime"]["samples"].as_u64().unwrap();
     let stats = &out.metrics["realtime"]["mcap"];
     assert_eq!(stats["complete"], true, "{stats}");

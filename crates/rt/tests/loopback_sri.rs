@@ -3,61 +3,30 @@
 
 mod common;
 
-use common::{loopback_sri_options, preset};
+use common::{
+    assert_ran_to_its_end, assert_rebound_kept, covs, delayed, loopback_sri_options, print_metrics,
+    run_both,
+};
 use hilcontact_core::compensator::{CompensatorConfig, ModelParams};
-use hilcontact_rt::{FacilityHandle, HilHandle};
 use serde_json::Value;
 use std::time::Duration;
 
 /// Runs the loop against the emulator at 20 ms robot delay; returns the metrics.
 fn run(kind: CompensatorConfig, duration: f64) -> Value {
-    let mut s = preset("paper-table1");
-    s.facility.robot_delay = 0.02;
-    s.simulation.duration = duration;
-    s.compensator = kind;
-    let (emu, rt) = loopback_sri_options();
-    let facility = FacilityHandle::start(&s, &emu).unwrap();
-    let hil = HilHandle::start(&s, &rt).unwrap();
-    assert!(hil.wait(Duration::from_secs_f64(duration + 30.0)));
-    let out = hil.finish();
-    let status = facility.join();
-    let out = out.unwrap_or_else(|e| panic!("{e}; emulator: {status:?}"));
+    let s = delayed(kind, duration);
+    let wait = Duration::from_secs_f64(duration + 30.0);
+    let (out, status) = run_both(&s, &loopback_sri_options(), wait);
     assert!(status.rdt_sent > 0 && status.corrections > 0, "{status:?}");
-    eprintln!(
-        "{}",
-        serde_json::to_string_pretty(&out.metrics["realtime"]).unwrap()
-    );
-    eprintln!(
-        "{}",
-        serde_json::to_string_pretty(&out.metrics["collisions"]).unwrap()
-    );
+    print_metrics(&out.metrics);
     out.metrics
-}
-
-fn covs(m: &Value) -> Vec<f64> {
-    m["collisions"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|c| c["cov"].as_f64())
-        .collect()
 }
 
 #[test]
 fn sri_pida_at_20ms_keeps_the_rebound_speed_in_real_time() {
     let m = run(CompensatorConfig::Pida(ModelParams::default()), 3.5);
-    assert!(
-        m["status"] == "ok" || m["status"] == "unfaithful",
-        "{}: {}",
-        m["status"],
-        m["reason"]
-    );
-    let covs = covs(&m);
-    eprintln!("CoV {covs:?}");
-    assert!(covs.len() >= 3, "{covs:?}");
-    for cov in &covs {
-        assert!((0.9..=1.1).contains(cov), "CoV {cov} in {covs:?}");
-    }
+    assert_ran_to_its_end(&m);
+    eprintln!("CoV {:?}", covs(&m));
+    assert_rebound_kept(&m, 3);
     let rt = &m["realtime"];
     assert_eq!(rt["ticks"], 3501);
     assert_eq!(rt["stop"]["kind"], "completed");

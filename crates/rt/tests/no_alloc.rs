@@ -9,7 +9,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::Duration;
 
-use common::{loopback_options, loopback_sri_options, preset, rsi_loopback_options};
+use common::{delayed, loopback_options, loopback_sri_options, rsi_loopback_options};
 use hilcontact_core::compensator::{CompensatorConfig, ModelParams};
 use hilcontact_rt::{EmulatorOptions, FacilityHandle, HilHandle, RuntimeOptions};
 
@@ -43,11 +43,8 @@ static GLOBAL: Counting = Counting;
 /// checks that nothing allocates from the loop's first tick over a window spanning the first
 /// collision. One configuration at a time: the allocator counts the whole process.
 fn assert_no_allocation(name: &str, period: f64, (emu, rt): (EmulatorOptions, RuntimeOptions)) {
-    let mut s = preset("paper-table1");
-    s.facility.robot_delay = 0.02;
-    s.simulation.duration = 2.5;
+    let mut s = delayed(CompensatorConfig::Pida(ModelParams::default()), 2.5);
     s.simulation.period = period;
-    s.compensator = CompensatorConfig::Pida(ModelParams::default());
     ALLOCATIONS.store(0, Ordering::SeqCst);
     let facility = FacilityHandle::start(&s, &emu).unwrap();
     let hil = HilHandle::start(&s, &rt).unwrap();

@@ -8,22 +8,22 @@ mod common;
 use std::net::UdpSocket;
 use std::time::{Duration, Instant};
 
-use common::{preset, rsi_loopback_options};
+use common::{
+    assert_ran_to_its_end, assert_rebound_kept, assert_stop, covs, delayed, print_metrics,
+    rsi_loopback_options, run_both,
+};
 use hilcontact_core::compensator::{CompensatorConfig, ModelParams};
 use hilcontact_core::Scenario;
 use hilcontact_rt::devices::rsi::codec::{decode_state, AnswerEncoder, RsiNames};
 use hilcontact_rt::devices::rsi::{CorrectionMode, RsiEndpointOptions, RsiOptions};
 use hilcontact_rt::devices::EmulatedRobotOptions;
-use hilcontact_rt::{EmulatorOptions, FacilityHandle, HilHandle, RobotOptions};
+use hilcontact_rt::{EmulatorOptions, FacilityHandle, RobotOptions};
 use serde_json::Value;
 
 /// paper-table1 at the RSI cycle (4 ms) with a 20 ms robot delay.
 fn scenario(kind: CompensatorConfig, duration: f64) -> Scenario {
-    let mut s = preset("paper-table1");
-    s.facility.robot_delay = 0.02;
+    let mut s = delayed(kind, duration);
     s.simulation.period = 0.004;
-    s.simulation.duration = duration;
-    s.compensator = kind;
     s
 }
 
@@ -36,18 +36,10 @@ fn run(s: &Scenario, mode: CorrectionMode) -> Value {
         link.correction = mode;
         endpoint.correction = mode;
     }
-    let facility = FacilityHandle::start(s, &emu).unwrap();
-    let hil = HilHandle::start(s, &rt).unwrap();
-    assert!(hil.wait(Duration::from_secs_f64(s.simulation.duration + 20.0)));
-    let out = hil.finish();
-    let status = facility.join();
-    let out = out.unwrap_or_else(|e| panic!("{e}; emulator: {status:?}"));
+    let wait = Duration::from_secs_f64(s.simulation.duration + 20.0);
+    let (out, status) = run_both(s, &(emu, rt), wait);
     let m = out.metrics;
-    eprintln!("{}", serde_json::to_string_pretty(&m["realtime"]).unwrap());
-    eprintln!(
-        "{}",
-        serde_json::to_string_pretty(&m["collisions"]).unwrap()
-    );
+    print_metrics(&m);
     eprintln!("emulator: {:?}", status.robot);
     assert_eq!(status.robot_protocol, "RSI");
     // the controller got an answer to (nearly) every message, with its IPOC
@@ -57,35 +49,17 @@ fn run(s: &Scenario, mode: CorrectionMode) -> Value {
     m
 }
 
-fn covs(m: &Value) -> Vec<f64> {
-    m["collisions"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter_map(|c| c["cov"].as_f64())
-        .collect()
-}
-
 #[test]
 fn rsi_pida_at_20ms_keeps_the_rebound_speed() {
     let s = scenario(CompensatorConfig::Pida(ModelParams::default()), 3.5);
     let m = run(&s, CorrectionMode::Absolute);
-    assert!(
-        m["status"] == "ok" || m["status"] == "unfaithful",
-        "{}: {}",
-        m["status"],
-        m["reason"]
-    );
+    assert_ran_to_its_end(&m);
+    assert_stop(&m, "completed");
     let rt = &m["realtime"];
-    assert_eq!(rt["stop"]["kind"], "completed", "{}", m["reason"]);
     assert_eq!(rt["pacing"], "robot");
     assert_eq!(rt["ticks"], 876);
     assert_eq!(rt["samples_dropped"], 0);
-    let covs = covs(&m);
-    assert!(covs.len() >= 3, "{covs:?}");
-    for cov in &covs {
-        assert!((0.9..=1.1).contains(cov), "CoV {cov} in {covs:?}");
-    }
+    assert_rebound_kept(&m, 3);
     // one answer per tick (and per start-up message): measured, and rarely superseded
     let rsi = &rt["rsi"];
     let latency = &rsi["answer_latency_us"];
@@ -100,16 +74,8 @@ fn rsi_pida_at_20ms_keeps_the_rebound_speed() {
 fn rsi_relative_corrections_run_the_same() {
     let s = scenario(CompensatorConfig::Pida(ModelParams::default()), 2.5);
     let m = run(&s, CorrectionMode::Relative);
-    assert_eq!(
-        m["realtime"]["stop"]["kind"], "completed",
-        "{}",
-        m["reason"]
-    );
-    let covs = covs(&m);
-    assert!(covs.len() >= 2, "{covs:?}");
-    for cov in &covs {
-        assert!((0.9..=1.1).contains(cov), "CoV {cov} in {covs:?}");
-    }
+    assert_stop(&m, "completed");
+    assert_rebound_kept(&m, 2);
 }
 
 #[test]

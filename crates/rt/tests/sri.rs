@@ -12,33 +12,11 @@ use std::sync::Arc;
 use std::thread;
 use std::time::{Duration, Instant};
 
-use hilcontact_core::world::RelativeMotion;
+use common::{endpoint_context, free_tcp_port, link_context};
 use hilcontact_rt::devices::sri::{SriEndpoint, SriEndpointOptions, SriOptions, SriSensor};
-use hilcontact_rt::devices::{
-    EmulatedSensorOptions, EndpointContext, LinkContext, SensorEndpoint, SensorLink, Wrench,
-};
+use hilcontact_rt::devices::{EmulatedSensorOptions, SensorEndpoint, SensorLink, Wrench};
 use hilcontact_rt::{EmulatorOptions, RtError, RuntimeOptions, SensorOptions};
-use nalgebra::{UnitQuaternion, Vector3};
-
-fn endpoint_context() -> EndpointContext {
-    EndpointContext {
-        period: 0.001,
-        initial: RelativeMotion {
-            position: Vector3::zeros(),
-            orientation: UnitQuaternion::identity(),
-            velocity: Vector3::zeros(),
-            angular_velocity: Vector3::zeros(),
-        },
-    }
-}
-
-fn link_context() -> LinkContext {
-    LinkContext {
-        period: 0.001,
-        connect_timeout: 2.0,
-        start: None,
-    }
-}
+use nalgebra::Vector3;
 
 /// Runs the emulated box on its own thread, one control period per millisecond, sampling
 /// `wrench` (plus k·1e-3 N on Fx at period k); returns the box's address.
@@ -261,7 +239,7 @@ fn the_link_configures_the_box_and_counts_split_corrupt_and_missing_frames() {
         decoupling_matrix: Some(Box::new(matrix)),
         ..Default::default()
     };
-    let mut link = SriSensor::open(&o, &link_context()).unwrap();
+    let mut link = SriSensor::open(&o, &link_context(2.0)).unwrap();
     link.start_streaming();
     let newest = poll_until(&mut link, 8).expect("frames");
     assert_eq!(newest.force, Vector3::new(12.0, 2.0, -3.0));
@@ -301,7 +279,7 @@ fn a_refused_command_fails_the_open_naming_it() {
         sample_rate: Some(2000.0),
         ..Default::default()
     };
-    let Err(e) = SriSensor::open(&o, &link_context()) else {
+    let Err(e) = SriSensor::open(&o, &link_context(2.0)) else {
         panic!("a refused AT+SMPR must fail the open")
     };
     let text = e.to_string();
@@ -312,13 +290,13 @@ fn a_refused_command_fails_the_open_naming_it() {
     );
 
     // nothing listening: a connect error
-    let port = common::free_tcp_port();
+    let port = free_tcp_port();
     let Err(e) = SriSensor::open(
         &SriOptions {
             port,
             ..Default::default()
         },
-        &link_context(),
+        &link_context(2.0),
     ) else {
         panic!("nothing listens")
     };
@@ -333,7 +311,7 @@ fn the_link_reads_the_emulated_box() {
         port: address.port(),
         ..Default::default()
     };
-    let mut link = SriSensor::open(&o, &link_context()).unwrap();
+    let mut link = SriSensor::open(&o, &link_context(2.0)).unwrap();
     assert_eq!(link.sample_rate(), 1000);
     link.start_streaming();
     let w = poll_until(&mut link, 200).expect("frames");
