@@ -283,8 +283,8 @@ impl PyFacilityHandle {
     /// Counters: finished, tick, time (s), contact_force (N), sensor_protocol, robot_protocol,
     /// sensor and robot (each a dict of packet counters: received, accepted, malformed,
     /// invalid, foreign, stale, lost, late, sent, send_errors, io_errors), io_errors (both
-    /// endpoints), overruns, max_latency_us (µs), and the names of earlier versions: rdt_sent,
-    /// rdt_requests, rdt_bad_requests, egm_sent, corrections, corrections_dropped.
+    /// endpoints), overruns, max_latency_us (µs), and the names of earlier versions:
+    /// rdt_requests, rdt_bad_requests, corrections, corrections_dropped.
     fn status<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         json_to_py(py, &self.handle()?.status())
     }

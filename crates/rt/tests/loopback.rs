@@ -41,7 +41,10 @@ fn run(kind: CompensatorConfig, duration: f64) -> (Value, Vec<(f64, f64)>) {
     assert!(hil.wait(Duration::from_secs(5)));
     let out = hil.finish().unwrap();
     let status = facility.join();
-    assert!(status.rdt_sent > 0 && status.corrections > 0, "{status:?}");
+    assert!(
+        status.sensor.sent > 0 && status.corrections > 0,
+        "{status:?}"
+    );
     eprintln!(
         "{}",
         serde_json::to_string_pretty(&out.metrics["realtime"]).unwrap()

@@ -22,7 +22,10 @@ fn run(kind: CompensatorConfig, duration: f64) -> Value {
     let out = hil.finish();
     let status = facility.join();
     let out = out.unwrap_or_else(|e| panic!("{e}; emulator: {status:?}"));
-    assert!(status.rdt_sent > 0 && status.corrections > 0, "{status:?}");
+    assert!(
+        status.sensor.sent > 0 && status.corrections > 0,
+        "{status:?}"
+    );
     eprintln!(
         "{}",
         serde_json::to_string_pretty(&out.metrics["realtime"]).unwrap()

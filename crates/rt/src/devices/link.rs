@@ -461,6 +461,9 @@ pub struct EndpointContext {
 /// A sensor link that the registry ([`crate::devices`]) opens: its options (`[sensor]` of
 /// the runtime's options, without `kind`), parsed once into what opens it.
 pub trait SensorDevice: SensorLink + Sized + 'static {
+    /// How the link reaches the sensor, known before it is opened (the opened link's
+    /// [`SensorLink::transport`] says the same); UDP by default.
+    const TRANSPORT: Transport = Transport::Udp;
     /// The link's options.
     type Options;
     /// The link's options once parsed: what opens the link.
@@ -487,6 +490,9 @@ pub trait RobotDevice: RobotLink + Sized + 'static {
     /// What clocks the loop with this robot, known before it is opened (the opened link's
     /// [`RobotLink::pacing`] says the same).
     const PACING: Pacing;
+    /// How the link reaches the robot, known before it is opened (the opened link's
+    /// [`RobotLink::transport`] says the same); UDP by default.
+    const TRANSPORT: Transport = Transport::Udp;
     /// The link's options.
     type Options;
     /// The link's options once parsed: what opens the link.

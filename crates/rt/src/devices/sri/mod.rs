@@ -220,6 +220,7 @@ impl SriSensor {
 }
 
 impl SensorDevice for SriSensor {
+    const TRANSPORT: Transport = Transport::TcpClient;
     type Options = SriOptions;
     type Config = SriConfig;
 
@@ -298,7 +299,7 @@ impl SensorDevice for SriSensor {
 
 impl SensorLink for SriSensor {
     fn transport(&self) -> Transport {
-        Transport::TcpClient
+        <Self as SensorDevice>::TRANSPORT
     }
 
     fn name(&self) -> &'static str {
