@@ -99,6 +99,21 @@ pub enum Transport {
     TcpServer,
 }
 
+/// [`SensorLink::stats`] and [`SensorLink::stats_mut`] (or [`RobotLink`]'s) of a link whose
+/// counters are its `stats` field: `stats_accessors!();` in the trait's `impl`.
+macro_rules! stats_accessors {
+    () => {
+        fn stats(&self) -> &LinkStats {
+            &self.stats
+        }
+
+        fn stats_mut(&mut self) -> &mut LinkStats {
+            &mut self.stats
+        }
+    };
+}
+pub(crate) use stats_accessors;
+
 /// A force/torque sensor as the loop sees it.
 pub trait SensorLink: Send {
     /// Short protocol name for messages, e.g. `"RDT"`.
@@ -365,6 +380,12 @@ impl RobotIdentity {
     /// The robot's address, once locked.
     pub fn address(&self) -> Option<SocketAddr> {
         self.robot_addr
+    }
+
+    /// [`RobotLink::describe`] of a robot that sends `what` (e.g. "EGM feedback") to UDP
+    /// `port`: `"the robot on UDP port 6510"`, then [`RobotIdentity::describe`].
+    pub fn describe_udp(&self, port: u16, what: &str) -> String {
+        format!("the robot on UDP port {port}{}", self.describe(what))
     }
 
     /// For a connect error: `what` (e.g. "EGM feedback") came only from senders away from the

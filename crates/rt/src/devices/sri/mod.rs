@@ -220,9 +220,9 @@ impl SriSensor {
 }
 
 impl SensorDevice for SriSensor {
-    const TRANSPORT: Transport = Transport::TcpClient;
     type Options = SriOptions;
     type Config = SriConfig;
+    const TRANSPORT: Transport = Transport::TcpClient;
 
     /// Checks the host's form, the sample rate (if given) and the decoupling matrix, once.
     fn parse(options: &SriOptions) -> Result<SriConfig> {
@@ -353,13 +353,7 @@ impl SensorLink for SriSensor {
         newest
     }
 
-    fn stats(&self) -> &LinkStats {
-        &self.stats
-    }
-
-    fn stats_mut(&mut self) -> &mut LinkStats {
-        &mut self.stats
-    }
+    super::link::stats_accessors!();
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
         let mut m = serde_json::Map::new();
