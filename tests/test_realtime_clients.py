@@ -64,17 +64,17 @@ def test_netft_client_reads_the_emulated_sensor(pressed_facility):
         sensor.send(0x0042)
         time.sleep(0.02)
         assert sensor.getMeasurement() == pytest.approx([0] * 6, abs=2)
-        sent_before = pressed_facility.status()["rdt_sent"]
+        sent_before = pressed_facility.status()["sensor"]["sent"]
         sensor.startStreaming(handler=True)
         time.sleep(0.3)
         sensor.stopStreaming()
-        streamed = pressed_facility.status()["rdt_sent"] - sent_before
+        streamed = pressed_facility.status()["sensor"]["sent"] - sent_before
         # 1 kHz for 0.3 s plus the 0.1 s NetFT waits before it sends the stop
         assert 300 <= streamed <= 480, streamed
         time.sleep(0.05)
-        after_stop = pressed_facility.status()["rdt_sent"]
+        after_stop = pressed_facility.status()["sensor"]["sent"]
         time.sleep(0.1)
-        assert pressed_facility.status()["rdt_sent"] == after_stop  # stop (0x0000) stops
+        assert pressed_facility.status()["sensor"]["sent"] == after_stop  # stop (0x0000) stops
     finally:
         sensor.sock.close()
 
@@ -157,7 +157,7 @@ def test_abb_robot_client_drives_the_emulated_robot(core):
             # the client's sequence numbers step by 2: gaps are accepted, nothing is dropped
             assert status["corrections_dropped"] == 0
             # feedback every 4 ms of the emulator's time
-            assert abs(status["egm_sent"] - status["time"] * 250) <= 2, status
+            assert abs(status["robot"]["sent"] - status["time"] * 250) <= 2, status
     finally:
         client.close()
 
@@ -236,7 +236,7 @@ def test_pynetft_client_reads_the_emulated_sensor(core, units):
             assert health.malformed_count == 0 and health.out_of_order_count == 0
             assert health.duplicate_count == 0 and health.device_error_count == 0
         status = facility.status()
-    assert status["rdt_sent"] > 50
+    assert status["sensor"]["sent"] > 50
     assert status["rdt_bad_requests"] == 0
 
 

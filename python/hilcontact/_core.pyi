@@ -121,8 +121,9 @@ class FacilityHandle:
     """A running emulated facility (from :func:`start_facility`)."""
 
     def status(self) -> dict[str, Any]:
-        """``finished``, ``tick``, ``time`` (s), ``contact_force`` (N), ``rdt_sent``,
-        ``rdt_requests``, ``rdt_bad_requests``, ``egm_sent``, ``corrections``,
+        """``finished``, ``tick``, ``time`` (s), ``contact_force`` (N), ``sensor_protocol``,
+        ``robot_protocol``, ``sensor`` and ``robot`` (each a dict of packet counters, e.g.
+        ``sent``), ``io_errors``, ``rdt_requests``, ``rdt_bad_requests``, ``corrections``,
         ``corrections_dropped``, ``overruns``, ``max_latency_us``."""
 
     def addresses(self) -> dict[str, str | None]:

@@ -235,7 +235,7 @@ class Facility:
     def status(self) -> dict[str, Any]:
         """Counters: time (s), contact_force (N), ``sensor`` and ``robot`` (each: received,
         accepted, malformed, invalid, foreign, stale, lost, sent, send_errors, io_errors),
-        io_errors (both), overruns, and the names of earlier versions (rdt_sent, egm_sent,
+        io_errors (both), overruns, and the names of earlier versions (rdt_requests,
         corrections, corrections_dropped, ...)."""
         if self.final_status is not None:
             return self.final_status

@@ -168,43 +168,72 @@ fn json_to_py<'py>(py: Python<'py>, value: &impl serde::Serialize) -> PyResult<B
         .call1((text,))
 }
 
+/// Parses a scenario and options (JSON) and runs `run` on them with the GIL released; an
+/// error becomes the matching Python exception.
+fn run_released<O, R>(
+    py: Python<'_>,
+    scenario_json: &str,
+    options_json: &str,
+    run: impl FnOnce(&Scenario, &O) -> hilcontact_rt::Result<R> + Send,
+) -> PyResult<R>
+where
+    O: serde::de::DeserializeOwned + Sync,
+    R: Send,
+{
+    let scenario = scenario_data(py, scenario_json)?;
+    let options: O = parse_options(py, options_json)?;
+    py.allow_threads(|| run(&scenario, &options))
+        .map_err(|e| rt_err(py, e))
+}
+
+/// A Rust handle held by a Python object until it is finished (or joined): from then on
+/// every method raises ValueError with `gone`.
+struct Held<T> {
+    inner: Option<T>,
+    gone: &'static str,
+}
+
+impl<T> Held<T> {
+    fn get(&self) -> PyResult<&T> {
+        self.inner
+            .as_ref()
+            .ok_or_else(|| PyValueError::new_err(self.gone))
+    }
+
+    fn take(&mut self) -> PyResult<T> {
+        self.inner
+            .take()
+            .ok_or_else(|| PyValueError::new_err(self.gone))
+    }
+}
+
 /// A running real-time HIL loop (`start_hil`). The loop runs in Rust threads; every method
 /// returns at once except `wait` and `finish`, which release the GIL.
 #[pyclass(module = "hilcontact._core", name = "HilHandle")]
-struct PyHilHandle {
-    inner: Option<HilHandle>,
-}
-
-impl PyHilHandle {
-    fn handle(&self) -> PyResult<&HilHandle> {
-        self.inner
-            .as_ref()
-            .ok_or_else(|| PyValueError::new_err("the run has been finished already"))
-    }
-}
+struct PyHilHandle(Held<HilHandle>);
 
 #[pymethods]
 impl PyHilHandle {
     /// A snapshot for the live line: phase, tick, time (s), force (N), energy (J),
     /// max_latency_us, overruns, sensor_lost, sensor_late, robot_lost, robot_late, dropped, stop.
     fn status<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        json_to_py(py, &self.handle()?.status())
+        json_to_py(py, &self.0.get()?.status())
     }
 
     /// Asks the loop to stop: it commands the robot to hold, stops streaming and flushes.
     fn stop(&self) -> PyResult<()> {
-        self.handle()?.stop();
+        self.0.get()?.stop();
         Ok(())
     }
 
     /// Whether the loop has ended.
     fn is_finished(&self) -> PyResult<bool> {
-        Ok(self.handle()?.is_finished())
+        Ok(self.0.get()?.is_finished())
     }
 
     /// Waits up to `timeout` seconds (GIL released); returns whether the loop has ended.
     fn wait(&self, py: Python<'_>, timeout: f64) -> PyResult<bool> {
-        let handle = self.handle()?;
+        let handle = self.0.get()?;
         let timeout = Duration::from_secs_f64(timeout.max(0.0));
         Ok(py.allow_threads(|| handle.wait(timeout)))
     }
@@ -212,10 +241,7 @@ impl PyHilHandle {
     /// Waits for the loop and its writer (GIL released) and returns
     /// `{"timeseries": {column: ndarray}, "reference": {...}, "metrics": str, "exit_code": int}`.
     fn finish<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let handle = self
-            .inner
-            .take()
-            .ok_or_else(|| PyValueError::new_err("the run has been finished already"))?;
+        let handle = self.0.take()?;
         let output = py
             .allow_threads(move || handle.finish())
             .map_err(|e| rt_err(py, e))?;
@@ -240,11 +266,9 @@ fn check(
     options_json: &str,
     duration: f64,
 ) -> PyResult<String> {
-    let scenario = scenario_data(py, scenario_json)?;
-    let options: RuntimeOptions = parse_options(py, options_json)?;
-    let report = py
-        .allow_threads(|| hilcontact_rt::check(&scenario, &options, duration))
-        .map_err(|e| rt_err(py, e))?;
+    let report = run_released(py, scenario_json, options_json, |scenario, options| {
+        hilcontact_rt::check(scenario, options, duration)
+    })?;
     serde_json::to_string(&report).map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
@@ -254,46 +278,33 @@ fn check(
 /// counts per unit before returning; raises RealtimeError if that fails.
 #[pyfunction]
 fn start_hil(py: Python<'_>, scenario_json: &str, options_json: &str) -> PyResult<PyHilHandle> {
-    let scenario = scenario_data(py, scenario_json)?;
-    let options: RuntimeOptions = parse_options(py, options_json)?;
-    let handle = py
-        .allow_threads(|| HilHandle::start(&scenario, &options))
-        .map_err(|e| rt_err(py, e))?;
-    Ok(PyHilHandle {
+    let handle = run_released(py, scenario_json, options_json, HilHandle::start)?;
+    Ok(PyHilHandle(Held {
         inner: Some(handle),
-    })
+        gone: "the run has been finished already",
+    }))
 }
 
 /// A running emulated facility (`start_facility`).
 #[pyclass(module = "hilcontact._core", name = "FacilityHandle")]
-struct PyFacilityHandle {
-    inner: Option<FacilityHandle>,
-}
-
-impl PyFacilityHandle {
-    fn handle(&self) -> PyResult<&FacilityHandle> {
-        self.inner
-            .as_ref()
-            .ok_or_else(|| PyValueError::new_err("the facility has been joined already"))
-    }
-}
+struct PyFacilityHandle(Held<FacilityHandle>);
 
 #[pymethods]
 impl PyFacilityHandle {
     /// Counters: finished, tick, time (s), contact_force (N), sensor_protocol, robot_protocol,
     /// sensor and robot (each a dict of packet counters: received, accepted, malformed,
     /// invalid, foreign, stale, lost, late, sent, send_errors, io_errors), io_errors (both
-    /// endpoints), overruns, max_latency_us (µs), and the names of earlier versions: rdt_sent,
-    /// rdt_requests, rdt_bad_requests, egm_sent, corrections, corrections_dropped.
+    /// endpoints), overruns, max_latency_us (µs), and the names of earlier versions:
+    /// rdt_requests, rdt_bad_requests, corrections, corrections_dropped.
     fn status<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        json_to_py(py, &self.handle()?.status())
+        json_to_py(py, &self.0.get()?.status())
     }
 
     /// `{"sensor": "host:port", "http": "host:port" | None, "robot": ..., "robot_peer": ...,
     /// "egm_peer": ...}` (`robot_peer`: where the robot's feedback goes; `egm_peer` is its name
     /// of earlier versions).
     fn addresses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let a = self.handle()?.addresses();
+        let a = self.0.get()?.addresses();
         let d = PyDict::new(py);
         d.set_item("sensor", a.sensor.to_string())?;
         d.set_item("http", a.http.map(|h| h.to_string()))?;
@@ -305,21 +316,18 @@ impl PyFacilityHandle {
 
     /// Asks the emulator to stop; returns at once.
     fn stop(&self) -> PyResult<()> {
-        self.handle()?.stop();
+        self.0.get()?.stop();
         Ok(())
     }
 
     /// Whether the emulator has ended.
     fn is_finished(&self) -> PyResult<bool> {
-        Ok(self.handle()?.is_finished())
+        Ok(self.0.get()?.is_finished())
     }
 
     /// Stops the emulator, waits for it (GIL released) and returns its final counters.
     fn join<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
-        let handle = self
-            .inner
-            .take()
-            .ok_or_else(|| PyValueError::new_err("the facility has been joined already"))?;
+        let handle = self.0.take()?;
         let status = py.allow_threads(move || handle.join());
         json_to_py(py, &status)
     }
@@ -334,14 +342,11 @@ fn start_facility(
     scenario_json: &str,
     options_json: &str,
 ) -> PyResult<PyFacilityHandle> {
-    let scenario = scenario_data(py, scenario_json)?;
-    let options: EmulatorOptions = parse_options(py, options_json)?;
-    let handle = py
-        .allow_threads(|| FacilityHandle::start(&scenario, &options))
-        .map_err(|e| rt_err(py, e))?;
-    Ok(PyFacilityHandle {
+    let handle = run_released(py, scenario_json, options_json, FacilityHandle::start)?;
+    Ok(PyFacilityHandle(Held {
         inner: Some(handle),
-    })
+        gone: "the facility has been joined already",
+    }))
 }
 
 /// The default options of the runtime and the emulator, and the device protocols, as JSON:

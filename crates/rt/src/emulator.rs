@@ -82,14 +82,10 @@ pub struct FacilityStatus {
     pub robot: LinkStats,
     /// Socket errors of both endpoints (receive or send), never dropped uncounted.
     pub io_errors: u64,
-    /// Sensor samples (RDT records) sent (`sensor.sent`; the name of earlier versions).
-    pub rdt_sent: u64,
     /// Valid sensor requests received (`sensor.accepted`; the name of earlier versions).
     pub rdt_requests: u64,
     /// Invalid sensor requests (size, header, command) dropped (`sensor.dropped()`).
     pub rdt_bad_requests: u64,
-    /// Robot feedback messages sent (`robot.sent`; the name of earlier versions).
-    pub egm_sent: u64,
     /// Robot commands (EGM corrections) accepted (`robot.accepted`).
     pub corrections: u64,
     /// Robot commands dropped: malformed, invalid, foreign, stale (`robot.dropped()`).
@@ -204,10 +200,8 @@ impl FacilityHandle {
             sensor,
             robot,
             io_errors: sensor.io_errors + robot.io_errors,
-            rdt_sent: sensor.sent,
             rdt_requests: sensor.accepted,
             rdt_bad_requests: sensor.dropped(),
-            egm_sent: robot.sent,
             corrections: robot.accepted,
             corrections_dropped: robot.dropped(),
             overruns: s.overruns.load(Ordering::Relaxed),

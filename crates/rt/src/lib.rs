@@ -41,8 +41,6 @@ pub mod runtime;
 pub mod safety;
 
 pub use check::{check, CheckReport};
-/// The former name of [`devices`], for code written against it.
-pub use devices as links;
 pub use devices::{LinkStats, Pacing, RobotLink, RobotOptions, SensorLink, SensorOptions};
 pub use emulator::{EmulatorOptions, FacilityHandle};
 pub use error::{Result, RtError};

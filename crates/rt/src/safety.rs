@@ -377,80 +377,37 @@ mod tests {
             t.push(at(x).point(&rod));
             t
         };
-        // tracking: the robot 5 mm behind the command is held where it is
-        let held = hold_target(
-            &l,
-            Some(at(-0.990)),
-            Some(at(-0.985)),
-            &commanded(-0.985),
-            &rod,
-            &start,
-        )
-        .unwrap();
-        assert_eq!(held.position.x, -0.990);
-        // a feedback 300 mm off (inside a 100 m plausibility bound, outside the workspace):
-        // the last command is held, not the bogus pose
-        let held = hold_target(
-            &l,
-            Some(at(-0.695)),
-            Some(at(-0.985)),
-            &commanded(-0.985),
-            &rod,
-            &start,
-        )
-        .unwrap();
-        assert_eq!(held.position.x, -0.985);
         // a robot 15 mm behind the last command but on a command of the window (a slow
-        // robot): trusted
+        // robot)
         let mut window = Tracking::new(&l, period);
         for x in [-0.990, -0.985, -0.980, -0.975] {
             window.push(at(x).point(&rod));
         }
-        let held = hold_target(
-            &l,
-            Some(at(-0.990)),
-            Some(at(-0.975)),
-            &window,
-            &rod,
-            &start,
-        );
-        assert_eq!(held.unwrap().position.x, -0.990);
-        // inside the workspace but 50 mm from the command: the command too
-        let held = hold_target(
-            &l,
-            Some(at(-0.935)),
-            Some(at(-0.985)),
-            &commanded(-0.985),
-            &rod,
-            &start,
-        )
-        .unwrap();
-        assert_eq!(held.position.x, -0.985);
-        // before any command (a refused start): the robot's own pose if inside the workspace,
-        // else nothing at all
-        assert_eq!(
-            hold_target(
-                &l,
-                Some(at(-0.945)),
-                None,
-                &Tracking::new(&l, period),
-                &rod,
-                &start
-            )
-            .unwrap()
-            .position
-            .x,
-            -0.945
-        );
-        assert!(hold_target(
-            &l,
-            Some(at(0.4)),
-            None,
-            &Tracking::new(&l, period),
-            &rod,
-            &start
-        )
-        .is_none());
-        assert!(hold_target(&l, None, None, &Tracking::new(&l, period), &rod, &start).is_none());
+        let none = Tracking::new(&l, period);
+        // (feedback x, last command x, tracking window, the x held or None), with why
+        let cases = [
+            // tracking: the robot 5 mm behind the command is held where it is
+            (Some(-0.990), Some(-0.985), &commanded(-0.985), Some(-0.990)),
+            // a feedback 300 mm off (inside a 100 m plausibility bound, outside the
+            // workspace): the last command is held, not the bogus pose
+            (Some(-0.695), Some(-0.985), &commanded(-0.985), Some(-0.985)),
+            // the slow robot on a command of the window: trusted
+            (Some(-0.990), Some(-0.975), &window, Some(-0.990)),
+            // inside the workspace but 50 mm from the command: the command too
+            (Some(-0.935), Some(-0.985), &commanded(-0.985), Some(-0.985)),
+            // before any command (a refused start): the robot's own pose if inside the
+            // workspace, else nothing at all
+            (Some(-0.945), None, &none, Some(-0.945)),
+            (Some(0.4), None, &none, None),
+            (None, None, &none, None),
+        ];
+        for (feedback, last, tracking, expected) in cases {
+            let held = hold_target(&l, feedback.map(at), last.map(at), tracking, &rod, &start);
+            assert_eq!(
+                held.map(|h| h.position.x),
+                expected,
+                "feedback {feedback:?}, last command {last:?}"
+            );
+        }
     }
 }

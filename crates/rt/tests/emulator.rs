@@ -241,7 +241,7 @@ fn the_emulators_send_errors_are_counted() {
     let robot = status.robot;
     assert!(robot.send_errors >= 5, "{status:?}");
     assert_eq!(robot.sent, 0, "{status:?}");
-    assert_eq!(status.egm_sent, 0);
+    assert_eq!(status.robot.sent, 0);
     assert!(robot.io_errors >= robot.send_errors, "{status:?}");
     assert_eq!(status.io_errors, status.sensor.io_errors + robot.io_errors);
     // one feedback every 4 ms of the emulator's time: every one of them failed and was counted

@@ -39,7 +39,10 @@ fn run(kind: CompensatorConfig, duration: f64) -> (Value, Vec<(f64, f64)>) {
     }
     let (out, status) = finish_both(facility, hil, Duration::from_secs(5));
     let out = out.unwrap_or_else(|e| panic!("{e}; emulator: {status:?}"));
-    assert!(status.rdt_sent > 0 && status.corrections > 0, "{status:?}");
+    assert!(
+        status.sensor.sent > 0 && status.corrections > 0,
+        "{status:?}"
+    );
     print_metrics(&out.metrics);
     (out.metrics, after_stop)
 }

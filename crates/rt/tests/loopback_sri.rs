@@ -16,7 +16,10 @@ fn run(kind: CompensatorConfig, duration: f64) -> Value {
     let s = delayed(kind, duration);
     let wait = Duration::from_secs_f64(duration + 30.0);
     let (out, status) = run_both(&s, &loopback_sri_options(), wait);
-    assert!(status.rdt_sent > 0 && status.corrections > 0, "{status:?}");
+    assert!(
+        status.sensor.sent > 0 && status.corrections > 0,
+        "{status:?}"
+    );
     print_metrics(&out.metrics);
     out.metrics
 }

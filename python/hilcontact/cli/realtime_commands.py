@@ -84,13 +84,11 @@ def _stop_on_signals() -> None:
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
 
 
-#: Sensor protocols that stream over TCP (the others over UDP): SRI M812x boxes.
-_TCP_SENSORS = ("sri",)
-
-
-def _sensor_scheme(kind: str) -> str:
-    """``tcp`` or ``udp``: the transport of a sensor protocol, for addresses shown to the user."""
-    return "tcp" if kind.lower() in _TCP_SENSORS else "udp"
+def _scheme(link: str, kind: str) -> str:
+    """``tcp`` or ``udp``: how a protocol of ``link`` (``sensor``/``robot``) is reached, from the
+    Rust registry (``udp``, ``tcp-client``, ``tcp-server``), for addresses shown to the user."""
+    transports = _RT_DEFAULTS.get("kinds", {}).get("transport", {}).get(link, {})
+    return str(transports.get(kind.lower(), "udp")).split("-")[0]
 
 
 def _link_option_flags(section: str) -> list[Any]:
@@ -161,11 +159,12 @@ def facility_command(scenario: str, sets: tuple[str, ...], duration: float | Non
     _stop_on_signals()
     a = facility.addresses
     f = resolved.facility
-    sensor = facility.status()["sensor_protocol"]
+    sensor, robot = facility.status()["sensor_protocol"], facility.status()["robot_protocol"]
+    robot_scheme = _scheme("robot", robot)
     click.echo(
-        f"ready: facility {resolved.name}: sensor {sensor} {_sensor_scheme(sensor)}://{a['sensor']}, "
+        f"ready: facility {resolved.name}: sensor {sensor} {_scheme('sensor', sensor)}://{a['sensor']}, "
         f"netftapi2.xml {'http://' + str(a['http']) + '/netftapi2.xml' if a['http'] else 'off'}, "
-        f"robot {facility.status()['robot_protocol']} udp://{a['robot']} -> udp://{a['robot_peer']}; robot delay {f.robot_delay * 1e3:g} ms, "
+        f"robot {robot} {robot_scheme}://{a['robot']} -> {robot_scheme}://{a['robot_peer']}; robot delay {f.robot_delay * 1e3:g} ms, "
         f"sensor delay {f.sensor_delay * 1e3:g} ms, noise {f.sensor_noise:g} N; Ctrl-C stops",
         nl=True,
     )
@@ -292,9 +291,10 @@ def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tu
     defaults = _RT_DEFAULTS.get("facility", {})
     sensor_kind = sensor_protocol or defaults.get("sensor", {}).get("kind", "rdt")
     robot_kind = robot_protocol or defaults.get("robot", {}).get("kind", "egm")
-    sensor_socket = socket.SOCK_STREAM if _sensor_scheme(sensor_kind) == "tcp" else socket.SOCK_DGRAM
+    sensor_socket = socket.SOCK_STREAM if _scheme("sensor", sensor_kind) == "tcp" else socket.SOCK_DGRAM
     sensor = {"kind": sensor_kind, "port": _free_port(sensor_socket)}
-    robot = {"kind": robot_kind, "port": _free_port(socket.SOCK_DGRAM)}
+    robot_socket = socket.SOCK_STREAM if _scheme("robot", robot_kind) == "tcp" else socket.SOCK_DGRAM
+    robot = {"kind": robot_kind, "port": _free_port(robot_socket)}
     if any(flag.path[:2] == ("sensor", sensor_kind) and flag.path[-1] == "http_port" for flag in _FACILITY_FLAGS):
         sensor["http_port"] = _free_port(socket.SOCK_STREAM)
     facility = {"sensor": dict(sensor), "robot": dict(robot)}
@@ -343,9 +343,10 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
             runtime_options["scheduling"] = scheduling
         with start_facility(resolved, facility_options) as facility:
             a = facility.addresses
+            robot_scheme = _scheme("robot", robot_kind)
             Console(stderr=True).print(
-                f"facility: sensor {_sensor_scheme(facility_options['sensor']['kind'])}://{a['sensor']}{', http://' + str(a['http']) + '/netftapi2.xml' if a['http'] else ''}, "
-                f"robot udp://{a['robot']} -> udp://{a['robot_peer']}",
+                f"facility: sensor {_scheme('sensor', facility_options['sensor']['kind'])}://{a['sensor']}{', http://' + str(a['http']) + '/netftapi2.xml' if a['http'] else ''}, "
+                f"robot {robot_scheme}://{a['robot']} -> {robot_scheme}://{a['robot_peer']}",
                 soft_wrap=True,
             )
             try:

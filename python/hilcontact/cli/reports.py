@@ -199,8 +199,8 @@ def _hil_line(s: dict[str, Any]) -> str:
 def _facility_line(s: dict[str, Any]) -> str:
     sensor, robot = s.get("sensor_protocol", "RDT"), s.get("robot_protocol", "EGM")
     return (
-        f"facility  t {s['time']:8.3f} s | contact {s['contact_force']:7.1f} N | {sensor} sent {s['rdt_sent']} | "
-        f"{robot} sent {s['egm_sent']}, corrections {s['corrections']} (dropped {s['corrections_dropped']}) | "
+        f"facility  t {s['time']:8.3f} s | contact {s['contact_force']:7.1f} N | {sensor} sent {s['sensor']['sent']} | "
+        f"{robot} sent {s['robot']['sent']}, corrections {s['corrections']} (dropped {s['corrections_dropped']}) | "
         f"io errors {s.get('io_errors', 0)} | overruns {s['overruns']}"
     )
 

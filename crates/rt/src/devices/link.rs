@@ -99,6 +99,21 @@ pub enum Transport {
     TcpServer,
 }
 
+/// [`SensorLink::stats`] and [`SensorLink::stats_mut`] (or [`RobotLink`]'s) of a link whose
+/// counters are its `stats` field: `stats_accessors!();` in the trait's `impl`.
+macro_rules! stats_accessors {
+    () => {
+        fn stats(&self) -> &LinkStats {
+            &self.stats
+        }
+
+        fn stats_mut(&mut self) -> &mut LinkStats {
+            &mut self.stats
+        }
+    };
+}
+pub(crate) use stats_accessors;
+
 /// A force/torque sensor as the loop sees it.
 pub trait SensorLink: Send {
     /// Short protocol name for messages, e.g. `"RDT"`.
@@ -367,6 +382,12 @@ impl RobotIdentity {
         self.robot_addr
     }
 
+    /// [`RobotLink::describe`] of a robot that sends `what` (e.g. "EGM feedback") to UDP
+    /// `port`: `"the robot on UDP port 6510"`, then [`RobotIdentity::describe`].
+    pub fn describe_udp(&self, port: u16, what: &str) -> String {
+        format!("the robot on UDP port {port}{}", self.describe(what))
+    }
+
     /// For a connect error: `what` (e.g. "EGM feedback") came only from senders away from the
     /// start — the nearest one and how far, and what to do; empty otherwise.
     pub fn describe(&self, what: &str) -> String {
@@ -461,6 +482,9 @@ pub struct EndpointContext {
 /// A sensor link that the registry ([`crate::devices`]) opens: its options (`[sensor]` of
 /// the runtime's options, without `kind`), parsed once into what opens it.
 pub trait SensorDevice: SensorLink + Sized + 'static {
+    /// How the link reaches the sensor, known before it is opened (the opened link's
+    /// [`SensorLink::transport`] says the same); UDP by default.
+    const TRANSPORT: Transport = Transport::Udp;
     /// The link's options.
     type Options;
     /// The link's options once parsed: what opens the link.
@@ -487,6 +511,9 @@ pub trait RobotDevice: RobotLink + Sized + 'static {
     /// What clocks the loop with this robot, known before it is opened (the opened link's
     /// [`RobotLink::pacing`] says the same).
     const PACING: Pacing;
+    /// How the link reaches the robot, known before it is opened (the opened link's
+    /// [`RobotLink::transport`] says the same); UDP by default.
+    const TRANSPORT: Transport = Transport::Udp;
     /// The link's options.
     type Options;
     /// The link's options once parsed: what opens the link.

@@ -158,6 +158,11 @@ macro_rules! registry {
                 match self { $( SensorOptions::$sensor(_) => $skind, )+ }
             }
 
+            /// How the link reaches the sensor, known before it is opened.
+            pub fn transport(&self) -> Transport {
+                match self { $( SensorOptions::$sensor(_) => <$slink as SensorDevice>::TRANSPORT, )+ }
+            }
+
             /// Checks the options that need no socket (the host's form, the protocol's own
             /// values) and types them, once, so that bad input is refused before any file or
             /// socket is created.
@@ -216,6 +221,11 @@ macro_rules! registry {
             /// scenario's period must equal the robot's cycle).
             pub fn pacing(&self) -> Pacing {
                 match self { $( RobotOptions::$robot(_) => <$rlink as RobotDevice>::PACING, )+ }
+            }
+
+            /// How the link reaches the robot, known before it is opened.
+            pub fn transport(&self) -> Transport {
+                match self { $( RobotOptions::$robot(_) => <$rlink as RobotDevice>::TRANSPORT, )+ }
             }
 
             /// Checks the options that need no socket (hosts, pose mapping, the protocol's own
@@ -299,8 +309,9 @@ impl Default for EmulatedRobotOptions {
 
 /// The default options of every protocol, keyed by kind, for the runtime's links and the
 /// emulator's devices: `{"runtime": {"sensor": {"rdt": {...}, "sri": {...}}, "robot": {...}},
-/// "facility": {...}, "robot_paced": [KIND, ...]}` (each kind's options as `{"kind": KIND}` deserializes them: the one
-/// place the defaults live).
+/// "facility": {...}, "robot_paced": [KIND, ...], "transport": {"sensor": {"rdt": "udp", "sri":
+/// "tcp-client"}, "robot": {...}}}` (each kind's options as `{"kind": KIND}` deserializes them:
+/// the one place the defaults live; each link's [`Transport`], for addresses shown to the user).
 pub fn protocol_defaults() -> serde_json::Value {
     fn each<T: Serialize + serde::de::DeserializeOwned>(
         kinds: &[&str],
@@ -314,16 +325,30 @@ pub fn protocol_defaults() -> serde_json::Value {
             })
             .collect()
     }
+    fn transports<T>(
+        kinds: &[&str],
+        options: impl Fn(&str) -> Option<T>,
+        transport: impl Fn(&T) -> Transport,
+    ) -> serde_json::Map<String, serde_json::Value> {
+        kinds
+            .iter()
+            .filter_map(|kind| {
+                let transport = transport(&options(kind)?);
+                Some((kind.to_string(), serde_json::to_value(transport).ok()?))
+            })
+            .collect()
+    }
     let paced: Vec<&str> = ROBOT_KINDS
         .iter()
         .copied()
-        .filter(|kind| {
-            serde_json::from_value::<RobotOptions>(serde_json::json!({ "kind": kind }))
-                .is_ok_and(|o| o.pacing() == Pacing::Robot)
-        })
+        .filter(|kind| RobotOptions::from_kind(kind).is_some_and(|o| o.pacing() == Pacing::Robot))
         .collect();
     serde_json::json!({
         "robot_paced": paced,
+        "transport": {
+            "sensor": transports(SENSOR_KINDS, SensorOptions::from_kind, SensorOptions::transport),
+            "robot": transports(ROBOT_KINDS, RobotOptions::from_kind, RobotOptions::transport),
+        },
         "runtime": {
             "sensor": each::<SensorOptions>(SENSOR_KINDS),
             "robot": each::<RobotOptions>(ROBOT_KINDS),

@@ -121,6 +121,7 @@ fn clear_joints(j: &mut Option<EgmJoints>) {
     }
 }
 
+/// An empty [`EgmPlanned`] (or [`EgmFeedBack`]) with room for joints.
 fn planned() -> EgmPlanned {
     EgmPlanned {
         joints: joints(),
@@ -130,6 +131,7 @@ fn planned() -> EgmPlanned {
     }
 }
 
+/// Empties an [`EgmPlanned`] (or [`EgmFeedBack`]) in place, keeping its buffers.
 fn clear_planned(p: &mut Option<EgmPlanned>) {
     let p = p.get_or_insert_with(planned);
     clear_joints(&mut p.joints);
@@ -202,27 +204,33 @@ fn check_size(datagram: &[u8]) -> Result<(), EgmError> {
     }
 }
 
+/// `Default` as `new()` (with the buffers allocated) for the decoders and encoders below.
+macro_rules! default_is_new {
+    ($($name:ident),+) => {
+        $(impl Default for $name {
+            fn default() -> Self {
+                Self::new()
+            }
+        })+
+    };
+}
+default_is_new!(
+    RobotDecoder,
+    CorrectionDecoder,
+    CorrectionEncoder,
+    FeedbackEncoder
+);
+
 /// Decodes `EgmRobot` feedback into a preallocated message.
 pub struct RobotDecoder {
     msg: EgmRobot,
-}
-
-impl Default for RobotDecoder {
-    fn default() -> Self {
-        Self::new()
-    }
 }
 
 impl RobotDecoder {
     /// A decoder with room for the largest accepted datagram.
     pub fn new() -> Self {
         let msg = EgmRobot {
-            feed_back: Some(EgmFeedBack {
-                joints: joints(),
-                cartesian: None,
-                external_joints: joints(),
-                time: None,
-            }),
+            feed_back: Some(planned()),
             planned: Some(planned()),
             test_signals: Some(EgmTestSignals {
                 signals: repeated(),
@@ -254,16 +262,7 @@ impl RobotDecoder {
         m.rapid_exec_state = None;
         m.utilization_rate = None;
         m.move_index = None;
-        let fb = m.feed_back.get_or_insert_with(|| EgmFeedBack {
-            joints: joints(),
-            cartesian: None,
-            external_joints: joints(),
-            time: None,
-        });
-        clear_joints(&mut fb.joints);
-        clear_joints(&mut fb.external_joints);
-        fb.cartesian = None;
-        fb.time = None;
+        clear_planned(&mut m.feed_back);
         clear_planned(&mut m.planned);
         m.test_signals
             .get_or_insert_with(|| EgmTestSignals {
@@ -322,12 +321,6 @@ impl RobotDecoder {
 /// Decodes `EgmSensor` corrections into a preallocated message (the robot's side).
 pub struct CorrectionDecoder {
     msg: EgmSensor,
-}
-
-impl Default for CorrectionDecoder {
-    fn default() -> Self {
-        Self::new()
-    }
 }
 
 impl CorrectionDecoder {
@@ -406,6 +399,16 @@ impl CorrectionDecoder {
     }
 }
 
+/// A pose and a time without joints, as the emulated robot sends its feedback and plan.
+fn clocked_pose() -> EgmPlanned {
+    EgmPlanned {
+        joints: None,
+        cartesian: None,
+        external_joints: None,
+        time: Some(EgmClock { sec: 0, usec: 0 }),
+    }
+}
+
 fn pose_message(p: &PoseMm) -> EgmPose {
     let [x, y, z] = p.position_mm;
     let [u0, u1, u2, u3] = p.orientation;
@@ -420,12 +423,6 @@ fn pose_message(p: &PoseMm) -> EgmPose {
 pub struct CorrectionEncoder {
     msg: EgmSensor,
     buf: Vec<u8>,
-}
-
-impl Default for CorrectionEncoder {
-    fn default() -> Self {
-        Self::new()
-    }
 }
 
 impl CorrectionEncoder {
@@ -492,12 +489,6 @@ pub struct FeedbackEncoder {
     buf: Vec<u8>,
 }
 
-impl Default for FeedbackEncoder {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
 impl FeedbackEncoder {
     /// An encoder with its message and buffer allocated. The emulated robot has no joint
     /// model, so joints are not sent; motors are on, MCI and RAPID running.
@@ -508,18 +499,8 @@ impl FeedbackEncoder {
                 tm: Some(0),
                 mtype: Some(MessageType::Data as i32),
             }),
-            feed_back: Some(EgmFeedBack {
-                joints: None,
-                cartesian: None,
-                external_joints: None,
-                time: Some(EgmClock { sec: 0, usec: 0 }),
-            }),
-            planned: Some(EgmPlanned {
-                joints: None,
-                cartesian: None,
-                external_joints: None,
-                time: Some(EgmClock { sec: 0, usec: 0 }),
-            }),
+            feed_back: Some(clocked_pose()),
+            planned: Some(clocked_pose()),
             motor_state: Some(EgmMotorState {
                 state: MotorStateType::MotorsOn as i32,
             }),
@@ -563,13 +544,14 @@ impl FeedbackEncoder {
             h.seqno = Some(seqno);
             h.tm = Some((time_us / 1000) as u32);
         }
-        if let Some(f) = self.msg.feed_back.as_mut() {
-            f.cartesian = Some(pose_message(actual));
-            f.time = Some(clock);
-        }
-        if let Some(p) = self.msg.planned.as_mut() {
-            p.cartesian = Some(pose_message(planned));
-            p.time = Some(clock);
+        for (message, pose) in [
+            (&mut self.msg.feed_back, actual),
+            (&mut self.msg.planned, planned),
+        ] {
+            if let Some(m) = message.as_mut() {
+                m.cartesian = Some(pose_message(pose));
+                m.time = Some(clock);
+            }
         }
         self.buf.clear();
         let _ = self.msg.encode(&mut self.buf);
@@ -645,6 +627,9 @@ mod tests {
             m.encode_to_vec()
         };
         let d = |b: Vec<u8>| RobotDecoder::new().decode(&b);
+        fn cartesian(m: &mut EgmRobot) -> &mut EgmPose {
+            m.feed_back.as_mut().unwrap().cartesian.as_mut().unwrap()
+        }
         assert_eq!(d(edit(&|m| m.header = None)), Err(EgmError::MissingHeader));
         assert_eq!(
             d(edit(&|m| m.header.as_mut().unwrap().mtype = Some(3))),
@@ -652,45 +637,15 @@ mod tests {
         );
         assert_eq!(d(edit(&|m| m.feed_back = None)), Err(EgmError::MissingPose));
         assert_eq!(
-            d(edit(&|m| m
-                .feed_back
-                .as_mut()
-                .unwrap()
-                .cartesian
-                .as_mut()
-                .unwrap()
-                .pos
-                .as_mut()
-                .unwrap()
-                .x = f64::NAN)),
+            d(edit(&|m| cartesian(m).pos.as_mut().unwrap().x = f64::NAN)),
             Err(EgmError::NonFinite)
         );
         assert_eq!(
-            d(edit(&|m| m
-                .feed_back
-                .as_mut()
-                .unwrap()
-                .cartesian
-                .as_mut()
-                .unwrap()
-                .pos
-                .as_mut()
-                .unwrap()
-                .y = 2e5)),
+            d(edit(&|m| cartesian(m).pos.as_mut().unwrap().y = 2e5)),
             Err(EgmError::OutOfRange)
         );
         assert_eq!(
-            d(edit(&|m| m
-                .feed_back
-                .as_mut()
-                .unwrap()
-                .cartesian
-                .as_mut()
-                .unwrap()
-                .orient
-                .as_mut()
-                .unwrap()
-                .u0 = 0.5)),
+            d(edit(&|m| cartesian(m).orient.as_mut().unwrap().u0 = 0.5)),
             Err(EgmError::BadQuaternion)
         );
         // an RDT record is not EGM (a default one: 36 zero bytes)

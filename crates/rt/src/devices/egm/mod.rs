@@ -143,11 +143,7 @@ impl RobotLink for EgmRobot {
     }
 
     fn describe(&self) -> String {
-        format!(
-            "the robot on UDP port {}{}",
-            self.port,
-            self.identity.describe("EGM feedback")
-        )
+        self.identity.describe_udp(self.port, "EGM feedback")
     }
 
     fn pacing(&self) -> Pacing {
@@ -202,13 +198,7 @@ impl RobotLink for EgmRobot {
         self.identity.address()
     }
 
-    fn stats(&self) -> &LinkStats {
-        &self.stats
-    }
-
-    fn stats_mut(&mut self) -> &mut LinkStats {
-        &mut self.stats
-    }
+    super::link::stats_accessors!();
 }
 
 /// EGM decoding errors as the counters see them: a wrong size, bytes that are not protobuf, a

@@ -77,16 +77,9 @@ pub struct EgmQuaternion {
     pub u3: f64,
 }
 
-/// Euler angles, degrees.
-#[derive(Clone, Copy, PartialEq, Message)]
-pub struct EgmEuler {
-    #[prost(double, required, tag = "1")]
-    pub x: f64,
-    #[prost(double, required, tag = "2")]
-    pub y: f64,
-    #[prost(double, required, tag = "3")]
-    pub z: f64,
-}
+/// Euler angles, degrees: `egm.proto`'s `EgmEuler` has [`EgmCartesian`]'s fields and tags,
+/// so it is the same Rust type (the same bytes on the wire).
+pub type EgmEuler = EgmCartesian;
 
 /// A time: seconds and microseconds.
 #[derive(Clone, Copy, PartialEq, Message)]
@@ -122,7 +115,7 @@ pub struct EgmJoints {
     pub joints: Vec<f64>,
 }
 
-/// Planned (commanded) position: joints or pose.
+/// Planned (commanded) position: joints or pose. Also the measured one ([`EgmFeedBack`]).
 #[derive(Clone, PartialEq, Message)]
 pub struct EgmPlanned {
     #[prost(message, optional, tag = "1")]
@@ -155,18 +148,9 @@ pub struct EgmPathCorr {
     pub age: u32,
 }
 
-/// Measured (actual) position of the robot.
-#[derive(Clone, PartialEq, Message)]
-pub struct EgmFeedBack {
-    #[prost(message, optional, tag = "1")]
-    pub joints: Option<EgmJoints>,
-    #[prost(message, optional, tag = "2")]
-    pub cartesian: Option<EgmPose>,
-    #[prost(message, optional, tag = "3")]
-    pub external_joints: Option<EgmJoints>,
-    #[prost(message, optional, tag = "4")]
-    pub time: Option<EgmClock>,
-}
+/// Measured (actual) position of the robot: `egm.proto`'s `EgmFeedBack` has [`EgmPlanned`]'s
+/// fields and tags, so it is the same Rust type (the same bytes on the wire).
+pub type EgmFeedBack = EgmPlanned;
 
 /// Motor state.
 #[derive(Clone, Copy, PartialEq, Message)]

@@ -222,13 +222,7 @@ impl SensorLink for RdtSensor {
         newest
     }
 
-    fn stats(&self) -> &LinkStats {
-        &self.stats
-    }
-
-    fn stats_mut(&mut self) -> &mut LinkStats {
-        &mut self.stats
-    }
+    super::link::stats_accessors!();
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
         let mut m = serde_json::Map::new();

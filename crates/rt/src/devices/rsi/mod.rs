@@ -293,11 +293,7 @@ impl RobotLink for RsiRobot {
     }
 
     fn describe(&self) -> String {
-        format!(
-            "the robot on UDP port {}{}",
-            self.port,
-            self.identity.describe("RSI state")
-        )
+        self.identity.describe_udp(self.port, "RSI state")
     }
 
     fn pacing(&self) -> Pacing {
@@ -389,13 +385,7 @@ impl RobotLink for RsiRobot {
         self.identity.address()
     }
 
-    fn stats(&self) -> &LinkStats {
-        &self.stats
-    }
-
-    fn stats_mut(&mut self) -> &mut LinkStats {
-        &mut self.stats
-    }
+    super::link::stats_accessors!();
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
         let reference = self.reference.map(|r| {

@@ -222,6 +222,7 @@ impl SriSensor {
 impl SensorDevice for SriSensor {
     type Options = SriOptions;
     type Config = SriConfig;
+    const TRANSPORT: Transport = Transport::TcpClient;
 
     /// Checks the host's form, the sample rate (if given) and the decoupling matrix, once.
     fn parse(options: &SriOptions) -> Result<SriConfig> {
@@ -298,7 +299,7 @@ impl SensorDevice for SriSensor {
 
 impl SensorLink for SriSensor {
     fn transport(&self) -> Transport {
-        Transport::TcpClient
+        <Self as SensorDevice>::TRANSPORT
     }
 
     fn name(&self) -> &'static str {
@@ -352,13 +353,7 @@ impl SensorLink for SriSensor {
         newest
     }
 
-    fn stats(&self) -> &LinkStats {
-        &self.stats
-    }
-
-    fn stats_mut(&mut self) -> &mut LinkStats {
-        &mut self.stats
-    }
+    super::link::stats_accessors!();
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
         let mut m = serde_json::Map::new();
