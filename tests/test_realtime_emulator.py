@@ -71,7 +71,7 @@ def test_the_emulator_runs_from_grouped_options(core):
             status = facility.status()
     assert status["sensor_protocol"] == "RDT" and status["robot_protocol"] == "EGM"
     final = facility.stop()
-    assert final["robot"]["sent"] == final["robot"]["sent"] >= 1
+    assert final["robot"]["sent"] >= 1
     assert final["io_errors"] == 0 and final["robot"]["send_errors"] == 0
 
 
@@ -110,7 +110,7 @@ def test_the_emulators_send_errors_are_counted(core):
             time.sleep(0.02)
     final = facility.stop()
     robot = final["robot"]
-    assert robot["send_errors"] >= 5 and robot["sent"] == 0 == final["robot"]["sent"], final
+    assert robot["send_errors"] >= 5 and robot["sent"] == 0, final
     assert final["io_errors"] >= robot["send_errors"], final
 
 

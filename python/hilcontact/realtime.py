@@ -66,8 +66,11 @@ REALTIME_COLUMNS: list[str] = [name for name, _, _ in _core().table_columns()["r
 
 
 def realtime_defaults() -> dict[str, Any]:
-    """The default options: ``{"runtime": {...}, "facility": {...}, "protocols": {...}}``
-    (``protocols``: the sensor and robot kinds, each implemented by the runtime and the emulator)."""
+    """The default options: ``{"runtime": {...}, "facility": {...}, "protocols": {...},
+    "kinds": {...}}`` (``protocols``: the sensor and robot kinds, each implemented by the runtime
+    and the emulator; ``kinds``: each protocol's default options for the runtime and the
+    facility, ``robot_paced`` (the robots that pace the loop) and ``transport`` (``udp``,
+    ``tcp-client`` or ``tcp-server`` per protocol))."""
     return json.loads(_core().realtime_defaults())
 
 

@@ -84,7 +84,7 @@ impl EventWatch {
             return;
         }
         let now = outputs.last_time();
-        let now_ns = super::mcap::time_ns(now);
+        let now_ns = super::time_ns(now);
         let due = self
             .last_fault_ns
             .is_none_or(|t| now_ns >= t + FAULT_EVENT_INTERVAL_NS);

@@ -42,7 +42,7 @@ use serde::{Deserialize, Serialize};
 use hilcontact_core::hil::HilRecord;
 use hilcontact_core::metrics::Metrics;
 
-use super::{feed_simulation, Event, EventLevel, RunInfo, Sink, SinkContext};
+use super::{feed_simulation, time_ns, Event, EventLevel, RunInfo, Sink, SinkContext};
 use crate::error::{Result, RtError};
 use crate::report::Sample;
 
@@ -526,15 +526,6 @@ pub fn schema_text(schema: &str) -> String {
         text.push_str(dep);
     }
     text
-}
-
-/// A run time in ns (negative or non-finite: 0).
-pub fn time_ns(t: f64) -> u64 {
-    if t.is_finite() && t > 0.0 {
-        (t * 1e9).round() as u64
-    } else {
-        0
-    }
 }
 
 /// The name of the events' sender (`rcl_interfaces/msg/Log` `name`).

@@ -82,6 +82,15 @@ outputs! {
     mcap;
 }
 
+/// A run time in ns (negative or non-finite: 0).
+pub fn time_ns(t: f64) -> u64 {
+    if t.is_finite() && t > 0.0 {
+        (t * 1e9).round() as u64
+    } else {
+        0
+    }
+}
+
 /// A destination of a run's samples and events. Fed by one thread (a real-time run's writer
 /// thread), in time order; every method is infallible (a sink counts its own failures and
 /// reports them when finished).

@@ -63,8 +63,9 @@ impl HilHandle {
     }
 
     /// As [`HilHandle::start`], with links opened by the caller (a protocol outside the
-    /// registry, or a test double); `options.sensor` and `options.robot` are not used but
-    /// are reported in `metrics.json`.
+    /// registry, or a test double); `options.sensor` and `options.robot` are parsed and
+    /// checked like every option (a bad one refuses the start) and reported in
+    /// `metrics.json`, but open nothing.
     pub fn start_with_links(
         scenario: &Scenario,
         options: &RuntimeOptions,

@@ -22,9 +22,11 @@
 //! a tick that ends after the next deadline is an overrun, and missed periods are caught up
 //! (the virtual time stays `k·T`).
 //!
-//! Every stop (end of run, `stop()`, a safety limit) ends the same way: the robot is commanded
-//! to hold its last fed-back pose for `hold_time`, the sensor's streaming is stopped, and the
-//! writer thread drains the ring buffer completely before the results are built.
+//! Every stop (end of run, `stop()`, a safety limit) ends the same way: after a force or moment
+//! stop the robot first backs away (`hold.rs`), then it is commanded to hold for `hold_time`
+//! (its last fed-back pose if plausible, else the last command), the sensor's streaming is
+//! stopped, and the writer thread drains the ring buffer completely before the results are
+//! built.
 
 //!
 //! The files, by what each owns:

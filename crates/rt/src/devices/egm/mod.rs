@@ -147,7 +147,7 @@ impl RobotLink for EgmRobot {
     }
 
     fn pacing(&self) -> Pacing {
-        Pacing::Clock
+        <Self as RobotDevice>::PACING
     }
 
     fn feedback_period(&self) -> f64 {

@@ -297,7 +297,7 @@ impl RobotLink for RsiRobot {
     }
 
     fn pacing(&self) -> Pacing {
-        Pacing::Robot
+        <Self as RobotDevice>::PACING
     }
 
     fn feedback_period(&self) -> f64 {
