@@ -31,9 +31,21 @@ pub fn scenario_schema() -> schemars::Schema {
 /// with the dotted key and the messages `must be > 0, got -1`, `must be >= 0, got ...`,
 /// `must be between 0 and 1 (exclusive), got ...`. Returns the keys that failed.
 pub fn check_ranges(scenario: &Scenario, issues: &mut Issues) -> BTreeSet<String> {
-    let schema = scenario_schema();
+    check_ranges_of(scenario, &scenario_schema(), "scenario", issues)
+}
+
+/// [`check_ranges`] for any value and its JSON Schema (e.g. the real-time options of
+/// `hilcontact-rt`): every number outside the range `schema` gives it (or not finite, where a
+/// range is given) is recorded under its dotted key; `what` names the value when it cannot be
+/// serialised. Returns the keys that failed.
+pub fn check_ranges_of<T: Serialize + ?Sized>(
+    value: &T,
+    schema: &schemars::Schema,
+    what: &str,
+    issues: &mut Issues,
+) -> BTreeSet<String> {
     let mut failed = BTreeSet::new();
-    match scenario.serialize(Collect) {
+    match value.serialize(Collect) {
         Ok(node) => walk(
             schema.as_value(),
             schema.as_value(),
@@ -42,7 +54,7 @@ pub fn check_ranges(scenario: &Scenario, issues: &mut Issues) -> BTreeSet<String
             issues,
             &mut failed,
         ),
-        Err(e) => issues.push("scenario", e.0),
+        Err(e) => issues.push(what, e.0),
     }
     failed
 }

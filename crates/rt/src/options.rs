@@ -12,6 +12,10 @@
 //! `robot` are the `oneOf` variants of those properties, tagged by `kind`.
 
 use schemars::JsonSchema;
+
+use hilcontact_core::error::Issues;
+use hilcontact_core::schema::check_ranges_of;
+use hilcontact_core::CoreError;
 use serde::{Deserialize, Serialize};
 
 use crate::clock::SchedulingOptions;
@@ -125,6 +129,7 @@ impl RuntimeOptions {
                 format!("must be a number >= 0, got {}", o.hold_time),
             ));
         }
+        check_schema_ranges(o, schemars::schema_for!(RuntimeOptions))?;
         Ok(ParsedRuntime { sensor, robot })
     }
 }
@@ -187,10 +192,27 @@ impl EmulatorOptions {
                 format!("must be 6 finite numbers, got {:?}", o.sensor_offset),
             ));
         }
-        Ok(ParsedFacility {
+        let parsed = ParsedFacility {
             sensor: o.sensor.parse()?,
             robot: o.robot.parse()?,
-        })
+        };
+        check_schema_ranges(o, schemars::schema_for!(EmulatorOptions))?;
+        Ok(parsed)
+    }
+}
+
+/// Every number of `options` against the range its field's `#[schemars(...)]` gives in the
+/// options' JSON Schema (the core's `check_ranges_of`, as for a scenario): the one check an
+/// option needs beyond its type. Run after the hand-written checks above, whose messages
+/// (named for the flags of earlier versions) come first; a new option's range is checked here
+/// without a line of its own. The first problem is the error, its key dotted
+/// (`limits.force_limit`).
+fn check_schema_ranges(options: &impl Serialize, schema: schemars::Schema) -> Result<()> {
+    let mut issues = Issues::default();
+    check_ranges_of(options, &schema, "options", &mut issues);
+    match issues.finish() {
+        Ok(()) => Ok(()),
+        Err(CoreError::InvalidScenario { key, message, .. }) => Err(RtError::option(key, message)),
     }
 }
 
@@ -286,5 +308,50 @@ mod tests {
         assert!(emulator.parse().is_err());
         assert!(RuntimeOptions::default().parse().is_ok());
         assert!(EmulatorOptions::default().parse().is_ok());
+    }
+
+    /// A field with nothing but its `#[schemars]` range (a new option, as the recipe adds it)
+    /// is checked: out of range, not finite, nested in a group, each refused naming its key.
+    #[test]
+    fn a_range_in_the_schema_alone_is_checked() {
+        #[derive(Serialize, JsonSchema)]
+        struct Group {
+            /// s.
+            #[schemars(range(min = 0.0, max = 2.0))]
+            new_time: f64,
+        }
+        #[derive(Serialize, JsonSchema)]
+        struct Options {
+            /// N.
+            #[schemars(extend("exclusiveMinimum" = 0.0))]
+            new_force: f64,
+            group: Group,
+        }
+        let check = |new_force, new_time| {
+            check_schema_ranges(
+                &Options {
+                    new_force,
+                    group: Group { new_time },
+                },
+                schemars::schema_for!(Options),
+            )
+        };
+        assert!(check(1.0, 2.0).is_ok());
+        for (force, time, key, text) in [
+            (0.0, 1.0, "new_force", "must be > 0, got 0"),
+            (f64::NAN, 1.0, "new_force", "must be a finite number"),
+            (
+                1.0,
+                2.5,
+                "group.new_time",
+                "must be between 0 and 2, got 2.5",
+            ),
+        ] {
+            let message = check(force, time).unwrap_err().to_string();
+            assert!(
+                message.contains(key) && message.contains(text),
+                "{force} {time}: {message}"
+            );
+        }
     }
 }
