@@ -49,6 +49,9 @@ def test_cli_init_writes_runnable_file_and_keeps_an_existing_one(core, tmp_path)
     assert f"wrote {target}" in result.stdout
     assert hc.load_scenario(target).simulation.duration == 0.5
     target.write_text("# mine\n")
+    renamed = invoke("init", str(tmp_path / "lab.toml"), "--from", "paper-exp-1.93hz", "--set", "name=lab")
+    assert renamed.exit_code == 0 and "(from paper-exp-1.93hz)" in renamed.stdout, renamed.output  # not "from lab"
+    assert hc.load_scenario(tmp_path / "lab.toml").name == "lab"
     again = invoke("init", str(target))
     assert again.exit_code == 2 and "exists" in again.stderr and len(again.stderr.strip().splitlines()) == 1
     assert target.read_text() == "# mine\n"

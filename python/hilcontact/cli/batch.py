@@ -321,7 +321,7 @@ def init(file: Path, source: str, sets: tuple[str, ...], force: bool) -> None:
     with _errors():
         resolved = load_scenario(source, parse_set_options(sets))
         written = write_template(file, resolved, overwrite=force)
-    click.echo(f"wrote {written} (from {resolved.name}); run it with: hilcontact run {written}")
+    click.echo(f"wrote {written} (from {source}); run it with: hilcontact run {written}")
 
 
 @cli.command(short_help="Print a scenario's resolved TOML.")
