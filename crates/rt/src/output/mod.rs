@@ -6,10 +6,11 @@
 //! the run's events ([`Event`]: their texts in [`events`]) and [`Outputs`], the set of sinks a
 //! run opened. The sinks:
 //!
-//! - [`mcap`]: an MCAP recording (ROS 2 messages) for robotics viewers, option `mcap`;
-//! - [`run_folder`]: the samples of a real-time run, from which its time series, reference and
-//!   metrics are built (the run folder); every real-time run has it, and its metrics are what
-//!   the other sinks' end events and reports go into, so the writer thread holds it apart.
+//! - [`mcap`]: an MCAP recording (ROS 2 messages) for robotics viewers, option `mcap`.
+//!
+//! Beside them, not a sink: [`run_folder`], the samples of a real-time run, from which its
+//! time series, reference and metrics are built (the run folder); every real-time run has it,
+//! and its metrics are what the sinks' end events and reports go into.
 //!
 //! **Threads and timing.** A real-time run's sinks live in the writer thread
 //! (`crate::runtime`), never the loop thread: they get every tick's [`Sample`] in tick order,

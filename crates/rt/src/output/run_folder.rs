@@ -4,14 +4,12 @@
 //! the time series, the ideal reference and the metrics ([`crate::report::build_output`];
 //! Python writes them out as `timeseries.parquet`, `reference.parquet`, `metrics.json`).
 //!
-//! It is a [`Sink`] like the others, but every real-time run has one and the writer thread
-//! holds it apart: its metrics are what the other sinks' end events and reports go into.
-
-use serde_json::Value;
+//! It is not one of the [`super::Sink`]s: every real-time run has it, the writer thread feeds it
+//! first and holds it apart, and its metrics are what the sinks' end events and reports go
+//! into.
 
 use hilcontact_core::Plan;
 
-use super::{Event, Sink};
 use crate::error::Result;
 use crate::report::{build_output, HilOutput, RunOutcome, Sample};
 
@@ -33,6 +31,11 @@ impl RunFolder {
         }
     }
 
+    /// Keeps one tick's sample (no allocation within the reserved room).
+    pub fn push(&mut self, s: &Sample) {
+        self.samples.push(*s);
+    }
+
     /// The samples so far.
     pub fn samples(&self) -> &[Sample] {
         &self.samples
@@ -48,19 +51,4 @@ impl RunFolder {
     ) -> Result<HilOutput> {
         build_output(plan, options, &self.samples, outcome)
     }
-}
-
-impl Sink for RunFolder {
-    fn sample(&mut self, s: &Sample) {
-        self.samples.push(*s);
-    }
-
-    fn event(&mut self, _: &Event<'_>) {}
-
-    /// The samples' count (the time series is built by [`RunFolder::build`]).
-    fn finish(self: Box<Self>) -> Value {
-        Value::from(self.samples.len())
-    }
-
-    fn discard(self: Box<Self>) {}
 }

@@ -15,7 +15,7 @@ use crate::error::{Result, RtError};
 use crate::options::RuntimeOptions;
 use crate::output::events::EventWatch;
 use crate::output::run_folder::RunFolder;
-use crate::output::{Outputs, RunInfo, Sink};
+use crate::output::{Outputs, RunInfo};
 use crate::report::Sample;
 use crate::safety::StopKind;
 
@@ -46,7 +46,7 @@ pub(super) fn spawn_writer(
                 // read before draining: every sample up to the stop is in the ring then
                 let stop = StopKind::from_code(shared.stop_code.load(Ordering::Acquire));
                 while let Ok(s) = consumer.pop() {
-                    run_folder.sample(&s);
+                    run_folder.push(&s);
                     outputs.sample(&s);
                 }
                 if !outputs.is_empty() {
