@@ -2,7 +2,7 @@
 //! `cargo run --release --example run_preset -- python/hilcontact/scenarios/paper-table1.toml [key=value ...]`
 //! with keys `robot_delay`, `sensor_delay`, `round_delays` (true|false), `noise` (N), `seed`, `kind` (compensator), `mode` (align|lead),
 //! `observer` (work|paper), `controller` (normal|paper), `ratio` (force_ratio_max), `duration` (s), `servo` (Hz), `law` (linear|hunt-crossley), `stiffness`, `damping`, `exponent`, `repeat` (more runs, metrics only as a sweep runs them, for profiling: `perf record -g`
-//! on this example).
+//! on this example), `tables` (true: the repeated runs keep their time series, as `hc.simulate`).
 
 use hilcontact_core::compensator::{
     CompensatorConfig, ControllerMode, DelayMode, ModelParams, ObserverMode,
@@ -19,6 +19,7 @@ fn main() {
     let (mut kind, mut mode, mut observer) =
         ("none".to_string(), DelayMode::Align, ObserverMode::Work);
     let mut repeat = 1usize;
+    let mut tables = false;
     let mut ratio = ModelParams::default().force_ratio_max;
     let mut controller = ControllerMode::Normal;
     for arg in &args[2.min(args.len())..] {
@@ -31,6 +32,7 @@ fn main() {
             "round_delays" => s.facility.round_delays = value.parse().expect("true or false"),
             "kind" => kind = value.to_string(),
             "repeat" => repeat = value.parse().expect("integer"),
+            "tables" => tables = value.parse().expect("true or false"),
             "ratio" => ratio = value.parse().expect("force_ratio_max"),
             "duration" => s.simulation.duration = value.parse().expect("s"),
             "servo" => s.facility.servo_frequency = value.parse().expect("Hz"),
@@ -86,8 +88,13 @@ fn main() {
     let start = std::time::Instant::now();
     let out = hilcontact_core::simulate(&s).expect("simulate");
     for _ in 1..repeat {
-        // as a sweep runs it: summary only, no time series
-        std::hint::black_box(hilcontact_core::simulate_metrics(&s).expect("simulate"));
+        if tables {
+            // as `hc.simulate` runs it: with the time series
+            std::hint::black_box(hilcontact_core::simulate(&s).expect("simulate"));
+        } else {
+            // as a sweep runs it: summary only, no time series
+            std::hint::black_box(hilcontact_core::simulate_metrics(&s).expect("simulate"));
+        }
     }
     let elapsed = start.elapsed() / repeat as u32;
     let m = &out.metrics;
@@ -146,4 +153,21 @@ fn main() {
     if let Some(reason) = &m.reason {
         println!("  {reason}");
     }
+    // every bit of both tables and of the metrics, to tell a pure optimisation (same digest)
+    let mut digest = 0xcbf2_9ce4_8422_2325u64; // FNV-1a
+    let mut eat = |bytes: &[u8]| {
+        for b in bytes {
+            digest = (digest ^ u64::from(*b)).wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    for table in [&out.timeseries, &out.reference] {
+        for (name, values) in &table.columns {
+            eat(name.as_bytes());
+            for v in values {
+                eat(&v.to_bits().to_le_bytes());
+            }
+        }
+    }
+    eat(serde_json::to_string(m).expect("metrics").as_bytes());
+    println!("  digest of the tables and metrics: {digest:016x}");
 }

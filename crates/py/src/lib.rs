@@ -758,8 +758,32 @@ fn frames<'py>(
     Ok(result)
 }
 
+/// glibc's allocator keeps freed memory instead of handing it back to the system at once: a
+/// run's time series (a few MB of columns, then the records and pandas' copies) were each a
+/// fresh `mmap` faulted in page by page and unmapped at the end, which cost about as much as
+/// the simulation itself (docs/performance.md). Allocations up to 32 MiB come from the heap,
+/// and up to 64 MiB of free memory at its top is kept for the next run. Other allocators are
+/// left as they are.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+fn keep_freed_memory() {
+    extern "C" {
+        fn mallopt(param: std::os::raw::c_int, value: std::os::raw::c_int) -> std::os::raw::c_int;
+    }
+    const M_TRIM_THRESHOLD: std::os::raw::c_int = -1;
+    const M_MMAP_THRESHOLD: std::os::raw::c_int = -3;
+    // SAFETY: mallopt only sets allocator parameters; a refused value leaves them unchanged.
+    unsafe {
+        mallopt(M_MMAP_THRESHOLD, 32 << 20);
+        mallopt(M_TRIM_THRESHOLD, 64 << 20);
+    }
+}
+
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+fn keep_freed_memory() {}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    keep_freed_memory();
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(simulate_batch, m)?)?;
     m.add_function(wrap_pyfunction!(summary_columns, m)?)?;
