@@ -10,7 +10,9 @@
 //! the extension key `x-value` (`"vec3"`, `"quaternion"`, `"inertia"`) so that a reader of the
 //! schema knows their shape, and `x-magnitude`, the largest `|x|` of each of their numbers
 //! (checked here); their other checks (non-zero, symmetric positive definite) are semantic
-//! and live in [`crate::plan::Plan::resolve`].
+//! and live in [`crate::plan::Plan::resolve`]. A number whose 0 means "none" and whose other
+//! values must not be tiny (a quantisation step: `x / step` must stay finite) carries
+//! `x-nonzero-minimum`, the smallest value allowed other than 0 (checked here too).
 
 use std::collections::BTreeSet;
 use std::fmt;
@@ -127,6 +129,14 @@ fn walk(
             } else if !ok {
                 issues.push(path, format!("must be {allowed}, got {x}"));
                 failed.insert(path.to_string());
+            } else if let Some(smallest) = schema.get("x-nonzero-minimum").and_then(Value::as_f64) {
+                if x != 0.0 && x.abs() < smallest {
+                    issues.push(
+                        path,
+                        format!("must be 0 (none) or >= {}, got {x}", short(smallest)),
+                    );
+                    failed.insert(path.to_string());
+                }
             }
         }
     }

@@ -61,12 +61,28 @@ def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, m
         check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / resolved.name, force)
         mcap_path = _mcap_file(mcap, folder, force)
-        with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
-            result = simulate(resolved, mcap=mcap_path, overwrite=force)
+        before = _file_state(mcap_path)
+        try:
+            with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
+                result = simulate(resolved, mcap=mcap_path, overwrite=force)
+        except KeyboardInterrupt:  # Ctrl-C during the simulation: the part of a recording it wrote goes too
+            if mcap_path is not None and _file_state(mcap_path) not in (before, None):
+                mcap_path.unlink(missing_ok=True)
+            raise
         result.save(folder, plots=not no_plots, overwrite=force)
     console = Console()
     _report(console, result, folder)
     _report_mcap(console, result.mcap)
+
+
+def _file_state(path: Path | None) -> tuple[int, int, int] | None:
+    """A file's identity and state (inode, size, modification time), None if it is not there:
+    whether this process has written it since."""
+    try:
+        st = path.stat() if path is not None else None
+    except OSError:
+        return None
+    return (st.st_ino, st.st_size, st.st_mtime_ns) if st is not None else None
 
 
 @cli.command(short_help="Redraw the figures of a run or comparison folder.")
