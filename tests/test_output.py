@@ -421,3 +421,19 @@ def test_a_scenario_that_is_not_a_regular_file_gets_a_precise_line(tmp_path):
         with pytest.raises(hc.ScenarioError, match=fragment):
             hc.load_scenario(scenario)
     assert not (tmp_path / "o").exists()
+
+
+def test_only_folders_swapped_into_place_are_reported_written(tmp_path):
+    from hilcontact.output import written_folders
+
+    before = written_folders()
+
+    def write(folder: Path) -> None:
+        write_atomically(folder / "inner", lambda f: (f / "a.txt").write_text("a"), "run")  # inside staging
+        raise KeyboardInterrupt  # the outer one never completes
+
+    with pytest.raises(KeyboardInterrupt):
+        write_atomically(tmp_path / "outer", write, "comparison")
+    assert written_folders() == before and list(tmp_path.iterdir()) == []
+    write_atomically(tmp_path / "outer", lambda f: (f / "b.txt").write_text("b"), "comparison")
+    assert written_folders() == [*before, tmp_path / "outer"]

@@ -62,6 +62,7 @@ __all__ = [
     "signals_held",
     "staging_name",
     "write_atomically",
+    "note_written",
     "written_folders",
 ]
 
@@ -290,7 +291,11 @@ def write_atomically(
         except OSError as exc:
             raise OutputError(f"--out {directory}: cannot create it: {exc.strerror or exc}") from None
         try:
-            write(staging)
+            _NESTING.depth += 1  # what `write` saves inside staging is not saved yet
+            try:
+                write(staging)
+            finally:
+                _NESTING.depth -= 1
             marker = {"written_by": "hilcontact", "kind": kind, "pid": os.getpid(), "time": time.time(),
                       "files": _listing(staging)}
             (staging / MARKER).write_text(json.dumps(marker) + "\n", encoding="utf-8")
@@ -309,7 +314,7 @@ def write_atomically(
         shutil.rmtree(staging, ignore_errors=True)
         raise
     finally:  # the swap done (a held-back Ctrl-C may be on its way): the old folder goes
-        if swapped:
+        if swapped and _NESTING.depth == 0:
             _WRITTEN.append(Path(directory))
             _CHECKED.pop(target, None)  # a later write checks afresh
         if old is not None:
@@ -320,10 +325,26 @@ def write_atomically(
 _WRITTEN: list[Path] = []
 
 
+class _Nesting(threading.local):
+    """How many :func:`write_atomically` calls of this thread are writing their staging
+    folder (a comparison's runs are written inside the comparison's)."""
+
+    depth = 0
+
+
+_NESTING = _Nesting()
+
+
 def written_folders() -> list[Path]:
-    """The folders this process has written completely (swapped into place) so far, as given;
-    what a command stopped by Ctrl-C reports having saved."""
+    """The folders (and files, :func:`note_written`) this process has written completely so
+    far, as given; what a command stopped by Ctrl-C reports having saved."""
     return list(_WRITTEN)
+
+
+def note_written(path: str | os.PathLike[str]) -> None:
+    """Record a file written completely outside :func:`write_atomically` (a run's MCAP
+    recording), for :func:`written_folders`."""
+    _WRITTEN.append(Path(path))
 
 
 def _note_replaced(directory: str | os.PathLike[str], target: Path) -> None:

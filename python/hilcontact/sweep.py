@@ -41,7 +41,8 @@ import pandas as pd
 import pyarrow as pa
 
 from .comparison import comparison_scenarios, parse_kinds
-from .errors import ArgumentError, HilContactError, ScenarioError, describe
+from .errors import ArgumentError, HilContactError, ScenarioError
+from .errors import describe as _shown
 from .limits import (
     SWEEP_BYTES_PER_RUN,
     SWEEP_SECONDS_PER_RUN,
@@ -190,7 +191,7 @@ def _axes(grid: Mapping[str, Any] | Iterable[str | GridAxis] | None) -> list[Gri
     if isinstance(grid, Mapping):
         for key, body in grid.items():
             if not isinstance(key, str):
-                raise ArgumentError(f"grid: keys are dotted scenario keys (strings), got {describe(key)}")
+                raise ArgumentError(f"grid: keys are dotted scenario keys (strings), got {_shown(key)}")
             if isinstance(body, str):
                 axes.append(parse_grid(f"{key}={body}"))
             elif isinstance(body, Mapping):
@@ -202,7 +203,7 @@ def _axes(grid: Mapping[str, Any] | Iterable[str | GridAxis] | None) -> list[Gri
     elif isinstance(grid, (str, bytes)) or not isinstance(grid, Iterable):
         raise ArgumentError(
             "grid: expected a list of specs ['KEY=START:STOP:COUNT', ...] or a mapping "
-            f"{{KEY: 'START:STOP:COUNT' or [values]}}, got {describe(grid)}"
+            f"{{KEY: 'START:STOP:COUNT' or [values]}}, got {_shown(grid)}"
         )
     else:
         for item in grid:
@@ -216,7 +217,7 @@ def _axes(grid: Mapping[str, Any] | Iterable[str | GridAxis] | None) -> list[Gri
             raise ScenarioError(f"--grid {axis.key}: a number of more than {sys.get_int_max_str_digits()} digits") from None
         if len(set(shown)) != len(shown):
             repeated = next(v for v in axis.values if shown.count(repr(v)) > 1)
-            raise ScenarioError(f"--grid {axis.key}: repeats the value {describe(repeated)}; give each value once")
+            raise ScenarioError(f"--grid {axis.key}: repeats the value {_shown(repeated)}; give each value once")
     keys = [a.key for a in axes]
     for key in keys:
         if keys.count(key) > 1:
@@ -301,34 +302,34 @@ def check_threads(threads: Any) -> int | None:
         return None
     if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or not 1 <= threads <= MAX_THREADS:
         raise ArgumentError(
-            f"threads: expected a whole number from 1 to {MAX_THREADS} (None: one per core), got {describe(threads)}"
+            f"threads: expected a whole number from 1 to {MAX_THREADS} (None: one per core), got {_shown(threads)}"
         )
     return int(threads)
 
 
-def _check_run_arguments(out: Any, resume: Any, dask: Any, chunk_size: Any, progress: Any,
+def check_run_arguments(out: Any, resume: Any, dask: Any, chunk_size: Any, progress: Any,
                          flush_seconds: Any) -> None:
     """The arguments of :func:`run_plan` (and :func:`sweep`) checked before anything runs or is
     written; :class:`~hilcontact.errors.ArgumentError` naming the first bad one."""
     if out is not None and not isinstance(out, (str, os.PathLike)):
-        raise ArgumentError(f"out: expected a folder path or None, got {describe(out)}")
+        raise ArgumentError(f"out: expected a folder path or None, got {_shown(out)}")
     if out is not None and (not isinstance(os.fspath(out), str) or "\x00" in os.fspath(out)):
-        raise ArgumentError(f"out: expected a folder path (text without NUL characters), got {describe(out)}")
+        raise ArgumentError(f"out: expected a folder path (text without NUL characters), got {_shown(out)}")
     if not isinstance(resume, bool):
-        raise ArgumentError(f"resume: expected True or False, got {describe(resume)}")
+        raise ArgumentError(f"resume: expected True or False, got {_shown(resume)}")
     if chunk_size is not None and (
         isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer))
         or not 1 <= chunk_size <= MAX_CHUNK_SIZE
     ):
         raise ArgumentError(
-            f"chunk_size: expected a whole number from 1 to {MAX_CHUNK_SIZE} (None: the default), got {describe(chunk_size)}"
+            f"chunk_size: expected a whole number from 1 to {MAX_CHUNK_SIZE} (None: the default), got {_shown(chunk_size)}"
         )
     if progress is not None and not callable(progress):
-        raise ArgumentError(f"progress: expected a function (done, total) or None, got {describe(progress)}")
+        raise ArgumentError(f"progress: expected a function (done, total) or None, got {_shown(progress)}")
     if isinstance(flush_seconds, bool) or not isinstance(flush_seconds, (int, float)) or not (
         math.isfinite(flush_seconds) and flush_seconds >= 0
     ):
-        raise ArgumentError(f"flush_seconds: expected a finite number of seconds >= 0, got {describe(flush_seconds)}")
+        raise ArgumentError(f"flush_seconds: expected a finite number of seconds >= 0, got {_shown(flush_seconds)}")
     if dask is None:
         return
     if isinstance(dask, str):
@@ -342,7 +343,7 @@ def _check_run_arguments(out: Any, resume: Any, dask: Any, chunk_size: Any, prog
             ) from None
     elif not callable(getattr(dask, "submit", None)):
         raise ArgumentError(
-            f"dask: expected 'local', a scheduler address (tcp://host:8786) or a dask.distributed.Client, got {describe(dask)}"
+            f"dask: expected 'local', a scheduler address (tcp://host:8786) or a dask.distributed.Client, got {_shown(dask)}"
         )
 
 
@@ -374,10 +375,10 @@ def plan_sweep(
     runs, then with each swept key's most demanding value).
     """
     if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= MAX_SEEDS:
-        raise ArgumentError(f"--seeds: expected a whole number from 1 to {MAX_SEEDS}, got {describe(seeds)}")
+        raise ArgumentError(f"--seeds: expected a whole number from 1 to {MAX_SEEDS}, got {_shown(seeds)}")
     threads = check_threads(threads)
     if limits is not None and not isinstance(limits, Limits):
-        raise ArgumentError(f"limits: expected a hilcontact.limits.Limits or None, got {describe(limits)}")
+        raise ArgumentError(f"limits: expected a hilcontact.limits.Limits or None, got {_shown(limits)}")
     axes = _axes(grid)
     kinds = parse_kinds(compensators)
     base_scenario = load_scenario(scenario, overrides)
@@ -732,7 +733,7 @@ def sweep(
     on Dask. Raises ScenarioError for bad input before anything runs; on KeyboardInterrupt the
     finished rows are in ``out`` before the exception propagates.
     """
-    _check_run_arguments(out, resume, dask, chunk_size, progress, flush_seconds)
+    check_run_arguments(out, resume, dask, chunk_size, progress, flush_seconds)
     return run_plan(
         plan_sweep(scenario, grid, compensators, seeds, overrides, limits=limits, threads=threads),
         out,
@@ -759,9 +760,9 @@ def run_plan(
     """Run a validated :class:`SweepPlan` (see :func:`sweep` for the arguments)."""
     _core()  # fail early if the extension is missing
     if not isinstance(plan, SweepPlan):
-        raise ArgumentError(f"plan: expected a SweepPlan (from plan_sweep), got {describe(plan)}")
+        raise ArgumentError(f"plan: expected a SweepPlan (from plan_sweep), got {_shown(plan)}")
     threads = check_threads(threads)
-    _check_run_arguments(out, resume, dask, chunk_size, progress, flush_seconds)
+    check_run_arguments(out, resume, dask, chunk_size, progress, flush_seconds)
     everything = list(plan.runs())
     order = [r[0] for r in everything]
     folder = Path(out) if out is not None else None

@@ -133,7 +133,7 @@ fn walk(
                 if x != 0.0 && x.abs() < smallest {
                     issues.push(
                         path,
-                        format!("must be 0 (none) or >= {}, got {x}", short(smallest)),
+                        format!("must be 0 (none) or >= {}, got {x:e}", short(smallest)),
                     );
                     failed.insert(path.to_string());
                 }

@@ -13,7 +13,7 @@ from rich.markup import escape
 from ..comparison import ALL_KINDS, Comparison, comparison_scenarios, run_comparison
 from ..errors import HilContactError, ScenarioError
 from ..limits import Limits, check_run
-from ..output import OutputError, check_output_folder
+from ..output import OutputError, check_output_folder, note_written
 from ..run import Run, simulate
 from ..scenario import load_scenario, presets
 from .options import (
@@ -69,6 +69,8 @@ def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, m
             if mcap_path is not None and _file_state(mcap_path) not in (before, None):
                 mcap_path.unlink(missing_ok=True)
             raise
+        if mcap_path is not None:
+            note_written(mcap_path)
         result.save(folder, plots=not no_plots, overwrite=force)
     console = Console()
     _report(console, result, folder)
@@ -229,10 +231,11 @@ def sweep_command(
         TimeRemainingColumn,
     )
 
-    from ..sweep import check_sweep_folder, plan_sweep, run_plan
+    from ..sweep import check_run_arguments, check_sweep_folder, plan_sweep, run_plan
 
     _stop_on_sigterm()
     with _errors():
+        check_run_arguments(out, resume, dask, None, None, 5.0)
         overrides = parse_set_options(sets)
         # validate before anything runs
         plan = plan_sweep(scenario, list(grids), kinds, seeds, overrides, limits=Limits(max_memory, max_time),
