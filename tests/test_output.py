@@ -392,10 +392,9 @@ def test_mcap_in_a_missing_folder_is_refused_with_one_line(tmp_path):
     result = invoke("run", "paper-table1", *SHORT, "--out", str(tmp_path / "o"), "--mcap", str(tmp_path / "a" / "b" / "r.mcap"))
     assert_one_error_line(result, "--mcap", "does not exist", "create it first")
     assert list(tmp_path.iterdir()) == []
-    with pytest.raises(OutputError, match="does not exist"):
-        hc.simulate("paper-table1", mcap=tmp_path / "a" / "r.mcap")
-    with pytest.raises(OutputError, match="does not exist"):
-        hc.simulate("paper-table1", outputs={"mcap": {"path": str(tmp_path / "a" / "r.mcap")}})
+    for command in (["demo-rt"], ["hil", "paper-table1", "--sensor", "127.0.0.1"]):
+        result = invoke(*command, "--out", str(tmp_path / "rt"), "--mcap", str(tmp_path / "a" / "r.mcap"))
+        assert_one_error_line(result, "--mcap", "does not exist")
     assert list(tmp_path.iterdir()) == []
 
 

@@ -15,7 +15,7 @@ import pandas as pd
 
 from .errors import ArgumentError, ScenarioError, describe
 from .native import core as _core
-from .output import OutputError, resolve_path, write_atomically
+from .output import write_atomically
 from .scenario import Scenario, load_scenario
 
 if TYPE_CHECKING:
@@ -183,14 +183,6 @@ class Run:
             self.plot(folder)
 
 
-def _check_file_folder(path: str | os.PathLike[str], what: str) -> None:
-    """An output file's folder must exist: hilcontact creates no folders for a file
-    (:class:`~hilcontact.output.OutputError` naming it)."""
-    folder = resolve_path(path, f"{what} {os.fspath(path)}").parent
-    if not folder.is_dir():
-        raise OutputError(f"{what} {os.fspath(path)}: its folder {folder} does not exist; create it first")
-
-
 def simulate(
     scenario: Scenario | str | os.PathLike[str],
     mcap: str | os.PathLike[str] | None = None,
@@ -223,10 +215,6 @@ def simulate(
     wanted = dict(outputs or {})
     if mcap is not None:
         wanted["mcap"] = {"path": os.fspath(mcap), "overwrite": bool(overwrite)}
-    for key, options in wanted.items():
-        path = options.get("path") if isinstance(options, Mapping) else None
-        if isinstance(path, (str, os.PathLike)) and os.fspath(path):
-            _check_file_folder(path, key)
     core = _core()
     result = core.simulate(scenario.to_json(), json.dumps(wanted)) if wanted else core.simulate(scenario.to_json())
     metrics = json.loads(result["metrics"])

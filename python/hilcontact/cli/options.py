@@ -253,18 +253,18 @@ def _mcap_file(mcap: str | None, folder: Path, force: bool) -> Path | None:
     target = resolve_path(path, f"--mcap {mcap}")
     if target.is_dir():
         raise OutputError(f"--mcap {mcap}: is a directory; give a file name, e.g. --mcap run.mcap")
-    if not target.parent.is_dir():
-        raise OutputError(f"--mcap {mcap}: its folder {target.parent} does not exist; create it first")
-    if os.path.lexists(target) and not target.is_file():
-        raise OutputError(f"--mcap {mcap}: exists and is not a file")
-    if target.exists() and not force:
-        raise OutputError(f"--mcap {mcap}: exists; choose another file, or add --force to replace it")
     out = resolve_path(folder, f"--out {folder}")
     if target == out or out in target.parents:
         raise OutputError(
             f"--mcap {mcap}: is inside --out {folder}, which is replaced as a whole when the run is saved; "
             "write it elsewhere"
         )
+    if not target.parent.is_dir():  # no folder is created for it (issue 25)
+        raise OutputError(f"--mcap {mcap}: its folder {target.parent} does not exist; create it first")
+    if os.path.lexists(target) and not target.is_file():
+        raise OutputError(f"--mcap {mcap}: exists and is not a file")
+    if target.exists() and not force:
+        raise OutputError(f"--mcap {mcap}: exists; choose another file, or add --force to replace it")
     return path
 
 
