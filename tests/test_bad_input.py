@@ -11,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 import pandas as pd
@@ -276,6 +277,203 @@ def test_a_run_killed_while_writing_leaves_no_temporary_folder(core, tmp_path, s
         again = _cli(*args, "--no-plots", cwd=tmp_path)
         assert again.wait(timeout=120) == 0, again.stderr.read()
         assert _entries(tmp_path) == ["out"]
+
+
+# ---- the last round's leftovers (issue 25, item 10) ----------------------------------------
+
+DIGITS = "1" * 5000  # above Python's limit on the digits of an integer (4300)
+
+
+def test_a_5000_digit_number_is_one_line_naming_the_key(tmp_path):
+    result = invoke("run", "paper-table1", "--set", f"facility.robot_delay={DIGITS}", "--out", "o", cwd=tmp_path)
+    assert_one_error_line(result, "--set facility.robot_delay", "more than 4300 digits")
+    path = tmp_path / "long.toml"
+    path.write_text(hc.load_scenario("paper-table1").to_toml().replace("robot_delay = 0.01", f"robot_delay = {DIGITS}"))
+    assert f"robot_delay = {DIGITS}" in path.read_text()
+    result = invoke("run", str(path), "--out", "o", cwd=tmp_path)
+    assert_one_error_line(result, "long.toml", "facility.robot_delay", "more than 4300 digits")
+    result = invoke("sweep", "paper-table1", "--grid", f"facility.robot_delay=0.01,{DIGITS}", "--out", "s", cwd=tmp_path)
+    assert_one_error_line(result, "--grid facility.robot_delay", "more than 4300 digits")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["long.toml"]
+    # from the API: a Python integer of 5000 digits is a value like any other, named by its key
+    with pytest.raises(hc.ScenarioError, match=r"^facility\.robot_delay: .*digits"):
+        hc.load_scenario("paper-table1", {"facility.robot_delay": 10**4999})
+
+
+@pytest.mark.parametrize("key", ["facility.force_resolution", "facility.torque_resolution"])
+def test_a_tiny_quantisation_step_is_refused_and_0_or_a_real_step_runs(tmp_path, key):
+    for value in ("1e-308", "5e-324", "1e-10"):
+        result = invoke("run", "paper-table1", "--set", f"{key}={value}", *SHORT, "--out", "o", cwd=tmp_path)
+        assert_one_error_line(result, key, "must be 0 (none) or >= 1e-9")
+        with pytest.raises(hc.ScenarioError, match="must be 0 \\(none\\) or >= 1e-9"):
+            hc.load_scenario("paper-table1", {key: float(value)})
+    assert list(tmp_path.iterdir()) == []
+    # the core refuses it too (a scenario that bypasses Python's models)
+    data = hc.load_scenario("paper-table1").to_dict()
+    section, name = key.split(".")
+    data[section][name] = 1e-308
+    with pytest.raises(hc.ScenarioError) as info:
+        hc.native.core().resolve_scenario(json.dumps(data))
+    assert [m for k, m in info.value.issues if k == key][0].startswith("must be 0 (none) or >= 1e-9, got 1e-308")
+    for value in (0.0, 1e-9, 0.5):
+        run = hc.simulate(hc.load_scenario("paper-table1", {key: value, "simulation.duration": 0.3}))
+        assert run.timeseries.notna().all().all() and run.status in ("ok", "unfaithful", "diverged")
+
+
+def _bare(tmp_path: Path) -> list[str]:
+    return sorted(p.name for p in tmp_path.iterdir())
+
+
+QUICK = {"simulation.duration": 0.3}
+
+
+@pytest.mark.parametrize(
+    ("call", "name"),
+    [
+        (lambda out: hc.sweep("paper-table1", ["servicer.mass=300"], "none", out=out, threads="x", overrides=QUICK), "threads"),
+        (lambda out: hc.sweep("paper-table1", ["servicer.mass=300"], "none", out=out, threads=100000, overrides=QUICK), "threads"),
+        (lambda out: hc.sweep("paper-table1", ["servicer.mass=300"], "none", out=out, threads=0, overrides=QUICK), "threads"),
+        (lambda out: hc.sweep("paper-table1", ["servicer.mass=300"], "none", out=out, overrides=["simulation.duration=0.3"]), "overrides"),
+        (lambda out: hc.sweep("paper-table1", {"facility.robot_delay": [0.01, 0.01]}, "none", out=out, overrides=QUICK), "--grid facility.robot_delay"),
+        (lambda out: hc.sweep("paper-table1", ["servicer.mass=300"], "none", out=out, chunk_size=-1, overrides=QUICK), "chunk_size"),
+        (lambda out: hc.sweep("paper-table1", ["servicer.mass=300"], "none", out=out, chunk_size=2.5, overrides=QUICK), "chunk_size"),
+        (lambda out: hc.sweep("paper-table1", 5, "none", out=out, overrides=QUICK), "grid"),
+        (lambda out: hc.sweep("paper-table1", ["servicer.mass=300"], 5, out=out, overrides=QUICK), "compensators"),
+        (lambda out: hc.sweep("paper-table1", ["servicer.mass=300"], "none", out=out, progress=3, overrides=QUICK), "progress"),
+        (lambda out: hc.sweep("paper-table1", ["servicer.mass=300"], "none", out=out, flush_seconds=float("nan"), overrides=QUICK), "flush_seconds"),
+        (lambda out: hc.sweep("paper-table1", ["servicer.mass=300"], "none", out=out, dask=7, overrides=QUICK), "dask"),
+        (lambda out: hc.compare("paper-table1", 5, QUICK), "kinds"),
+        (lambda out: hc.compare("paper-table1", "none", ["simulation.duration=0.3"]), "overrides"),
+        (lambda out: hc.compare(5, "none", QUICK), "scenario"),
+        (lambda out: hc.load_scenario("paper-table1", [("simulation.duration", 0.3)]), "overrides"),
+        (lambda out: hc.simulate("paper-table1", outputs=["mcap"]), "outputs"),
+        (lambda out: hc.stability_map(out), "results"),
+        (lambda out: hc.stability_map(pd.DataFrame()), "results"),
+        (lambda out: hc.stability_map(pd.DataFrame(columns=hc.sweep.__globals__["RESULT_COLUMNS"])), "results"),
+        (lambda out: hc.stability_map(5), "results"),
+        (lambda out: hc.stability_map(_ROWS(), cov_tolerance="x"), "cov_tolerance"),
+        (lambda out: hc.stability_map(_ROWS(), cof_limit=-1), "cof_limit"),
+    ],
+    ids=["threads x", "threads 100000", "threads 0", "overrides list", "grid repeats", "chunk_size -1",
+         "chunk_size 2.5", "grid 5", "compensators 5", "progress 3", "flush nan", "dask 7", "compare kinds 5",
+         "compare overrides list", "compare scenario 5", "load overrides list", "outputs list", "map of a missing folder",
+         "map of an empty frame", "map of no rows", "map of 5", "cov_tolerance x", "cof_limit -1"],
+)
+def test_bad_api_arguments_raise_the_package_s_value_error_naming_them(tmp_path, call, name):
+    out = tmp_path / "out"
+    with pytest.raises(hc.HilContactError) as info:
+        call(out)
+    assert isinstance(info.value, ValueError), type(info.value)
+    message = str(info.value)
+    assert message.startswith(name) and "\n" not in message, message
+    assert _bare(tmp_path) == []  # nothing written
+
+
+def _ROWS() -> pd.DataFrame:
+    from test_sweep import _synthetic_rows
+
+    return _synthetic_rows()
+
+
+def test_dask_without_dask_installed_is_the_package_s_error(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "dask", None)  # import dask -> ImportError
+    monkeypatch.setitem(sys.modules, "dask.distributed", None)
+    with pytest.raises(hc.errors.ArgumentError, match="^dask: needs dask.distributed"):
+        hc.sweep("paper-table1", ["servicer.mass=300"], "none", out=tmp_path / "s", dask="local", overrides=QUICK)
+    assert _bare(tmp_path) == []
+    result = invoke("sweep", "paper-table1", "--grid", "servicer.mass=300", "--compensators", "none",
+                    "--dask", "local", "--out", "s", cwd=tmp_path)
+    assert_one_error_line(result, "dask: needs dask.distributed", "pip install")
+    assert _bare(tmp_path) == []
+
+
+def test_stability_map_cli_on_a_missing_or_empty_folder_is_one_line(tmp_path):
+    assert_one_error_line(invoke("stability-map", str(tmp_path / "nope")), "nope")
+    (tmp_path / "empty").mkdir()
+    assert_one_error_line(invoke("stability-map", str(tmp_path / "empty")), "no sweep results")
+    assert _bare(tmp_path) == ["empty"] and list((tmp_path / "empty").iterdir()) == []
+
+
+# ---- property: any argument of the Python API works or is the package's error naming it -----
+
+hypothesis_api = pytest.importorskip("hypothesis")
+st_api = hypothesis_api.strategies
+
+#: Values of any type an argument might be given by mistake.
+ANY_VALUE = (
+    st_api.sampled_from([None, True, False, 0, -1, 1, 2, 5, 2**70, 10**5000, 0.5, -0.5, float("nan"),
+                         float("inf"), 1e-308, "", "x", "none", "none,pida", "pida,", "local", "0.01,0.02",
+                         [], [0.01, 0.01], ["none"], ["servicer.mass=300"], [1, "a"], {}, {"a": 1},
+                         {"servicer.mass": [300, 300]}, (300,), b"none", object(), print, pd.DataFrame()])
+    | st_api.integers(min_value=-(2**40), max_value=2**40)
+    | st_api.floats(allow_nan=True, allow_infinity=True)
+    | st_api.text(max_size=8)
+)
+
+#: Each function's arguments: the baseline (a valid call) and the names an error may name for
+#: a bad value of each argument (the argument, or the scenario keys it carries).
+API_CALLS = {
+    "simulate": ({"scenario": "paper-table1", "mcap": None, "overwrite": False, "outputs": None},
+                 {"scenario": ("scenario", "unknown scenario", "preset"), "mcap": ("mcap",), "overwrite": ("overwrite",),
+                  "outputs": ("outputs", "options", "mcap")}),
+    "compare": ({"scenario_source": "paper-table1", "kinds": "none", "overrides": None, "progress": None},
+                {"scenario_source": ("scenario", "unknown scenario", "preset"), "kinds": ("kinds",),
+                 "overrides": ("overrides", "invalid override key"), "progress": ("progress",)}),
+    "sweep": ({"scenario": "paper-table1", "grid": ["servicer.mass=300"], "compensators": "none", "seeds": 1,
+               "out": None, "threads": None, "chunk_size": None, "dask": None, "progress": None, "resume": False,
+               "flush_seconds": 5.0},
+              {"scenario": ("scenario", "unknown scenario", "preset"), "grid": ("grid", "--grid"),
+               "compensators": ("compensators",), "seeds": ("--seeds",), "out": ("out", "--out"),
+               "threads": ("threads",), "chunk_size": ("chunk_size",), "dask": ("dask",), "progress": ("progress",),
+               "resume": ("resume",), "flush_seconds": ("flush_seconds",)}),
+    "stability_map": ({"results": "ROWS", "cov_tolerance": None, "cof_limit": None},
+                      {"results": ("results",), "cov_tolerance": ("cov_tolerance",), "cof_limit": ("cof_limit",)}),
+}
+
+
+@hypothesis_api.settings(max_examples=150, derandomize=True, database=None, deadline=None,
+                         suppress_health_check=list(hypothesis_api.HealthCheck))
+@hypothesis_api.given(data=st_api.data())
+def test_any_argument_of_the_api_works_or_is_the_package_s_error_naming_it(core, tmp_path_factory, data):
+    function = data.draw(st_api.sampled_from(sorted(API_CALLS)), label="function")
+    baseline, names = API_CALLS[function]
+    argument = data.draw(st_api.sampled_from(sorted(names)), label="argument")
+    value = data.draw(ANY_VALUE, label="value")
+    if argument == "dask" and isinstance(value, str):
+        value = None  # an address would connect (or start a cluster): tested on its own
+    kwargs = dict(baseline)
+    if function == "stability_map":
+        kwargs["results"] = _ROWS()
+    folder = tmp_path_factory.mktemp("api")
+    kwargs[argument] = value
+    if argument in ("out", "mcap") and isinstance(value, str):
+        kwargs[argument] = str(folder / ("p" + value.replace("/", "_")))  # always inside the test's folder
+    if function == "simulate":
+        call = lambda: hc.simulate(hc.load_scenario("paper-table1", QUICK) if kwargs["scenario"] == "paper-table1" else kwargs["scenario"],  # noqa: E731
+                                   **{k: v for k, v in kwargs.items() if k != "scenario"})
+    elif function == "compare":
+        if kwargs["overrides"] is None:
+            kwargs["overrides"] = QUICK
+        call = lambda: hc.compare(**kwargs)  # noqa: E731
+    elif function == "sweep":
+        kwargs["overrides"] = QUICK
+        call = lambda: hc.sweep(**kwargs)  # noqa: E731
+    else:
+        call = lambda: hc.stability_map(**kwargs)  # noqa: E731
+    try:
+        call()
+    except hc.HilContactError as exc:
+        assert isinstance(exc, ValueError), (function, argument, value, type(exc), exc)
+        message = str(exc)
+        assert "\n" not in message
+        if isinstance(value, Mapping) and argument in ("scenario", "scenario_source"):
+            hypothesis_api.event("refused (raw scenario data: its keys are named)")
+            return
+        acceptable = names[argument] + (tuple(map(str, value)) if isinstance(value, Mapping) else ())
+        assert any(name in message for name in acceptable), (function, argument, value, message)
+        hypothesis_api.event("refused")
+        return
+    hypothesis_api.event("worked")
 
 
 # ---- property: any mutation of a preset is one clear line or a finite result --------------

@@ -20,7 +20,7 @@ from conftest import synthetic_run
 
 import hilcontact as hc
 from hilcontact.cli import cli
-from hilcontact.output import MARKER
+from hilcontact.output import MARKER, OutputError
 from hilcontact.comparison import (
     ALL_KINDS,
     SUMMARY_COLUMNS,
@@ -302,8 +302,12 @@ def test_save_without_plots_and_replacing_an_old_folder(tmp_path):
     out = tmp_path / "cmp"
     comparison = fake_comparison(("none", "pida"))
     comparison.save(out, plots=False)  # a folder hilcontact wrote: replaced completely
-    (out / "stale.txt").write_text("old")
     comparison.save(out, plots=False)
+    (out / "stale.txt").write_text("old")  # a file hilcontact did not write: overwrite=True (issue 25)
+    with pytest.raises(OutputError, match="stale.txt"):
+        comparison.save(out, plots=False)
+    assert (out / "stale.txt").read_text() == "old"
+    comparison.save(out, plots=False, overwrite=True)
     assert {p.name for p in out.iterdir()} == {"none", "pida", "comparison.md", "comparison.csv", MARKER}
     assert {p.name for p in (out / "pida").iterdir()} == RUN_FILES
     assert "## Figures" not in (out / "comparison.md").read_text()

@@ -60,9 +60,15 @@ def test_save_without_plots(tmp_path, fake_run):
 def test_save_replaces_existing_folder_completely(tmp_path, fake_run):
     out = tmp_path / "run"
     fake_run.save(out, plots=False)  # a folder hilcontact wrote: replaced completely
-    (out / "stale.txt").write_text("old")
     (out / "metrics.json").write_text("old")
     fake_run.save(out, plots=False)
+    assert json.loads((out / "metrics.json").read_text())["status"] == "ok"
+    (out / "stale.txt").write_text("old")  # a file hilcontact did not write: overwrite=True (issue 25)
+    with pytest.raises(hc.output.OutputError, match="stale.txt"):
+        fake_run.save(out, plots=False)
+    assert (out / "stale.txt").read_text() == "old"
+    (out / "metrics.json").write_text("old")
+    fake_run.save(out, plots=False, overwrite=True)
     assert {p.name for p in out.iterdir()} == DATA_FILES
     assert json.loads((out / "metrics.json").read_text())["status"] == "ok"
     assert siblings(out) == ["run"]

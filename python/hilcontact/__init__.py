@@ -26,6 +26,10 @@ the target mockup frame ``t``; quaternions ``[w, x, y, z]``.
 
 from __future__ import annotations
 
+from ._startup import guard as _guard
+
+_guard()  # the `hilcontact` command: Ctrl-C while importing is one line, exit 130 (hilcontact._startup)
+
 from .comparison import Comparison, compare
 from .errors import HilContactError, RealtimeError, RealtimeOptionError, ScenarioError
 from .native import VERSION as __version__

@@ -23,11 +23,11 @@ from typing import TYPE_CHECKING, Any
 
 import pandas as pd
 
-from .errors import HilContactError, ScenarioError
+from .errors import ArgumentError, HilContactError, ScenarioError, describe
 from .registry import KINDS
 from .output import write_atomically
 from .run import Run, simulate
-from .scenario import COMPENSATOR_MODELS, Scenario, _override_steps, _read_source, load_scenario
+from .scenario import COMPENSATOR_MODELS, Scenario, _check_overrides, _override_steps, _read_source, load_scenario
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -90,26 +90,33 @@ SUMMARY_COLUMNS = [
 ]
 
 
-def parse_kinds(kinds: str | Iterable[str] | None) -> list[str]:
+def parse_kinds(kinds: str | Iterable[str] | None, argument: str = "compensators") -> list[str]:
     """Compensator kinds from a comma-separated string or a list (None: all of them), checked,
-    duplicates removed, in the given order."""
+    duplicates removed, in the given order; ``argument`` names them in the error
+    (:class:`~hilcontact.errors.ArgumentError` for a wrong type, ScenarioError for an unknown
+    kind)."""
     if kinds is None:
         return list(ALL_KINDS)
-    items = kinds.split(",") if isinstance(kinds, str) else list(kinds)
     allowed = ", ".join(ALL_KINDS)
+    if isinstance(kinds, (bytes, Mapping)) or not isinstance(kinds, (str, Iterable)):
+        raise ArgumentError(
+            f"{argument}: expected compensator kinds (a list, or a comma-separated string), got {describe(kinds)}; "
+            f"allowed: {allowed}"
+        )
+    items = kinds.split(",") if isinstance(kinds, str) else list(kinds)
     out: list[str] = []
     for item in items:
         if not isinstance(item, str):
-            raise ScenarioError(f"compensators: expected compensator kinds, got {item!r}; allowed: {allowed}")
+            raise ArgumentError(f"{argument}: expected compensator kinds, got {describe(item)}; allowed: {allowed}")
         kind = item.strip()
         if not kind:
             continue  # "none,pida," or spaces
         if kind not in COMPENSATOR_MODELS:
-            raise ScenarioError(f"compensators: unknown compensator {kind!r}; allowed: {allowed}")
+            raise ScenarioError(f"{argument}: unknown compensator {describe(kind)}; allowed: {allowed}")
         if kind not in out:
             out.append(kind)
     if not out:
-        raise ScenarioError(f"compensators: none given; allowed: {allowed}")
+        raise ScenarioError(f"{argument}: none given; allowed: {allowed}")
     return out
 
 
@@ -117,13 +124,17 @@ def comparison_scenarios(
     scenario_source: Any,
     kinds: str | Iterable[str] | None = None,
     overrides: Mapping[str, Any] | None = None,
+    *,
+    argument: str = "compensators",
 ) -> dict[str, Scenario]:
     """The resolved scenario of each compensator (validated before anything runs).
 
-    Raises ScenarioError for a bad scenario, override or kind, and for an override of
-    ``compensator.kind`` (the kinds are the ``kinds`` argument).
+    Raises ScenarioError for a bad scenario, override or kind (``argument`` names the kinds in
+    the message), and for an override of ``compensator.kind`` (the kinds are the ``kinds``
+    argument).
     """
-    chosen = parse_kinds(kinds)
+    _check_overrides(overrides)
+    chosen = parse_kinds(kinds, argument)
     user = dict(overrides or {})
     parameters: dict[str, str] = {}  # override key -> compensator parameter it sets
     for key in user:
@@ -379,13 +390,17 @@ def compare(
     before the first run; raises ScenarioError for bad input. A diverging run is a result,
     not an error.
     """
-    return run_comparison(comparison_scenarios(scenario_source, kinds, overrides), progress=progress)
+    if progress is not None and not callable(progress):
+        raise ArgumentError(f"progress: expected a function (kind, index, total) or None, got {describe(progress)}")
+    return run_comparison(comparison_scenarios(scenario_source, kinds, overrides, argument="kinds"), progress=progress)
 
 
 def run_comparison(
     scenarios: Mapping[str, Scenario], *, progress: Callable[[str, int, int], None] | None = None
 ) -> Comparison:
     """Simulate resolved scenarios (kind -> Scenario, e.g. from :func:`comparison_scenarios`)."""
+    if not isinstance(scenarios, Mapping) or not all(isinstance(s, Scenario) for s in scenarios.values()):
+        raise ArgumentError(f"scenarios: expected a mapping kind -> Scenario, got {describe(scenarios)}")
     runs: dict[str, Run] = {}
     for index, (kind, scenario) in enumerate(scenarios.items()):
         if progress is not None:

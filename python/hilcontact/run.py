@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -12,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from .errors import ScenarioError
+from .errors import ArgumentError, ScenarioError, describe
 from .native import core as _core
 from .output import write_atomically
 from .scenario import Scenario, load_scenario
@@ -169,6 +170,8 @@ class Run:
         :mod:`hilcontact.output`); else :class:`~hilcontact.output.OutputError`. Returns the
         folder's path.
         """
+        if not isinstance(directory, (str, os.PathLike)):
+            raise ArgumentError(f"directory: expected a folder path, got {describe(directory)}")
         return write_atomically(directory, lambda folder: self._write(folder, plots), "run", overwrite)
 
     def _write(self, folder: Path, plots: bool) -> None:
@@ -201,6 +204,12 @@ def simulate(
     Raises ScenarioError for an invalid scenario. A diverging loop is not an error: the run's
     ``status`` is ``"diverged"`` and ``metrics["reason"]`` says why.
     """
+    if outputs is not None and not isinstance(outputs, Mapping):
+        raise ArgumentError(f"outputs: expected a mapping output -> options, e.g. {{'mcap': {{'path': 'run.mcap'}}}}, got {describe(outputs)}")
+    if mcap is not None and not isinstance(mcap, (str, os.PathLike)):
+        raise ArgumentError(f"mcap: expected a file path or None, got {describe(mcap)}")
+    if not isinstance(overwrite, bool):
+        raise ArgumentError(f"overwrite: expected True or False, got {describe(overwrite)}")
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
     wanted = dict(outputs or {})

@@ -37,6 +37,8 @@ import json
 import math
 import os
 import re
+import stat
+import sys
 import tomllib
 from collections.abc import Mapping
 from importlib import resources
@@ -44,6 +46,7 @@ from typing import Annotated, Any, Literal, Union
 
 import tomli_w
 from pydantic import (
+    AfterValidator,
     BaseModel,
     BeforeValidator,
     ConfigDict,
@@ -55,7 +58,7 @@ from pydantic import (
 )
 
 from . import _core
-from .errors import ScenarioError
+from .errors import ArgumentError, ScenarioError, describe
 from .native import VERSION
 from .registry import KINDS
 
@@ -87,7 +90,7 @@ def _show(value: Any, limit: int = 60) -> str:
     elif isinstance(value, Mapping):
         text = "a table {" + ", ".join(str(k) for k in value) + "}"
     else:
-        text = repr(value)
+        text = describe(value, limit)  # never fails (an integer above Python's digit limit)
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
@@ -172,6 +175,17 @@ def _value_type(marker: str, magnitude: float | None) -> Any:
         return checked
 
     return Annotated[Any if marker == "inertia" else list[float], BeforeValidator(check)]
+
+
+def _nonzero_minimum(smallest: float) -> Any:
+    """The check of the schema's `x-nonzero-minimum`: 0 (none) or at least ``smallest``."""
+
+    def check(value: float) -> float:
+        if value != 0 and abs(value) < smallest:
+            raise ValueError(f"must be 0 (none) or >= {_bound(smallest)}, got {_show(value)}")
+        return value
+
+    return check
 
 
 #: The largest value of the schema's unsigned integer formats (the core's u32, u64).
@@ -262,6 +276,8 @@ def _field(prop: Mapping[str, Any], required: bool) -> tuple[Any, Any]:
                 kwargs[name] = schema[key]
         if annotation is int and "maximum" not in schema and schema.get("format") in _UINT_MAX:
             kwargs["le"] = _UINT_MAX[schema["format"]]
+        if "x-nonzero-minimum" in schema:
+            annotation = Annotated[annotation, AfterValidator(_nonzero_minimum(schema["x-nonzero-minimum"]))]
     elif schema.get("type") == "boolean":
         annotation = bool
     elif schema.get("type") == "string":
@@ -669,6 +685,34 @@ def _parse_toml(text: str, source: str) -> dict[str, Any]:
         raise ScenarioError(f"{source}: invalid TOML: {exc}") from None
     except RecursionError:
         raise ScenarioError(f"{source}: invalid TOML: arrays or tables nested too deeply") from None
+    except ValueError:  # an integer above Python's limit on digits (sys.get_int_max_str_digits)
+        key = _long_number_key(text) or "a value"
+        raise ScenarioError(
+            f"{source}: {key}: a number of more than {sys.get_int_max_str_digits()} digits; "
+            "give a number such as 0.02 or 1e30"
+        ) from None
+
+
+_TABLE_HEADER = re.compile(r"^\s*\[+\s*([^\]]+?)\s*\]+")
+_KEY_VALUE = re.compile(r"^\s*([A-Za-z0-9_.\-\"' ]+?)\s*=\s*(.*)$")
+
+
+def _long_number_key(text: str) -> str | None:
+    """The dotted key of the first value of ``text`` (TOML) with a run of more digits than
+    Python converts (best effort, for the message), None if none is found."""
+    limit = sys.get_int_max_str_digits() or 4300
+    digits = re.compile(r"[0-9_]{%d,}" % (limit + 1))
+    table = ""
+    for line in text.splitlines():
+        header = _TABLE_HEADER.match(line)
+        if header and "=" not in line.split("]")[0]:
+            table = header.group(1).replace('"', "").replace("'", "")
+            continue
+        pair = _KEY_VALUE.match(line)
+        if pair and digits.search(pair.group(2)):
+            key = pair.group(1).strip().replace('"', "").replace("'", "")
+            return f"{table}.{key}" if table else key
+    return None
 
 
 _SEGMENT = re.compile(r"^([A-Za-z_][A-Za-z0-9_-]*)((?:\[\d+\])*)$")
@@ -713,6 +757,7 @@ def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any] | None)
     file written for ``tdpa-impedance``). Compensator parameters set by overrides are always
     kept, so one that the new kind does not have is an error.
     """
+    _check_overrides(overrides)
     data: dict[str, Any] = copy.deepcopy(dict(raw))
     parsed = [(key, _override_steps(key), value) for key, value in (overrides or {}).items()]
     for key, steps, value in parsed:
@@ -746,17 +791,60 @@ def apply_overrides(raw: Mapping[str, Any], overrides: Mapping[str, Any] | None)
     return data
 
 
+def _check_overrides(overrides: Any) -> None:
+    """Overrides are a mapping (or None); anything else is an :class:`ArgumentError`."""
+    if overrides is not None and not isinstance(overrides, Mapping):
+        raise ArgumentError(
+            "overrides: expected a mapping of dotted keys to values, e.g. {'facility.robot_delay': 0.02}, "
+            f"got {type(overrides).__name__} {_show(overrides)}"
+        )
+
+
+def _not_a_file(text: str) -> str | None:
+    """Why the path ``text`` is not a TOML file to read (a directory, a device such as
+    /dev/null, a FIFO, a socket, a symbolic link loop or one to a missing file), None for a
+    regular file or a path that does not exist."""
+    try:
+        mode = os.stat(text).st_mode
+    except OSError as exc:
+        if exc.errno == getattr(os, "ELOOP", 40):
+            return "a symbolic link loop"
+        if os.path.islink(text):
+            return f"a symbolic link to a missing file ({os.readlink(text)})"
+        if exc.errno in (getattr(os, "ENOENT", 2), getattr(os, "ENOTDIR", 20)):
+            return None
+        return f"cannot be read: {exc.strerror or exc}"
+    if stat.S_ISREG(mode):
+        return None
+    if stat.S_ISDIR(mode):
+        return "is a directory"
+    if stat.S_ISFIFO(mode):
+        return "is a named pipe (FIFO)"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "is a device"
+    if stat.S_ISSOCK(mode):
+        return "is a socket"
+    return "is not a regular file"
+
+
 def _read_source(source: Any) -> dict[str, Any]:
     if isinstance(source, Scenario):
         return source.to_dict()
     if isinstance(source, Mapping):
         return copy.deepcopy(dict(source))
     if not isinstance(source, (str, os.PathLike)):
-        raise ScenarioError(f"expected a preset name, a TOML file path or a Scenario, got {_show(source)}")
+        raise ArgumentError(f"scenario: expected a preset name, a TOML file path or a Scenario, got {_show(source)}")
     text = os.fspath(source)
+    if not isinstance(text, str):
+        raise ArgumentError(f"scenario: expected a preset name, a TOML file path or a Scenario, got {_show(source)}")
     files = _preset_files()
     if isinstance(source, str) and text in files:
         return _parse_toml(files[text].read_text(encoding="utf-8"), f"preset {text!r}")
+    if "\x00" in text:
+        raise ScenarioError(f"scenario {_show(text)}: a path cannot hold a NUL character")
+    problem = _not_a_file(text)
+    if problem is not None:
+        raise ScenarioError(f"{text}: {problem}, expected a preset name or a TOML file")
     if os.path.isfile(text):
         try:
             with open(text, "rb") as handle:
@@ -766,8 +854,6 @@ def _read_source(source: Any) -> dict[str, Any]:
         except OSError as exc:
             raise ScenarioError(f"{text}: cannot read: {exc.strerror}") from None
         return _parse_toml(content, text)
-    if os.path.isdir(text):
-        raise ScenarioError(f"{text}: is a directory, expected a preset name or a TOML file")
     names = ", ".join(sorted(files)) or "(none)"
     raise ScenarioError(f"unknown scenario {text!r}: not a preset and no such file; presets: {names}")
 
@@ -779,6 +865,7 @@ def load_scenario(source: Any, overrides: Mapping[str, Any] | None = None) -> Sc
     :class:`Scenario`. ``overrides`` maps dotted keys (``"facility.robot_delay"``) to values and
     is applied to the raw TOML data before validation. Raises ScenarioError.
     """
+    _check_overrides(overrides)
     raw = _read_source(source)
     if overrides:
         raw = apply_overrides(raw, overrides)

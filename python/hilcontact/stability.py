@@ -24,8 +24,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import pandas as pd
 
-from .errors import HilContactError
-from .sweep import load_results
+from .errors import ArgumentError, HilContactError, describe
+from .sweep import RESULTS_FILE, load_results
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -169,16 +169,52 @@ def criterion_text(cov_tolerance: float | None, cof_limit: float | None) -> str:
     return "every run ok" + (" and " + ", ".join(extra) + " on every collision" if extra else "")
 
 
+#: The columns of a sweep's rows a map reads.
+_NEEDED = ("run_key", "compensator", "status", "robot_delay", "contact_frequency", "worst_cov", "worst_cof")
+
+
+def _rows_of(results: Any) -> pd.DataFrame:
+    """A sweep's rows from a DataFrame or a sweep folder, checked (see :func:`stability_map`)."""
+    if isinstance(results, pd.DataFrame):
+        rows = results
+    elif isinstance(results, (str, os.PathLike)):
+        folder = Path(results)
+        if not folder.is_dir():
+            raise ArgumentError(f"results: {folder}: no such folder (expected a sweep folder or its rows)")
+        try:
+            rows = load_results(folder)
+        except ArgumentError:
+            raise
+        except HilContactError as exc:
+            if isinstance(exc, ValueError):
+                raise
+            raise ArgumentError(f"results: {folder}: no sweep results ({RESULTS_FILE}) here") from None
+    else:
+        raise ArgumentError(f"results: expected a sweep's rows (a DataFrame) or a sweep folder, got {describe(results)}")
+    missing = [name for name in _NEEDED if name not in rows.columns]
+    if missing:
+        raise ArgumentError(f"results: not a sweep's rows (missing columns {', '.join(missing)})")
+    if rows.empty:
+        raise ArgumentError("results: the sweep has no finished runs")
+    return rows
+
+
 def stability_map(
     results: pd.DataFrame | str | os.PathLike[str], cov_tolerance: float | None = None, cof_limit: float | None = None
 ) -> StabilityMap:
     """The stability map of a sweep's rows (a DataFrame from :func:`hilcontact.sweep` or a
-    sweep folder)."""
-    rows = results if isinstance(results, pd.DataFrame) else load_results(results)
-    if rows.empty:
-        raise HilContactError("stability map: the sweep has no finished runs")
-    if not ((cov_tolerance is None or cov_tolerance > 0) and (cof_limit is None or cof_limit > 0)):
-        raise HilContactError("stability map: the CoV tolerance and the CoF limit must be > 0")
+    sweep folder). ``cov_tolerance``, ``cof_limit``: None or a finite number > 0.
+
+    Raises :class:`~hilcontact.errors.ArgumentError` (a ValueError) naming the argument for a
+    missing folder, a folder without sweep results, rows without a sweep's columns, no
+    finished run, or a bad tolerance."""
+    for name, value in (("cov_tolerance", cov_tolerance), ("cof_limit", cof_limit)):
+        if value is not None and (
+            isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating))
+            or not (math.isfinite(value) and value > 0)
+        ):
+            raise ArgumentError(f"{name}: expected a finite number > 0 or None, got {describe(value)}")
+    rows = _rows_of(results)
     usable = rows[np.isfinite(rows["contact_frequency"].astype(float))]
     if usable.empty:
         raise HilContactError(

@@ -28,6 +28,7 @@ import itertools
 import json
 import math
 import os
+import sys
 import time
 import tomllib
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -40,7 +41,8 @@ import pandas as pd
 import pyarrow as pa
 
 from .comparison import comparison_scenarios, parse_kinds
-from .errors import HilContactError, ScenarioError
+from .errors import ArgumentError, HilContactError, ScenarioError
+from .errors import describe as _shown
 from .limits import (
     SWEEP_BYTES_PER_RUN,
     SWEEP_SECONDS_PER_RUN,
@@ -75,6 +77,10 @@ PARTS_DIR = "parts"
 MAX_GRID_VALUES = 100_000
 #: Most noise seeds per grid point (``--seeds``).
 MAX_SEEDS = 100_000
+#: Most Rust threads of a local sweep (``threads``, ``--threads``).
+MAX_THREADS = 1024
+#: Most runs per core call or Dask task (``chunk_size``).
+MAX_CHUNK_SIZE = 1_000_000
 
 #: Columns of a result row, after the swept keys (one column per ``--grid`` key, named by the
 #: key), in this order. ``run_key`` identifies the run (grid values, compensator, seed) for
@@ -117,13 +123,17 @@ def _tidy(value: float) -> float:
     return float(f"{value:.12g}")
 
 
-def _toml_value(text: str) -> Any:
+def _toml_value(text: str, key: str = "") -> Any:
     try:
         return tomllib.loads("v = " + text)["v"]
     except tomllib.TOMLDecodeError:
         return text
     except RecursionError:
-        raise ScenarioError(f"--grid value {text[:40]!r}...: nested too deeply") from None
+        raise ScenarioError(f"--grid {key} value {text[:40]!r}...: nested too deeply") from None
+    except ValueError:  # an integer above Python's limit on digits
+        raise ScenarioError(
+            f"--grid {key}: a number of more than {sys.get_int_max_str_digits()} digits; give a number such as 0.02"
+        ) from None
 
 
 def parse_grid(spec: str) -> GridAxis:
@@ -166,7 +176,7 @@ def parse_grid(spec: str) -> GridAxis:
             raise ScenarioError(f"--grid {key}: {len(items)} values; at most {MAX_GRID_VALUES} per key")
         if any(not item for item in items):
             raise ScenarioError(f"--grid {key}: list {body!r} has an empty item")
-        values = tuple(_toml_value(item) for item in items)
+        values = tuple(_toml_value(item, key) for item in items)
     if len(set(map(repr, values))) != len(values):
         raise ScenarioError(f"--grid {key}: {body!r} repeats a value")
     return GridAxis(key=key, values=values)
@@ -180,15 +190,34 @@ def _axes(grid: Mapping[str, Any] | Iterable[str | GridAxis] | None) -> list[Gri
     axes: list[GridAxis] = []
     if isinstance(grid, Mapping):
         for key, body in grid.items():
+            if not isinstance(key, str):
+                raise ArgumentError(f"grid: keys are dotted scenario keys (strings), got {_shown(key)}")
             if isinstance(body, str):
                 axes.append(parse_grid(f"{key}={body}"))
+            elif isinstance(body, Mapping):
+                raise ArgumentError(f"grid: {key}: expected a spec 'START:STOP:COUNT' or a list of values, got a mapping")
             elif isinstance(body, Iterable):
-                axes.append(GridAxis(key=str(key), values=tuple(body)))
+                axes.append(GridAxis(key=key, values=tuple(body)))
             else:
-                axes.append(GridAxis(key=str(key), values=(body,)))
+                axes.append(GridAxis(key=key, values=(body,)))
+    elif isinstance(grid, (str, bytes)) or not isinstance(grid, Iterable):
+        raise ArgumentError(
+            "grid: expected a list of specs ['KEY=START:STOP:COUNT', ...] or a mapping "
+            f"{{KEY: 'START:STOP:COUNT' or [values]}}, got {_shown(grid)}"
+        )
     else:
         for item in grid:
             axes.append(item if isinstance(item, GridAxis) else parse_grid(item))
+    for axis in axes:
+        if len(axis.values) > MAX_GRID_VALUES:
+            raise ScenarioError(f"--grid {axis.key}: {len(axis.values)} values; at most {MAX_GRID_VALUES} per key")
+        try:
+            shown = [repr(v) for v in axis.values]
+        except ValueError:  # an integer above Python's limit on digits
+            raise ScenarioError(f"--grid {axis.key}: a number of more than {sys.get_int_max_str_digits()} digits") from None
+        if len(set(shown)) != len(shown):
+            repeated = next(v for v in axis.values if shown.count(repr(v)) > 1)
+            raise ScenarioError(f"--grid {axis.key}: repeats the value {_shown(repeated)}; give each value once")
     keys = [a.key for a in axes]
     for key in keys:
         if keys.count(key) > 1:
@@ -266,6 +295,58 @@ def run_key(values: Mapping[str, Any], kind: str, seed: int) -> str:
     return json.dumps({"grid": dict(values), "compensator": kind, "seed": seed}, sort_keys=True)
 
 
+def check_threads(threads: Any) -> int | None:
+    """``threads`` checked: None (one per core) or a whole number from 1 to
+    :data:`MAX_THREADS`; else :class:`~hilcontact.errors.ArgumentError`."""
+    if threads is None:
+        return None
+    if isinstance(threads, bool) or not isinstance(threads, (int, np.integer)) or not 1 <= threads <= MAX_THREADS:
+        raise ArgumentError(
+            f"threads: expected a whole number from 1 to {MAX_THREADS} (None: one per core), got {_shown(threads)}"
+        )
+    return int(threads)
+
+
+def check_run_arguments(out: Any, resume: Any, dask: Any, chunk_size: Any, progress: Any,
+                         flush_seconds: Any) -> None:
+    """The arguments of :func:`run_plan` (and :func:`sweep`) checked before anything runs or is
+    written; :class:`~hilcontact.errors.ArgumentError` naming the first bad one."""
+    if out is not None and not isinstance(out, (str, os.PathLike)):
+        raise ArgumentError(f"out: expected a folder path or None, got {_shown(out)}")
+    if out is not None and (not isinstance(os.fspath(out), str) or "\x00" in os.fspath(out)):
+        raise ArgumentError(f"out: expected a folder path (text without NUL characters), got {_shown(out)}")
+    if not isinstance(resume, bool):
+        raise ArgumentError(f"resume: expected True or False, got {_shown(resume)}")
+    if chunk_size is not None and (
+        isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer))
+        or not 1 <= chunk_size <= MAX_CHUNK_SIZE
+    ):
+        raise ArgumentError(
+            f"chunk_size: expected a whole number from 1 to {MAX_CHUNK_SIZE} (None: the default), got {_shown(chunk_size)}"
+        )
+    if progress is not None and not callable(progress):
+        raise ArgumentError(f"progress: expected a function (done, total) or None, got {_shown(progress)}")
+    if isinstance(flush_seconds, bool) or not isinstance(flush_seconds, (int, float)) or not (
+        math.isfinite(flush_seconds) and flush_seconds >= 0
+    ):
+        raise ArgumentError(f"flush_seconds: expected a finite number of seconds >= 0, got {_shown(flush_seconds)}")
+    if dask is None:
+        return
+    if isinstance(dask, str):
+        if not dask.strip():
+            raise ArgumentError("dask: expected 'local', a scheduler address (tcp://host:8786) or a Client, got ''")
+        try:
+            import dask.distributed  # noqa: F401
+        except ImportError:
+            raise ArgumentError(
+                "dask: needs dask.distributed, which is not installed: pip install 'hilcontact[dask]'"
+            ) from None
+    elif not callable(getattr(dask, "submit", None)):
+        raise ArgumentError(
+            f"dask: expected 'local', a scheduler address (tcp://host:8786) or a dask.distributed.Client, got {_shown(dask)}"
+        )
+
+
 def _sweep_estimate(runs: int, per_run: Estimate, threads: int | None) -> Estimate:
     """A sweep's estimate: its runs' time plus their validation, and the memory of the runs
     that run at once (one per thread) plus what the plan keeps per run."""
@@ -294,7 +375,10 @@ def plan_sweep(
     runs, then with each swept key's most demanding value).
     """
     if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= MAX_SEEDS:
-        raise ScenarioError(f"--seeds: expected a whole number from 1 to {MAX_SEEDS}, got {seeds!r}")
+        raise ArgumentError(f"--seeds: expected a whole number from 1 to {MAX_SEEDS}, got {_shown(seeds)}")
+    threads = check_threads(threads)
+    if limits is not None and not isinstance(limits, Limits):
+        raise ArgumentError(f"limits: expected a hilcontact.limits.Limits or None, got {_shown(limits)}")
     axes = _axes(grid)
     kinds = parse_kinds(compensators)
     base_scenario = load_scenario(scenario, overrides)
@@ -649,6 +733,7 @@ def sweep(
     on Dask. Raises ScenarioError for bad input before anything runs; on KeyboardInterrupt the
     finished rows are in ``out`` before the exception propagates.
     """
+    check_run_arguments(out, resume, dask, chunk_size, progress, flush_seconds)
     return run_plan(
         plan_sweep(scenario, grid, compensators, seeds, overrides, limits=limits, threads=threads),
         out,
@@ -674,8 +759,10 @@ def run_plan(
 ) -> pd.DataFrame:
     """Run a validated :class:`SweepPlan` (see :func:`sweep` for the arguments)."""
     _core()  # fail early if the extension is missing
-    if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
-        raise ScenarioError(f"threads: expected a whole number >= 1, got {threads!r}")
+    if not isinstance(plan, SweepPlan):
+        raise ArgumentError(f"plan: expected a SweepPlan (from plan_sweep), got {_shown(plan)}")
+    threads = check_threads(threads)
+    check_run_arguments(out, resume, dask, chunk_size, progress, flush_seconds)
     everything = list(plan.runs())
     order = [r[0] for r in everything]
     folder = Path(out) if out is not None else None

@@ -222,13 +222,13 @@ pub struct FacilityConfig {
     #[serde(default)]
     #[schemars(range(min = 0.0, max = 1e6))]
     pub torque_noise: f64,
-    /// Force quantisation step, N (0 = none, <= 1e6).
+    /// Force quantisation step, N (0 = none, else 1e-9 to 1e6).
     #[serde(default)]
-    #[schemars(range(min = 0.0, max = 1e6))]
+    #[schemars(range(min = 0.0, max = 1e6), extend("x-nonzero-minimum" = 1e-9))]
     pub force_resolution: f64,
-    /// Moment quantisation step, N·m (0 = none, <= 1e6).
+    /// Moment quantisation step, N·m (0 = none, else 1e-9 to 1e6).
     #[serde(default)]
-    #[schemars(range(min = 0.0, max = 1e6))]
+    #[schemars(range(min = 0.0, max = 1e6), extend("x-nonzero-minimum" = 1e-9))]
     pub torque_resolution: f64,
     /// Sensor origin in the target frame, m.
     #[serde(default)]

@@ -10,7 +10,9 @@
 //! the extension key `x-value` (`"vec3"`, `"quaternion"`, `"inertia"`) so that a reader of the
 //! schema knows their shape, and `x-magnitude`, the largest `|x|` of each of their numbers
 //! (checked here); their other checks (non-zero, symmetric positive definite) are semantic
-//! and live in [`crate::plan::Plan::resolve`].
+//! and live in [`crate::plan::Plan::resolve`]. A number whose 0 means "none" and whose other
+//! values must not be tiny (a quantisation step: `x / step` must stay finite) carries
+//! `x-nonzero-minimum`, the smallest value allowed other than 0 (checked here too).
 
 use std::collections::BTreeSet;
 use std::fmt;
@@ -127,6 +129,14 @@ fn walk(
             } else if !ok {
                 issues.push(path, format!("must be {allowed}, got {x}"));
                 failed.insert(path.to_string());
+            } else if let Some(smallest) = schema.get("x-nonzero-minimum").and_then(Value::as_f64) {
+                if x != 0.0 && x.abs() < smallest {
+                    issues.push(
+                        path,
+                        format!("must be 0 (none) or >= {}, got {x:e}", short(smallest)),
+                    );
+                    failed.insert(path.to_string());
+                }
             }
         }
     }
@@ -456,3 +466,64 @@ macro_rules! table_like {
 }
 
 table_like!(SerializeStruct, SerializeStructVariant);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::error::CoreError;
+
+    /// A quantisation step as the facility's: 0 (none) or 1e-9 to 1e6.
+    #[derive(serde::Serialize, schemars::JsonSchema)]
+    struct Step {
+        #[schemars(range(min = 0.0, max = 1e6), extend("x-nonzero-minimum" = 1e-9))]
+        step: f64,
+    }
+
+    /// The problems `check_ranges_of` records for a step, as (key, message).
+    fn problems(step: f64) -> Vec<(String, String)> {
+        let mut issues = Issues::default();
+        check_ranges_of(
+            &Step { step },
+            &schemars::schema_for!(Step),
+            "step",
+            &mut issues,
+        );
+        match issues.finish() {
+            Ok(()) => Vec::new(),
+            Err(e @ CoreError::InvalidScenario { .. }) => {
+                e.issues().into_iter().map(|i| (i.key, i.message)).collect()
+            }
+        }
+    }
+
+    #[test]
+    fn a_nonzero_minimum_allows_0_and_refuses_tiny_steps() {
+        for ok in [0.0, 1e-9, 0.5, 1e6] {
+            assert_eq!(problems(ok), Vec::new(), "{ok}");
+        }
+        for tiny in [1e-308, 5e-324, 9.99e-10] {
+            assert_eq!(
+                problems(tiny),
+                vec![(
+                    "step".to_string(),
+                    format!("must be 0 (none) or >= 1e-9, got {tiny:e}")
+                )]
+            );
+        }
+        // the range comes first: a negative step is out of range, not "tiny"
+        let negative = problems(-1e-12);
+        assert_eq!(negative.len(), 1);
+        assert!(negative[0]
+            .1
+            .starts_with("must be between 0 and 1e6, got -"));
+    }
+
+    #[test]
+    fn the_facility_s_quantisation_steps_have_the_nonzero_minimum() {
+        let schema = serde_json::to_value(scenario_schema()).expect("schema");
+        let facility = &schema["$defs"]["FacilityConfig"]["properties"];
+        for key in ["force_resolution", "torque_resolution"] {
+            assert_eq!(facility[key]["x-nonzero-minimum"], 1e-9, "{key}");
+        }
+    }
+}

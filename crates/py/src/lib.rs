@@ -1,13 +1,17 @@
 //! Python bindings of hilcontact-core (`hilcontact._core`): convert types, map errors,
 //! release the GIL. No numerics here.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{sync_channel, RecvTimeoutError};
+use std::sync::Arc;
 use std::time::Duration;
 
 use hilcontact_core::{CoreError, Plan, Scenario, Table};
 use hilcontact_rt::output::{Outputs, RunInfo, OUTPUTS};
 use hilcontact_rt::{EmulatorOptions, FacilityHandle, HilHandle, RtError, RuntimeOptions};
 use numpy::IntoPyArray;
-use pyo3::exceptions::{PyException, PyOSError, PyValueError};
+use pyo3::exceptions::{PyException, PyImportError, PyKeyboardInterrupt, PyOSError, PyValueError};
+use pyo3::panic::PanicException;
 use pyo3::prelude::*;
 use pyo3::sync::GILOnceCell;
 use pyo3::types::{PyDict, PyTuple, PyType};
@@ -184,6 +188,78 @@ where
     let options: O = parse_options(py, options_json)?;
     py.allow_threads(|| run(&scenario, &options))
         .map_err(|e| rt_err(py, e))
+}
+
+/// How often a long call checks Python's signals (Ctrl-C) while the core works.
+const SIGNAL_POLL: Duration = Duration::from_millis(20);
+
+/// Runs `work` on a thread of its own while this thread waits for it with the GIL released,
+/// checking Python's signals every [`SIGNAL_POLL`] (`py.check_signals()`): a Ctrl-C (or a
+/// SIGTERM that Python turns into KeyboardInterrupt) raises within that time instead of after
+/// the whole run. `work` gets a flag that is set then, so that work made of many runs stops
+/// before its next one; a single simulation cannot stop early (the core has no stop hook), so
+/// it runs on to its end on its thread, and its result is dropped. Signals are checked once
+/// more before returning: nothing converts a result into Python objects (numpy arrays) with a
+/// KeyboardInterrupt pending.
+fn run_interruptible<R: Send + 'static>(
+    py: Python<'_>,
+    work: impl FnOnce(&AtomicBool) -> R + Send + 'static,
+) -> PyResult<R> {
+    let cancel = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&cancel);
+    let (done, mut result) = sync_channel(1);
+    std::thread::Builder::new()
+        .name("hilcontact-core".into())
+        .spawn(move || {
+            let _ = done.send(work(&flag));
+        })
+        .map_err(|e| PyOSError::new_err(format!("cannot start the simulation's thread: {e}")))?;
+    loop {
+        // the receiver goes into the GIL-free closure and comes back (it is Send, not Sync)
+        let (received, back) = py.allow_threads(move || (result.recv_timeout(SIGNAL_POLL), result));
+        result = back;
+        if let Err(interrupt) = py.check_signals() {
+            cancel.store(true, Ordering::Relaxed);
+            return Err(interrupt);
+        }
+        match received {
+            Ok(value) => return Ok(value),
+            Err(RecvTimeoutError::Timeout) => continue,
+            Err(RecvTimeoutError::Disconnected) => {
+                return Err(PanicException::new_err(
+                    "the simulation's thread panicked (see the message above)",
+                ))
+            }
+        }
+    }
+}
+
+/// Loads NumPy's C API now, at import: rust-numpy loads it on the first conversion by running
+/// NumPy's Python code, and panics if that raises, as a Ctrl-C landing there makes it do
+/// ("Failed to access NumPy array API capsule: KeyboardInterrupt"). A Ctrl-C pending or
+/// arriving now raises KeyboardInterrupt from the import instead (the panic caught, its
+/// message silenced); a NumPy that cannot be loaded twice in a row is an ImportError.
+fn load_numpy(py: Python<'_>) -> PyResult<()> {
+    py.check_signals()?;
+    let load = || {
+        let hook = std::panic::take_hook();
+        std::panic::set_hook(Box::new(|_| {}));
+        let loaded = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            Vec::<f64>::new().into_pyarray(py);
+        }));
+        std::panic::set_hook(hook);
+        loaded.is_ok()
+    };
+    if load() {
+        return Ok(());
+    }
+    if load() {
+        // the first attempt failed on something that passed: a Ctrl-C, consumed by it
+        return Err(PyKeyboardInterrupt::new_err(()));
+    }
+    Err(PyImportError::new_err(
+        "hilcontact._core: cannot load NumPy's C API",
+    ))
 }
 
 /// A Rust handle held by a Python object until it is finished (or joined): from then on
@@ -415,14 +491,14 @@ fn simulate<'py>(
         }
         None => None,
     };
-    let (output, reports) = py.allow_threads(|| match outputs {
+    let (output, reports) = run_interruptible(py, move |_| match outputs {
         Some((outputs, info)) if !outputs.is_empty() => {
             let (output, records) = hilcontact_core::sim::simulate_plan_with_records(&plan);
             let reports = outputs.record_simulation(&info, &records, &output.metrics);
             (output, reports)
         }
         _ => (hilcontact_core::sim::simulate_plan(&plan), Vec::new()),
-    });
+    })?;
     let metrics =
         serde_json::to_string(&output.metrics).map_err(|e| PyValueError::new_err(e.to_string()))?;
     let result = PyDict::new(py);
@@ -459,26 +535,32 @@ fn simulate_batch<'py>(
         .iter()
         .map(|json| parse_scenario(py, json))
         .collect::<PyResult<Vec<_>>>()?;
-    let run_all = || {
-        parsed
-            .par_iter()
-            .map(|s| {
-                let start = std::time::Instant::now();
-                let metrics = hilcontact_core::sim::simulate_plan_metrics(s);
-                (metrics, start.elapsed().as_secs_f64())
-            })
-            .collect::<Vec<_>>()
-    };
-    let results = py.allow_threads(|| -> PyResult<_> {
+    // on Ctrl-C, the runs not yet started are skipped (the call raises KeyboardInterrupt)
+    let results = run_interruptible(py, move |cancel| {
+        let run_all = || {
+            parsed
+                .par_iter()
+                .map(|s| {
+                    if cancel.load(Ordering::Relaxed) {
+                        return None;
+                    }
+                    let start = std::time::Instant::now();
+                    let metrics = hilcontact_core::sim::simulate_plan_metrics(s);
+                    Some((metrics, start.elapsed().as_secs_f64()))
+                })
+                .collect::<Option<Vec<_>>>()
+        };
         match threads {
             None => Ok(run_all()),
             Some(n) => rayon::ThreadPoolBuilder::new()
                 .num_threads(n.max(1))
                 .build()
                 .map(|pool| pool.install(run_all))
-                .map_err(|e| PyValueError::new_err(format!("thread pool: {e}"))),
+                .map_err(|e| format!("thread pool of {n} threads: {e}")),
         }
-    })?;
+    })?
+    .map_err(PyValueError::new_err)?
+    .ok_or_else(|| PyKeyboardInterrupt::new_err(()))?;
     use hilcontact_core::sweep::RunSummary;
     let n = results.len();
     let mut status = Vec::with_capacity(n);
@@ -784,6 +866,7 @@ fn keep_freed_memory() {}
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     keep_freed_memory();
+    load_numpy(m.py())?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(simulate_batch, m)?)?;
     m.add_function(wrap_pyfunction!(summary_columns, m)?)?;

@@ -25,6 +25,16 @@ reached or a port in use exits with 1. ``check`` exits with 0 when a run would s
 would refuse. An interrupted sweep (Ctrl-C) keeps its finished rows
 and exits with code 130.
 
+Ctrl-C (or SIGTERM) at any other moment of a batch command, from its start-up (importing the
+package: :mod:`hilcontact._startup`) to its last line, prints one ``interrupted: ...`` line
+naming what it had completely saved, or saying that nothing was written, and exits with code
+130; no traceback. A simulation stopped midway is not saved (the core's run has no stop hook;
+the bindings stop waiting for it within 20 ms), nor is the part of its ``--mcap`` recording;
+an output folder is never left half-replaced (:mod:`hilcontact.output`). A Ctrl-C during
+Python's own start-up, before hilcontact's code runs, is Python's.
+Two commands writing the same ``--out``: the last one wins and prints a ``note: ...`` line
+when it replaced the other's folder.
+
 The package: :mod:`.options` (the command group and the shared option machinery),
 :mod:`.batch` (the simulation and offline commands), :mod:`.realtime_commands` (``hil``,
 ``check``, ``facility``, ``demo-rt``), :mod:`.reports` (what the commands print).

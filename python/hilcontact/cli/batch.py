@@ -13,7 +13,7 @@ from rich.markup import escape
 from ..comparison import ALL_KINDS, Comparison, comparison_scenarios, run_comparison
 from ..errors import HilContactError, ScenarioError
 from ..limits import Limits, check_run
-from ..output import OutputError, check_output_folder
+from ..output import OutputError, check_output_folder, note_written
 from ..run import Run, simulate
 from ..scenario import load_scenario, presets
 from .options import (
@@ -61,12 +61,30 @@ def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, m
         check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / resolved.name, force)
         mcap_path = _mcap_file(mcap, folder, force)
-        with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
-            result = simulate(resolved, mcap=mcap_path, overwrite=force)
+        before = _file_state(mcap_path)
+        try:
+            with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
+                result = simulate(resolved, mcap=mcap_path, overwrite=force)
+        except KeyboardInterrupt:  # Ctrl-C during the simulation: the part of a recording it wrote goes too
+            if mcap_path is not None and _file_state(mcap_path) not in (before, None):
+                mcap_path.unlink(missing_ok=True)
+            raise
+        if mcap_path is not None:
+            note_written(mcap_path)
         result.save(folder, plots=not no_plots, overwrite=force)
     console = Console()
     _report(console, result, folder)
     _report_mcap(console, result.mcap)
+
+
+def _file_state(path: Path | None) -> tuple[int, int, int] | None:
+    """A file's identity and state (inode, size, modification time), None if it is not there:
+    whether this process has written it since."""
+    try:
+        st = path.stat() if path is not None else None
+    except OSError:
+        return None
+    return (st.st_ino, st.st_size, st.st_mtime_ns) if st is not None else None
 
 
 @cli.command(short_help="Redraw the figures of a run or comparison folder.")
@@ -213,10 +231,11 @@ def sweep_command(
         TimeRemainingColumn,
     )
 
-    from ..sweep import check_sweep_folder, plan_sweep, run_plan
+    from ..sweep import check_run_arguments, check_sweep_folder, plan_sweep, run_plan
 
     _stop_on_sigterm()
     with _errors():
+        check_run_arguments(out, resume, dask, None, None, 5.0)
         overrides = parse_set_options(sets)
         # validate before anything runs
         plan = plan_sweep(scenario, list(grids), kinds, seeds, overrides, limits=Limits(max_memory, max_time),

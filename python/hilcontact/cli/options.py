@@ -6,10 +6,12 @@ exit codes."""
 from __future__ import annotations
 
 import math
+import os
 import signal
 import sys
 import threading
 import tomllib
+import warnings
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -17,9 +19,10 @@ from typing import Any
 
 import click
 
+from .._startup import started
 from ..errors import HilContactError, RealtimeOptionError, ScenarioError
 from ..limits import Limits
-from ..output import OutputError, check_output_folder
+from ..output import OutputError, ReplacedWhileRunning, check_output_folder, resolve_path, written_folders
 from ..native import VERSION, core_version
 
 
@@ -40,6 +43,11 @@ def parse_set_options(items: Sequence[str], option: str = "--set",
             value = raw.strip()
         except RecursionError:
             raise ScenarioError(f"--set {key}: the value is nested too deeply") from None
+        except ValueError:  # Python's limit on the digits of an integer (sys.get_int_max_str_digits)
+            raise ScenarioError(
+                f"--set {key}: a number of more than {sys.get_int_max_str_digits()} digits; "
+                "give a number such as 0.02 or 1e30"
+            ) from None
         overrides[key] = value
     return overrides
 
@@ -53,15 +61,49 @@ def _fail(message: str, code: int) -> None:
     raise click.exceptions.Exit(code)
 
 
+class _Interrupted(Exception):
+    """A command stopped by Ctrl-C (or SIGTERM, turned into KeyboardInterrupt): carried past
+    click, which would print an empty line and "Aborted!", to :meth:`_Cli.main`."""
+
+
+#: Exit code of a command stopped by Ctrl-C or SIGTERM (128 + SIGINT, as a shell reports it).
+EXIT_INTERRUPTED = 130
+
+
+def interrupted_line() -> str:
+    """The one line a command stopped by Ctrl-C prints: what it had written (the folders it
+    completed, :func:`hilcontact.output.written_folders`), or that it wrote nothing."""
+    folders = written_folders()
+    if not folders:
+        return "interrupted: stopped before anything was saved; nothing written"
+    return "interrupted: stopped after saving " + ", ".join(str(f) for f in folders)
+
+
 class _Cli(click.Group):
     """The command group; a usage error (an unknown option, a bad option value, a missing
-    argument) is one ``error: ...`` line on stderr and exit code 2, like every bad input."""
+    argument) is one ``error: ...`` line on stderr and exit code 2, like every bad input; Ctrl-C
+    (or SIGTERM in a batch command) is one ``interrupted: ...`` line (:func:`interrupted_line`)
+    and exit code 130, whenever it comes."""
+
+    def invoke(self, ctx: click.Context) -> Any:
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt:
+            raise _Interrupted() from None
 
     def main(self, *args: Any, standalone_mode: bool = True, **kwargs: Any) -> Any:
+        started()
         if not standalone_mode:
             return super().main(*args, standalone_mode=False, **kwargs)
         try:
-            code = super().main(*args, standalone_mode=False, **kwargs)
+            try:
+                code = super().main(*args, standalone_mode=False, **kwargs)
+            except click.Abort as exc:
+                if not isinstance(exc.__cause__, KeyboardInterrupt):
+                    raise
+                raise _Interrupted() from None
+        except (_Interrupted, KeyboardInterrupt):
+            _interrupted_exit()
         except click.UsageError as exc:
             command = exc.ctx.command_path + ": " if exc.ctx is not None and exc.ctx.parent is not None else ""
             click.echo(_one_line(command + exc.format_message()), err=True)
@@ -69,10 +111,22 @@ class _Cli(click.Group):
         except click.ClickException as exc:
             click.echo(_one_line(exc.format_message()), err=True)
             sys.exit(exc.exit_code)
-        except (click.Abort, KeyboardInterrupt, EOFError):
+        except (click.Abort, EOFError):
             click.echo("Aborted!", err=True)
             sys.exit(1)
         sys.exit(code if isinstance(code, int) else 0)
+
+
+def _interrupted_exit() -> None:
+    """Print :func:`interrupted_line` and exit with code 130; a second Ctrl-C meanwhile changes
+    nothing."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        click.echo(interrupted_line(), err=True)
+        sys.stderr.flush()
+    except (OSError, ValueError):
+        pass
+    sys.exit(EXIT_INTERRUPTED)
 
 
 class _Number(click.ParamType):
@@ -151,8 +205,13 @@ def _run_output_options(default_out: str) -> list[Any]:
 
 @contextmanager
 def _errors() -> Iterator[None]:
+    """Bad input (exit 2) and other errors (exit 1) as one ``error: ...`` line; a
+    :class:`~hilcontact.output.ReplacedWhileRunning` warning as a ``note: ...`` line."""
     try:
-        yield
+        with warnings.catch_warnings():
+            warnings.simplefilter("always", ReplacedWhileRunning)
+            warnings.showwarning = _note  # type: ignore[assignment]
+            yield
     except (ScenarioError, RealtimeOptionError, OutputError) as exc:
         _fail(str(exc), 2)
     except HilContactError as exc:
@@ -160,6 +219,11 @@ def _errors() -> Iterator[None]:
     except OSError as exc:  # a disk or permission error that no command turned into an OutputError
         where = f"{exc.filename}: " if exc.filename else ""
         _fail(f"{where}{exc.strerror or exc}", 2)
+
+
+def _note(message: Warning | str, category: type[Warning], *_args: Any, **_kwargs: Any) -> None:
+    """A warning as a ``note: ...`` line on stderr (inside :func:`_errors`)."""
+    click.echo("note: " + " ".join(str(message).split("\n")), err=True)
 
 
 _FORCE_HELP = "Replace --out even if it holds files hilcontact did not write."
@@ -186,16 +250,21 @@ def _mcap_file(mcap: str | None, folder: Path, force: bool) -> Path | None:
     if mcap is None:
         return None
     path = Path(mcap)
-    if path.is_dir():
+    target = resolve_path(path, f"--mcap {mcap}")
+    if target.is_dir():
         raise OutputError(f"--mcap {mcap}: is a directory; give a file name, e.g. --mcap run.mcap")
-    if path.exists() and not force:
-        raise OutputError(f"--mcap {mcap}: exists; choose another file, or add --force to replace it")
-    target, out = path.absolute(), folder.absolute()
+    out = resolve_path(folder, f"--out {folder}")
     if target == out or out in target.parents:
         raise OutputError(
             f"--mcap {mcap}: is inside --out {folder}, which is replaced as a whole when the run is saved; "
             "write it elsewhere"
         )
+    if not target.parent.is_dir():  # no folder is created for it (issue 25)
+        raise OutputError(f"--mcap {mcap}: its folder {target.parent} does not exist; create it first")
+    if os.path.lexists(target) and not target.is_file():
+        raise OutputError(f"--mcap {mcap}: exists and is not a file")
+    if target.exists() and not force:
+        raise OutputError(f"--mcap {mcap}: exists; choose another file, or add --force to replace it")
     return path
 
 
