@@ -272,10 +272,16 @@ def sweep_command(
 @click.option("--cov-tolerance", default=None, type=NON_NEGATIVE,
               help="Stricter than the runs' verdicts: |CoV - 1| <= this on every collision.")
 @click.option("--cof-limit", default=None, type=POSITIVE, help="Stricter than the runs' verdicts: CoF <= this on every collision.")
-def stability_map_command(sweep_dir: str, out: str | None, cov_tolerance: float | None, cof_limit: float | None) -> None:
-    """Draw, per compensator, the (contact frequency, robot delay) region where every run is
-    faithful (status ok: the scenario's [metrics] tolerances, from judge_from on), heat maps of the worst CoV and CoF, and print the maximal faithful delay per
-    compensator and contact frequency.
+@click.option("--tolerate", default=1, show_default=True, type=click.IntRange(0, None),
+              help="Failing runs (seeds) a faithful cell may hold, while they are fewer than half of it; 0: every run.")
+def stability_map_command(sweep_dir: str, out: str | None, cov_tolerance: float | None, cof_limit: float | None,
+                          tolerate: int) -> None:
+    """Draw, per compensator, the fraction of faithful runs (seeds) of each (contact
+    frequency, robot delay) cell (a run is faithful with status ok: the scenario's [metrics]
+    tolerances, from judge_from on; a cell is faithful when all its runs but at most
+    --tolerate are, the failing ones fewer than half), heat maps of the worst CoV and CoF,
+    and print the faithful runs per cell and the maximal faithful delay per compensator and
+    contact frequency.
 
     Writes stability_map.png, worst_cov.png, worst_cof.png, max_faithful_delay.csv and
     cells.csv into DIR.
@@ -285,7 +291,7 @@ def stability_map_command(sweep_dir: str, out: str | None, cov_tolerance: float 
     with _errors():
         if not Path(sweep_dir).is_dir():
             raise ScenarioError(f"{sweep_dir}: not a sweep folder")
-        result = stability_map(sweep_dir, cov_tolerance=cov_tolerance, cof_limit=cof_limit)
+        result = stability_map(sweep_dir, cov_tolerance=cov_tolerance, cof_limit=cof_limit, tolerate=tolerate)
         folder = result.save(out if out is not None else sweep_dir)
     _report_stability_map(Console(), result, folder, criterion_text(cov_tolerance, cof_limit), MAP_FILES)
 
