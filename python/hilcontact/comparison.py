@@ -49,14 +49,15 @@ __all__ = [
 ALL_KINDS: tuple[str, ...] = KINDS
 
 #: Figures of a comparison (file stems); ``compare_identification`` only when a compared
-#: compensator identifies the contact, ``compare_velocity_error`` only when the motion is
-#: not 1-D.
+#: compensator identifies the contact, ``compare_measured_applied`` only when the ideal
+#: reference has a collision, ``compare_velocity_error`` only when the motion is not 1-D.
 COMPARISON_FIGURES = (
     "compare_velocity",
     "compare_force",
     "compare_energy",
     "compare_identification",
     "compare_cov_cof",
+    "compare_measured_applied",
     "compare_velocity_error",
 )
 
