@@ -148,7 +148,7 @@ class StabilityMap:
             return figure, axes
 
         figures: dict[str, Figure] = {}
-        figure, axes = panels(f"Faithful runs per cell ({criterion});\n✓: {self.rule}")
+        figure, axes = panels(f"Faithful runs per cell (a run is faithful with {criterion});\n✓: {self.rule}")
         colours = ListedColormap(["#d9534f", "#f0ad4e", "#5cb85c"])
         for ax, kind in zip(axes, kinds):
             fraction, ok = grid(kind, "faithful_fraction"), grid(kind, "faithful")
@@ -205,7 +205,7 @@ def criterion_text(cov_tolerance: float | None, cof_limit: float | None) -> str:
         extra.append(f"|CoV−1| ≤ {cov_tolerance:g}")
     if cof_limit is not None:
         extra.append(f"CoF ≤ {cof_limit:g}")
-    return "every run ok" + (" and " + ", ".join(extra) + " on every collision" if extra else "")
+    return "status ok" + (" and " + ", ".join(extra) + " on every collision" if extra else "")
 
 
 def stability_map(
