@@ -37,9 +37,11 @@ __all__ = [
     "COMPARISON_FIGURES",
     "RANKING_RULE",
     "Comparison",
+    "DelayComparison",
     "Standing",
     "Violation",
     "compare",
+    "compare_over_delays",
     "comparison_scenarios",
     "parse_kinds",
     "run_comparison",
@@ -543,8 +545,9 @@ def _escape(text: str) -> str:
 
 
 def _worst(violations: Iterable[Violation]) -> str:
-    """The violation farthest over its limit, as text (empty if none)."""
-    worst = max(violations, key=lambda v: _ratio(v.value, v.limit), default=None)
+    """The collision's violation farthest over its limit (a lost or extra collision count
+    only when no collision broke a tolerance), as text (empty if none)."""
+    worst = max(violations, key=lambda v: (v.collision is not None, _ratio(v.value, v.limit)), default=None)
     return "" if worst is None else str(worst)
 
 
@@ -595,3 +598,135 @@ def run_comparison(
             progress(kind, index, len(scenarios))
         runs[kind] = simulate(scenario)
     return Comparison(runs=runs)
+
+
+def delay_label(delay: float) -> str:
+    """A robot delay (s) as a folder name and label: ``10ms``."""
+    return f"{delay * 1e3:g}ms"
+
+
+#: Figures of a comparison over robot delays (file stems): one panel per delay, (a), (b), …
+DELAY_FIGURES = ("compare_velocity", "compare_force", "compare_cov_cof")
+
+
+@dataclass
+class DelayComparison:
+    """The result of :func:`compare_over_delays`: one :class:`Comparison` per robot delay.
+
+    Attributes:
+        comparisons: robot delay (s) -> comparison, in the given order.
+    """
+
+    comparisons: dict[float, Comparison]
+
+    def to_markdown(self, figures: Iterable[str] = ()) -> str:
+        """The report: per delay, its recommendation and ranking (the full tables in each
+        delay's folder), then links to ``figures``."""
+        first = next(iter(self.comparisons.values()))
+        lines = [f"# Compensator comparison over robot delays: {first.scenario.name}", ""]
+        for panel, (delay, comparison) in zip("abcdefghijklmnopqrstuvwxyz", self.comparisons.items()):
+            lines += [f"## ({panel}) robot delay {delay * 1e3:g} ms", "",
+                      f"**Recommendation:** {_escape(comparison.recommendation)}.", "",
+                      "| rank | compensator | verdict | worst margin | tolerances broken |", "|--:|---|---|--:|---|"]
+            lines += [f"| {s.rank} | `{s.kind}` | {s.verdict} | {_cell(s.margin, '.2f')} | {_escape(s.reason) or '-'} |"
+                      for s in comparison.ranking]
+            lines += ["", f"Tables and figures: [{delay_label(delay)}/comparison.md]({delay_label(delay)}/comparison.md)", ""]
+        figures = list(figures)
+        if figures:
+            lines += ["## Figures", ""]
+            for name in figures:
+                lines += [f"![{Path(name).stem}]({name})", ""]
+        lines.append("Ranking rule: " + RANKING_RULE)
+        lines.append("")
+        return "\n".join(lines)
+
+    def plot(self) -> dict[str, Figure]:
+        """The figures over delays (:data:`DELAY_FIGURES`), one panel per delay."""
+        from .plots import delay_figures
+
+        return delay_figures({delay: c.runs for delay, c in self.comparisons.items()})
+
+    def save(self, directory: str | os.PathLike[str], plots: bool = True, overwrite: bool = False,
+             run_plots: bool = False) -> Path:
+        """Write ``<delay>ms/`` (a comparison folder per delay, as :meth:`Comparison.save`),
+        ``comparison.md`` and, unless ``plots=False``, the figures over delays, atomically."""
+        from .plots import save_figures
+
+        def write(folder: Path) -> None:
+            for delay, comparison in self.comparisons.items():
+                comparison.save(folder / delay_label(delay), plots=plots, run_plots=run_plots)
+            names = []
+            if plots:
+                figures = self.plot()
+                save_figures(figures, folder, dpi=110)
+                names = [f"{name}.png" for name in figures]
+            (folder / "comparison.md").write_text(self.to_markdown(names), encoding="utf-8")
+
+        return write_atomically(directory, write, "comparison-delays", overwrite)
+
+
+def parse_delays(text: str) -> list[float]:
+    """Robot delays (s) from ``"0.01,0.02"``: finite, >= 0, at most 8, duplicates removed.
+    Raises ScenarioError with one line."""
+    out: list[float] = []
+    for item in text.split(","):
+        item = item.strip()
+        if not item:
+            continue
+        try:
+            value = float(item)
+        except ValueError:
+            raise ScenarioError(f"--delays: {item!r} is not a number (seconds, e.g. 0.01,0.02)") from None
+        if not (math.isfinite(value) and 0.0 <= value <= 60.0):
+            raise ScenarioError(f"--delays: {item!r} must be between 0 and 60 s")
+        if value not in out:
+            out.append(value)
+    if not out:
+        raise ScenarioError("--delays: no delay given (seconds, e.g. 0.01,0.02)")
+    if len(out) > 8:
+        raise ScenarioError(f"--delays: at most 8 delays, got {len(out)}")
+    return out
+
+
+def delay_scenarios(
+    scenario_source: Any, delays: Iterable[float], kinds: str | Iterable[str] | None = None,
+    overrides: Mapping[str, Any] | None = None,
+) -> dict[float, dict[str, Scenario]]:
+    """The resolved scenarios per robot delay and compensator (all validated first);
+    ``overrides`` may not set ``facility.robot_delay``."""
+    user = dict(overrides or {})
+    if any(_override_steps(key) == ["facility", "robot_delay"] for key in user):
+        raise ScenarioError("facility.robot_delay: set the delays with --delays, not --set")
+    return {delay: comparison_scenarios(scenario_source, kinds, {**user, "facility.robot_delay": delay})
+            for delay in delays}
+
+
+def compare_over_delays(
+    scenario_source: Any,
+    delays: Iterable[float],
+    kinds: str | Iterable[str] | None = None,
+    overrides: Mapping[str, Any] | None = None,
+    *,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> DelayComparison:
+    """:func:`compare` at each robot delay (s); every scenario is validated before the first
+    run. ``progress(label, index, total)`` before each run."""
+    return run_over_delays(delay_scenarios(scenario_source, delays, kinds, overrides), progress=progress)
+
+
+def run_over_delays(
+    scenarios: Mapping[float, Mapping[str, Scenario]], *, progress: Callable[[str, int, int], None] | None = None
+) -> DelayComparison:
+    """Simulate resolved scenarios per delay (from :func:`delay_scenarios`)."""
+    total = sum(len(per) for per in scenarios.values())
+    done = 0
+    out: dict[float, Comparison] = {}
+    for delay, per in scenarios.items():
+        runs: dict[str, Run] = {}
+        for kind, scenario in per.items():
+            if progress is not None:
+                progress(f"{kind}, {delay * 1e3:g} ms", done, total)
+            runs[kind] = simulate(scenario)
+            done += 1
+        out[delay] = Comparison(runs=runs)
+    return DelayComparison(out)

@@ -1001,3 +1001,96 @@ def draw_in_two_processes(makers: Mapping[str, Callable[[], Figure | None]], dir
         return saved
 
     return in_two_processes(list(makers), draw, lambda name: (folder / f"{name}.png").is_file())
+
+
+# --------------------------------------------------------------------------------------
+# Comparisons over robot delays: (a), (b), … one panel per delay
+# --------------------------------------------------------------------------------------
+
+_PANEL_LETTERS = "abcdefghijklmnopqrstuvwxyz"
+
+
+def _overlay_figure(runs_by_delay: Mapping[float, Mapping[str, RunData]], title: str, ylabel: str,
+                    series: Callable[[pd.DataFrame], np.ndarray | None]) -> Figure:
+    """One panel per delay, (a), (b), …: every compensator's HIL curve (its colour) over the
+    ideal reference (dashed), as the paper's Figs. 9 and 11; y fitted to the runs that ran to
+    the end (a diverged one leaves the panel, its end marked in the legend)."""
+    count = len(runs_by_delay)
+    figure = Figure(figsize=(5.5 * count + 2.4, 4.8))
+    FigureCanvasAgg(figure)
+    axes = figure.subplots(1, count, sharey=True, squeeze=False)[0]
+    _margins(figure, left=0.8, right=2.4, top=_top_margin(2), bottom=0.55, wspace=0.08)
+    ranges = []
+    for letter, ax, (delay, runs) in zip(_PANEL_LETTERS, axes, runs_by_delay.items()):
+        first = next(iter(runs.values()))
+        ideal = series(first.reference)
+        if ideal is not None:
+            _plot(ax, first.reference["time"], ideal, color="black", lw=1.1, ls="--", label="ideal reference", zorder=3)
+            ranges.append(_series_range(ideal))
+        for i, (kind, run) in enumerate(runs.items()):
+            values = series(run.timeseries)
+            if values is None:
+                continue
+            label = kind if run.status in _RAN_THROUGH else f"{kind} ({run.status})"
+            _plot(ax, run.timeseries["time"], values, color=_kind_color(kind, i), lw=1.2, label=label)
+            if run.status in _RAN_THROUGH:
+                ranges.append(_series_range(values))
+        ax.set_title(f"({letter}) robot delay {delay * 1e3:g} ms", fontsize=11)
+        ax.set_xlabel("time (s)")
+        ax.grid(True, alpha=0.4)
+    axes[0].set_ylabel(ylabel)
+    finite = [r for r in ranges if math.isfinite(r[0])]
+    if finite:
+        lo, hi = min(r[0] for r in finite), max(r[1] for r in finite)
+        pad = 0.1 * max(hi - lo, 1e-12)
+        axes[0].set_ylim(lo - pad, hi + pad)
+    axes[-1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=9, frameon=False, title="compensator")
+    first = next(iter(next(iter(runs_by_delay.values())).values()))
+    _suptitle(figure, f"{title}\n{first.scenario.name} | sensor delay {first.scenario.facility.sensor_delay * 1e3:g} ms "
+                      "| dashed: ideal reference")
+    return figure
+
+
+def _delay_bars_figure(runs_by_delay: Mapping[float, Mapping[str, RunData]]) -> Figure:
+    """CoV (top) and CoF (bottom) per collision, grouped by compensator, one column per
+    delay, (a), (b), …, with the tolerance lines."""
+    count = len(runs_by_delay)
+    figure = Figure(figsize=(5.5 * count + 2.4, 7.0))
+    FigureCanvasAgg(figure)
+    axes = figure.subplots(2, count, sharex="col", squeeze=False)  # own y per panel: each may be cut
+    _margins(figure, left=0.8, right=2.4, top=_top_margin(2), bottom=0.55, hspace=0.08, wspace=0.15)
+    tol = next(iter(next(iter(runs_by_delay.values())).values())).scenario.metrics
+    for column, (letter, (delay, runs)) in enumerate(zip(_PANEL_LETTERS, runs_by_delay.items())):
+        collisions = _collision_count(runs, ("cov", "cof"))
+        _collision_bars(axes[0][column], runs, "cov", "CoV", collisions, 1.0, 1.0,
+                        (1.0 - tol.cov_tolerance, 1.0 + tol.cov_tolerance))
+        _collision_bars(axes[1][column], runs, "cof", "CoF", collisions, 1.0, 1.0, (tol.max_cof,))
+        axes[0][column].set_title(f"({letter}) robot delay {delay * 1e3:g} ms", fontsize=11)
+        axes[1][column].set_xlabel("collision")
+        axes[1][column].set_xticks(np.arange(1, collisions + 1))
+        if column:
+            axes[0][column].set_ylabel("")
+            axes[1][column].set_ylabel("")
+    axes[0][-1].legend(*axes[0][0].get_legend_handles_labels(), loc="upper left", bbox_to_anchor=(1.02, 1.0),
+                       fontsize=9, frameon=False, title="compensator")
+    first = next(iter(next(iter(runs_by_delay.values())).values()))
+    _suptitle(figure, f"CoV and CoF per collision (1 = ideal; dotted red: |CoV − 1| ≤ {tol.cov_tolerance:g}, "
+                      f"CoF ≤ {tol.max_cof:g})\n{first.scenario.name}")
+    return figure
+
+
+def delay_figures(runs_by_delay: Mapping[float, Mapping[str, RunData]]) -> dict[str, Figure]:
+    """The figures of a comparison over robot delays (file stems as
+    :data:`hilcontact.comparison.DELAY_FIGURES`): one panel per delay, (a), (b), …"""
+
+    def velocity(frame: pd.DataFrame) -> np.ndarray | None:
+        values = _column(frame, "tip_velocity_x")
+        return None if values is None else values * 1e3
+
+    return {
+        "compare_velocity": _overlay_figure(runs_by_delay, "Rod-tip relative velocity along x", "velocity x (mm/s)",
+                                            velocity),
+        "compare_force": _overlay_figure(runs_by_delay, "Contact force magnitude", "|contact force| (N)",
+                                         lambda frame: _magnitude(frame, "contact_force")),
+        "compare_cov_cof": _delay_bars_figure(runs_by_delay),
+    }

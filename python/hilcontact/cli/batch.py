@@ -123,19 +123,26 @@ def plot(folder: Path, force: bool) -> None:
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
 @click.option("--run-figures", is_flag=True, help="Also draw each compensator's own figures (slower; `hilcontact plot DIR` draws them later).")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
+@click.option("--delays", "delays", metavar="LIST", default=None,
+              help="Compare at each robot delay (s, comma-separated, e.g. 0.01,0.02): a comparison folder per "
+                   "delay and figures with one panel per delay, (a), (b), ….")
 @_with(_LIMIT_OPTIONS)
 def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool,
-                    run_figures: bool, force: bool, max_memory: float, max_time: float) -> None:
-    """Simulate SCENARIO once per compensator and compare them.
+                    run_figures: bool, force: bool, delays: str | None, max_memory: float, max_time: float) -> None:
+    """Simulate SCENARIO once per compensator and compare them: a ranking, a recommendation,
+    and for each compensator that is not faithful the tolerance it broke (docs/choosing.md).
 
     Writes a run folder per compensator (data; its figures with --run-figures, or later with
     `hilcontact plot DIR/<compensator>`), comparison.md and comparison.csv (CoV, CoF, peak
     force, rebound speed per collision; status and identification errors per compensator)
-    and the compare_*.png figures.
+    and the compare_*.png figures. With --delays, one such folder per delay (DIR/10ms/, …).
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     _stop_on_sigterm()
+    if delays is not None:
+        _compare_over_delays(scenario, sets, kinds, out, no_plots, run_figures, force, delays, max_memory, max_time)
+        return
     with _errors():
         overrides = parse_set_options(sets)
         scenarios = comparison_scenarios(scenario, kinds, overrides)  # validate all before running
@@ -160,6 +167,39 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
             progress.update(task, completed=len(scenarios), description="Writing files")
             result.save(folder, plots=not no_plots, overwrite=force, run_plots=run_figures)
     _report_comparison(Console(), result, folder)
+
+
+def _compare_over_delays(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool,
+                         run_figures: bool, force: bool, delays: str, max_memory: float, max_time: float) -> None:
+    """`compare --delays`: the comparison at each robot delay, saved and reported per delay."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from ..comparison import delay_label, delay_scenarios, parse_delays, run_over_delays
+
+    with _errors():
+        overrides = parse_set_options(sets)
+        per_delay = delay_scenarios(scenario, parse_delays(delays), kinds, overrides)  # validate all first
+        total = sum(len(per) for per in per_delay.values())
+        first = next(iter(next(iter(per_delay.values())).values()))
+        check_run(first, Limits(max_memory, max_time), runs=total)
+        folder = _out_folder(out, Path("runs") / f"{first.name}-compare", force)
+        with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=Console(stderr=True), transient=True) as progress:
+            task = progress.add_task(f"Simulating {escape(first.name)}", total=total)
+
+            def advance(label: str, index: int, count: int) -> None:
+                progress.update(task, completed=index, description=f"Simulating {escape(first.name)}: {escape(label)}")
+
+            result = run_over_delays(per_delay, progress=advance)
+            progress.update(task, completed=total, description="Writing files")
+            result.save(folder, plots=not no_plots, overwrite=force, run_plots=run_figures)
+    console = Console()
+    for delay, comparison in result.comparisons.items():
+        _report_comparison(console, comparison, folder / delay_label(delay))
+        console.print()
+    console.print(f"saved to {escape(str(folder))}/ (comparison.md, one folder per delay"
+                  + ("" if no_plots else ", compare_velocity.png, compare_force.png, compare_cov_cof.png with (a), (b), … panels")
+                  + ")", soft_wrap=True)
 
 
 @cli.command(name="sweep", short_help="Run a scenario over a grid of values, compensators and seeds.")
