@@ -148,7 +148,8 @@ class StabilityMap:
             return figure, axes
 
         figures: dict[str, Figure] = {}
-        figure, axes = panels(f"Faithful runs per cell (a run is faithful with {criterion});\n✓: {self.rule}")
+        figure, axes = panels(f"Faithful runs per cell (a run is faithful with {criterion}; green: all, orange: some, "
+                              f"red: none);\n✓: {self.rule}")
         colours = ListedColormap(["#d9534f", "#f0ad4e", "#5cb85c"])
         for ax, kind in zip(axes, kinds):
             fraction, ok = grid(kind, "faithful_fraction"), grid(kind, "faithful")
@@ -156,14 +157,15 @@ class StabilityMap:
             # red: none faithful, orange: some, green: all
             shade = np.where(np.isfinite(fraction), np.where(fraction >= 1.0, 2.0, np.where(fraction > 0.0, 1.0, 0.0)), np.nan)
             ax.pcolormesh(x, y, np.ma.masked_invalid(shade), cmap=colours, vmin=0, vmax=2, edgecolors="white", linewidth=0.3)
-            if len(delays) * len(freqs) <= 300:
-                size = 7 if len(delays) <= 12 else 5
+            # every cell's count when they fit (12 delays), else only the mixed (orange) ones
+            every = len(delays) <= 12
+            if len(freqs) <= 40:
                 for i, freq in enumerate(freqs):
                     for j, delay in enumerate(delays):
-                        if np.isfinite(runs[i, j]):
+                        if np.isfinite(runs[i, j]) and (every or 0 < good[i, j] < runs[i, j]):
                             mark = " ✓" if ok[i, j] == 1.0 else ""
                             ax.text(delay * 1e3, freq, f"{int(good[i, j])}/{int(runs[i, j])}{mark}", ha="center",
-                                    va="center", fontsize=size, color="black")
+                                    va="center", fontsize=7 if every else 5, color="black")
         figures["stability_map"] = figure
 
         figure, axes = panels("Worst |CoV − 1| per cell (log scale)")
