@@ -511,7 +511,12 @@ def _suptitle(figure: Figure, text: str) -> None:
     """The figure's title, its top 0.1 in below the figure's top (its lines fit the margin
     :func:`_top_margin` leaves)."""
     height = figure.get_size_inches()[1]
-    figure.suptitle(text, fontsize=12, y=1.0 - 0.1 / height, va="top")
+    title = figure.suptitle(text, fontsize=12, y=1.0 - 0.1 / height, va="top")
+    # a narrow figure (one panel) gets a smaller font rather than a title wider than itself
+    width = title.get_window_extent(figure.canvas.get_renderer()).width
+    room = 0.97 * figure.get_size_inches()[0] * figure.dpi
+    if width > room:
+        title.set_fontsize(max(12.0 * room / width, 7.0))
 
 
 def _top_margin(title_lines: int) -> float:
@@ -778,7 +783,7 @@ def compare_identification_figure(runs: Mapping[str, RunData]) -> Figure | None:
         figure,
         f"Identified contact stiffness and damping\n{run.scenario.name} | robot delay "
         f"{run.scenario.facility.robot_delay * 1e3:g} ms | dashed: true value\naxes fitted to the estimates "
-        "after the first collision (the initial guess off-scale)",
+        "after the first collision",
     )
     return figure
 
@@ -954,8 +959,8 @@ def compare_measured_applied_figure(runs: Mapping[str, RunData]) -> Figure | Non
     _clip_to_ok_runs(panels, runs, ranges)
     _tidy_labels(panels, every_row=(0,))
     _suptitle(figure, f"Measured and applied force, collision {number} (the paper's Figs. 16, 18)\n"
-                      f"{_comparison_header(runs)}\nmeasured: the sensor's; applied: what the compensator "
-                      "gave the virtual dynamics; dashed: ideal reference")
+                      f"{_comparison_header(runs)}\nmeasured: the sensor's; applied: given to the virtual "
+                      "dynamics; dashed: ideal reference")
     return figure
 
 
