@@ -514,7 +514,7 @@ def _suptitle(figure: Figure, text: str) -> None:
     title = figure.suptitle(text, fontsize=12, y=1.0 - 0.1 / height, va="top")
     # a narrow figure (one panel) gets a smaller font rather than a title wider than itself
     width = title.get_window_extent(figure.canvas.get_renderer()).width
-    room = 0.97 * figure.get_size_inches()[0] * figure.dpi
+    room = 0.92 * figure.get_size_inches()[0] * figure.dpi
     if width > room:
         title.set_fontsize(max(12.0 * room / width, 7.0))
 
@@ -955,7 +955,7 @@ def compare_measured_applied_figure(runs: Mapping[str, RunData]) -> Figure | Non
         ax.set_ylabel("|force| (N)")
         ax.set_xlabel("time (s)")
         if i == 0:
-            ax.legend(loc="upper right", fontsize=8)
+            ax.legend(loc="best", fontsize=8)
     _clip_to_ok_runs(panels, runs, ranges)
     _tidy_labels(panels, every_row=(0,))
     _suptitle(figure, f"Measured and applied force, collision {number} (the paper's Figs. 16, 18)\n"
