@@ -279,6 +279,11 @@ class Comparison:
 
     Attributes:
         runs: compensator kind -> run, in the compared order.
+
+    The answer: :attr:`ranking` (a :class:`Standing` per compensator, best first, by
+    :data:`RANKING_RULE`: rank, verdict, faithful_from, margin, every :class:`Violation`),
+    :attr:`recommendation` (one line), and :attr:`summary` (with rank, verdict and the worst
+    violation per compensator); :attr:`table` per collision.
     """
 
     runs: dict[str, Run]
