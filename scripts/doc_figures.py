@@ -304,6 +304,121 @@ def readme_model_mediated() -> str:
     return "; ".join(cells)
 
 
+# ---- docs/choosing.md: which compensator for which delay, contact frequency and noise ----------
+
+#: The sweep of docs/choosing.md: robot delays (s), contact stiffnesses (N/m) giving 2, 4 and
+#: 8 Hz on `paper-table1`, force noise (N, std per axis), seeds per point, compensators.
+CHOOSING_DELAYS = [0.01, 0.02, 0.04, 0.08]
+CHOOSING_STIFFNESS = [44068.75, 176275.0, 705100.0]
+CHOOSING_NOISE = [0.0, 0.3]
+CHOOSING_SEEDS = 3
+CHOOSING_KINDS = ["pic", "dac", "pida", "tdpa-impedance", "tdpa-admittance", "model-mediated"]
+
+_SWEEPS: dict[str, Any] = {}
+
+
+def choosing_sweeps() -> tuple[Any, Any]:
+    """The sweep of every compensator judged on every collision, and `model-mediated`'s judged
+    from collision 3 (each wall's second contact on `paper-table1`); cached."""
+    if not _SWEEPS:
+        grid = {"facility.robot_delay": CHOOSING_DELAYS, "contact.stiffness": CHOOSING_STIFFNESS,
+                "facility.sensor_noise": CHOOSING_NOISE}
+        _SWEEPS["all"] = hc.sweep("paper-table1", grid, compensators=CHOOSING_KINDS, seeds=CHOOSING_SEEDS)
+        _SWEEPS["from3"] = hc.sweep("paper-table1", grid, compensators="model-mediated", seeds=CHOOSING_SEEDS,
+                                    overrides={"metrics.judge_from": 3})
+    return _SWEEPS["all"], _SWEEPS["from3"]
+
+
+def _margin(rows: Any) -> float:
+    """The worst margin of a cell's runs (as the comparison's ranking: the largest value /
+    limit of |CoV − 1|, CoF and velocity error, default tolerances)."""
+    return float(max((rows["worst_cov"] - 1.0).abs().max() / 0.05, rows["worst_cof"].max() / 1.2,
+                     rows["worst_velocity_error"].max() / 0.05))
+
+
+def choosing_table(noise: float) -> str:
+    """Per contact frequency and robot delay: the compensators faithful by the stability map's
+    cell rule (all seeds but at most one, fewer than half), best (smallest worst margin) first
+    and in bold; then `model-mediated` if faithful only from collision 3."""
+    from hilcontact.stability import stability_map
+
+    rows, from3 = choosing_sweeps()
+    rows, from3 = rows[rows["facility.sensor_noise"] == noise], from3[from3["facility.sensor_noise"] == noise]
+    cells = stability_map(rows).cells.set_index(["compensator", "contact_frequency", "robot_delay"])
+    cells3 = stability_map(from3).cells.set_index(["compensator", "contact_frequency", "robot_delay"])
+    freqs = sorted(rows["contact_frequency"].unique())
+    lines = ["| contact frequency | " + " | ".join(f"{d * 1e3:g} ms" for d in CHOOSING_DELAYS) + " |",
+             "|---|" + "---|" * len(CHOOSING_DELAYS)]
+    for freq in freqs:
+        row = [f"{freq:.2f} Hz"]
+        for delay in CHOOSING_DELAYS:
+            ok = []
+            for kind in CHOOSING_KINDS:
+                cell = cells.loc[(kind, freq, delay)]
+                if cell["faithful"]:
+                    runs = rows[(rows["compensator"] == kind) & (rows["contact_frequency"] == freq) & (rows["robot_delay"] == delay)]
+                    ok.append((_margin(runs), kind, int(cell["faithful_runs"]), int(cell["runs"])))
+            ok.sort()
+            text = [f"{'**' + kind + '**' if i == 0 else kind}" + ("" if good == runs else f" ({good}/{runs})")
+                    for i, (_, kind, good, runs) in enumerate(ok)]
+            later = cells3.loc[("model-mediated", freq, delay)]
+            if "model-mediated" not in [k for _, k, _, _ in ok] and later["faithful"]:
+                name = "model-mediated from #3"
+                text.append(f"**{name}**" if not ok else name)
+            row.append(", ".join(text) if text else "none")
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines)
+
+
+def choosing_quiet() -> str:
+    return choosing_table(0.0)
+
+
+def choosing_noisy() -> str:
+    return choosing_table(0.3)
+
+
+def choosing_rule() -> str:
+    """The comparison's ranking rule, quoted from the code (hilcontact.comparison.RANKING_RULE)."""
+    from hilcontact.comparison import RANKING_RULE
+
+    return RANKING_RULE
+
+
+def write_images() -> list[Path]:
+    """The images the pages show (only with --write): docs/img/choosing_stability_map.png,
+    the noisy sweep's stability map with the faithful seeds per cell."""
+    from hilcontact.plots import save_figures
+    from hilcontact.stability import stability_map
+
+    rows, _ = choosing_sweeps()
+    noisy = rows[rows["facility.sensor_noise"] == CHOOSING_NOISE[-1]]
+    figure = stability_map(noisy).figures()["stability_map"]
+    save_figures({"choosing_stability_map": figure}, ROOT / "docs" / "img", dpi=90)
+    return [ROOT / "docs" / "img" / "choosing_stability_map.png"]
+
+
+# ---- docs/model.md: the paper's experiments with the facility's losses ------------------------
+
+
+def paper_experiments_table() -> str:
+    """Rebound speed per collision (mm/s) on `paper-exp-*-facility` and `paper-exp-*`, per
+    compensator, and the fourth rebound against the initial 20 mm/s."""
+    lines = ["| preset | compensator | rebound per collision (mm/s) | 4th / initial |", "|---|---|---|--:|"]
+    for preset in ("paper-exp-1.93hz-facility", "paper-exp-2.64hz-facility", "paper-exp-1.93hz", "paper-exp-2.64hz"):
+        for kind in ("none", "pic", "dac", "pida"):
+            r = run(preset, kind)
+            speeds = [c.get("rebound_speed") for c in r.metrics["collisions"]]
+            text = ", ".join("-" if v is None else f"{v * 1e3:.1f}" for v in speeds)
+            if r.status == "diverged":
+                text += f" (diverged at {r.metrics['diverged_at']:.2f} s)"
+            fourth = f"{speeds[3] / 0.02:.2f}" if len(speeds) > 3 and speeds[3] is not None else "-"
+            lines.append(f"| `{preset}` | `{kind}` | {text} | {fourth} |")
+    reference = run("paper-exp-2.64hz", "none").metrics["reference_collisions"]
+    lines.append("| ideal reference, 2.64 Hz | | " + ", ".join(f"{c['rebound_speed'] * 1e3:.1f}" for c in reference) + " | |")
+    return "\n".join(lines)
+
+
 #: Every figure: name -> function writing its text.
 FIGURES: dict[str, Callable[[], str]] = {
     "dac-table": dac_table,
@@ -319,6 +434,10 @@ FIGURES: dict[str, Callable[[], str]] = {
     "model-mediated-table": model_mediated_table,
     "readme-model-mediated": readme_model_mediated,
     "model-mediated-reach": model_mediated_reach,
+    "choosing-quiet": choosing_quiet,
+    "choosing-noisy": choosing_noisy,
+    "choosing-rule": choosing_rule,
+    "paper-experiments": paper_experiments_table,
 }
 
 #: Pages that hold figures.
@@ -376,6 +495,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"## {name}\n{value}\n")
         return 0
     stale = stale_pages(values)
+    if args.write:
+        for image in write_images():
+            print(f"drew {image.relative_to(ROOT)}")
     for page, (old, new) in stale.items():
         name = page.relative_to(ROOT)
         if args.write:

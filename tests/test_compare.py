@@ -41,6 +41,7 @@ COMPARE_PLOTS = {
     "compare_energy.png",
     "compare_identification.png",
     "compare_cov_cof.png",
+    "compare_measured_applied.png",
 }
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -232,10 +233,17 @@ def test_comparison_figures():
     figures = comparison.plot()
     assert list(figures) == [
         "compare_velocity", "compare_force", "compare_energy", "compare_identification", "compare_cov_cof",
+        "compare_measured_applied",
     ]
     velocity = figures["compare_velocity"]
-    panels = [ax for ax in velocity.axes if ax.get_visible()]
+    panels = [ax for ax in velocity.axes if ax.get_visible() and ax.get_label() != "zoom"]
     assert len(panels) == 4
+    # below each panel, a zoom on one collision of the reference (the synthetic one has one)
+    zooms = [ax for ax in velocity.axes if ax.get_visible() and ax.get_label() == "zoom"]
+    assert len(zooms) == 4 and len({ax.get_xlim() for ax in zooms}) == 1
+    start, end = 0.1, 0.2  # its reference collision
+    lo, hi = zooms[0].get_xlim()
+    assert lo < start < end < hi and hi - lo < 0.5
     assert [ax.get_title().split(":")[0] for ax in panels] == ["none", "pic", "pida", "tdpa-impedance"]
     assert "DIVERGED" in panels[0].get_title() and panels[1].get_title() == "pic: ok"
     assert len({ax.get_ylim() for ax in panels}) == 1  # shared axes
@@ -246,7 +254,7 @@ def test_comparison_figures():
     pic_hil = [line for line in panels[1].get_lines() if line.get_label() == "HIL"][0]
     assert np.nanmax(pic_hil.get_ydata()) == pytest.approx(20.0)
     # observed energy only where it has values
-    energy = [ax for ax in figures["compare_energy"].axes if ax.get_visible()]
+    energy = [ax for ax in figures["compare_energy"].axes if ax.get_visible() and ax.get_label() != "zoom"]
     observed = [[line for line in ax.get_lines() if line.get_label() == "observed energy"] for ax in energy]
     assert [len(lines) for lines in observed] == [0, 0, 1, 0]
     assert observed[2][0].get_linestyle() == ":"
@@ -273,7 +281,8 @@ def test_comparison_figures():
 def test_identification_figure_only_when_a_kind_identifies():
     figures = fake_comparison(("none", "tdpa-impedance")).plot()
     assert "compare_identification" not in figures
-    assert set(figures) == {"compare_velocity", "compare_force", "compare_energy", "compare_cov_cof"}
+    assert set(figures) == {"compare_velocity", "compare_force", "compare_energy", "compare_cov_cof",
+                            "compare_measured_applied"}
 
 
 @pytest.mark.parametrize("run_plots", [False, True])

@@ -35,8 +35,13 @@ if TYPE_CHECKING:
 __all__ = [
     "ALL_KINDS",
     "COMPARISON_FIGURES",
+    "RANKING_RULE",
     "Comparison",
+    "DelayComparison",
+    "Standing",
+    "Violation",
     "compare",
+    "compare_over_delays",
     "comparison_scenarios",
     "parse_kinds",
     "run_comparison",
@@ -46,14 +51,15 @@ __all__ = [
 ALL_KINDS: tuple[str, ...] = KINDS
 
 #: Figures of a comparison (file stems); ``compare_identification`` only when a compared
-#: compensator identifies the contact, ``compare_velocity_error`` only when the motion is
-#: not 1-D.
+#: compensator identifies the contact, ``compare_measured_applied`` only when the ideal
+#: reference has a collision, ``compare_velocity_error`` only when the motion is not 1-D.
 COMPARISON_FIGURES = (
     "compare_velocity",
     "compare_force",
     "compare_energy",
     "compare_identification",
     "compare_cov_cof",
+    "compare_measured_applied",
     "compare_velocity_error",
 )
 
@@ -87,6 +93,9 @@ SUMMARY_COLUMNS = [
     "worst_velocity_error_pct",
     "lost_collisions",
     "extra_collisions",
+    "rank",
+    "verdict",
+    "violation",
 ]
 
 
@@ -162,6 +171,113 @@ def comparison_scenarios(
     return scenarios
 
 
+#: How :attr:`Comparison.ranking` orders the compensators (quoted by docs/choosing.md).
+RANKING_RULE = (
+    "Compensators that ran to the end come first, those that diverged or stopped last (the "
+    "later the stop, the better). Among those that ran to the end: first the ones faithful "
+    "from an earlier collision (every collision from it on within the scenario's [metrics] "
+    "tolerances: |CoV − 1|, CoF, rebound velocity error; judged from `judge_from`; none lost "
+    "or extra beyond those allowed; at least one compared collision from it on), then the ones "
+    "never faithful; ties go to the smaller worst margin, the largest of |CoV − 1| / "
+    "cov_tolerance, CoF / max_cof and velocity error / max_velocity_error over the collisions "
+    "judged (from the faithful one on, or all of them)."
+)
+
+
+@dataclass(frozen=True)
+class Violation:
+    """One tolerance a run broke: which collision (None: lost or extra collisions), which
+    metric, its value and the limit of the scenario's ``[metrics]``."""
+
+    collision: int | None
+    metric: str  # "|CoV − 1|", "CoF", "velocity error (%)", "lost collisions", "extra collisions"
+    value: float
+    limit: float
+
+    def __str__(self) -> str:
+        if self.collision is None:
+            return f"{self.metric} {self.value:g} > {self.limit:g}"
+        if self.metric == "velocity error (%)":
+            return f"collision {self.collision}: velocity error {self.value:.2f} % > {self.limit:g} %"
+        return f"collision {self.collision}: {self.metric} {self.value:.3f} > {self.limit:g}"
+
+
+@dataclass(frozen=True)
+class Standing:
+    """A compensator's place in :attr:`Comparison.ranking` (:data:`RANKING_RULE`).
+
+    Attributes:
+        kind: the compensator.
+        rank: 1 for the best.
+        faithful_from: the first collision (1-based) from which every collision keeps the
+            tolerances (None: never; a run that diverged is never faithful).
+        margin: the worst margin (largest value / limit over the collisions judged; > 1 breaks
+            a tolerance), NaN without a compared collision.
+        violations: every tolerance broken, per collision, in order (collisions before
+            ``[metrics] judge_from`` are not judged).
+        verdict: one phrase: ``faithful``, ``faithful from collision 3``, ``unfaithful``,
+            ``diverged at 1.234 s``.
+    """
+
+    kind: str
+    rank: int
+    faithful_from: int | None
+    margin: float
+    violations: tuple[Violation, ...]
+    verdict: str
+
+    @property
+    def reason(self) -> str:
+        """Why it is not faithful (on every collision): its worst violation and how many more,
+        or its stop; empty when faithful."""
+        return _why_not(self) if self.verdict != "faithful" else ""
+
+
+def _ratio(value: float, limit: float) -> float:
+    if limit > 0:
+        return value / limit
+    return math.inf if value > 0 else 0.0
+
+
+def _judge(run: Run) -> tuple[int | None, float, list[Violation]]:
+    """(faithful_from, margin, violations) of a run against its scenario's ``[metrics]``."""
+    tol = run.scenario.metrics
+    collisions = [c for c in run.metrics.get("collisions") or [] if _finite(c.get("cov"))]
+    violations: list[Violation] = []
+    margins: dict[int, float] = {}
+    for c in collisions:
+        n = int(c["index"])
+        if n < tol.judge_from:
+            continue
+        cov_error = abs(float(c["cov"]) - 1.0)
+        cof = float(c["cof"]) if _finite(c.get("cof")) else 0.0
+        v_error = float(c["velocity_error"]) if _finite(c.get("velocity_error")) else 0.0
+        margins[n] = max(_ratio(cov_error, tol.cov_tolerance), _ratio(cof, tol.max_cof),
+                         _ratio(v_error, tol.max_velocity_error))
+        if cov_error > tol.cov_tolerance:
+            violations.append(Violation(n, "|CoV − 1|", cov_error, tol.cov_tolerance))
+        if cof > tol.max_cof:
+            violations.append(Violation(n, "CoF", cof, tol.max_cof))
+        if v_error > tol.max_velocity_error:
+            violations.append(Violation(n, "velocity error (%)", 100.0 * v_error, 100.0 * tol.max_velocity_error))
+    counted = True
+    for key, limit, name in (("lost_collisions", tol.max_lost_collisions, "lost collisions"),
+                             ("extra_collisions", tol.max_extra_collisions, "extra collisions")):
+        count = len(run.metrics.get(key) or [])
+        if count > limit:
+            violations.append(Violation(None, name, count, limit))
+            counted = False
+    start = max([tol.judge_from] + [v.collision + 1 for v in violations if v.collision is not None])
+    later = [m for n, m in margins.items() if n >= start]
+    if run.status in ("ok", "unfaithful") and counted and later:
+        return start, max(later), violations
+    return None, max(margins.values(), default=math.nan), violations
+
+
+def _finite(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
 def _nan(value: Any) -> float:
     if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
         return float(value)
@@ -174,6 +290,11 @@ class Comparison:
 
     Attributes:
         runs: compensator kind -> run, in the compared order.
+
+    The answer: :attr:`ranking` (a :class:`Standing` per compensator, best first, by
+    :data:`RANKING_RULE`: rank, verdict, faithful_from, margin, every :class:`Violation`),
+    :attr:`recommendation` (one line), and :attr:`summary` (with rank, verdict and the worst
+    violation per compensator); :attr:`table` per collision.
     """
 
     runs: dict[str, Run]
@@ -227,12 +348,68 @@ class Comparison:
         }
 
     @property
+    def ranking(self) -> list[Standing]:
+        """The compensators from best to worst by :data:`RANKING_RULE`, each with why: the
+        collision it is faithful from, its worst margin and every tolerance it broke."""
+        judged = []
+        for order, (kind, run) in enumerate(self.runs.items()):
+            start, margin, violations = _judge(run)
+            stopped = run.status not in ("ok", "unfaithful")
+            at = _nan(run.metrics.get("diverged_at"))
+            if stopped:
+                key: tuple[Any, ...] = (2, -at if math.isfinite(at) else 0.0, order)
+                verdict = f"{run.status} at {at:.3f} s" if math.isfinite(at) else run.status
+            elif start is not None:
+                key = (0, start, margin, order)
+                verdict = "faithful" if run.status == "ok" else f"faithful from collision {start}"
+            else:
+                key = (1, margin if math.isfinite(margin) else math.inf, order)
+                verdict = "unfaithful" if violations else "no compared collision"
+            judged.append((key, kind, start, margin, violations, verdict))
+        judged.sort(key=lambda item: item[0])
+        return [Standing(kind, rank, start, margin, tuple(violations), verdict)
+                for rank, (_, kind, start, margin, violations, verdict) in enumerate(judged, 1)]
+
+    @property
+    def recommendation(self) -> str:
+        """One line: the compensator to use (the first of :attr:`ranking`) and why, and why
+        not the next one; or that none is faithful, and the closest."""
+        ranking = self.ranking
+        delay = f"{self.scenario.facility.robot_delay * 1e3:g} ms"
+        best = ranking[0]
+        if best.faithful_from is None:
+            line = f"no compensator is faithful at {delay}; closest: {best.kind} ({_why_not(best)})"
+        elif best.verdict == "faithful":
+            judged = self.runs[best.kind].scenario.metrics.judge_from
+            where = "every collision" if judged == 1 else f"every collision from {judged} on"
+            line = f"use {best.kind}: faithful on {where} at {delay} (worst margin {best.margin:.2f} of the tolerances)"
+        else:
+            line = (f"use {best.kind}: faithful from collision {best.faithful_from} on at {delay} "
+                    f"(before: {_worst(best.violations)})")
+        if len(ranking) > 1 and best.faithful_from is not None:
+            runner = ranking[1]
+            if runner.faithful_from is None:
+                line += f"; {runner.kind}: {_why_not(runner)}"
+            else:
+                line += f"; next: {runner.kind} ({runner.verdict}, worst margin {runner.margin:.2f})"
+        return line
+
+    @property
     def summary(self) -> pd.DataFrame:
-        """One row per compensator (index ``compensator``): status, diverged_at (s, NaN if
-        ok), collisions (count), cov (list, one per collision), mean_cov, worst_cov_error
-        (largest |CoV - 1|), worst_cof (the CoF farthest from 1), stiffness_error_pct (%),
-        damping_error_Ns_mm (N s/mm); NaN where the run has no such value."""
-        rows = [{"compensator": kind, **self._stats(run)} for kind, run in self.runs.items()]
+        """One row per compensator (index ``compensator``), in the compared order: status,
+        diverged_at (s, NaN if ok), collisions (count), cov (list, one per collision),
+        mean_cov, worst_cov_error (largest |CoV - 1|), worst_cof (the CoF farthest from 1),
+        stiffness_error_pct (%), damping_error_Ns_mm (N s/mm), worst_velocity_error_pct (%),
+        lost_collisions and extra_collisions (counts); then from :attr:`ranking`: rank (1:
+        best), verdict (``faithful``, ``faithful from collision 3``, ``unfaithful``,
+        ``diverged at 1.234 s``) and violation (the worst tolerance broken: collision,
+        metric, value > limit; empty if none). NaN where the run has no such value."""
+        standings = {s.kind: s for s in self.ranking}
+        rows = [
+            {"compensator": kind, **self._stats(run), "rank": standings[kind].rank,
+             "verdict": standings[kind].verdict, "violation": _worst(standings[kind].violations)}
+            for kind, run in self.runs.items()
+        ]
         frame = pd.DataFrame(rows, columns=["compensator", *SUMMARY_COLUMNS])
         return frame.set_index("compensator")
 
@@ -281,6 +458,20 @@ class Comparison:
             f"{contact.stiffness * 1e-3:g} N/mm, damping {contact.damping * 1e-3:g} N·s/mm.",
             "CoV and CoF are the rebound speed and the peak force of each collision divided by "
             "those of the ideal reference (1 is perfect). `-`: no value.",
+            "",
+            "## Ranking",
+            "",
+            f"**Recommendation:** {_escape(self.recommendation)}.",
+            "",
+            "| rank | compensator | verdict | worst margin | tolerances broken (worst; all in metrics.json) |",
+            "|--:|---|---|--:|---|",
+            *[
+                f"| {s.rank} | `{s.kind}` | {s.verdict} | {_cell(s.margin, '.2f')} | {_escape(s.reason) or '-'} |"
+                for s in self.ranking
+            ],
+            "",
+            "Worst margin: the largest value / limit of |CoV − 1|, CoF and velocity error over the "
+            "collisions judged (1 = at a tolerance). " + RANKING_RULE,
             "",
             "## Summary",
             "",
@@ -364,6 +555,26 @@ class Comparison:
         return write_atomically(directory, write, "comparison", overwrite)
 
 
+def _escape(text: str) -> str:
+    """Text for a Markdown table cell (pipes escaped)."""
+    return text.replace("|", "\\|")
+
+
+def _worst(violations: Iterable[Violation]) -> str:
+    """The collision's violation farthest over its limit (a lost or extra collision count
+    only when no collision broke a tolerance), as text (empty if none)."""
+    worst = max(violations, key=lambda v: (v.collision is not None, _ratio(v.value, v.limit)), default=None)
+    return "" if worst is None else str(worst)
+
+
+def _why_not(standing: Standing) -> str:
+    """Why a compensator is not faithful: its worst violation (and how many more), or its stop."""
+    if standing.violations and standing.verdict.startswith(("unfaithful", "faithful")):
+        more = len(standing.violations) - 1
+        return _worst(standing.violations) + (f" (+{more} more)" if more else "")
+    return standing.verdict
+
+
 def _cell(value: Any, fmt: str) -> str:
     if value is None:
         return "-"
@@ -407,3 +618,135 @@ def run_comparison(
             progress(kind, index, len(scenarios))
         runs[kind] = simulate(scenario)
     return Comparison(runs=runs)
+
+
+def delay_label(delay: float) -> str:
+    """A robot delay (s) as a folder name and label: ``10ms``."""
+    return f"{delay * 1e3:g}ms"
+
+
+#: Figures of a comparison over robot delays (file stems): one panel per delay, (a), (b), …
+DELAY_FIGURES = ("compare_velocity", "compare_force", "compare_cov_cof")
+
+
+@dataclass
+class DelayComparison:
+    """The result of :func:`compare_over_delays`: one :class:`Comparison` per robot delay.
+
+    Attributes:
+        comparisons: robot delay (s) -> comparison, in the given order.
+    """
+
+    comparisons: dict[float, Comparison]
+
+    def to_markdown(self, figures: Iterable[str] = ()) -> str:
+        """The report: per delay, its recommendation and ranking (the full tables in each
+        delay's folder), then links to ``figures``."""
+        first = next(iter(self.comparisons.values()))
+        lines = [f"# Compensator comparison over robot delays: {first.scenario.name}", ""]
+        for panel, (delay, comparison) in zip("abcdefghijklmnopqrstuvwxyz", self.comparisons.items()):
+            lines += [f"## ({panel}) robot delay {delay * 1e3:g} ms", "",
+                      f"**Recommendation:** {_escape(comparison.recommendation)}.", "",
+                      "| rank | compensator | verdict | worst margin | tolerances broken |", "|--:|---|---|--:|---|"]
+            lines += [f"| {s.rank} | `{s.kind}` | {s.verdict} | {_cell(s.margin, '.2f')} | {_escape(s.reason) or '-'} |"
+                      for s in comparison.ranking]
+            lines += ["", f"Tables and figures: [{delay_label(delay)}/comparison.md]({delay_label(delay)}/comparison.md)", ""]
+        figures = list(figures)
+        if figures:
+            lines += ["## Figures", ""]
+            for name in figures:
+                lines += [f"![{Path(name).stem}]({name})", ""]
+        lines.append("Ranking rule: " + RANKING_RULE)
+        lines.append("")
+        return "\n".join(lines)
+
+    def plot(self) -> dict[str, Figure]:
+        """The figures over delays (:data:`DELAY_FIGURES`), one panel per delay."""
+        from .plots import delay_figures
+
+        return delay_figures({delay: c.runs for delay, c in self.comparisons.items()})
+
+    def save(self, directory: str | os.PathLike[str], plots: bool = True, overwrite: bool = False,
+             run_plots: bool = False) -> Path:
+        """Write ``<delay>ms/`` (a comparison folder per delay, as :meth:`Comparison.save`),
+        ``comparison.md`` and, unless ``plots=False``, the figures over delays, atomically."""
+        from .plots import save_figures
+
+        def write(folder: Path) -> None:
+            for delay, comparison in self.comparisons.items():
+                comparison.save(folder / delay_label(delay), plots=plots, run_plots=run_plots)
+            names = []
+            if plots:
+                figures = self.plot()
+                save_figures(figures, folder, dpi=110)
+                names = [f"{name}.png" for name in figures]
+            (folder / "comparison.md").write_text(self.to_markdown(names), encoding="utf-8")
+
+        return write_atomically(directory, write, "comparison-delays", overwrite)
+
+
+def parse_delays(text: str) -> list[float]:
+    """Robot delays (s) from ``"0.01,0.02"``: finite, >= 0, at most 8, duplicates removed.
+    Raises ScenarioError with one line."""
+    out: list[float] = []
+    for item in text.split(","):
+        item = item.strip()
+        if not item:
+            continue
+        try:
+            value = float(item)
+        except ValueError:
+            raise ScenarioError(f"--delays: {item!r} is not a number (seconds, e.g. 0.01,0.02)") from None
+        if not (math.isfinite(value) and 0.0 <= value <= 60.0):
+            raise ScenarioError(f"--delays: {item!r} must be between 0 and 60 s")
+        if value not in out:
+            out.append(value)
+    if not out:
+        raise ScenarioError("--delays: no delay given (seconds, e.g. 0.01,0.02)")
+    if len(out) > 8:
+        raise ScenarioError(f"--delays: at most 8 delays, got {len(out)}")
+    return out
+
+
+def delay_scenarios(
+    scenario_source: Any, delays: Iterable[float], kinds: str | Iterable[str] | None = None,
+    overrides: Mapping[str, Any] | None = None,
+) -> dict[float, dict[str, Scenario]]:
+    """The resolved scenarios per robot delay and compensator (all validated first);
+    ``overrides`` may not set ``facility.robot_delay``."""
+    user = dict(overrides or {})
+    if any(_override_steps(key) == ["facility", "robot_delay"] for key in user):
+        raise ScenarioError("facility.robot_delay: set the delays with --delays, not --set")
+    return {delay: comparison_scenarios(scenario_source, kinds, {**user, "facility.robot_delay": delay})
+            for delay in delays}
+
+
+def compare_over_delays(
+    scenario_source: Any,
+    delays: Iterable[float],
+    kinds: str | Iterable[str] | None = None,
+    overrides: Mapping[str, Any] | None = None,
+    *,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> DelayComparison:
+    """:func:`compare` at each robot delay (s); every scenario is validated before the first
+    run. ``progress(label, index, total)`` before each run."""
+    return run_over_delays(delay_scenarios(scenario_source, delays, kinds, overrides), progress=progress)
+
+
+def run_over_delays(
+    scenarios: Mapping[float, Mapping[str, Scenario]], *, progress: Callable[[str, int, int], None] | None = None
+) -> DelayComparison:
+    """Simulate resolved scenarios per delay (from :func:`delay_scenarios`)."""
+    total = sum(len(per) for per in scenarios.values())
+    done = 0
+    out: dict[float, Comparison] = {}
+    for delay, per in scenarios.items():
+        runs: dict[str, Run] = {}
+        for kind, scenario in per.items():
+            if progress is not None:
+                progress(f"{kind}, {delay * 1e3:g} ms", done, total)
+            runs[kind] = simulate(scenario)
+            done += 1
+        out[delay] = Comparison(runs=runs)
+    return DelayComparison(out)

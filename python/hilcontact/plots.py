@@ -233,6 +233,11 @@ def identification_figure(run: RunData) -> Figure:
     ax_c.set_title("Identified contact damping", fontsize=11)
     ax_c.grid(True, alpha=0.4)
     ax_c.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False)
+    # axes that show the convergence, not the initial guess (converged_range)
+    for ax, column, true in ((ax_k, "stiffness_estimate", contact.stiffness), (ax_c, "damping_estimate", contact.damping)):
+        limits = converged_range(run, column, true)
+        if limits is not None:
+            ax.set_ylim(limits[0] * 1e-3, limits[1] * 1e-3)
     return figure
 
 
@@ -494,28 +499,65 @@ def _kind_color(kind: str, index: int) -> str:
 def _comparison_header(runs: Mapping[str, RunData]) -> str:
     run = next(iter(runs.values()))
     f = run.scenario.facility
-    return (
-        f"{run.scenario.name} | robot delay {f.robot_delay * 1e3:g} ms, sensor delay "
-        f"{f.sensor_delay * 1e3:g} ms | solid: HIL, dashed: ideal reference"
-    )
+    return f"{run.scenario.name} | robot delay {f.robot_delay * 1e3:g} ms, sensor delay {f.sensor_delay * 1e3:g} ms"
 
 
-def _grid(count: int, rows_per_panel: int = 1) -> tuple[Figure, list[list[Axes]]]:
-    """A figure with ``count`` panels (at most 3 per row), each ``rows_per_panel`` axes tall;
-    all axes share x, and y is shared per panel row. Returns the axes per panel."""
+#: Height of one line of a figure title (12 pt) and of a panel title (11 pt), inches.
+_SUPTITLE_LINE = 0.22
+_PANEL_TITLE = 0.34
+
+
+def _suptitle(figure: Figure, text: str) -> None:
+    """The figure's title, its top 0.1 in below the figure's top (its lines fit the margin
+    :func:`_top_margin` leaves)."""
+    height = figure.get_size_inches()[1]
+    title = figure.suptitle(text, fontsize=12, y=1.0 - 0.1 / height, va="top")
+    # a narrow figure (one panel) gets a smaller font rather than a title wider than itself
+    width = title.get_window_extent(figure.canvas.get_renderer()).width
+    room = 0.92 * figure.get_size_inches()[0] * figure.dpi
+    if width > room:
+        title.set_fontsize(max(12.0 * room / width, 7.0))
+
+
+def _top_margin(title_lines: int) -> float:
+    """Top margin (in) that holds a figure title of ``title_lines`` lines above the first
+    row's panel titles, without overlap."""
+    return 0.1 + _SUPTITLE_LINE * title_lines + 0.12 + _PANEL_TITLE
+
+
+def _grid(count: int, rows_per_panel: int = 1, title_lines: int = 2,
+          height_ratios: list[float] | None = None, between: float = 0.55) -> tuple[Figure, list[list[Axes]]]:
+    """A figure with ``count`` panels (at most 3 per row), each ``rows_per_panel`` axes tall
+    (relative heights ``height_ratios``); the same row of every panel shares x and y. The top
+    margin holds a title of ``title_lines`` lines and the panel titles, the space between
+    panel rows (``between``, in) a panel title, or with tick labels above it 0.9 in (nothing
+    overlaps at any count). Returns the axes per panel."""
     columns = min(3, max(count, 1))
     panel_rows = math.ceil(count / columns)
     rows = panel_rows * rows_per_panel
-    figure = Figure(figsize=(5.0 * columns + 0.6, 3.0 * rows + 0.8))
+    ratios = list(height_ratios or [1.0] * rows_per_panel) * panel_rows
+    axis_height, inside = 2.7, 0.45  # inches: an axis, the space between the axes of a panel
+    top, bottom = _top_margin(title_lines), 0.5
+    heights: list[float] = []
+    for r in range(rows):
+        heights.append(axis_height * ratios[r])
+        if r < rows - 1:
+            heights.append(between if (r + 1) % rows_per_panel == 0 else inside)
+    height = top + bottom + sum(heights)
+    width = 5.0 * columns + 0.6
+    figure = Figure(figsize=(width, height))
     FigureCanvasAgg(figure)
-    grid = figure.subplots(rows, columns, sharex=True, squeeze=False)
-    _margins(figure, left=0.75, right=0.2, top=0.75, bottom=0.5, hspace=0.16, wspace=0.14)
-    for r in range(rows_per_panel):  # share y between the same row of every panel
+    spec = figure.add_gridspec(len(heights), columns, height_ratios=heights, hspace=0.0, wspace=0.14,
+                               left=0.75 / width, right=1.0 - 0.2 / width, top=1.0 - top / height,
+                               bottom=bottom / height)
+    grid = [[figure.add_subplot(spec[2 * r, c]) for c in range(columns)] for r in range(rows)]
+    for r in range(rows_per_panel):  # share x and y between the same row of every panel
         first = grid[r][0]
         for pr in range(panel_rows):
             for c in range(columns):
                 ax = grid[pr * rows_per_panel + r][c]
                 if ax is not first:
+                    ax.sharex(first)
                     ax.sharey(first)
     panels = []
     for i in range(panel_rows * columns):
@@ -529,26 +571,20 @@ def _grid(count: int, rows_per_panel: int = 1) -> tuple[Figure, list[list[Axes]]
     return figure, panels
 
 
-def _tidy_labels(panels: list[list[Axes]]) -> None:
-    """Shared axes: time tick labels and label only under the lowest panel of each column,
-    the y label only on the first column."""
+def _tidy_labels(panels: list[list[Axes]], every_row: tuple[int, ...] = ()) -> None:
+    """Shared axes: time tick labels and label only under the lowest panel of each column
+    (and under every panel for the rows in ``every_row``, e.g. a zoom row with its own time
+    window), the y label only on the first column."""
     columns = min(3, max(len(panels), 1))
     for i, axes in enumerate(panels):
         lowest = i + columns >= len(panels)
         for r, ax in enumerate(axes):
             bottom = lowest and r == len(axes) - 1
-            ax.tick_params(axis="x", labelbottom=bottom)
-            ax.set_xlabel("time (s)" if bottom else "")
+            ax.tick_params(axis="x", labelbottom=bottom or r in every_row)
+            if not bottom:
+                ax.set_xlabel("")
             if i % columns:
                 ax.set_ylabel("")
-
-
-def _panel_title(kind: str, run: RunData) -> str:
-    if run.status == "ok":
-        return f"{kind}: ok"
-    at = run.metrics.get("diverged_at")
-    when = f" at {at:.2f} s" if isinstance(at, (int, float)) else ""
-    return f"{kind}: {run.status.upper()}{when}"
 
 
 def _clip_to_ok_runs(
@@ -581,6 +617,42 @@ def _series_range(*series: np.ndarray | None) -> tuple[float, float]:
     return (float(min(v.min() for v in values)), float(max(v.max() for v in values)))
 
 
+def _panel_title(kind: str, run: RunData) -> str:
+    """A comparison panel's title: the compensator and its verdict (``ok``, ``OK FROM #3``,
+    ``UNFAITHFUL``, ``DIVERGED at 1.23 s``)."""
+    if run.status == "ok":
+        return f"{kind}: ok"
+    if run.status == "unfaithful":
+        from .comparison import _judge
+
+        start = _judge(run)[0]  # type: ignore[arg-type]
+        return f"{kind}: OK FROM #{start}" if start is not None else f"{kind}: UNFAITHFUL"
+    at = run.metrics.get("diverged_at")
+    when = f" at {at:.2f} s" if isinstance(at, (int, float)) else ""
+    return f"{kind}: {run.status.upper()}{when}"
+
+
+def zoom_window(runs: Mapping[str, RunData]) -> tuple[float, float, int] | None:
+    """The time window (s) of the comparison figures' zoom and the collision it shows: the
+    ideal reference's second collision (its first when it has one only), widened by half its
+    length and by the robot delay, so that the delayed HIL response shows. None without a
+    reference collision."""
+    run = next(iter(runs.values()))
+    collisions = [c for c in run.metrics.get("reference_collisions") or [] if c.get("start") is not None]
+    if not collisions:
+        return None
+    chosen = collisions[1] if len(collisions) > 1 else collisions[0]
+    start = float(chosen["start"])
+    end = float(chosen["end"]) if chosen.get("end") is not None else start + 0.2
+    delay = max(r.scenario.facility.robot_delay for r in runs.values())
+    pad = max(0.5 * (end - start), 2.0 * delay, 0.02)
+    return start - pad - delay, end + pad + delay, int(chosen.get("index") or collisions.index(chosen) + 1)
+
+
+def _in_window(time: np.ndarray, window: tuple[float, float]) -> slice:
+    return slice(int(np.searchsorted(time, window[0])), int(np.searchsorted(time, window[1], side="right")))
+
+
 def _time_panels(
     runs: Mapping[str, RunData],
     title: str,
@@ -588,8 +660,12 @@ def _time_panels(
     hil: Callable[[pd.DataFrame], np.ndarray | None],
     extra: Callable[[Axes, RunData], np.ndarray | None] | None = None,
 ) -> Figure:
-    figure, panels = _grid(len(runs))
-    ranges = []
+    """One panel per compensator: the whole run above, a zoom on one collision below
+    (:func:`zoom_window`), HIL against the ideal reference."""
+    zoom = zoom_window(runs)
+    figure, panels = _grid(len(runs), rows_per_panel=2 if zoom else 1, title_lines=3,
+                           height_ratios=[1.0, 0.75] if zoom else None, between=0.9 if zoom else 0.55)
+    ranges, zoom_ranges = [], []
     for i, ((kind, run), axes) in enumerate(zip(runs.items(), panels)):
         ax = axes[0]
         color = _kind_color(kind, i)
@@ -609,9 +685,30 @@ def _time_panels(
         ax.set_xlabel("time (s)")
         if i == 0:
             ax.legend(loc="best", fontsize=8)
+        if zoom:
+            lo, hi, number = zoom
+            ax.axvspan(lo, hi, color="tab:blue", alpha=0.07, lw=0)
+            zx = axes[1]
+            zx.set_label("zoom")  # tells the zoom axes from the whole-run ones
+            t, tr = run.timeseries["time"].to_numpy(), run.reference["time"].to_numpy()
+            w, wr = _in_window(t, (lo, hi)), _in_window(tr, (lo, hi))
+            if ideal is not None:
+                zx.plot(tr[wr], ideal[wr], color="black", lw=1.0, ls="--")
+            if values is not None:
+                zx.plot(t[w], values[w], color=color, lw=1.3)
+            zoom_ranges.append(_series_range(None if values is None else values[w], None if ideal is None else ideal[wr]))
+            _shade_collisions(zx, run)
+            zx.set_xlim(lo, hi)
+            zx.grid(True, alpha=0.4)
+            zx.set_ylabel(ylabel)
+            zx.text(0.01, 0.97, f"collision {number}", transform=zx.transAxes, va="top", fontsize=8)
+            zx.set_xlabel("time (s)")
     _clip_to_ok_runs(panels, runs, ranges)
-    _tidy_labels(panels)
-    figure.suptitle(f"{title}\n{_comparison_header(runs)}", fontsize=12)
+    if zoom:
+        _clip_to_ok_runs(panels, runs, zoom_ranges, row=1)
+    _tidy_labels(panels, every_row=(0, 1) if zoom else ())
+    zoomed = f"; below: collision {zoom[2]} (shaded above)" if zoom else ""
+    _suptitle(figure, f"{title}\n{_comparison_header(runs)}\nsolid: HIL, dashed: ideal reference{zoomed}")
     return figure
 
 
@@ -652,7 +749,7 @@ def compare_identification_figure(runs: Mapping[str, RunData]) -> Figure | None:
     chosen = {kind: run for kind, run in runs.items() if identifies(run)}
     if not chosen:
         return None
-    figure, panels = _grid(len(chosen), rows_per_panel=2)
+    figure, panels = _grid(len(chosen), rows_per_panel=2, title_lines=3)
     index = {kind: i for i, kind in enumerate(runs)}
     for (kind, run), (ax_k, ax_c) in zip(chosen.items(), panels):
         ts, contact = run.timeseries, run.scenario.contact
@@ -671,14 +768,42 @@ def compare_identification_figure(runs: Mapping[str, RunData]) -> Figure | None:
         ax_k.set_title(_panel_title(kind, run), fontsize=11, color=_STATUS_COLOURS.get(run.status, "tab:red"))
         ax_k.set_ylabel("stiffness (N/mm)")
         ax_c.set_ylabel("damping (N·s/mm)")
+        ax_c.set_xlabel("time (s)")
+    # shared y limits that show the convergence: the estimates after each run's first
+    # collision and the true values, not the initial guess
+    for row, column, true, scale in ((0, "stiffness_estimate", "stiffness", 1e-3), (1, "damping_estimate", "damping", 1e-3)):
+        limits = [converged_range(run, column, getattr(run.scenario.contact, true)) for run in chosen.values()]
+        limits = [lim for lim in limits if lim is not None]
+        if limits:
+            lo, hi = min(lim[0] for lim in limits) * scale, max(lim[1] for lim in limits) * scale
+            panels[0][row].set_ylim(lo, hi)
     _tidy_labels(panels)
     run = next(iter(runs.values()))
-    figure.suptitle(
+    _suptitle(
+        figure,
         f"Identified contact stiffness and damping\n{run.scenario.name} | robot delay "
-        f"{run.scenario.facility.robot_delay * 1e3:g} ms | dashed: true value",
-        fontsize=12,
+        f"{run.scenario.facility.robot_delay * 1e3:g} ms | dashed: true value\naxes fitted to the estimates "
+        "after the first collision",
     )
     return figure
+
+
+def converged_range(run: RunData, column: str, true: float) -> tuple[float, float] | None:
+    """y limits (SI units) for an estimate ``column`` that show its convergence: the 0.5 and
+    99.5 percentiles of its values after the run's first HIL collision, and the true value,
+    widened by 10 % of their span (at least 2 % of the true value). None without such values."""
+    ts = run.timeseries
+    first = _first_collision(run)
+    if column not in ts or first is None:
+        return None
+    values = ts[column].to_numpy(dtype=np.float64)[ts["time"].to_numpy() > first[1]]
+    values = values[np.isfinite(values)]
+    if not values.size:
+        return None
+    lo, hi = np.percentile(values, [0.5, 99.5])
+    lo, hi = min(float(lo), true), max(float(hi), true)
+    pad = max(0.1 * (hi - lo), 0.02 * abs(true), 1e-12)
+    return lo - pad, hi + pad
 
 
 def _finite_number(value: object) -> bool:
@@ -700,11 +825,13 @@ def _collision_count(runs: Mapping[str, RunData], keys: tuple[str, ...]) -> int:
 
 
 def _collision_bars(
-    ax: Axes, runs: Mapping[str, RunData], key: str, label: str, count: int, line: float | None, scale: float = 1.0
+    ax: Axes, runs: Mapping[str, RunData], key: str, label: str, count: int, line: float | None, scale: float = 1.0,
+    tolerances: tuple[float, ...] = (),
 ) -> None:
     """Grouped bars of ``metrics["collisions"][i][key] * scale`` per collision, one colour per
-    compensator, a dashed line at ``line``. When a diverged run's bars dwarf the others, the
-    axis is cut and those bars are labelled with their value."""
+    compensator, a dashed line at ``line`` and dotted red lines at ``tolerances`` (the
+    scenario's limits). When a diverged run's bars dwarf the others, the axis is cut and those
+    bars are labelled with their value."""
     kinds = list(runs)
     numbers = np.arange(1, count + 1)
     width = 0.8 / max(len(kinds), 1)
@@ -734,6 +861,11 @@ def _collision_bars(
                     ax.text(xi, cap, f"{h:.2f}", ha="center", va="bottom", fontsize=7, rotation=90)
     if line is not None:
         ax.axhline(line, color="black", lw=1.0, ls="--")
+    for limit in tolerances:
+        ax.axhline(limit, color="tab:red", lw=1.2, ls=":")
+    if tolerances:  # the highest limit named at the right (a band's two lines are too close for two)
+        ax.annotate(f"{max(tolerances):g}", (1.0, max(tolerances)), xycoords=("axes fraction", "data"),
+                    xytext=(3, 3), textcoords="offset points", va="bottom", fontsize=8, color="tab:red")
     if cap is not None:
         ax.set_ylim(0.0, cap * 1.15)
         label += " (cut; bars above labelled)"
@@ -742,25 +874,22 @@ def _collision_bars(
 
 
 def _bars_figure(
-    runs: Mapping[str, RunData], rows: list[tuple[str, str, float | None, float]], title: str
+    runs: Mapping[str, RunData], rows: list[tuple[str, str, float | None, float, tuple[float, ...]]], title: str
 ) -> Figure:
-    """One axis of grouped bars per ``(key, label, line, scale)``, collisions across."""
+    """One axis of grouped bars per ``(key, label, line, scale, tolerances)``, collisions across."""
     figure = Figure(figsize=(11.0, 7.0))
     FigureCanvasAgg(figure)
     axes = figure.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
-    _margins(figure, left=0.8, right=1.9, top=0.75, bottom=0.55, hspace=0.08)
-    count = _collision_count(runs, tuple(key for key, _, _, _ in rows))
-    for ax, (key, label, line, scale) in zip(axes, rows):
-        _collision_bars(ax, runs, key, label, count, line, scale)
-    axes[0].legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9, frameon=False, title="compensator")
+    _margins(figure, left=0.8, right=1.9, top=_top_margin(2) - _PANEL_TITLE, bottom=0.55, hspace=0.08)
+    count = _collision_count(runs, tuple(row[0] for row in rows))
+    for ax, (key, label, line, scale, tolerances) in zip(axes, rows):
+        _collision_bars(ax, runs, key, label, count, line, scale, tolerances)
+    axes[0].legend(loc="upper left", bbox_to_anchor=(1.03, 1.0), fontsize=9, frameon=False, title="compensator")
     axes[-1].set_xlabel("collision")
     axes[-1].set_xticks(np.arange(1, count + 1))
     run = next(iter(runs.values())) if runs else None
     if run is not None:
-        figure.suptitle(
-            f"{title}\n{run.scenario.name} | robot delay {run.scenario.facility.robot_delay * 1e3:g} ms",
-            fontsize=12,
-        )
+        _suptitle(figure, f"{title}\n{run.scenario.name} | robot delay {run.scenario.facility.robot_delay * 1e3:g} ms")
     return figure
 
 
@@ -768,8 +897,13 @@ def compare_cov_cof_figure(runs: Mapping[str, RunData]) -> Figure:
     """Grouped bars of CoV and CoF per collision, one colour per compensator, a line at 1.
     When a diverged run's bars dwarf the others, the axis is cut and those bars are
     labelled with their value."""
+    tol = next(iter(runs.values())).scenario.metrics
     return _bars_figure(
-        runs, [("cov", "CoV", 1.0, 1.0), ("cof", "CoF", 1.0, 1.0)], "CoV and CoF per collision (1 = ideal)"
+        runs,
+        [("cov", "CoV", 1.0, 1.0, (1.0 - tol.cov_tolerance, 1.0 + tol.cov_tolerance)),
+         ("cof", "CoF", 1.0, 1.0, (tol.max_cof,))],
+        f"CoV and CoF per collision (1 = ideal; dotted red: the tolerances |CoV − 1| ≤ {tol.cov_tolerance:g}, "
+        f"CoF ≤ {tol.max_cof:g})",
     )
 
 
@@ -781,12 +915,53 @@ def compare_velocity_error_figure(runs: Mapping[str, RunData]) -> Figure:
     return _bars_figure(
         runs,
         [
-            ("velocity_error", "velocity error (%)", tolerance, 100.0),
-            ("angular_velocity_error", "angular velocity error (%)", None, 100.0),
+            ("velocity_error", "velocity error (%)", tolerance, 100.0, ()),
+            ("angular_velocity_error", "angular velocity error (%)", None, 100.0, ()),
         ],
         "Rebound velocity errors per collision: |v − v_ref|/|v_ref|, |ω − ω_ref|/|ω_ref| "
         f"(0 = ideal; dashed: tolerance {tolerance:g} %)",
     )
+
+
+def compare_measured_applied_figure(runs: Mapping[str, RunData]) -> Figure | None:
+    """The paper's Figs. 16 and 18: per compensator, the measured force (the sensor's, delayed
+    and noisy) against the force the compensator applied to the virtual dynamics, and the
+    ideal reference's contact force, |F| (N), zoomed on one collision (:func:`zoom_window`):
+    `pida`'s applied force leads the measured one. None without a reference collision."""
+    zoom = zoom_window(runs)
+    if zoom is None:
+        return None
+    lo, hi, number = zoom
+    figure, panels = _grid(len(runs), title_lines=3)
+    ranges = []
+    for i, ((kind, run), (ax,)) in enumerate(zip(runs.items(), panels)):
+        ts, ref = run.timeseries, run.reference
+        t, tr = ts["time"].to_numpy(), ref["time"].to_numpy()
+        w, wr = _in_window(t, (lo, hi)), _in_window(tr, (lo, hi))
+        measured, applied = _magnitude(ts, "measured_force"), _magnitude(ts, "applied_force")
+        ideal = _magnitude(ref, "contact_force")
+        if ideal is not None:
+            ax.plot(tr[wr], ideal[wr], color="black", lw=1.0, ls="--", label="ideal reference")
+        if measured is not None:
+            ax.plot(t[w], measured[w], color="0.45", lw=1.1, label="measured")
+        if applied is not None:
+            ax.plot(t[w], applied[w], color=_kind_color(kind, i), lw=1.5, label="applied (compensated)")
+        ranges.append(_series_range(*(None if v is None else v[w] for v in (measured, applied)),
+                                    None if ideal is None else ideal[wr]))
+        _shade_collisions(ax, run)
+        ax.set_xlim(lo, hi)
+        ax.set_title(_panel_title(kind, run), fontsize=11, color=_STATUS_COLOURS.get(run.status, "tab:red"))
+        ax.grid(True, alpha=0.4)
+        ax.set_ylabel("|force| (N)")
+        ax.set_xlabel("time (s)")
+        if i == 0:
+            ax.legend(loc="best", fontsize=8)
+    _clip_to_ok_runs(panels, runs, ranges)
+    _tidy_labels(panels, every_row=(0,))
+    _suptitle(figure, f"Measured and applied force, collision {number} (the paper's Figs. 16, 18)\n"
+                      f"{_comparison_header(runs)}\nmeasured: the sensor's; applied: given to the virtual "
+                      "dynamics; dashed: ideal reference")
+    return figure
 
 
 def comparison_figure_makers(runs: Mapping[str, RunData]) -> dict[str, Callable[[], Figure | None]]:
@@ -798,6 +973,7 @@ def comparison_figure_makers(runs: Mapping[str, RunData]) -> dict[str, Callable[
         "compare_energy": lambda: compare_energy_figure(runs),
         "compare_identification": lambda: compare_identification_figure(runs),
         "compare_cov_cof": lambda: compare_cov_cof_figure(runs),
+        "compare_measured_applied": lambda: compare_measured_applied_figure(runs),
     }
     if not all(moves_in_1d(run) for run in runs.values()):
         makers["compare_velocity_error"] = lambda: compare_velocity_error_figure(runs)
@@ -830,3 +1006,96 @@ def draw_in_two_processes(makers: Mapping[str, Callable[[], Figure | None]], dir
         return saved
 
     return in_two_processes(list(makers), draw, lambda name: (folder / f"{name}.png").is_file())
+
+
+# --------------------------------------------------------------------------------------
+# Comparisons over robot delays: (a), (b), … one panel per delay
+# --------------------------------------------------------------------------------------
+
+_PANEL_LETTERS = "abcdefghijklmnopqrstuvwxyz"
+
+
+def _overlay_figure(runs_by_delay: Mapping[float, Mapping[str, RunData]], title: str, ylabel: str,
+                    series: Callable[[pd.DataFrame], np.ndarray | None]) -> Figure:
+    """One panel per delay, (a), (b), …: every compensator's HIL curve (its colour) over the
+    ideal reference (dashed), as the paper's Figs. 9 and 11; y fitted to the runs that ran to
+    the end (a diverged one leaves the panel, its end marked in the legend)."""
+    count = len(runs_by_delay)
+    figure = Figure(figsize=(5.5 * count + 2.4, 4.8))
+    FigureCanvasAgg(figure)
+    axes = figure.subplots(1, count, sharey=True, squeeze=False)[0]
+    _margins(figure, left=0.8, right=2.4, top=_top_margin(2), bottom=0.55, wspace=0.08)
+    ranges = []
+    for letter, ax, (delay, runs) in zip(_PANEL_LETTERS, axes, runs_by_delay.items()):
+        first = next(iter(runs.values()))
+        ideal = series(first.reference)
+        if ideal is not None:
+            _plot(ax, first.reference["time"], ideal, color="black", lw=1.1, ls="--", label="ideal reference", zorder=3)
+            ranges.append(_series_range(ideal))
+        for i, (kind, run) in enumerate(runs.items()):
+            values = series(run.timeseries)
+            if values is None:
+                continue
+            label = kind if run.status in _RAN_THROUGH else f"{kind} ({run.status})"
+            _plot(ax, run.timeseries["time"], values, color=_kind_color(kind, i), lw=1.2, label=label)
+            if run.status in _RAN_THROUGH:
+                ranges.append(_series_range(values))
+        ax.set_title(f"({letter}) robot delay {delay * 1e3:g} ms", fontsize=11)
+        ax.set_xlabel("time (s)")
+        ax.grid(True, alpha=0.4)
+    axes[0].set_ylabel(ylabel)
+    finite = [r for r in ranges if math.isfinite(r[0])]
+    if finite:
+        lo, hi = min(r[0] for r in finite), max(r[1] for r in finite)
+        pad = 0.1 * max(hi - lo, 1e-12)
+        axes[0].set_ylim(lo - pad, hi + pad)
+    axes[-1].legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=9, frameon=False, title="compensator")
+    first = next(iter(next(iter(runs_by_delay.values())).values()))
+    _suptitle(figure, f"{title}\n{first.scenario.name} | sensor delay {first.scenario.facility.sensor_delay * 1e3:g} ms "
+                      "| dashed: ideal reference")
+    return figure
+
+
+def _delay_bars_figure(runs_by_delay: Mapping[float, Mapping[str, RunData]]) -> Figure:
+    """CoV (top) and CoF (bottom) per collision, grouped by compensator, one column per
+    delay, (a), (b), …, with the tolerance lines."""
+    count = len(runs_by_delay)
+    figure = Figure(figsize=(5.5 * count + 2.4, 7.0))
+    FigureCanvasAgg(figure)
+    axes = figure.subplots(2, count, sharex="col", squeeze=False)  # own y per panel: each may be cut
+    _margins(figure, left=0.8, right=2.4, top=_top_margin(2), bottom=0.55, hspace=0.08, wspace=0.15)
+    tol = next(iter(next(iter(runs_by_delay.values())).values())).scenario.metrics
+    for column, (letter, (delay, runs)) in enumerate(zip(_PANEL_LETTERS, runs_by_delay.items())):
+        collisions = _collision_count(runs, ("cov", "cof"))
+        _collision_bars(axes[0][column], runs, "cov", "CoV", collisions, 1.0, 1.0,
+                        (1.0 - tol.cov_tolerance, 1.0 + tol.cov_tolerance))
+        _collision_bars(axes[1][column], runs, "cof", "CoF", collisions, 1.0, 1.0, (tol.max_cof,))
+        axes[0][column].set_title(f"({letter}) robot delay {delay * 1e3:g} ms", fontsize=11)
+        axes[1][column].set_xlabel("collision")
+        axes[1][column].set_xticks(np.arange(1, collisions + 1))
+        if column:
+            axes[0][column].set_ylabel("")
+            axes[1][column].set_ylabel("")
+    axes[0][-1].legend(*axes[0][0].get_legend_handles_labels(), loc="upper left", bbox_to_anchor=(1.02, 1.0),
+                       fontsize=9, frameon=False, title="compensator")
+    first = next(iter(next(iter(runs_by_delay.values())).values()))
+    _suptitle(figure, f"CoV and CoF per collision (1 = ideal; dotted red: |CoV − 1| ≤ {tol.cov_tolerance:g}, "
+                      f"CoF ≤ {tol.max_cof:g})\n{first.scenario.name}")
+    return figure
+
+
+def delay_figures(runs_by_delay: Mapping[float, Mapping[str, RunData]]) -> dict[str, Figure]:
+    """The figures of a comparison over robot delays (file stems as
+    :data:`hilcontact.comparison.DELAY_FIGURES`): one panel per delay, (a), (b), …"""
+
+    def velocity(frame: pd.DataFrame) -> np.ndarray | None:
+        values = _column(frame, "tip_velocity_x")
+        return None if values is None else values * 1e3
+
+    return {
+        "compare_velocity": _overlay_figure(runs_by_delay, "Rod-tip relative velocity along x", "velocity x (mm/s)",
+                                            velocity),
+        "compare_force": _overlay_figure(runs_by_delay, "Contact force magnitude", "|contact force| (N)",
+                                         lambda frame: _magnitude(frame, "contact_force")),
+        "compare_cov_cof": _delay_bars_figure(runs_by_delay),
+    }

@@ -8,7 +8,10 @@ one compared collision; the map may be stricter still in the worst CoV and CoF o
 collision (``cov_tolerance``, ``cof_limit``; by default none: the verdict alone, by the
 scenario's tolerances, |CoV − 1| ≤ 5 %, CoF ≤ 1.2 unless set, from ``[metrics] judge_from``
 on). A cell (compensator, contact frequency, robot delay)
-is faithful when every run in it is: every seed and every value of any other swept key.
+holds every seed and every value of any other swept key; its *faithful fraction* is the share
+of its runs that are faithful. A cell counts as faithful by :func:`cell_rule` (default: all
+its runs but at most one, and the failing ones fewer than half: with 3 seeds, 2 of 3 pass;
+with 1 or 2, all must; ``tolerate=0``: every run).
 The *maximal faithful delay* of a compensator at a frequency is the largest swept delay up to
 which every cell, from the smallest delay on, is faithful (NaN if the smallest is not).
 """
@@ -30,7 +33,10 @@ from .sweep import RESULTS_FILE, load_results
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-__all__ = ["StabilityMap", "faithful", "stability_map"]
+__all__ = ["DEFAULT_TOLERATE", "StabilityMap", "cell_rule", "faithful", "stability_map"]
+
+#: Failing runs a faithful cell may hold by default (while they stay fewer than half of it).
+DEFAULT_TOLERATE = 1
 
 #: Files written by :meth:`StabilityMap.save`.
 MAP_FILES = ("stability_map.png", "worst_cov.png", "worst_cof.png", "max_faithful_delay.csv", "cells.csv")
@@ -46,20 +52,42 @@ def faithful(rows: pd.DataFrame, cov_tolerance: float | None = None, cof_limit: 
     return ok
 
 
+def cell_rule(tolerate: int) -> str:
+    """The rule that makes a cell faithful, in words (figures, tables, docs)."""
+    if tolerate == 0:
+        return "a cell is faithful when every run in it is"
+    return (f"a cell is faithful when all its runs but at most {tolerate} are, the failing ones "
+            "fewer than half")
+
+
+def cell_faithful(faithful_runs: np.ndarray, runs: np.ndarray, tolerate: int) -> np.ndarray:
+    """Whether cells with ``faithful_runs`` of ``runs`` faithful pass :func:`cell_rule`."""
+    failing = np.asarray(runs) - np.asarray(faithful_runs)
+    return (failing <= tolerate) & (2 * failing < np.asarray(runs))
+
+
 @dataclass
 class StabilityMap:
     """Per compensator and (contact frequency, robot delay) cell: faithful or not, and the
     worst CoV and CoF over the cell's runs.
 
     Attributes:
-        cells: one row per (compensator, contact_frequency, robot_delay): runs, faithful
-            (bool), worst_cov (the CoV farthest from 1), worst_cof (largest), diverged (runs).
-        cov_tolerance, cof_limit: the criterion.
+        cells: one row per (compensator, contact_frequency, robot_delay): runs,
+            faithful_runs, faithful_fraction (faithful_runs / runs), faithful (bool, by
+            :func:`cell_rule`), worst_cov (the CoV farthest from 1), worst_cof (largest),
+            diverged (runs).
+        cov_tolerance, cof_limit: the run criterion; tolerate: the cell rule's failing runs.
     """
 
     cells: pd.DataFrame
     cov_tolerance: float | None
     cof_limit: float | None
+    tolerate: int = DEFAULT_TOLERATE
+
+    @property
+    def rule(self) -> str:
+        """The cell rule in words (:func:`cell_rule`)."""
+        return cell_rule(self.tolerate)
 
     @property
     def compensators(self) -> list[str]:
@@ -120,11 +148,24 @@ class StabilityMap:
             return figure, axes
 
         figures: dict[str, Figure] = {}
-        figure, axes = panels(f"Faithful region ({criterion})")
-        colours = ListedColormap(["#d9534f", "#5cb85c"])
+        figure, axes = panels(f"Faithful runs per cell (a run is faithful with {criterion}; green: all, orange: some, "
+                              f"red: none);\n✓: {self.rule}")
+        colours = ListedColormap(["#d9534f", "#f0ad4e", "#5cb85c"])
         for ax, kind in zip(axes, kinds):
-            ok = grid(kind, "faithful")
-            ax.pcolormesh(x, y, np.ma.masked_invalid(ok), cmap=colours, vmin=0, vmax=1, edgecolors="white", linewidth=0.3)
+            fraction, ok = grid(kind, "faithful_fraction"), grid(kind, "faithful")
+            good, runs = grid(kind, "faithful_runs"), grid(kind, "runs")
+            # red: none faithful, orange: some, green: all
+            shade = np.where(np.isfinite(fraction), np.where(fraction >= 1.0, 2.0, np.where(fraction > 0.0, 1.0, 0.0)), np.nan)
+            ax.pcolormesh(x, y, np.ma.masked_invalid(shade), cmap=colours, vmin=0, vmax=2, edgecolors="white", linewidth=0.3)
+            # every cell's count when they fit (12 delays), else only the mixed (orange) ones
+            every = len(delays) <= 12
+            if len(freqs) <= 40:
+                for i, freq in enumerate(freqs):
+                    for j, delay in enumerate(delays):
+                        if np.isfinite(runs[i, j]) and (every or 0 < good[i, j] < runs[i, j]):
+                            mark = " ✓" if ok[i, j] == 1.0 else ""
+                            ax.text(delay * 1e3, freq, f"{int(good[i, j])}/{int(runs[i, j])}{mark}", ha="center",
+                                    va="center", fontsize=7 if every else 5, color="black")
         figures["stability_map"] = figure
 
         figure, axes = panels("Worst |CoV − 1| per cell (log scale)")
@@ -166,7 +207,7 @@ def criterion_text(cov_tolerance: float | None, cof_limit: float | None) -> str:
         extra.append(f"|CoV−1| ≤ {cov_tolerance:g}")
     if cof_limit is not None:
         extra.append(f"CoF ≤ {cof_limit:g}")
-    return "every run ok" + (" and " + ", ".join(extra) + " on every collision" if extra else "")
+    return "status ok" + (" and " + ", ".join(extra) + " on every collision" if extra else "")
 
 
 #: The columns of a sweep's rows a map reads.
@@ -200,10 +241,12 @@ def _rows_of(results: Any) -> pd.DataFrame:
 
 
 def stability_map(
-    results: pd.DataFrame | str | os.PathLike[str], cov_tolerance: float | None = None, cof_limit: float | None = None
+    results: pd.DataFrame | str | os.PathLike[str], cov_tolerance: float | None = None, cof_limit: float | None = None,
+    tolerate: int = DEFAULT_TOLERATE,
 ) -> StabilityMap:
     """The stability map of a sweep's rows (a DataFrame from :func:`hilcontact.sweep` or a
-    sweep folder). ``cov_tolerance``, ``cof_limit``: None or a finite number > 0.
+    sweep folder). ``cov_tolerance``, ``cof_limit``: None or a finite number > 0;
+    ``tolerate``: failing runs a faithful cell may hold (:func:`cell_rule`).
 
     Raises :class:`~hilcontact.errors.ArgumentError` (a ValueError) naming the argument for a
     missing folder, a folder without sweep results, rows without a sweep's columns, no
@@ -214,6 +257,8 @@ def stability_map(
             or not (math.isfinite(value) and value > 0)
         ):
             raise ArgumentError(f"{name}: expected a finite number > 0 or None, got {describe(value)}")
+    if isinstance(tolerate, bool) or not isinstance(tolerate, (int, np.integer)) or tolerate < 0:
+        raise ArgumentError(f"tolerate: expected an integer >= 0, got {describe(tolerate)}")
     rows = _rows_of(results)
     usable = rows[np.isfinite(rows["contact_frequency"].astype(float))]
     if usable.empty:
@@ -229,13 +274,16 @@ def stability_map(
     keys = ["compensator", "contact_frequency", "robot_delay"]
     grouped = usable.groupby(keys, sort=False)
     cells = grouped.agg(
-        runs=("run_key", "size"), faithful=("faithful", "all"), worst_cof=("worst_cof", "max"),
+        runs=("run_key", "size"), faithful_runs=("faithful", "sum"), worst_cof=("worst_cof", "max"),
         diverged=("diverged", "sum"),
     )
+    cells["faithful_runs"] = cells["faithful_runs"].astype(np.int64)
+    cells["faithful_fraction"] = cells["faithful_runs"] / cells["runs"]
+    cells["faithful"] = cell_faithful(cells["faithful_runs"].to_numpy(), cells["runs"].to_numpy(), int(tolerate))
     # the worst CoV of a cell: the run's CoV farthest from 1 (NaN if any run has none)
     worst = usable.loc[usable["cov_error"].fillna(np.inf).groupby([usable[k] for k in keys], sort=False).idxmax()]
     cells["worst_cov"] = worst.set_index(keys)["worst_cov"]
-    cells = cells.reset_index()[["compensator", "contact_frequency", "robot_delay", "runs", "faithful",
-                                 "worst_cov", "worst_cof", "diverged"]]
+    cells = cells.reset_index()[["compensator", "contact_frequency", "robot_delay", "runs", "faithful_runs",
+                                 "faithful_fraction", "faithful", "worst_cov", "worst_cof", "diverged"]]
     cells["diverged"] = cells["diverged"].astype(np.int64)
-    return StabilityMap(cells=cells, cov_tolerance=cov_tolerance, cof_limit=cof_limit)
+    return StabilityMap(cells=cells, cov_tolerance=cov_tolerance, cof_limit=cof_limit, tolerate=int(tolerate))

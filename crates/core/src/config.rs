@@ -214,6 +214,13 @@ pub struct FacilityConfig {
     #[serde(default = "default_servo_damping")]
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 100.0))]
     pub servo_damping: f64,
+    /// Viscous damping the facility adds to the physical contact (its mounts and the robot's
+    /// compliance), N·s/m (0 = none, the default; <= 1e9): the measured contact force grows
+    /// by `d·v_n` against the rod tip's approach and shrinks by it on the rebound (`v_n`: the
+    /// tip's speed along the force), never pulling. The ideal reference does not have it.
+    #[serde(default)]
+    #[schemars(range(min = 0.0, max = 1e9))]
+    pub dissipation: f64,
     /// Gaussian noise on each force axis, N (standard deviation, 0 to 1e6).
     #[serde(default)]
     #[schemars(range(min = 0.0, max = 1e6))]
@@ -261,6 +268,7 @@ impl Default for FacilityConfig {
             sensor_delay: 0.0,
             servo_frequency: 0.0,
             servo_damping: default_servo_damping(),
+            dissipation: 0.0,
             sensor_noise: 0.0,
             torque_noise: 0.0,
             force_resolution: 0.0,

@@ -558,7 +558,25 @@ pub struct IdentificationError {
     pub damping_error: f64,
     /// Number of samples averaged.
     pub samples: usize,
+    /// The units of the two errors, written with them into `metrics.json`
+    /// ([`IDENTIFICATION_UNITS`]).
+    pub units: IdentificationUnits,
 }
+
+/// The units of [`IdentificationError`]'s errors, as `metrics.json` states them.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct IdentificationUnits {
+    /// Unit of `stiffness_error`.
+    pub stiffness_error: &'static str,
+    /// Unit of `damping_error`.
+    pub damping_error: &'static str,
+}
+
+/// `stiffness_error` is a fraction (0.01 = 1 %), `damping_error` is in N·s/m.
+pub const IDENTIFICATION_UNITS: IdentificationUnits = IdentificationUnits {
+    stiffness_error: "fraction (0.01 = 1 %)",
+    damping_error: "N·s/m",
+};
 
 /// Identification error over samples in contact (`force > threshold`) after the first
 /// collision's end; `None` if there is no such sample or the trace has no estimates.
@@ -586,6 +604,7 @@ pub fn identification_error(
         stiffness_error: sk / n as f64,
         damping_error: sc / n as f64,
         samples: n,
+        units: IDENTIFICATION_UNITS,
     })
 }
 

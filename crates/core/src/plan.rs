@@ -56,6 +56,8 @@ pub struct FacilityPlan {
     pub servo_frequency: f64,
     /// Servo lag damping ratio (> 0).
     pub servo_damping: f64,
+    /// Viscous damping the facility adds to the physical contact, N·s/m (0 = none).
+    pub dissipation: f64,
     /// Force noise per axis (standard deviation), N.
     pub force_noise: f64,
     /// Moment noise per axis (standard deviation), N·m.
@@ -287,6 +289,7 @@ impl Plan {
                 robot_delay_ticks: robot,
                 servo_frequency: f.servo_frequency,
                 servo_damping: f.servo_damping,
+                dissipation: f.dissipation,
                 force_noise: f.sensor_noise,
                 torque_noise: f.torque_noise,
                 force_resolution: f.force_resolution,

@@ -141,19 +141,26 @@ def plot(folder: Path, force: bool) -> None:
 @click.option("--no-plots", is_flag=True, help="Do not write the PNG figures.")
 @click.option("--run-figures", is_flag=True, help="Also draw each compensator's own figures (slower; `hilcontact plot DIR` draws them later).")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
+@click.option("--delays", "delays", metavar="LIST", default=None,
+              help="Compare at each robot delay (s, comma-separated, e.g. 0.01,0.02): a comparison folder per "
+                   "delay and figures with one panel per delay, (a), (b), ….")
 @_with(_LIMIT_OPTIONS)
 def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool,
-                    run_figures: bool, force: bool, max_memory: float, max_time: float) -> None:
-    """Simulate SCENARIO once per compensator and compare them.
+                    run_figures: bool, force: bool, delays: str | None, max_memory: float, max_time: float) -> None:
+    """Simulate SCENARIO once per compensator and compare them: a ranking, a recommendation,
+    and for each compensator that is not faithful the tolerance it broke (docs/choosing.md).
 
     Writes a run folder per compensator (data; its figures with --run-figures, or later with
     `hilcontact plot DIR/<compensator>`), comparison.md and comparison.csv (CoV, CoF, peak
     force, rebound speed per collision; status and identification errors per compensator)
-    and the compare_*.png figures.
+    and the compare_*.png figures. With --delays, one such folder per delay (DIR/10ms/, …).
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     _stop_on_sigterm()
+    if delays is not None:
+        _compare_over_delays(scenario, sets, kinds, out, no_plots, run_figures, force, delays, max_memory, max_time)
+        return
     with _errors():
         overrides = parse_set_options(sets)
         scenarios = comparison_scenarios(scenario, kinds, overrides)  # validate all before running
@@ -178,6 +185,39 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
             progress.update(task, completed=len(scenarios), description="Writing files")
             result.save(folder, plots=not no_plots, overwrite=force, run_plots=run_figures)
     _report_comparison(Console(), result, folder)
+
+
+def _compare_over_delays(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool,
+                         run_figures: bool, force: bool, delays: str, max_memory: float, max_time: float) -> None:
+    """`compare --delays`: the comparison at each robot delay, saved and reported per delay."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from ..comparison import delay_label, delay_scenarios, parse_delays, run_over_delays
+
+    with _errors():
+        overrides = parse_set_options(sets)
+        per_delay = delay_scenarios(scenario, parse_delays(delays), kinds, overrides)  # validate all first
+        total = sum(len(per) for per in per_delay.values())
+        first = next(iter(next(iter(per_delay.values())).values()))
+        check_run(first, Limits(max_memory, max_time), runs=total)
+        folder = _out_folder(out, Path("runs") / f"{first.name}-compare", force)
+        with Progress(TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=Console(stderr=True), transient=True) as progress:
+            task = progress.add_task(f"Simulating {escape(first.name)}", total=total)
+
+            def advance(label: str, index: int, count: int) -> None:
+                progress.update(task, completed=index, description=f"Simulating {escape(first.name)}: {escape(label)}")
+
+            result = run_over_delays(per_delay, progress=advance)
+            progress.update(task, completed=total, description="Writing files")
+            result.save(folder, plots=not no_plots, overwrite=force, run_plots=run_figures)
+    console = Console()
+    for delay, comparison in result.comparisons.items():
+        _report_comparison(console, comparison, folder / delay_label(delay))
+        console.print()
+    console.print(f"saved to {escape(str(folder))}/ (comparison.md, one folder per delay"
+                  + ("" if no_plots else ", compare_velocity.png, compare_force.png, compare_cov_cof.png with (a), (b), … panels")
+                  + ")", soft_wrap=True)
 
 
 @cli.command(name="sweep", short_help="Run a scenario over a grid of values, compensators and seeds.")
@@ -291,10 +331,16 @@ def sweep_command(
 @click.option("--cov-tolerance", default=None, type=NON_NEGATIVE,
               help="Stricter than the runs' verdicts: |CoV - 1| <= this on every collision.")
 @click.option("--cof-limit", default=None, type=POSITIVE, help="Stricter than the runs' verdicts: CoF <= this on every collision.")
-def stability_map_command(sweep_dir: str, out: str | None, cov_tolerance: float | None, cof_limit: float | None) -> None:
-    """Draw, per compensator, the (contact frequency, robot delay) region where every run is
-    faithful (status ok: the scenario's [metrics] tolerances, from judge_from on), heat maps of the worst CoV and CoF, and print the maximal faithful delay per
-    compensator and contact frequency.
+@click.option("--tolerate", default=1, show_default=True, type=click.IntRange(0, None),
+              help="Failing runs (seeds) a faithful cell may hold, while they are fewer than half of it; 0: every run.")
+def stability_map_command(sweep_dir: str, out: str | None, cov_tolerance: float | None, cof_limit: float | None,
+                          tolerate: int) -> None:
+    """Draw, per compensator, the fraction of faithful runs (seeds) of each (contact
+    frequency, robot delay) cell (a run is faithful with status ok: the scenario's [metrics]
+    tolerances, from judge_from on; a cell is faithful when all its runs but at most
+    --tolerate are, the failing ones fewer than half), heat maps of the worst CoV and CoF,
+    and print the faithful runs per cell and the maximal faithful delay per compensator and
+    contact frequency.
 
     Writes stability_map.png, worst_cov.png, worst_cof.png, max_faithful_delay.csv and
     cells.csv into DIR.
@@ -304,7 +350,7 @@ def stability_map_command(sweep_dir: str, out: str | None, cov_tolerance: float 
     with _errors():
         if not Path(sweep_dir).is_dir():
             raise ScenarioError(f"{sweep_dir}: not a sweep folder")
-        result = stability_map(sweep_dir, cov_tolerance=cov_tolerance, cof_limit=cof_limit)
+        result = stability_map(sweep_dir, cov_tolerance=cov_tolerance, cof_limit=cof_limit, tolerate=tolerate)
         folder = result.save(out if out is not None else sweep_dir)
     _report_stability_map(Console(), result, folder, criterion_text(cov_tolerance, cof_limit), MAP_FILES)
 

@@ -31,10 +31,12 @@ def _report(console: Console, result: Run, folder: Path) -> None:
     delay_ms = result.scenario.facility.robot_delay * 1e3
     table = Table(
         title=f"{result.scenario.name}: compensator {result.compensator}, robot delay {delay_ms:g} ms",
+        pad_edge=False,
     )
-    for header in ("#", "start (s)", "end (s)", "CoV", "CoF", "v error (%)", "peak force (N)",
-                   "rebound speed (mm/s)", "reference rebound (mm/s)"):
-        table.add_column(header, justify="right")
+    # two-line headers, numbers never wrapped: fits 80 columns
+    for header in ("#", "start\n(s)", "end\n(s)", "CoV", "CoF", "v err\n(%)", "peak\nF (N)",
+                   "rebound\n(mm/s)", "ideal\n(mm/s)"):
+        table.add_column(header, justify="right", no_wrap=True)
     for number, row in result.collision_table().iterrows():
         table.add_row(
             str(number) if row["complete"] else f"{number}*",
@@ -88,21 +90,33 @@ def _report_mcap(console: Console, recorded: dict[str, Any] | None) -> None:
 
 
 def _report_comparison(console: Console, result: Comparison, folder: Path) -> None:
+    """`hilcontact compare`'s report: a row per compensator (compared order) with its rank,
+    then the tolerance each unfaithful one broke, the ranking and the recommendation. Fits 80
+    columns: the CoV cell wraps between numbers, never inside one."""
     s = result.scenario
     table = Table(
         title=f"{s.name}: robot delay {s.facility.robot_delay * 1e3:g} ms, "
         f"sensor delay {s.facility.sensor_delay * 1e3:g} ms",
+        pad_edge=False,
     )
+    summary = result.summary
+    covs = {kind: [_number(v, ".2f") for v in row["cov"]] for kind, row in summary.iterrows()}
+    longest = max((len(text) for texts in covs.values() for text in texts), default=1)
     table.add_column("compensator", no_wrap=True)
-    table.add_column("status", no_wrap=True)
-    table.add_column("CoV per collision")
-    for header in ("worst CoF", "v error (%)", "k error (%)", "c error (N·s/mm)"):
-        table.add_column(header, justify="right")
-    for kind, row in result.summary.iterrows():
+    table.add_column("status", min_width=10)
+    # two CoVs a line, wrapped between numbers only
+    table.add_column("CoV of\n#1, #2 …", min_width=max(longest, 4), max_width=max(2 * longest + 1, 9))
+    for header in ("worst\nCoF", "v err\n%", "k err\n%", "c err\nN·s/mm"):
+        table.add_column(header, justify="right", no_wrap=True)
+    standings = {standing.kind: standing for standing in result.ranking}
+    for kind, row in summary.iterrows():
+        standing = standings[str(kind)]
         if row["status"] == "ok":
             status = "[green]ok[/green]"
         elif row["status"] == "unfaithful":
             status = "[yellow]unfaithful[/yellow]"
+            if standing.faithful_from is not None:
+                status = f"[yellow]ok from #{standing.faithful_from}[/yellow]"
         else:
             at = row["diverged_at"]
             when = f" {at:.2f} s" if math.isfinite(at) else ""
@@ -110,18 +124,22 @@ def _report_comparison(console: Console, result: Comparison, folder: Path) -> No
         table.add_row(
             escape(str(kind)),
             status,
-            " ".join(_number(v, ".2f") for v in row["cov"]) or "-",
+            " ".join(covs[kind]) or "-",
             _number(row["worst_cof"], ".3f"),
-            _number(row["worst_velocity_error_pct"], ".2f"),
+            _number(row["worst_velocity_error_pct"], ".1f"),
             _number(row["stiffness_error_pct"], ".3g"),
             _number(row["damping_error_Ns_mm"], ".3g"),
         )
     console.print(table)
     console.print(
         "CoV, CoF: rebound speed and peak force / ideal reference (1 is perfect); "
-        "mean CoV and worst |CoV-1| in comparison.md",
+        "ranked below (docs/choosing.md); mean CoV and worst |CoV-1| in comparison.md",
         soft_wrap=True,
     )
+    for standing in result.ranking:
+        if standing.reason:
+            console.print(f"  {standing.rank}. {escape(standing.kind)}: {escape(standing.reason)}", soft_wrap=True)
+    console.print(f"[bold]recommendation:[/bold] {escape(result.recommendation)}", soft_wrap=True)
     files = ", ".join(sorted(p.name + ("/" if p.is_dir() else "") for p in folder.iterdir()))
     console.print(f"saved to {escape(str(folder))}/ ({escape(files)})", soft_wrap=True)
 
@@ -157,8 +175,23 @@ def _report_sweep(console: Console, rows: Any, out: str) -> None:
 
 
 def _report_stability_map(console: Console, result: Any, folder: Path, criterion: str, files: Sequence[str]) -> None:
-    """`hilcontact stability-map`'s table: the maximal faithful robot delay (ms) per contact
-    frequency and compensator, then the files written."""
+    """`hilcontact stability-map`'s tables: the faithful runs of each cell (compensator and
+    contact frequency down, robot delay across; ✓: faithful by the map's cell rule), then the
+    maximal faithful robot delay (ms) per contact frequency and compensator, then the files."""
+    cells = result.cells
+    delays = sorted(cells["robot_delay"].unique())
+    if 30 + 7 * len(delays) > console.width:  # too many delays for a grid: the mixed cells only
+        mixed = cells[(cells["faithful_runs"] > 0) & (cells["faithful_runs"] < cells["runs"])]
+        console.print(f"faithful runs per cell: {len(delays)} delays, see stability_map.png and cells.csv; "
+                      f"cells where only some runs are faithful: {len(mixed)}", soft_wrap=True)
+        for _, cell in mixed.iterrows():
+            mark = " ✓" if cell["faithful"] else ""
+            console.print(f"  {escape(str(cell['compensator']))}, {cell['contact_frequency']:.2f} Hz, "
+                          f"{cell['robot_delay'] * 1e3:g} ms: {int(cell['faithful_runs'])}/{int(cell['runs'])}{mark}",
+                          soft_wrap=True)
+        console.print(f"a run is faithful with {criterion}; ✓: {result.rule}", soft_wrap=True)
+    else:
+        _cell_grid(console, cells, delays, criterion, result.rule)
     best = result.max_faithful_delay()
     table = Table(title=f"maximal faithful robot delay (ms): {criterion}")
     table.add_column("contact frequency (Hz)", justify="right")
@@ -169,6 +202,28 @@ def _report_stability_map(console: Console, result: Any, folder: Path, criterion
     console.print(table)
     console.print("- : not faithful even at the smallest swept delay", soft_wrap=True)
     console.print(f"saved to {escape(str(folder))}/ ({', '.join(files)})", soft_wrap=True)
+
+
+def _cell_grid(console: Console, cells: Any, delays: list[float], criterion: str, rule: str) -> None:
+    """The faithful runs of every cell: compensator and frequency down, delay across."""
+    grid = Table(title="faithful runs per cell", padding=(0, 1))
+    grid.add_column("compensator", no_wrap=True)
+    grid.add_column("Hz", justify="right", no_wrap=True)
+    for delay in delays:
+        grid.add_column(f"{delay * 1e3:g} ms", justify="right", no_wrap=True)
+    for (kind, freq), group in cells.groupby(["compensator", "contact_frequency"], sort=False):
+        by_delay = group.set_index("robot_delay")
+        row = []
+        for delay in delays:
+            if delay not in by_delay.index:
+                row.append("")
+                continue
+            cell = by_delay.loc[delay]
+            mark = "[green]✓[/green]" if cell["faithful"] else " "
+            row.append(f"{int(cell['faithful_runs'])}/{int(cell['runs'])}{mark}")
+        grid.add_row(escape(str(kind)), _number(freq, ".2f"), *row)
+    console.print(grid)
+    console.print(f"a run is faithful with {criterion}; ✓: {rule}", soft_wrap=True)
 
 
 def _report_identification(console: Console, log: str, collisions: Any) -> None:

@@ -195,6 +195,8 @@ pub struct FacilityModel {
     robot: RobotModel,
     sensor: SensorModel,
     contact_force: Vector3<f64>,
+    /// The facility's added contact damping, N·s/m ([`crate::plan::FacilityPlan::dissipation`]).
+    dissipation: f64,
 }
 
 impl FacilityModel {
@@ -209,12 +211,14 @@ impl FacilityModel {
             f.servo_damping,
             initial_command,
         );
-        let (contact_force, initial_wrench) = physical_wrench(&plan.system, robot.actual());
+        let (contact_force, initial_wrench) =
+            physical_wrench(&plan.system, robot.actual(), f.dissipation);
         FacilityModel {
             system: plan.system.clone(),
             robot,
             sensor: SensorModel::new(plan, &initial_wrench),
             contact_force,
+            dissipation: f.dissipation,
         }
     }
 }
@@ -225,7 +229,8 @@ impl Facility for FacilityModel {
     }
 
     fn measure(&mut self) -> Measurement {
-        let (contact_force, wrench) = physical_wrench(&self.system, self.robot.actual());
+        let (contact_force, wrench) =
+            physical_wrench(&self.system, self.robot.actual(), self.dissipation);
         self.contact_force = contact_force;
         let (force, moment) = self.sensor.sample(&wrench);
         Measurement {
@@ -240,9 +245,20 @@ impl Facility for FacilityModel {
     }
 }
 
-/// Contact force on the rod (`t`) and the wrench on the frame for the robot's actual motion.
-fn physical_wrench(system: &TwoBodySystem, actual: &RelativeMotion) -> (Vector3<f64>, FrameWrench) {
-    let (force, tip) = system.contact_force_at(actual);
+/// Contact force on the rod (`t`) and the wrench on the frame for the robot's actual motion,
+/// with the facility's added damping `dissipation` (N·s/m) along the force, never pulling.
+fn physical_wrench(
+    system: &TwoBodySystem,
+    actual: &RelativeMotion,
+    dissipation: f64,
+) -> (Vector3<f64>, FrameWrench) {
+    let (mut force, tip) = system.contact_force_at(actual);
+    let magnitude = force.norm();
+    if dissipation > 0.0 && magnitude > 0.0 {
+        let normal = force / magnitude;
+        let speed = actual.point_velocity(&system.rod_tip).dot(&normal);
+        force = normal * (magnitude - dissipation * speed).max(0.0);
+    }
     (
         force,
         FrameWrench::from_rod_force(&force, &tip, &system.sensor_origin),
