@@ -29,6 +29,7 @@ from __future__ import annotations
 from .comparison import Comparison, compare
 from .errors import HilContactError, RealtimeError, RealtimeOptionError, ScenarioError
 from .native import VERSION as __version__
+from .plugin import Compensator, PluginError
 from .realtime import Facility, run_hil, start_facility
 from .run import Run, simulate
 from .scenario import Scenario, apply_overrides, load_scenario, presets
@@ -37,6 +38,8 @@ from .sweep import load_results, sweep
 
 __all__ = [
     "Comparison",
+    "Compensator",
+    "PluginError",
     "Facility",
     "HilContactError",
     "RealtimeError",

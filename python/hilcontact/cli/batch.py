@@ -52,8 +52,12 @@ def _compensators_option(help: str) -> Any:
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @_with(_run_output_options("runs/<scenario name>"))
+@click.option("--compensator", "entry", default=None, metavar="FILE.py:CLASS",
+              help="Run a compensator written in Python (path/to/file.py:ClassName or module:ClassName).")
+@click.option("--step-limit", type=POSITIVE, default=None, metavar="S",
+              help="Longest time one step of a Python compensator may take, s [default: 0.5].")
 def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool,
-        max_memory: float, max_time: float) -> None:
+        max_memory: float, max_time: float, entry: str | None = None, step_limit: float | None = None) -> None:
     """Simulate SCENARIO (a preset name or a TOML file) and save the results."""
     _stop_on_sigterm()
     with _errors():
@@ -62,7 +66,7 @@ def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, m
         folder = _out_folder(out, Path("runs") / resolved.name, force)
         mcap_path = _mcap_file(mcap, folder, force)
         with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
-            result = simulate(resolved, mcap=mcap_path, overwrite=force)
+            result = simulate(resolved, mcap=mcap_path, overwrite=force, compensator=entry, step_limit=step_limit)
         result.save(folder, plots=not no_plots, overwrite=force)
     console = Console()
     _report(console, result, folder)
