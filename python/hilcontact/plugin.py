@@ -87,10 +87,10 @@ class Context:
     contact, the robot delay) is there too: a compensator that reads it is not deployable."""
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class StepInput:
     """What a compensator sees at one tick (as the Rust ``CompensatorInput``, the wrench in the
-    sensor frame)."""
+    sensor frame). New arrays each tick: a compensator may keep them."""
 
     tick: int
     """Tick number k, from 0."""
@@ -113,7 +113,7 @@ class StepInput:
     the desired tip velocity by K·J; zeros unless the class sets ``uses_tip_mobility``."""
 
 
-@dataclass
+@dataclass(slots=True)
 class StepOutput:
     """What a compensator returns at a tick (a plain dict with these keys works too)."""
 
@@ -229,7 +229,22 @@ def _describe(exc: BaseException) -> str:
     return " ".join(f"{type(exc).__name__}: {exc}".split())
 
 
-_FIELDS = ("applied_force", "applied_moment", "velocity_correction")
+def _vector(value: Any, key: str, where: str) -> tuple[float, float, float]:
+    """Three finite numbers of a returned 3-sequence, or PluginError naming the key."""
+    if value is None:
+        raise PluginError(f"{where} returned no {key} (return a dict or a StepOutput with {key})")
+    try:
+        wrong = len(value) != 3 or isinstance(value, str) or (isinstance(value, np.ndarray) and value.ndim != 1)
+        if not wrong:
+            x, y, z = float(value[0]), float(value[1]), float(value[2])
+    except (TypeError, ValueError):
+        raise PluginError(f"{where} returned {key} = {value!r:.60}, expected 3 numbers") from None
+    if wrong:
+        raise PluginError(f"{where} returned {key} of shape {np.shape(value)}, expected 3 numbers")
+    if not (math.isfinite(x) and math.isfinite(y) and math.isfinite(z)):
+        raise PluginError(f"{where} returned a non-finite {key} {[x, y, z]}")
+    return x, y, z
+
 _SCALARS = ("stiffness_estimate", "damping_estimate", "observed_energy")
 
 
@@ -283,28 +298,23 @@ class _Adapter:
         spent = time.perf_counter() - start
         if spent > self.step_limit:
             raise PluginError(f"{where} took {spent:.3g} s, above the limit of {self.step_limit:g} s (--step-limit)")
-        get = out.get if isinstance(out, Mapping) else (lambda key, default=None: getattr(out, key, default))
-        values: list[float] = []
-        for key in _FIELDS:
-            value = get(key, None)
-            if value is None:
-                if key == "velocity_correction":
-                    values.extend((0.0, 0.0, 0.0))
-                    continue
-                raise PluginError(f"{where} returned no {key} (return a dict or a StepOutput with {key})")
-            try:
-                vector = np.asarray(value, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise PluginError(f"{where} returned {key} = {value!r:.60}, expected 3 numbers") from None
-            if vector.shape != (3,):
-                raise PluginError(f"{where} returned {key} of shape {vector.shape}, expected 3 numbers")
-            if not np.all(np.isfinite(vector)):
-                raise PluginError(f"{where} returned a non-finite {key} {vector.tolist()}")
-            values.extend(vector.tolist())
+        if isinstance(out, dict) or isinstance(out, Mapping):
+            get = out.get
+        else:
+            def get(key: str, default: Any = None) -> Any:
+                return getattr(out, key, default)
+        force = get("applied_force", None)
+        moment = get("applied_moment", None)
+        correction = get("velocity_correction", None)
+        values = [
+            *_vector(force, "applied_force", where),
+            *_vector(moment, "applied_moment", where),
+            *((0.0, 0.0, 0.0) if correction is None else _vector(correction, "velocity_correction", where)),
+        ]
         for key in _SCALARS:
-            value = get(key, math.nan)
+            value = get(key, None)
             try:
-                number = float(value if value is not None else math.nan)
+                number = math.nan if value is None else float(value)
             except (TypeError, ValueError):
                 raise PluginError(f"{where} returned {key} = {value!r:.60}, expected a number") from None
             if math.isinf(number):
