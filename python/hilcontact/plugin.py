@@ -284,7 +284,7 @@ class _Adapter:
     def step_flat(self, k: int, data: tuple[float, ...]) -> tuple[float, ...]:
         a = np.asarray(data, dtype=np.float64)
         inp = StepInput(
-            tick=k, time=k * self.period, measured_force=a[1:4], measured_moment=a[4:7],
+            tick=k, time=float(a[0]), measured_force=a[1:4], measured_moment=a[4:7],
             tip_position_actual=a[7:10], tip_velocity_actual=a[10:13],
             tip_position_desired=a[13:16], tip_velocity_desired=a[16:19],
             tip_mobility=a[19:28].reshape(3, 3),
@@ -335,3 +335,36 @@ def make_adapter(entry: Any, scenario: Any, step_limit: float = STEP_LIMIT) -> _
     except Exception as exc:
         raise PluginError(f"compensator {cls.__name__}(): creating it raised {_describe(exc)}") from exc
     return _Adapter(instance, scenario, step_limit)
+
+
+#: The columns a replay returns (as ``_core.replay``'s): time, the applied wrench in the sensor
+#: frame, the velocity correction, the estimates and the observed energy.
+_REPLAY_VECTORS = ("applied_force", "applied_moment", "velocity_correction")
+
+
+def replay(entry: Any, scenario: Any, data: Any, step_limit: float = STEP_LIMIT) -> Any:
+    """A Python compensator run open loop on a recording, as ``_core.replay`` runs a shipped
+    one: ``data`` (a DataFrame) has ``time``, ``measured_force_*``, ``measured_moment_*`` (sensor
+    frame), ``actual_tip_position_*``, ``actual_tip_velocity_*``, ``tip_position_*``,
+    ``tip_velocity_*`` (``t``); the tip's mobility is ``I/μ`` (as the core's replay). Returns a
+    DataFrame of time, applied_force_*, applied_moment_* (sensor frame), velocity_correction_*,
+    stiffness_estimate, damping_estimate, observed_energy. PluginError as in a run."""
+    import pandas as pd
+
+    from .native import core
+
+    adapter = make_adapter(entry, scenario, step_limit)
+    context = core().compensator_context(scenario.to_json())
+    adapter.reset(context)
+    axes = ("x", "y", "z")
+    names = ["time"] + [f"{group}_{a}" for group in ("measured_force", "measured_moment", "actual_tip_position",
+                                                      "actual_tip_velocity", "tip_position", "tip_velocity")
+                        for a in axes]
+    rows = data[names].to_numpy(dtype=np.float64)
+    mobility = tuple((np.eye(3) / float(context["reduced_mass"])).ravel())
+    out = np.empty((len(rows), 13))
+    for k, row in enumerate(rows):
+        out[k, 0] = row[0]
+        out[k, 1:] = adapter.step_flat(k, (*row, *mobility))
+    columns = ["time"] + [f"{group}_{a}" for group in _REPLAY_VECTORS for a in axes] + list(_SCALARS)
+    return pd.DataFrame(out, columns=columns)

@@ -780,6 +780,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_function(wrap_pyfunction!(frames, m)?)?;
     m.add_function(wrap_pyfunction!(plugin::simulate_python, m)?)?;
+    m.add_function(wrap_pyfunction!(plugin::compensator_context, m)?)?;
     m.add_class::<PyHilHandle>()?;
     m.add_class::<PyFacilityHandle>()?;
     let errors = error_classes(m.py())?;

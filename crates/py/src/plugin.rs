@@ -10,7 +10,7 @@ use hilcontact_core::compensator::{
     Compensator, CompensatorInput, CompensatorOutput, ContactEstimate,
 };
 use hilcontact_core::frames::FrameWrench;
-use hilcontact_core::hil::compensator_context;
+use hilcontact_core::hil::compensator_context as core_context;
 use nalgebra::{UnitQuaternion, Vector3};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -141,18 +141,8 @@ pub fn simulate_python<'py>(
     name: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let plan = crate::parse_scenario(py, scenario_json)?;
-    let context = compensator_context(&plan);
     let q = plan.sensor.orientation;
-    let ctx = PyDict::new(py);
-    ctx.set_item("period", context.period)?;
-    ctx.set_item("sensor_delay_ticks", context.sensor_delay_ticks)?;
-    ctx.set_item("sensor_delay", context.sensor_delay())?;
-    ctx.set_item("sensor_origin", context.sensor_origin.as_slice().to_vec())?;
-    ctx.set_item("sensor_orientation", vec![q.w, q.i, q.j, q.k])?;
-    let r = q.to_rotation_matrix();
-    let rows: Vec<f64> = (0..9).map(|i| r[(i / 3, i % 3)]).collect();
-    ctx.set_item("sensor_rotation", rows)?;
-    ctx.set_item("reduced_mass", context.reduced_mass)?;
+    let ctx = context_dict(py, &plan)?;
     let bound = adapter.bind(py);
     bound.call_method1("reset", (ctx,))?;
     let flag = |name: &str| -> PyResult<bool> { bound.getattr(name)?.is_truthy() };
@@ -160,7 +150,7 @@ pub fn simulate_python<'py>(
     let compensator = PyCompensator {
         sensor_to_t: q,
         tick: 0,
-        period: context.period,
+        period: plan.period,
         estimates: flag("estimates_contact")?,
         energy: flag("observes_energy")?,
         mobility: flag("uses_tip_mobility")?,
@@ -197,4 +187,37 @@ pub fn simulate_python<'py>(
     result.set_item("metrics", metrics.to_string())?;
     result.set_item("summary", summary)?;
     Ok(result)
+}
+
+/// The facts a compensator of `plan` is built with, as the dict `reset(context)` gets.
+fn context_dict<'py>(
+    py: Python<'py>,
+    plan: &hilcontact_core::Plan,
+) -> PyResult<Bound<'py, PyDict>> {
+    let context = core_context(plan);
+    let q = plan.sensor.orientation;
+    let ctx = PyDict::new(py);
+    ctx.set_item("period", context.period)?;
+    ctx.set_item("sensor_delay_ticks", context.sensor_delay_ticks)?;
+    ctx.set_item("sensor_delay", context.sensor_delay())?;
+    ctx.set_item("sensor_origin", context.sensor_origin.as_slice().to_vec())?;
+    ctx.set_item("sensor_orientation", vec![q.w, q.i, q.j, q.k])?;
+    let r = q.to_rotation_matrix();
+    let rows: Vec<f64> = (0..9).map(|i| r[(i / 3, i % 3)]).collect();
+    ctx.set_item("sensor_rotation", rows)?;
+    ctx.set_item("reduced_mass", context.reduced_mass)?;
+    Ok(ctx)
+}
+
+/// The facts a scenario's (resolved JSON) compensator is built with, as `simulate_python`
+/// gives them to `reset(context)`: `period` s, `sensor_delay_ticks`, `sensor_delay` s,
+/// `sensor_origin` (`t`, m), `sensor_orientation` [w, x, y, z] and `sensor_rotation` (row-major
+/// 3x3), sensor to `t`, `reduced_mass` kg (what a replay of a recording gives a Python
+/// compensator). Raises ScenarioError for an invalid scenario.
+#[pyfunction]
+pub fn compensator_context<'py>(
+    py: Python<'py>,
+    scenario_json: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    context_dict(py, &crate::parse_scenario(py, scenario_json)?)
 }

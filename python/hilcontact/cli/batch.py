@@ -355,7 +355,8 @@ _RECORDING_OPTIONS = [
 
 @cli.command(name="replay", short_help="Run a compensator on a recording's measurements and poses.")
 @click.argument("log")
-@click.option("--compensator", "compensator", default=None, metavar="KIND", help="Compensator kind [default: the scenario's].")
+@click.option("--compensator", "compensator", default=None, metavar="KIND",
+              help="Compensator kind, or one written in Python (FILE.py:CLASS) [default: the scenario's].")
 @click.option("--desired-pose-topic", default=None, help="ROS 2 bag: a geometry_msgs/PoseStamped topic of the desired (virtual) rod tip (frame t).")
 @_with(_RECORDING_OPTIONS)
 def replay_command(log: str, compensator: str | None, desired_pose_topic: str | None, scenario: str | None,
@@ -375,12 +376,22 @@ def replay_command(log: str, compensator: str | None, desired_pose_topic: str | 
 
     with _errors():
         overrides = parse_set_options(sets)
-        if compensator is not None:
+        python = compensator is not None and ":" in compensator
+        if python:
+            overrides.update({"compensator.kind": "python", "compensator.entry": compensator})
+        elif compensator is not None:
             overrides["compensator.kind"] = compensator
         check_output_folder(out, overwrite=force)
         recording = read_recording(log, scenario, overrides, wrench_topic, pose_topic, twist_topic,
                                    need=IDENTIFY_COLUMNS + DESIRED_COLUMNS, desired_pose_topic=desired_pose_topic)
-        summary = save_replay(recording, replay(recording), out, force)
+        entry = recording.scenario.python_entry
+        if entry is not None:
+            from ..plugin import replay as replay_python
+
+            table = replay_python(entry, recording.scenario, recording.data)
+        else:
+            table = replay(recording)
+        summary = save_replay(recording, table, out, force)
     diff = summary.get("max_relative_difference_to_recorded")
     click.echo(f"{summary['compensator']}: {summary['samples']} ticks replayed -> {out}"
                + (f" (largest difference to the recorded applied wrench: {diff:.3g} of its peak)" if diff is not None else ""))
