@@ -251,3 +251,28 @@ def test_replay_with_a_python_compensator(core, tmp_path):
     assert result.exit_code == 0, result.output
     table = __import__("pandas").read_parquet(tmp_path / "pt" / "replay.parquet")
     assert np.array_equal(table["applied_force_x"], recorded["measured_force_x"])
+
+
+class Interrupted(hc.Compensator):
+    def step(self, inp):
+        if inp.tick == 5:
+            raise KeyboardInterrupt
+        return {"applied_force": inp.measured_force, "applied_moment": inp.measured_moment}
+
+
+class BadReset(hc.Compensator):
+    def reset(self, context):
+        raise RuntimeError("no context for me")
+
+    def step(self, inp):  # pragma: no cover - never reached
+        return {}
+
+
+def test_ctrl_c_in_a_step_is_not_a_plugin_error(core):
+    with pytest.raises(KeyboardInterrupt):
+        hc.simulate("paper-table1", compensator=Interrupted)
+
+
+def test_reset_raising_is_one_line(core):
+    with pytest.raises(PluginError, match=r"^compensator BadReset\.reset raised RuntimeError: no context for me$"):
+        hc.simulate("paper-table1", compensator=BadReset)
