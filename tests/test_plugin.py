@@ -276,3 +276,19 @@ def test_ctrl_c_in_a_step_is_not_a_plugin_error(core):
 def test_reset_raising_is_one_line(core):
     with pytest.raises(PluginError, match=r"^compensator BadReset\.reset raised RuntimeError: no context for me$"):
         hc.simulate("paper-table1", compensator=BadReset)
+
+
+def test_compare_with_a_python_compensator(core, tmp_path):
+    out = tmp_path / "cmp"
+    result = invoke("compare", "paper-table1", "--set", "simulation.duration=2", "--compensators", "pic",
+                    "--compensator", PIC, "--no-plots", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    assert (out / "pic" / "metrics.json").is_file() and (out / "py:PythonPic" / "metrics.json").is_file()
+    assert "py:PythonPic" in (out / "comparison.md").read_text()
+    loaded = hc.Comparison.load(out)
+    assert loaded.kinds == ["pic", "py:PythonPic"]
+    a, b = (loaded.runs[k].collision_table() for k in loaded.kinds)
+    assert np.allclose(a["cov"], b["cov"], rtol=0.01)
+    result = invoke("compare", "paper-table1", "--compensator", "nowhere.py:X", "--out", str(tmp_path / "o"))
+    assert_one_error_line(result, "no such file")
+    assert not (tmp_path / "o").exists()

@@ -33,7 +33,6 @@ from .errors import HilContactError, ScenarioError
 from .native import VERSION
 from .native import core as _core
 from .output import OutputError
-from .registry import KINDS
 from .scenario import load_scenario
 
 __all__ = [

@@ -35,7 +35,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -368,3 +368,19 @@ def replay(entry: Any, scenario: Any, data: Any, step_limit: float = STEP_LIMIT)
         out[k, 1:] = adapter.step_flat(k, (*row, *mobility))
     columns = ["time"] + [f"{group}_{a}" for group in _REPLAY_VECTORS for a in axes] + list(_SCALARS)
     return pd.DataFrame(out, columns=columns)
+
+
+def with_python_compensators(scenarios: Mapping[str, Any], entries: Sequence[Any]) -> dict[str, Any]:
+    """A comparison's scenarios (name -> Scenario, as ``comparison_scenarios`` gives them) with
+    one more per Python compensator of ``entries``, named ``py:<Class>``: the first scenario
+    with ``compensator.kind = "python"`` and the entry (``simulate`` then runs it)."""
+    out = dict(scenarios)
+    base = next(iter(scenarios.values()))
+    for entry in entries:
+        name = compensator_name(entry)
+        if name in out:
+            raise PluginError(f"compensator {entry}: {name} is compared twice")
+        scenario = base.model_copy()
+        scenario._python_entry = entry
+        out[name] = scenario
+    return out

@@ -128,8 +128,11 @@ def plot(folder: Path, force: bool) -> None:
 @click.option("--run-figures", is_flag=True, help="Also draw each compensator's own figures (slower; `hilcontact plot DIR` draws them later).")
 @click.option("--force", is_flag=True, help=_FORCE_HELP)
 @_with(_LIMIT_OPTIONS)
+@click.option("--compensator", "entries", multiple=True, metavar="FILE.py:CLASS",
+              help="Also compare a compensator written in Python (path/to/file.py:ClassName); repeatable.")
 def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool,
-                    run_figures: bool, force: bool, max_memory: float, max_time: float) -> None:
+                    run_figures: bool, force: bool, max_memory: float, max_time: float,
+                    entries: tuple[str, ...] = ()) -> None:
     """Simulate SCENARIO once per compensator and compare them.
 
     Writes a run folder per compensator (data; its figures with --run-figures, or later with
@@ -143,6 +146,10 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
     with _errors():
         overrides = parse_set_options(sets)
         scenarios = comparison_scenarios(scenario, kinds, overrides)  # validate all before running
+        if entries:
+            from ..plugin import with_python_compensators
+
+            scenarios = with_python_compensators(scenarios, entries)
         check_run(next(iter(scenarios.values())), Limits(max_memory, max_time), runs=len(scenarios))
         name = next(iter(scenarios.values())).name
         folder = _out_folder(out, Path("runs") / f"{name}-compare", force)
