@@ -292,3 +292,24 @@ def test_compare_with_a_python_compensator(core, tmp_path):
     result = invoke("compare", "paper-table1", "--compensator", "nowhere.py:X", "--out", str(tmp_path / "o"))
     assert_one_error_line(result, "no such file")
     assert not (tmp_path / "o").exists()
+
+
+def test_sweep_with_a_python_compensator(core, tmp_path):
+    """A sweep's rows of the Python pass-through are `none`'s (but the name and wall time),
+    and the folder resumes as any sweep's."""
+    out = tmp_path / "sweep"
+    result = invoke("sweep", "paper-table1", "--set", "simulation.duration=1.5", "--grid",
+                    "facility.robot_delay=0.004,0.01", "--compensators", "none", "--compensator", PASS_THROUGH,
+                    "--out", str(out))
+    assert result.exit_code == 0, result.output
+    rows = hc.load_results(out)
+    assert sorted(set(rows["compensator"])) == ["none", "py:PassThrough"]
+    drop = ["run_key", "compensator", "wall_time"]
+    none = rows[rows["compensator"] == "none"].drop(columns=drop).reset_index(drop=True)
+    py = rows[rows["compensator"] == "py:PassThrough"].drop(columns=drop).reset_index(drop=True)
+    __import__("pandas").testing.assert_frame_equal(py, none)
+    again = invoke("sweep", "paper-table1", "--set", "simulation.duration=1.5", "--grid",
+                   "facility.robot_delay=0.004,0.01", "--compensators", "none", "--compensator", PASS_THROUGH,
+                   "--out", str(out), "--resume")
+    assert again.exit_code == 0, again.output
+    assert len(hc.load_results(out)) == 4

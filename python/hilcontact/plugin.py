@@ -384,3 +384,30 @@ def with_python_compensators(scenarios: Mapping[str, Any], entries: Sequence[Any
         scenario._python_entry = entry
         out[name] = scenario
     return out
+
+
+def run_summaries(scenarios: Sequence[str], step_limit: float = STEP_LIMIT) -> dict[str, list[Any]]:
+    """Runs scenarios (JSON of resolved scenarios with ``compensator.kind = "python"``) one
+    after the other in this process and returns their sweep rows as ``_core.simulate_batch``
+    does: ``status`` and one list per column of ``_core.summary_columns()`` (``wall_time``
+    included, s). Holds the GIL while the compensator steps: threads do not run two at once,
+    processes (Dask workers) do."""
+    import json as _json
+
+    from .native import core
+    from .scenario import Scenario
+
+    names = [name for name, _, _ in core().summary_columns()]
+    columns: dict[str, list[Any]] = {"status": [], **{name: [] for name in names}}
+    for text in scenarios:
+        scenario = Scenario.from_dict(_json.loads(text))
+        entry = scenario.python_entry
+        adapter = make_adapter(entry, scenario, step_limit)
+        start = time.perf_counter()
+        result = core().simulate_python(scenario.to_json(), adapter, compensator_name(entry))
+        wall_time = time.perf_counter() - start
+        summary = result["summary"]
+        columns["status"].append(str(summary["status"]))
+        for name in names:
+            columns[name].append(wall_time if name == "wall_time" else float(summary[name]))
+    return columns

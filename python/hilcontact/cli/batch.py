@@ -196,6 +196,8 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
 )
 @click.option("--threads", type=click.IntRange(1, 1024), default=None, help="Rust threads for a local sweep [default: one per core].")
 @_with(_LIMIT_OPTIONS)
+@click.option("--compensator", "entries", multiple=True, metavar="FILE.py:CLASS",
+              help="Also sweep a compensator written in Python (one run at a time per process; --dask spreads them); repeatable.")
 def sweep_command(
     scenario: str,
     grids: tuple[str, ...],
@@ -208,6 +210,7 @@ def sweep_command(
     threads: int | None,
     max_memory: float,
     max_time: float,
+    entries: tuple[str, ...] = (),
 ) -> None:
     """Run SCENARIO at every point of the grid, with every compensator and seed.
 
@@ -231,7 +234,7 @@ def sweep_command(
         overrides = parse_set_options(sets)
         # validate before anything runs
         plan = plan_sweep(scenario, list(grids), kinds, seeds, overrides, limits=Limits(max_memory, max_time),
-                          threads=threads)
+                          threads=threads, python=list(entries))
         for note in check_sweep_folder(Path(out), plan, resume):
             click.echo("note: " + note, err=True)
         stderr = Console(stderr=True)
