@@ -147,3 +147,14 @@ def test_cli_benchmark_refuses_a_foreign_folder(core, tmp_path):
     result = invoke("benchmark", "--cases", "paper-10ms", "--out", str(out))
     assert_one_error_line(result, "not a benchmark's")
     assert sorted(p.name for p in out.iterdir()) == ["mine.txt"]
+
+
+def test_on_dask_gives_the_same_table(core, tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    local = tmp_path / "local"
+    bench.run_benchmark(local, "none,pida", python=[PASS_THROUGH], cases="paper-10ms,grid-010ms-2hz-*", plots=False)
+    with distributed.Client(processes=False, n_workers=1, threads_per_worker=2, dashboard_address=None) as client:
+        on_dask = tmp_path / "dask"
+        bench.run_benchmark(on_dask, "none,pida", python=[PASS_THROUGH], cases="paper-10ms,grid-010ms-2hz-*",
+                            plots=False, dask=client)
+    pd.testing.assert_frame_equal(_table(on_dask), _table(local))

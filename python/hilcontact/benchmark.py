@@ -288,6 +288,7 @@ def run_benchmark(
     step_limit: float | None = None,
     plots: bool = True,
     progress: Callable[[int, int], None] | None = None,
+    dask: str | Any | None = None,
 ) -> pd.DataFrame:
     """Run :data:`SUITE` (or the ``cases`` matching its patterns) with the shipped ``kinds`` and
     the Python compensators ``python`` into the folder ``out``; returns the summary (one row
@@ -299,6 +300,10 @@ def run_benchmark(
     continues a benchmark in ``out`` (same cases and compensators), skipping its finished runs.
     On KeyboardInterrupt the finished runs stay in ``out``. Raises ScenarioError for bad input
     and OutputError for a folder that cannot be used, both before anything runs.
+
+    ``dask``: run on Dask instead (``"local"``: a LocalCluster, one single-threaded worker per
+    core; a scheduler address; or a ``dask.distributed.Client``): tasks of a few shipped runs,
+    or one Python run, each worker a process (Python compensators then run in parallel).
     """
     if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
         raise ScenarioError(f"threads: expected a whole number >= 1, got {threads!r}")
@@ -325,20 +330,53 @@ def run_benchmark(
         if progress is not None:
             progress(done, len(jobs))
 
-    shipped = [(w, c) for w, c in pending if w.kind is not None]
-    size = 2 * (threads or os.cpu_count() or 1)
-    for start in range(0, len(shipped), size):
-        for row in _run_shipped(shipped[start:start + size], threads):
-            save(row)
-    for w, c in pending:
-        if w.kind is None:
-            save(_run_python(w, c, step_limit))
+    if dask is not None:
+        _run_on_dask(dask, pending, step_limit, save)
+    else:
+        shipped = [(w, c) for w, c in pending if w.kind is not None]
+        size = 2 * (threads or os.cpu_count() or 1)
+        for start in range(0, len(shipped), size):
+            for row in _run_shipped(shipped[start:start + size], threads):
+                save(row)
+        for w, c in pending:
+            if w.kind is None:
+                save(_run_python(w, c, step_limit))
     results = load_benchmark(folder)
     summary = summary_table(results)
     _write_tables(folder, results, summary)
     if plots:
         plot_pass_fraction(results, folder / "pass_fraction.png")
     return summary
+
+
+def _run_task(jobs: list[tuple[Entrant, BenchCase]], step_limit: float | None) -> list[dict[str, Any]]:
+    """The rows of some runs (the task a Dask worker runs)."""
+    shipped = [(w, c) for w, c in jobs if w.kind is not None]
+    rows = _run_shipped(shipped, 1) if shipped else []
+    return rows + [_run_python(w, c, step_limit) for w, c in jobs if w.kind is None]
+
+
+def _run_on_dask(dask: str | Any, pending: list[tuple[Entrant, BenchCase]], step_limit: float | None,
+                 save: Callable[[dict[str, Any]], None]) -> None:
+    from dask.distributed import as_completed
+
+    from .sweep import _dask_client
+
+    client = _dask_client(dask) if isinstance(dask, str) else dask
+    try:
+        shipped = [(w, c) for w, c in pending if w.kind is not None]
+        tasks = [shipped[i:i + 8] for i in range(0, len(shipped), 8)]
+        tasks += [[(w, c)] for w, c in pending if w.kind is None]
+        futures = [client.submit(_run_task, task, step_limit, pure=False) for task in tasks]
+        for future in as_completed(futures):
+            for row in future.result():
+                save(row)
+    finally:
+        if isinstance(dask, str):
+            cluster = getattr(client, "cluster", None)
+            client.close()
+            if cluster is not None:
+                cluster.close()
 
 
 # ---- reading and tables --------------------------------------------------------------------

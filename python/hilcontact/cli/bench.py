@@ -24,12 +24,14 @@ from .options import POSITIVE, _errors, _stop_on_sigterm, cli
 @click.option("--step-limit", type=POSITIVE, default=None, metavar="S",
               help="Longest time one step of a Python compensator may take, s [default: 0.5].")
 @click.option("--no-plots", is_flag=True, help="Do not draw pass_fraction.png.")
+@click.option("--dask", default=None, metavar="ADDRESS",
+              help="Run on Dask: 'local' (one worker process per core) or a scheduler address.")
 @click.option("--compare", "compare", nargs=2, default=None, metavar="A B",
               type=click.Path(file_okay=False, path_type=Path),
               help="Put two benchmark folders side by side (runs nothing).")
 def benchmark_command(kinds: str | None, entries: tuple[str, ...], cases: str | None, out: str | None,
                       resume: bool, threads: int | None, step_limit: float | None, no_plots: bool,
-                      compare: tuple[Path, Path] | None) -> None:
+                      dask: str | None, compare: tuple[Path, Path] | None) -> None:
     """Run every case of hil-bench-1 with each compensator; write one file per finished run,
     results.csv, summary.csv, summary.md and pass_fraction.png to DIR. Ctrl-C keeps the
     finished runs; rerun with --resume to continue. With --compare A B, print the two folders'
@@ -51,7 +53,7 @@ def benchmark_command(kinds: str | None, entries: tuple[str, ...], cases: str | 
             with stderr.status(f"{SUITE} ...") as status:
                 summary = run_benchmark(
                     folder, kinds, list(entries), cases, resume=resume, threads=threads, step_limit=step_limit,
-                    plots=not no_plots,
+                    plots=not no_plots, dask=dask,
                     progress=lambda done, total: status.update(f"{SUITE}: {done}/{total} runs"),
                 )
         except KeyboardInterrupt:
