@@ -419,8 +419,36 @@ def paper_experiments_table() -> str:
     return "\n".join(lines)
 
 
+# ---- docs/benchmark.md: hil-bench-1 -------------------------------------------------------------
+
+
+def benchmark_table() -> str:
+    """docs/benchmark.md: the summary of hil-bench-1 for the shipped compensators (the whole
+    suite, run into a temporary folder as `hilcontact benchmark` runs it)."""
+    import tempfile
+
+    from hilcontact import benchmark
+
+    with tempfile.TemporaryDirectory() as folder:
+        summary = benchmark.run_benchmark(Path(folder) / "b", plots=False)
+    return benchmark.to_markdown(summary).rstrip("\n")
+
+
+def benchmark_tolerances() -> str:
+    """docs/benchmark.md: the tolerances of the verdict, the `[metrics]` defaults."""
+    m = hc.load_scenario("paper-table1").metrics
+    return (
+        f"| `cov_tolerance` | {m.cov_tolerance:g} |\n| `max_cof` | {m.max_cof:g} |\n"
+        f"| `max_velocity_error` | {m.max_velocity_error:g} |\n| `max_lost_collisions` | {m.max_lost_collisions} |\n"
+        f"| `max_extra_collisions` | {m.max_extra_collisions} |\n| `judge_from` | {m.judge_from} |\n"
+        f"| `contact_threshold` | {m.contact_threshold:g} N |"
+    )
+
+
 #: Every figure: name -> function writing its text.
 FIGURES: dict[str, Callable[[], str]] = {
+    "benchmark-table": benchmark_table,
+    "benchmark-tolerances": benchmark_tolerances,
     "dac-table": dac_table,
     "pida-table": pida_table,
     "lead-table": lead_table,

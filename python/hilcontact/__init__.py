@@ -33,6 +33,7 @@ _guard()  # the `hilcontact` command: Ctrl-C while importing is one line, exit 1
 from .comparison import Comparison, compare
 from .errors import HilContactError, RealtimeError, RealtimeOptionError, ScenarioError
 from .native import VERSION as __version__
+from .plugin import Compensator, PluginError
 from .realtime import Facility, run_hil, start_facility
 from .run import Run, simulate
 from .scenario import Scenario, apply_overrides, load_scenario, presets
@@ -41,6 +42,8 @@ from .sweep import load_results, sweep
 
 __all__ = [
     "Comparison",
+    "Compensator",
+    "PluginError",
     "Facility",
     "HilContactError",
     "RealtimeError",

@@ -312,6 +312,7 @@ class Comparison:
         if not folder.is_dir():
             raise ScenarioError(f"{folder}: not a folder")
         runs = {kind: Run.load(folder / kind) for kind in ALL_KINDS if (folder / kind / "metrics.json").is_file()}
+        runs.update({p.name: Run.load(p) for p in sorted(folder.glob("py:*")) if (p / "metrics.json").is_file()})
         if not runs:
             raise ScenarioError(f"{folder}: not a comparison folder (no <compensator>/metrics.json)")
         return cls(runs)

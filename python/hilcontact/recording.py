@@ -285,7 +285,7 @@ def save_replay(recording: Recording, table: pd.DataFrame, out: str | os.PathLik
     """Write replay.parquet, summary.json and scenario.toml into ``out`` (atomically);
     returns the summary (with the largest relative difference to the recorded applied wrench
     when the recording has it)."""
-    summary: dict[str, Any] = {"source": recording.source, "compensator": recording.scenario.compensator.kind,
+    summary: dict[str, Any] = {"source": recording.source, "compensator": recording.scenario.python_entry or recording.scenario.compensator.kind,
                                "samples": len(table)}
     names = [*_vec("applied_force"), *_vec("applied_moment")]
     if all(n in recording.data.columns for n in names):

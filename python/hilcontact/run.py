@@ -188,6 +188,9 @@ def simulate(
     mcap: str | os.PathLike[str] | None = None,
     overwrite: bool = False,
     outputs: dict[str, Any] | None = None,
+    *,
+    compensator: Any = None,
+    step_limit: float | None = None,
 ) -> Run:
     """Simulate a scenario (a :class:`Scenario`, a preset name or a TOML path).
 
@@ -201,6 +204,13 @@ def simulate(
     ``{"mcap": {"path": "run.mcap", "chunk_interval": 1.0}}``; ``mcap`` above is the same as
     ``outputs={"mcap": {"path": mcap, "overwrite": overwrite}}``.
 
+    ``compensator``: a compensator written in Python (``"path/file.py:Class"``,
+    ``"module:Class"`` or a :class:`hilcontact.Compensator` subclass, see
+    :mod:`hilcontact.plugin`) in place of the scenario's ``[compensator]`` (a scenario with
+    ``compensator.kind = "python"`` names one itself); ``step_limit``: the longest one of its
+    steps may take, s (default :data:`hilcontact.plugin.STEP_LIMIT`). It cannot be recorded to
+    ``mcap`` or ``outputs``. A plug-in that fails raises :class:`~hilcontact.plugin.PluginError`.
+
     Raises ScenarioError for an invalid scenario. A diverging loop is not an error: the run's
     ``status`` is ``"diverged"`` and ``metrics["reason"]`` says why.
     """
@@ -212,6 +222,12 @@ def simulate(
         raise ArgumentError(f"overwrite: expected True or False, got {describe(overwrite)}")
     if not isinstance(scenario, Scenario):
         scenario = load_scenario(scenario)
+    if compensator is None:
+        compensator = scenario.python_entry
+    if compensator is not None:
+        if mcap is not None or outputs:
+            raise ScenarioError("mcap, outputs: a run with a Python compensator cannot be recorded yet")
+        return _simulate_python(scenario, compensator, step_limit)
     wanted = dict(outputs or {})
     if mcap is not None:
         wanted["mcap"] = {"path": os.fspath(mcap), "overwrite": bool(overwrite)}
@@ -225,4 +241,21 @@ def simulate(
         timeseries=_frame(result["timeseries"], TIMESERIES_COLUMNS + OPTIONAL_TIMESERIES_COLUMNS),
         reference=_frame(result["reference"], REFERENCE_COLUMNS),
         mcap=json.loads(recorded) if recorded else None,
+    )
+
+
+def _simulate_python(scenario: Scenario, compensator: Any, step_limit: float | None) -> Run:
+    """A run with a compensator written in Python (``_core.simulate_python``)."""
+    from .plugin import STEP_LIMIT, compensator_name, make_adapter
+
+    adapter = make_adapter(compensator, scenario, STEP_LIMIT if step_limit is None else step_limit)
+    if isinstance(compensator, str) and scenario.python_entry != compensator:
+        scenario = scenario.model_copy()  # scenario.toml names the compensator that ran
+        scenario._python_entry = compensator
+    result = _core().simulate_python(scenario.to_json(), adapter, compensator_name(compensator))
+    return Run(
+        scenario=scenario,
+        metrics=json.loads(result["metrics"]),
+        timeseries=_frame(result["timeseries"], TIMESERIES_COLUMNS + OPTIONAL_TIMESERIES_COLUMNS),
+        reference=_frame(result["reference"], REFERENCE_COLUMNS),
     )

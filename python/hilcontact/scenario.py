@@ -52,6 +52,7 @@ from pydantic import (
     ConfigDict,
     Discriminator,
     Field,
+    PrivateAttr,
     Tag,
     ValidationError,
     create_model,
@@ -380,8 +381,39 @@ def _summary(lines: list[str]) -> str:
     return message
 
 
+PYTHON_KIND = "python"
+"""``compensator.kind`` of a compensator written in Python, named by ``compensator.entry``
+(``"path/file.py:Class"`` or ``"module:Class"``, see :mod:`hilcontact.plugin`); the core
+runs such a scenario with ``kind = "none"`` in place and the Python compensator stepping."""
+
+
+def _split_python_compensator(data: Mapping[str, Any]) -> tuple[Mapping[str, Any], str | None]:
+    """A raw scenario with ``compensator.kind = "python"``: the data with ``kind = "none"`` in
+    its place, and the entry (None for any other kind)."""
+    table = data.get("compensator") if isinstance(data, Mapping) else None
+    if not isinstance(table, Mapping) or table.get("kind") != PYTHON_KIND:
+        return data, None
+    for key in table:
+        if key not in ("kind", "entry"):
+            raise ScenarioError(f"compensator.{key}: unknown key for kind = 'python'; allowed: entry")
+    entry = table.get("entry")
+    if not isinstance(entry, str) or ":" not in entry.strip(":"):
+        raise ScenarioError(
+            f"compensator.entry: expected path/to/file.py:ClassName or module:ClassName, got {_show(entry)}"
+        )
+    return {**data, "compensator": {"kind": "none"}}, entry
+
+
 class _ScenarioBase(_Table):
     """A fully resolved scenario. Build it with :func:`load_scenario` or :meth:`from_dict`."""
+
+    _python_entry: str | None = PrivateAttr(default=None)
+
+    @property
+    def python_entry(self) -> str | None:
+        """``compensator.entry`` when ``compensator.kind = "python"`` (then ``compensator`` here
+        is ``none``, what the core runs in its place), else None."""
+        return self._python_entry
 
     # ---- construction ------------------------------------------------------------------
 
@@ -389,6 +421,7 @@ class _ScenarioBase(_Table):
     def from_dict(cls, data: Mapping[str, Any]) -> Scenario:
         """Validate a raw (TOML-shaped) dict and resolve it with the core; raise ScenarioError
         with a one-line message (every problem's key is named, ``issues`` lists them)."""
+        data, entry = _split_python_compensator(data)
         try:
             checked = cls.model_validate(_plain(data))
         except ValidationError as exc:
@@ -404,7 +437,9 @@ class _ScenarioBase(_Table):
             error = ScenarioError(_summary([_issue_line(key, message) for key, message in issues]))
             error.issues = issues
             raise error from None
-        return cls.model_validate(json.loads(resolved))
+        scenario = cls.model_validate(json.loads(resolved))
+        scenario._python_entry = entry
+        return scenario
 
     @classmethod
     def from_toml(cls, text: str, source: str = "<string>") -> Scenario:
@@ -415,11 +450,15 @@ class _ScenarioBase(_Table):
 
     def to_dict(self) -> dict[str, Any]:
         """The resolved scenario as plain data (the schema of the TOML file and of the JSON)."""
-        return self.model_dump(mode="json")
+        data = self.model_dump(mode="json")
+        if self._python_entry is not None:
+            data["compensator"] = {"kind": PYTHON_KIND, "entry": self._python_entry}
+        return data
 
     def to_json(self) -> str:
-        """The resolved scenario as JSON, the input of ``hilcontact._core.simulate``."""
-        return json.dumps(self.to_dict())
+        """The resolved scenario as JSON, the input of ``hilcontact._core.simulate`` (a Python
+        compensator's scenario with ``kind = "none"`` in its place)."""
+        return json.dumps(self.model_dump(mode="json"))
 
     def to_toml(self) -> str:
         """The fully resolved scenario as TOML; loading it again gives an identical Scenario."""
@@ -737,6 +776,9 @@ def _switch_compensator_kind(data: dict[str, Any], kind: Any) -> None:
     the new kind has (the others belonged to the old kind). Parameters set by overrides are
     applied afterwards and validated as usual."""
     table = data.get("compensator")
+    if kind == PYTHON_KIND and isinstance(table, dict) and table.get("kind") != PYTHON_KIND:
+        data["compensator"] = {"kind": PYTHON_KIND}
+        return
     if not isinstance(table, dict) or not isinstance(kind, str) or kind not in COMPENSATOR_MODELS:
         return  # not a table, or an unknown kind: validation reports it
     if table.get("kind", "none") == kind:

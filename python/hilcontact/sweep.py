@@ -366,8 +366,10 @@ def plan_sweep(
     *,
     limits: Limits | None = None,
     threads: int | None = None,
+    python: Sequence[Any] = (),
 ) -> SweepPlan:
-    """Resolve and validate every run of a sweep (see :func:`sweep` for the arguments).
+    """Resolve and validate every run of a sweep (see :func:`sweep` for the arguments;
+    ``python``: compensators written in Python, ``FILE.py:Class`` entries, run as ``py:<Class>``).
 
     Raises ScenarioError naming the key and value for a bad grid, a bad override or a grid
     point that is not a valid scenario, and for a sweep whose estimated memory or time is
@@ -380,7 +382,11 @@ def plan_sweep(
     if limits is not None and not isinstance(limits, Limits):
         raise ArgumentError(f"limits: expected a hilcontact.limits.Limits or None, got {_shown(limits)}")
     axes = _axes(grid)
-    kinds = parse_kinds(compensators)
+    kinds = [] if python and compensators is None else parse_kinds(compensators)
+    if python:
+        from .plugin import compensator_name
+
+        kinds += [compensator_name(entry) for entry in python]
     base_scenario = load_scenario(scenario, overrides)
     base = base_scenario.to_dict()
     runs = math.prod(len(axis.values) for axis in axes) * len(kinds) * seeds
@@ -410,7 +416,13 @@ def plan_sweep(
     frequencies: dict[int, float] = {}
     for point, values in enumerate(points):
         try:
-            resolved = comparison_scenarios(base, kinds, values)
+            shipped = [k for k in kinds if not k.startswith("py:")]
+            resolved = comparison_scenarios(base, shipped, values) if shipped else {}
+            if python:
+                from .plugin import with_python_compensators
+
+                resolved = with_python_compensators(resolved or {"": load_scenario(base, values)}, python)
+                resolved.pop("", None)
         except ScenarioError as exc:
             shown = ", ".join(f"{k}={v!r}" for k, v in values.items())
             raise ScenarioError(f"--grid point {shown}: {exc}") from None
@@ -518,8 +530,30 @@ Progress = Callable[[int, int], None]
 
 
 def _run_chunk(scenarios: list[str], threads: int | None) -> dict[str, Any]:
-    """Run a chunk of scenarios in the core (the task a Dask worker runs)."""
-    return dict(_core().simulate_batch(scenarios, threads))
+    """Run a chunk of scenarios in the core (the task a Dask worker runs); those with a
+    compensator written in Python (``"kind": "python"``) one by one in this process
+    (:func:`hilcontact.plugin.run_summaries`)."""
+    python = [i for i, text in enumerate(scenarios) if '"python"' in text and _is_python(text)]
+    if not python:
+        return dict(_core().simulate_batch(scenarios, threads))
+    from .plugin import run_summaries
+
+    shipped = [i for i in range(len(scenarios)) if i not in set(python)]
+    parts = [(shipped, dict(_core().simulate_batch([scenarios[i] for i in shipped], threads)) if shipped else None),
+             (python, run_summaries([scenarios[i] for i in python]))]
+    columns: dict[str, Any] = {}
+    for order, part in parts:
+        if part is None:
+            continue
+        for name, values in part.items():
+            column = columns.setdefault(name, [None] * len(scenarios))
+            for i, value in zip(order, values):
+                column[i] = value
+    return columns
+
+
+def _is_python(text: str) -> bool:
+    return json.loads(text).get("compensator", {}).get("kind") == "python"
 
 
 def _rows(plan: SweepPlan, chunk: list[tuple[str, int, str, int]], columns: Mapping[str, Any]) -> pd.DataFrame:
@@ -697,6 +731,7 @@ def sweep(
     seeds: int = 1,
     out: str | os.PathLike[str] | None = None,
     *,
+    python: Sequence[Any] = (),
     overrides: Mapping[str, Any] | None = None,
     resume: bool = False,
     dask: str | Any | None = None,
@@ -713,7 +748,10 @@ def sweep(
         grid: the swept keys: specs ``["facility.robot_delay=0.002:0.06:30",
             "servicer.mass=100,300"]``, or a mapping ``{"facility.robot_delay": "0.002:0.06:30",
             "servicer.mass": [100, 300]}``. A range ``START:STOP:COUNT`` includes both ends.
-        compensators: kinds (comma-separated or a list; default all).
+        compensators: kinds (comma-separated or a list; default all, none when ``python`` is
+            given).
+        python: compensators written in Python (``FILE.py:Class`` entries; they run one at a
+            time per process: threads do not speed them up, Dask workers do).
         seeds: noise seeds per grid point: ``facility.seed``, ``facility.seed + 1``, ...
         out: folder for ``results.parquet`` (kept up to date as runs finish); None keeps the
             rows in memory only.
@@ -735,7 +773,7 @@ def sweep(
     """
     check_run_arguments(out, resume, dask, chunk_size, progress, flush_seconds)
     return run_plan(
-        plan_sweep(scenario, grid, compensators, seeds, overrides, limits=limits, threads=threads),
+        plan_sweep(scenario, grid, compensators, seeds, overrides, limits=limits, threads=threads, python=python),
         out,
         resume=resume,
         dask=dask,

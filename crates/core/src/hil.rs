@@ -48,9 +48,13 @@ pub struct VirtualDynamics {
 impl VirtualDynamics {
     /// The virtual side of a plan, at its initial state (allocates the compensator once).
     pub fn new(plan: &Plan) -> Self {
+        Self::with_compensator(plan, plan.compensator.build(&compensator_context(plan)))
+    }
+
+    /// The virtual side of a plan with a compensator built elsewhere (e.g. one written in
+    /// Python, `crates/py`) instead of the plan's `[compensator]`.
+    pub fn with_compensator(plan: &Plan, compensator: Box<dyn Compensator>) -> Self {
         let system = &plan.system;
-        let context = compensator_context(plan);
-        let compensator = plan.compensator.build(&context);
         VirtualDynamics {
             system: system.clone(),
             command: system.relative_motion(&plan.initial),
@@ -213,8 +217,13 @@ impl HilStep {
     /// The step of a plan, with the run's divergence bound (J, see
     /// [`crate::metrics::divergence_bound`]).
     pub fn new(plan: &Plan, energy_bound: f64) -> Self {
+        Self::with_dynamics(plan, energy_bound, VirtualDynamics::new(plan))
+    }
+
+    /// [`HilStep::new`] with the virtual side given (e.g. [`VirtualDynamics::with_compensator`]).
+    pub fn with_dynamics(plan: &Plan, energy_bound: f64, virt: VirtualDynamics) -> Self {
         HilStep {
-            virt: VirtualDynamics::new(plan),
+            virt,
             ticks: plan.ticks,
             period: plan.period,
             energy_bound,

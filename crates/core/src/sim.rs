@@ -4,7 +4,7 @@
 
 use nalgebra::{UnitQuaternion, Vector3};
 
-use crate::compensator::CompensatorInput;
+use crate::compensator::{Compensator, CompensatorInput};
 use crate::config::{ContactModelKind, Scenario};
 use crate::error::Result;
 use crate::facility::FacilityLoop;
@@ -173,12 +173,22 @@ pub fn run_hil(plan: &Plan, energy_bound: f64, keep_rows: bool) -> HilRun {
 /// build by kind, wrapped with [`FacilityLoop::with`]); it must not have ticked yet.
 pub fn run_hil_against(
     plan: &Plan,
-    mut facility: FacilityLoop,
+    facility: FacilityLoop,
     energy_bound: f64,
     keep_rows: bool,
 ) -> HilRun {
+    run_hil_step(plan, facility, HilStep::new(plan, energy_bound), keep_rows)
+}
+
+/// The HIL loop of a [`HilStep`] built elsewhere (e.g. with a compensator from outside the
+/// core, [`VirtualDynamics::with_compensator`]) against `facility`, which must not have ticked.
+pub fn run_hil_step(
+    plan: &Plan,
+    mut facility: FacilityLoop,
+    mut step: HilStep,
+    keep_rows: bool,
+) -> HilRun {
     let n = plan.ticks;
-    let mut step = HilStep::new(plan, energy_bound);
     let estimates = step.dynamics().estimates_contact();
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut trace = Trace::with_capacity(n + 1, estimates);
@@ -421,7 +431,33 @@ struct Runs {
     metrics: Metrics,
 }
 
+/// [`simulate_plan_with_records`] with a compensator built outside the core (e.g. one written
+/// in Python, `crates/py`) in place of the plan's `[compensator]` (whose kind the metrics name;
+/// the caller renames it).
+pub fn simulate_plan_with_compensator(
+    plan: &Plan,
+    compensator: Box<dyn Compensator>,
+    keep_rows: bool,
+) -> (SimulationOutput, Vec<HilRecord>) {
+    let Runs {
+        reference,
+        hil,
+        metrics,
+    } = run_with(plan, keep_rows, Some(compensator));
+    let output = SimulationOutput {
+        timeseries: hil_table(&hil.rows, hil.estimates_contact, hil.observes_energy),
+        reference: reference_table(&reference),
+        metrics,
+    };
+    (output, hil.rows)
+}
+
 fn run(plan: &Plan, keep_rows: bool) -> Runs {
+    run_with(plan, keep_rows, None)
+}
+
+/// The reference and the HIL loop, with the plan's compensator or `compensator`.
+fn run_with(plan: &Plan, keep_rows: bool, compensator: Option<Box<dyn Compensator>>) -> Runs {
     let (reference_trace, reference) = run_reference(plan, keep_rows);
     let reference_energy = &reference_trace.energy;
     let bound = metrics::divergence_bound(
@@ -429,7 +465,14 @@ fn run(plan: &Plan, keep_rows: bool) -> Runs {
         reference_energy[0],
         reference_energy,
     );
-    let hil = run_hil(plan, bound, keep_rows);
+    let hil = match compensator {
+        None => run_hil(plan, bound, keep_rows),
+        Some(c) => {
+            let step =
+                HilStep::with_dynamics(plan, bound, VirtualDynamics::with_compensator(plan, c));
+            run_hil_step(plan, FacilityLoop::new(plan), step, keep_rows)
+        }
+    };
     let metrics = trace_metrics(
         plan,
         &reference_trace,

@@ -16,6 +16,8 @@ use pyo3::prelude::*;
 use pyo3::sync::GILOnceCell;
 use pyo3::types::{PyDict, PyTuple, PyType};
 
+mod plugin;
+
 /// The package's exception classes, defined here once (`hilcontact.errors` re-exports them):
 /// `HilContactError(Exception)`, `ScenarioError(HilContactError, ValueError)`,
 /// `RealtimeError(HilContactError, OSError)` and `RealtimeOptionError(RealtimeError,
@@ -884,6 +886,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(replay, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_function(wrap_pyfunction!(frames, m)?)?;
+    m.add_function(wrap_pyfunction!(plugin::simulate_python, m)?)?;
+    m.add_function(wrap_pyfunction!(plugin::compensator_context, m)?)?;
     m.add_class::<PyHilHandle>()?;
     m.add_class::<PyFacilityHandle>()?;
     let errors = error_classes(m.py())?;

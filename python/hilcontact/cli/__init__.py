@@ -8,6 +8,8 @@
     hilcontact sweep SCENARIO --grid KEY=START:STOP:COUNT|KEY=A,B,... [--compensators LIST]
                      [--seeds N] [--set KEY=VALUE ...] --out DIR [--resume] [--dask ADDRESS]
     hilcontact stability-map SWEEP_DIR [--out DIR] [--cov-tolerance 0.05] [--cof-limit 1.2]
+    hilcontact benchmark [--compensators LIST] [--compensator FILE.py:CLASS ...] [--cases PATTERNS] [--out DIR] [--resume]
+    hilcontact benchmark --compare A B
     hilcontact presets
     hilcontact init FILE.toml [--from PRESET] [--set KEY=VALUE ...]
     hilcontact show SCENARIO [--set KEY=VALUE ...]
@@ -45,6 +47,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from . import batch, realtime_commands  # noqa: F401  (each registers its commands on the group)
+from . import bench  # noqa: F401  (registers benchmark)
 from .options import cli, parse_set_options
 
 __all__ = ["cli", "main", "parse_set_options"]

@@ -52,8 +52,12 @@ def _compensators_option(help: str) -> Any:
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @_with(_run_output_options("runs/<scenario name>"))
+@click.option("--compensator", "entry", default=None, metavar="FILE.py:CLASS",
+              help="Run a compensator written in Python (path/to/file.py:ClassName or module:ClassName).")
+@click.option("--step-limit", type=POSITIVE, default=None, metavar="S",
+              help="Longest time one step of a Python compensator may take, s [default: 0.5].")
 def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool,
-        max_memory: float, max_time: float) -> None:
+        max_memory: float, max_time: float, entry: str | None = None, step_limit: float | None = None) -> None:
     """Simulate SCENARIO (a preset name or a TOML file) and save the results."""
     _stop_on_sigterm()
     with _errors():
@@ -64,7 +68,7 @@ def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, m
         before = _file_state(mcap_path)
         try:
             with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
-                result = simulate(resolved, mcap=mcap_path, overwrite=force)
+                result = simulate(resolved, mcap=mcap_path, overwrite=force, compensator=entry, step_limit=step_limit)
         except KeyboardInterrupt:  # Ctrl-C during the simulation: the part of a recording it wrote goes too
             if mcap_path is not None and _file_state(mcap_path) not in (before, None):
                 mcap_path.unlink(missing_ok=True)
@@ -145,8 +149,11 @@ def plot(folder: Path, force: bool) -> None:
               help="Compare at each robot delay (s, comma-separated, e.g. 0.01,0.02): a comparison folder per "
                    "delay and figures with one panel per delay, (a), (b), ….")
 @_with(_LIMIT_OPTIONS)
+@click.option("--compensator", "entries", multiple=True, metavar="FILE.py:CLASS",
+              help="Also compare a compensator written in Python (path/to/file.py:ClassName); repeatable.")
 def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool,
-                    run_figures: bool, force: bool, delays: str | None, max_memory: float, max_time: float) -> None:
+                    run_figures: bool, force: bool, delays: str | None, max_memory: float, max_time: float,
+                    entries: tuple[str, ...] = ()) -> None:
     """Simulate SCENARIO once per compensator and compare them: a ranking, a recommendation,
     and for each compensator that is not faithful the tolerance it broke (docs/choosing.md).
 
@@ -164,6 +171,10 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
     with _errors():
         overrides = parse_set_options(sets)
         scenarios = comparison_scenarios(scenario, kinds, overrides)  # validate all before running
+        if entries:
+            from ..plugin import with_python_compensators
+
+            scenarios = with_python_compensators(scenarios, entries)
         check_run(next(iter(scenarios.values())), Limits(max_memory, max_time), runs=len(scenarios))
         name = next(iter(scenarios.values())).name
         folder = _out_folder(out, Path("runs") / f"{name}-compare", force)
@@ -243,6 +254,8 @@ def _compare_over_delays(scenario: str, sets: tuple[str, ...], kinds: str, out: 
 )
 @click.option("--threads", type=click.IntRange(1, 1024), default=None, help="Rust threads for a local sweep [default: one per core].")
 @_with(_LIMIT_OPTIONS)
+@click.option("--compensator", "entries", multiple=True, metavar="FILE.py:CLASS",
+              help="Also sweep a compensator written in Python (one run at a time per process; --dask spreads them); repeatable.")
 def sweep_command(
     scenario: str,
     grids: tuple[str, ...],
@@ -255,6 +268,7 @@ def sweep_command(
     threads: int | None,
     max_memory: float,
     max_time: float,
+    entries: tuple[str, ...] = (),
 ) -> None:
     """Run SCENARIO at every point of the grid, with every compensator and seed.
 
@@ -279,7 +293,7 @@ def sweep_command(
         overrides = parse_set_options(sets)
         # validate before anything runs
         plan = plan_sweep(scenario, list(grids), kinds, seeds, overrides, limits=Limits(max_memory, max_time),
-                          threads=threads)
+                          threads=threads, python=list(entries))
         for note in check_sweep_folder(Path(out), plan, resume):
             click.echo("note: " + note, err=True)
         stderr = Console(stderr=True)
@@ -416,7 +430,8 @@ _RECORDING_OPTIONS = [
 
 @cli.command(name="replay", short_help="Run a compensator on a recording's measurements and poses.")
 @click.argument("log")
-@click.option("--compensator", "compensator", default=None, metavar="KIND", help="Compensator kind [default: the scenario's].")
+@click.option("--compensator", "compensator", default=None, metavar="KIND",
+              help="Compensator kind, or one written in Python (FILE.py:CLASS) [default: the scenario's].")
 @click.option("--desired-pose-topic", default=None, help="ROS 2 bag: a geometry_msgs/PoseStamped topic of the desired (virtual) rod tip (frame t).")
 @_with(_RECORDING_OPTIONS)
 def replay_command(log: str, compensator: str | None, desired_pose_topic: str | None, scenario: str | None,
@@ -436,12 +451,22 @@ def replay_command(log: str, compensator: str | None, desired_pose_topic: str | 
 
     with _errors():
         overrides = parse_set_options(sets)
-        if compensator is not None:
+        python = compensator is not None and ":" in compensator
+        if python:
+            overrides.update({"compensator.kind": "python", "compensator.entry": compensator})
+        elif compensator is not None:
             overrides["compensator.kind"] = compensator
         check_output_folder(out, overwrite=force)
         recording = read_recording(log, scenario, overrides, wrench_topic, pose_topic, twist_topic,
                                    need=IDENTIFY_COLUMNS + DESIRED_COLUMNS, desired_pose_topic=desired_pose_topic)
-        summary = save_replay(recording, replay(recording), out, force)
+        entry = recording.scenario.python_entry
+        if entry is not None:
+            from ..plugin import replay as replay_python
+
+            table = replay_python(entry, recording.scenario, recording.data)
+        else:
+            table = replay(recording)
+        summary = save_replay(recording, table, out, force)
     diff = summary.get("max_relative_difference_to_recorded")
     click.echo(f"{summary['compensator']}: {summary['samples']} ticks replayed -> {out}"
                + (f" (largest difference to the recorded applied wrench: {diff:.3g} of its peak)" if diff is not None else ""))
