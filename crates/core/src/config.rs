@@ -174,6 +174,9 @@ pub struct ContactConfig {
     #[serde(default = "default_exponent")]
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 5.0))]
     pub exponent: f64,
+    /// Coulomb friction between the contacting surfaces (default: frictionless).
+    #[serde(default)]
+    pub friction: crate::contact::FrictionConfig,
 }
 
 fn default_exponent() -> f64 {

@@ -4,6 +4,11 @@
 //! A wall is a point and a unit normal `n` pointing from the wall into free space.
 //! Penetration `d = max(0, −(p_tip − p_wall)·n)`, penetration rate `ḋ = −v_tip·n`.
 //! The force on the rod is `max(0, f(d, ḋ))·n` while `d > 0`: a contact never pulls.
+//!
+//! With friction ([`Friction`], `[contact.friction]`), each pushing wall adds a tangential
+//! force against the tip's sliding velocity `v_t = v − (v·n)·n`, regularised Coulomb:
+//! `F_t = −μ(|v_t|)·F_n·v_t / √(|v_t|² + v_ε²)`, with the Stribeck curve
+//! `μ(s) = μ_k + (μ_s − μ_k)·exp(−(s/v_s)²)` (docs/model.md, "Friction").
 
 use nalgebra::Vector3;
 use schemars::JsonSchema;
@@ -68,6 +73,128 @@ impl ContactLaw for ContactModel {
     }
 }
 
+/// Regularised Coulomb friction with a static peak (Stribeck), stateless: the same force for
+/// the same state wherever it is evaluated (the ideal reference's RK4 stages, the facility
+/// model, the metrics).
+///
+/// ```text
+/// μ(s) = μ_k + (μ_s − μ_k)·exp(−(s/v_s)²)                 s = |v_t|, the sliding speed
+/// F_t  = −μ(s)·F_n·v_t / √(s² + v_ε²)                      tangential force on the rod
+/// ```
+/// Well above `v_ε` the force is Coulomb's `μ_k·F_n` against the sliding; below it, friction
+/// acts as a viscous damper of coefficient `μ_s·F_n / v_ε` (N·s/m), which is how sticking is
+/// modelled: a stuck contact creeps at a small fraction of `v_ε`. The friction force never
+/// does positive work: its power `F_t·v_t ≤ 0`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Friction {
+    /// Static coefficient μ_s (≥ μ_k): the peak of the Stribeck curve at zero sliding speed.
+    pub static_coefficient: f64,
+    /// Kinetic (sliding) coefficient μ_k.
+    pub kinetic_coefficient: f64,
+    /// Regularisation velocity v_ε, m/s (> 0): below it friction is viscous.
+    pub stick_velocity: f64,
+    /// Stribeck velocity v_s, m/s (> 0): the width of the static peak.
+    pub stribeck_velocity: f64,
+}
+
+impl Friction {
+    /// The friction coefficient μ(s) at sliding speed `s` (m/s), Stribeck curve.
+    pub fn coefficient(&self, s: f64) -> f64 {
+        let r = s / self.stribeck_velocity;
+        self.kinetic_coefficient
+            + (self.static_coefficient - self.kinetic_coefficient) * (-r * r).exp()
+    }
+
+    /// Tangential force on the rod, N, for a normal force `normal_force` (N, ≥ 0) and the
+    /// sliding velocity `v_t` (m/s, tangential to the surface): `−μ(s)·F_n·v_t/√(s² + v_ε²)`.
+    pub fn force(&self, normal_force: f64, v_t: &Vector3<f64>) -> Vector3<f64> {
+        let s2 = v_t.norm_squared();
+        if normal_force <= 0.0 || s2 == 0.0 {
+            return Vector3::zeros();
+        }
+        let s = s2.sqrt();
+        let eps = self.stick_velocity;
+        v_t * (-self.coefficient(s) * normal_force / (s2 + eps * eps).sqrt())
+    }
+}
+
+/// Friction between the contacting surfaces, `[contact.friction]` (both coefficients 0, the
+/// default: frictionless).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct FrictionConfig {
+    /// Kinetic (sliding) coefficient μ_k, 0 to 2 (steel on steel: about 0.1-0.3); 0 with
+    /// `static` 0: frictionless.
+    #[serde(default, rename = "kinetic")]
+    #[schemars(range(min = 0.0, max = 2.0))]
+    pub kinetic_coefficient: f64,
+    /// Static coefficient μ_s, 0 to 2: the peak at zero sliding speed, ≥ `kinetic`; 0: the
+    /// same as `kinetic`.
+    #[serde(default, rename = "static")]
+    #[schemars(range(min = 0.0, max = 2.0))]
+    pub static_coefficient: f64,
+    /// Regularisation velocity v_ε, m/s (1e-6 to 1): below it friction acts as viscous damping
+    /// `μ_s·F_n/v_ε`, and a sticking contact creeps at a fraction of it.
+    #[serde(default = "default_stick_velocity")]
+    #[schemars(range(min = 1e-6, max = 1.0), extend("x-magnitude" = 1e3))]
+    pub stick_velocity: f64,
+    /// Stribeck velocity v_s, m/s (1e-6 to 1): the width of the static peak.
+    #[serde(default = "default_stribeck_velocity")]
+    #[schemars(range(min = 1e-6, max = 1.0), extend("x-magnitude" = 1e3))]
+    pub stribeck_velocity: f64,
+}
+
+fn default_stick_velocity() -> f64 {
+    1e-3
+}
+
+fn default_stribeck_velocity() -> f64 {
+    5e-3
+}
+
+impl Default for FrictionConfig {
+    fn default() -> Self {
+        FrictionConfig {
+            kinetic_coefficient: 0.0,
+            static_coefficient: 0.0,
+            stick_velocity: default_stick_velocity(),
+            stribeck_velocity: default_stribeck_velocity(),
+        }
+    }
+}
+
+impl FrictionConfig {
+    /// Whether both coefficients are 0 (no friction at all).
+    pub fn is_frictionless(&self) -> bool {
+        self.kinetic_coefficient == 0.0 && self.static_coefficient == 0.0
+    }
+
+    /// The friction law: `Ok(None)` when frictionless, `Err` with a message when the static
+    /// coefficient is set below the kinetic one.
+    pub fn friction(&self) -> std::result::Result<Option<Friction>, String> {
+        if self.is_frictionless() {
+            return Ok(None);
+        }
+        let mu_k = self.kinetic_coefficient;
+        let mu_s = if self.static_coefficient == 0.0 {
+            mu_k
+        } else {
+            self.static_coefficient
+        };
+        if mu_s < mu_k {
+            return Err(format!(
+                "the static coefficient ({mu_s}) must not be below the kinetic one ({mu_k})"
+            ));
+        }
+        Ok(Some(Friction {
+            static_coefficient: mu_s,
+            kinetic_coefficient: mu_k,
+            stick_velocity: self.stick_velocity,
+            stribeck_velocity: self.stribeck_velocity,
+        }))
+    }
+}
+
 /// A planar wall of the collision frame, fixed in the target frame, as a scenario gives it
 /// (`[[walls]]`, and the prior walls of `model-mediated`); the core checks it and normalises
 /// its normal.
@@ -120,23 +247,43 @@ pub struct ContactGeometry {
     pub walls: Vec<Wall>,
     /// The contact law.
     pub law: ContactModel,
+    /// Friction between rod and walls (`None`: frictionless).
+    pub friction: Option<Friction>,
 }
 
 impl ContactGeometry {
     /// Physical contact force on the rod tip, target frame, N: the sum over the walls it
-    /// penetrates of `max(0, f(d, ḋ))·n`. Allocation-free.
+    /// penetrates of `max(0, f(d, ḋ))·n`, plus friction when there is any. Allocation-free.
     pub fn force_on_rod(&self, tip: &Vector3<f64>, tip_velocity: &Vector3<f64>) -> Vector3<f64> {
+        self.force_and_friction_power(tip, tip_velocity).0
+    }
+
+    /// [`ContactGeometry::force_on_rod`] and the power of its friction part, W (≤ 0: the rate
+    /// at which friction dissipates energy, `Σ F_t·v_t`). Allocation-free.
+    pub fn force_and_friction_power(
+        &self,
+        tip: &Vector3<f64>,
+        tip_velocity: &Vector3<f64>,
+    ) -> (Vector3<f64>, f64) {
         let mut force = Vector3::zeros();
+        let mut power = 0.0;
         for wall in &self.walls {
             let d = wall.penetration(tip);
             if d > 0.0 {
-                force += wall.normal
-                    * self
-                        .law
-                        .normal_force(d, wall.penetration_rate(tip_velocity));
+                let f_n = self
+                    .law
+                    .normal_force(d, wall.penetration_rate(tip_velocity));
+                force += wall.normal * f_n;
+                if let Some(friction) = &self.friction {
+                    // sliding velocity: the tip's velocity along the wall
+                    let v_t = tip_velocity - wall.normal * tip_velocity.dot(&wall.normal);
+                    let f_t = friction.force(f_n, &v_t);
+                    force += f_t;
+                    power += f_t.dot(&v_t);
+                }
             }
         }
-        force
+        (force, power)
     }
 
     /// Which walls push on the rod (bit `i` for wall `i`, the first 64 walls): the contact's
@@ -211,6 +358,7 @@ mod tests {
                 stiffness: 1000.0,
                 damping: 0.0,
             }),
+            friction: None,
         };
         let f = geometry.force_on_rod(&Vector3::new(0.012, 0.0, 0.0), &Vector3::zeros());
         // the force on the rod pushes it back out, along −x

@@ -64,6 +64,8 @@ pub struct Trace {
     pub stiffness_estimate: Vec<f64>,
     /// Identified damping, N·s/m (NaN when not identified; empty when nothing is identified).
     pub damping_estimate: Vec<f64>,
+    /// Energy friction dissipated over the whole run, J (the ideal reference's; 0 otherwise).
+    pub friction_work: f64,
 }
 
 /// One tick of a [`Trace`].
@@ -98,6 +100,7 @@ impl Trace {
             energy: Vec::with_capacity(n),
             stiffness_estimate: Vec::with_capacity(e),
             damping_estimate: Vec::with_capacity(e),
+            friction_work: 0.0,
         }
     }
 
@@ -678,6 +681,10 @@ pub struct EnergySummary {
     pub r#final: f64,
     /// The reference's energy at its last sample.
     pub reference_final: f64,
+    /// Energy friction dissipated in the reference, J (0 without friction); the rest of the
+    /// reference's loss, `initial − reference_final − reference_friction_work` out of contact,
+    /// is the damping's.
+    pub reference_friction_work: f64,
     /// Largest energy of the run.
     pub max: f64,
 }

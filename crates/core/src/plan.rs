@@ -203,6 +203,11 @@ impl Plan {
             }),
         };
 
+        let friction = c.friction.friction().unwrap_or_else(|message| {
+            issues.push("contact.friction.static", message);
+            None
+        });
+
         let resolvable = [
             "servicer.mass",
             "target.mass",
@@ -274,7 +279,11 @@ impl Plan {
                 target: target.0,
                 rod_tip: Vector3::from(resolved.rod.tip),
                 sensor_origin: Vector3::from(f.sensor_position),
-                contact: ContactGeometry { walls, law },
+                contact: ContactGeometry {
+                    walls,
+                    law,
+                    friction,
+                },
             },
             initial: TwoBodyState {
                 servicer: servicer.1,

@@ -94,6 +94,9 @@ pub struct ReferenceRecord {
     pub contact_moment: Vector3<f64>,
     /// Kinetic energy of the relative motion, J.
     pub energy: f64,
+    /// Energy friction has dissipated since the start, J (0 without friction): reported apart
+    /// from the damping's, which is the rest of the energy lost.
+    pub friction_work: f64,
 }
 
 /// Result of a simulation.
@@ -116,6 +119,7 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
     let mut x = plan.initial;
     let mut trace = Trace::with_capacity(n + 1, false);
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
+    let mut friction_work = 0.0;
     for k in 0..=n {
         let rel = system.relative_motion(&x);
         let (contact_force, tip) = system.contact_force_at(&rel);
@@ -128,6 +132,7 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
             contact_force,
             contact_moment: wrench.moment,
             energy: system.energy(&x),
+            friction_work,
         };
         trace.push(&TraceSample {
             time: row.time,
@@ -141,9 +146,10 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
             rows.push(row);
         }
         if k < n {
-            system.step_reference(&mut x, period, plan.reference_substeps);
+            friction_work += system.step_reference(&mut x, period, plan.reference_substeps);
         }
     }
+    trace.friction_work = friction_work;
     (trace, rows)
 }
 
@@ -363,8 +369,8 @@ pub const HIL_FIELDS: [Field<HilRecord>; 15] = [
 
 /// The reference's table: rod tip (`t`), the servicer's angular velocity relative to the
 /// target (`t`), the contact force on the rod and its moment on the frame about the sensor
-/// origin (`t`), the energy.
-pub const REFERENCE_FIELDS: [Field<ReferenceRecord>; 7] = [
+/// origin (`t`), the energy and the energy friction has dissipated so far.
+pub const REFERENCE_FIELDS: [Field<ReferenceRecord>; 8] = [
     scalar("time", "s", |r| r.time),
     vector("tip_position", "m", |r| r.tip_position),
     vector("tip_velocity", "m/s", |r| r.tip_velocity),
@@ -372,6 +378,7 @@ pub const REFERENCE_FIELDS: [Field<ReferenceRecord>; 7] = [
     vector("contact_force", "N", |r| r.contact_force),
     vector("contact_moment", "N m", |r| r.contact_moment),
     scalar("energy", "J", |r| r.energy),
+    scalar("friction_work", "J", |r| r.friction_work),
 ];
 
 /// The columns of a table's fields: `(name, unit, only)`, a vector's as three columns.
@@ -548,6 +555,7 @@ pub fn trace_metrics(
             initial: t.energy.first().copied().unwrap_or(f64::NAN),
             r#final: t.energy.last().copied().unwrap_or(f64::NAN),
             reference_final: r.energy.last().copied().unwrap_or(f64::NAN),
+            reference_friction_work: r.friction_work,
             max: t
                 .energy
                 .iter()

@@ -215,30 +215,45 @@ impl TwoBodySystem {
 
     /// Rates of both bodies of the true system (the contact law closes the loop).
     pub fn true_rates(&self, x: &TwoBodyState) -> (BodyRate, BodyRate) {
-        let (f_rod, tip) = self.contact_force(x);
+        self.true_rates_and_friction_power(x).0
+    }
+
+    /// [`TwoBodySystem::true_rates`] and the power of the contact's friction, W (≤ 0).
+    fn true_rates_and_friction_power(&self, x: &TwoBodyState) -> ((BodyRate, BodyRate), f64) {
+        let rel = self.relative_motion(x);
+        let tip = rel.point(&self.rod_tip);
+        let (f_rod, power) = self
+            .contact
+            .force_and_friction_power(&tip, &rel.point_velocity(&self.rod_tip));
         let w = FrameWrench::from_rod_force(&f_rod, &tip, &self.sensor_origin);
         let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, &w);
         (
-            x.servicer.rate(&self.servicer, &f_s, &tau_s),
-            x.target.rate(&self.target, &f_t, &tau_t),
+            (
+                x.servicer.rate(&self.servicer, &f_s, &tau_s),
+                x.target.rate(&self.target, &f_t, &tau_t),
+            ),
+            power,
         )
     }
 
-    /// One RK4 step of the true system (rod against walls, no facility) over `h`.
-    pub fn step_rk4(&self, x: &mut TwoBodyState, h: f64) {
+    /// One RK4 step of the true system (rod against walls, no facility) over `h`; returns the
+    /// energy friction dissipated over it, J (≥ 0; the friction power integrated with the
+    /// step's own RK4 weights).
+    pub fn step_rk4(&self, x: &mut TwoBodyState, h: f64) -> f64 {
         let advance = |x: &TwoBodyState, r: &(BodyRate, BodyRate), dt: f64| TwoBodyState {
             servicer: x.servicer.advanced(&r.0, dt),
             target: x.target.advanced(&r.1, dt),
         };
-        let k1 = self.true_rates(x);
-        let k2 = self.true_rates(&advance(x, &k1, 0.5 * h));
-        let k3 = self.true_rates(&advance(x, &k2, 0.5 * h));
-        let k4 = self.true_rates(&advance(x, &k3, h));
+        let (k1, p1) = self.true_rates_and_friction_power(x);
+        let (k2, p2) = self.true_rates_and_friction_power(&advance(x, &k1, 0.5 * h));
+        let (k3, p3) = self.true_rates_and_friction_power(&advance(x, &k2, 0.5 * h));
+        let (k4, p4) = self.true_rates_and_friction_power(&advance(x, &k3, h));
         let avg = (
             BodyRate::rk4_average(&k1.0, &k2.0, &k3.0, &k4.0),
             BodyRate::rk4_average(&k1.1, &k2.1, &k3.1, &k4.1),
         );
         *x = advance(x, &avg, h);
+        -(p1 + 2.0 * p2 + 2.0 * p3 + p4) * h / 6.0
     }
 
     /// The contact's active set at a state (see [`ContactGeometry::active_set`]).
@@ -259,7 +274,9 @@ impl TwoBodySystem {
     ///   active set (a wall starts or stops pushing) located by bisection to `h / 2¹⁶`: an RK4 step
     ///   ends just before it and a step of that width crosses it, so that no step of size
     ///   straddles the kink or jump of the force at contact start and end.
-    pub fn step_reference(&self, x: &mut TwoBodyState, period: f64, substeps: u32) {
+    ///
+    /// Returns the energy friction dissipated over the period, J (0 without friction).
+    pub fn step_reference(&self, x: &mut TwoBodyState, period: f64, substeps: u32) -> f64 {
         let start = self.relative_motion(x);
         let tip_velocity = start.point_velocity(&self.rod_tip);
         if self
@@ -275,18 +292,20 @@ impl TwoBodySystem {
             let clear = |m: &RelativeMotion| self.contact.clearance(&m.point(&self.rod_tip));
             if clear(&start) > bend && clear(&end) > bend {
                 *x = y;
-                return;
+                return 0.0;
             }
         }
         let h = period / substeps as f64;
         let mut remaining = period;
+        let mut friction_work = 0.0;
         while remaining > period * 1e-12 {
             let step = h.min(remaining);
             let before = self.active_set(x);
             let mut y = *x;
-            self.step_rk4(&mut y, step);
+            let work = self.step_rk4(&mut y, step);
             if self.active_set(&y) == before {
                 *x = y;
+                friction_work += work;
                 remaining -= step;
                 continue;
             }
@@ -303,9 +322,10 @@ impl TwoBodySystem {
                 }
             }
             // up to the switch with every RK4 stage before it, then across it in a tiny step
-            self.step_rk4(x, lo);
-            self.step_rk4(x, hi - lo);
+            friction_work += self.step_rk4(x, lo);
+            friction_work += self.step_rk4(x, hi - lo);
             remaining -= hi;
         }
+        friction_work
     }
 }

@@ -100,6 +100,10 @@ fn no_facility_tick_allocates() {
     s.facility.torque_noise = 0.02;
     s.facility.force_resolution = 0.01;
     s.facility.servo_frequency = 10.0;
+    // with friction, and a tangential velocity for it to act on
+    s.contact.friction.kinetic_coefficient = 0.2;
+    s.contact.friction.static_coefficient = 0.3;
+    s.servicer.velocity[1] = 0.005;
     let plan = s.resolve().unwrap();
     let mut step = HilStep::new(&plan, f64::INFINITY);
     let mut facility = FacilityLoop::new(&plan);
