@@ -33,7 +33,14 @@ pub fn scenario_schema() -> schemars::Schema {
 /// with the dotted key and the messages `must be > 0, got -1`, `must be >= 0, got ...`,
 /// `must be between 0 and 1 (exclusive), got ...`. Returns the keys that failed.
 pub fn check_ranges(scenario: &Scenario, issues: &mut Issues) -> BTreeSet<String> {
-    check_ranges_of(scenario, &scenario_schema(), "scenario", issues)
+    // built once per process: building it cost about 4 % of a run (docs/performance.md)
+    static SCHEMA: std::sync::OnceLock<schemars::Schema> = std::sync::OnceLock::new();
+    check_ranges_of(
+        scenario,
+        SCHEMA.get_or_init(scenario_schema),
+        "scenario",
+        issues,
+    )
 }
 
 /// [`check_ranges`] for any value and its JSON Schema (e.g. the real-time options of
