@@ -375,7 +375,8 @@ def test_every_preset_simulates_consistently(core, name):
         assert [c["index"] for c in m[key]] == list(range(1, len(m[key]) + 1))
         assert all(c["end"] > c["start"] for c in m[key])
     assert m["collisions"] and m["reference_collisions"]
-    assert set(m["energy"]) == {"initial", "final", "reference_final", "max"}
+    assert set(m["energy"]) == {"initial", "final", "reference_final", "reference_friction_work", "max"}
+    assert m["energy"]["reference_friction_work"] == 0.0  # no preset has friction yet
     json.dumps(m, allow_nan=False)  # plain JSON: no NaN or infinity
 
 

@@ -136,11 +136,11 @@ pub struct FrictionConfig {
     /// Regularisation velocity v_ε, m/s (1e-6 to 1): below it friction acts as viscous damping
     /// `μ_s·F_n/v_ε`, and a sticking contact creeps at a fraction of it.
     #[serde(default = "default_stick_velocity")]
-    #[schemars(range(min = 1e-6, max = 1.0), extend("x-magnitude" = 1e3))]
+    #[schemars(range(min = 1e-6, max = 1.0))]
     pub stick_velocity: f64,
     /// Stribeck velocity v_s, m/s (1e-6 to 1): the width of the static peak.
     #[serde(default = "default_stribeck_velocity")]
-    #[schemars(range(min = 1e-6, max = 1.0), extend("x-magnitude" = 1e3))]
+    #[schemars(range(min = 1e-6, max = 1.0))]
     pub stribeck_velocity: f64,
 }
 
