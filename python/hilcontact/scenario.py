@@ -544,8 +544,10 @@ def _locate(loc: tuple[Any, ...]) -> tuple[list[str | int], Any]:
         parts.append(part)
         if current is Scenario:
             current = _TABLES.get(part)
-        else:
-            current = None
+        else:  # a table inside a table (e.g. [contact.friction]): its model, if it is one
+            field = getattr(current, "model_fields", {}).get(part) if isinstance(current, type) else None
+            sub = getattr(field, "annotation", None)
+            current = sub if isinstance(sub, type) and issubclass(sub, _Table) else None
     return parts, owner
 
 
