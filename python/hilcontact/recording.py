@@ -518,14 +518,52 @@ def identification_scenario(scenario: Scenario, forgetting: float | None = OFFLI
     return load_scenario(data)
 
 
+def _fresh_rows(recording: Recording) -> np.ndarray | None:
+    """A real-time run's ticks that had a new sensor record (its ``sensor_age`` column, the
+    time since the record in use arrived, is 0), or None when every tick had one or the
+    recording has no such column."""
+    if "sensor_age" not in recording.data.columns:
+        return None
+    fresh = recording.data["sensor_age"].to_numpy(dtype=np.float64) <= 0
+    fresh[0] = True
+    return None if fresh.all() else fresh
+
+
 def identify(recording: Recording, forgetting: float | None = OFFLINE_FORGETTING) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Per tick (time, in_contact, stiffness/damping estimate and std) and per collision
     (index, start, end, samples, updates, stiffness, stiffness_std (N/m), damping,
     damping_std (N s/m), normal_x.. (unit, ``t``), normal_std_deg, point_x.. (m, ``t``),
     offset_std (m), peak_force (N))."""
     scenario = identification_scenario(recording.scenario, forgetting)
-    out = _call(recording, "identify", scenario, IDENTIFY_COLUMNS)
-    ticks = pd.DataFrame({k: np.asarray(v, dtype=np.float64) for k, v in out["timeseries"].items()})
+    fresh = _fresh_rows(recording)
+    if fresh is None:
+        out = _call(recording, "identify", scenario, IDENTIFY_COLUMNS)
+        ticks = pd.DataFrame({k: np.asarray(v, dtype=np.float64) for k, v in out["timeseries"].items()})
+    else:
+        # a real-time run's ticks without a new sensor record held the last force while the
+        # kinematics moved on: identified on the ticks with a new record only, each with the
+        # kinematics that produced it (τ_p earlier for align, taken here; the increments then
+        # span the held ticks)
+        data = recording.data
+        kept_rows = np.flatnonzero(fresh)
+        lag = alignment_lag(scenario)
+        kept = data.iloc[kept_rows].reset_index(drop=True)
+        for name in (*_vec("actual_tip_position"), *_vec("actual_tip_velocity")):
+            kept[name] = data[name].to_numpy(dtype=np.float64)[np.maximum(kept_rows - lag, 0)]
+        shifted = scenario.to_dict()
+        if lag:
+            shifted["facility"]["sensor_delay"] = 0.0
+        note = (f"sensor_age: identified on the {len(kept_rows)} ticks with a new sensor record "
+                f"({len(data) - len(kept_rows)} held the previous one)")
+        if note not in recording.derived:
+            recording.derived.append(note)
+        sub = Recording(source=recording.source, data=kept, scenario=recording.scenario)
+        out = _call(sub, "identify", load_scenario(shifted), IDENTIFY_COLUMNS)
+        part = pd.DataFrame({k: np.asarray(v, dtype=np.float64) for k, v in out["timeseries"].items()})
+        # back on every tick: a held tick shows the estimate of its record's tick
+        source = np.maximum.accumulate(np.where(fresh, np.arange(len(data)), 0))
+        ticks = part.iloc[np.searchsorted(kept_rows, source)].reset_index(drop=True)
+        ticks["time"] = data["time"].to_numpy(dtype=np.float64)
     rows = []
     for c in out["collisions"]:
         row = {k: c[k] for k in ("index", "start", "end", "samples", "updates", "stiffness", "stiffness_std",

@@ -329,7 +329,12 @@ pub fn identify(
                 &x0,
                 RESIDUAL_LAGS,
             );
-            let (sk, sc) = (cov[(0, 0)].sqrt(), cov[(1, 1)].sqrt());
+            // no update: the initial guess and its prior
+            let (sk, sc) = if made[i].is_empty() {
+                (params.stiffness_std, params.damping_std)
+            } else {
+                (cov[(0, 0)].sqrt(), cov[(1, 1)].sqrt())
+            };
             let count = (last - first + 1) as f64;
             let total: Vector3<f64> = (first..=last).map(force).sum();
             let e = total.normalize();
