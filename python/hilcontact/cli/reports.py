@@ -8,7 +8,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
 from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
@@ -280,6 +279,8 @@ def _identification_lines(run: Run) -> list[tuple[str, bool]]:
     """The summary's identification: k̂ and ĉ at the last contact tick, their mean errors
     against the scenario (metrics.json's ``identification``), and a warning when they drift
     (:data:`IDENTIFICATION_DRIFT`), naming the stale sensor records if there were many."""
+    import numpy as np
+
     ident = run.metrics.get("identification")
     series = run.timeseries
     if not ident or "stiffness_estimate" not in series.columns:
