@@ -72,18 +72,22 @@ def identification_figure(ticks: pd.DataFrame, collisions: pd.DataFrame, title: 
     return figure
 
 
-def _collision_series(data: pd.DataFrame, c: pd.Series, lag: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A collision's penetration d (m), its rate ḋ (m/s) and the measured force magnitude (N)."""
+def _collision_series(data: pd.DataFrame, c: pd.Series, lag: int) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                                              np.ndarray]:
+    """A collision's penetration d (m), its rate ḋ (m/s), the measured force magnitude (N) and
+    whether each tick had a new sensor record (a real-time run's ``sensor_age`` is 0)."""
     time = data["time"].to_numpy(dtype=float)
     first, last = int(np.searchsorted(time, c["start"])), int(np.searchsorted(time, c["end"]))
     k = np.arange(first, last + 1)
+    fresh = (data["sensor_age"].to_numpy(dtype=float)[k] <= 0 if "sensor_age" in data.columns
+             else np.ones(len(k), dtype=bool))
     j = np.maximum(k - lag, 0)
     n = np.array([c[f"normal_{a}"] for a in _AXES])
     point = np.array([c[f"point_{a}"] for a in _AXES])
     p = data[[f"actual_tip_position_{a}" for a in _AXES]].to_numpy(dtype=float)[j]
     v = data[[f"actual_tip_velocity_{a}" for a in _AXES]].to_numpy(dtype=float)[j]
     f = data[[f"measured_force_{a}" for a in _AXES]].to_numpy(dtype=float)[k]
-    return -(p - point) @ n, -v @ n, np.linalg.norm(f, axis=1)
+    return -(p - point) @ n, -v @ n, np.linalg.norm(f, axis=1), fresh
 
 
 def force_penetration_figure(data: pd.DataFrame, collisions: pd.DataFrame, lag: int, title: str) -> Figure:
@@ -102,13 +106,19 @@ def force_penetration_figure(data: pd.DataFrame, collisions: pd.DataFrame, lag: 
         grid[0].set_visible(True)
         grid[0].text(0.5, 0.5, "no collision", ha="center", va="center", transform=grid[0].transAxes)
     for ax, (_, c) in zip(grid, shown.iterrows()):
-        d, rate, force = _collision_series(data, c, lag)
+        d, rate, force, fresh = _collision_series(data, c, lag)
         k_hat, c_hat = float(c["stiffness"]), float(c["damping"])
+        if not fresh.all():
+            # real time: a held record against the moving tip (not identified on)
+            ax.plot(d[~fresh] * 1e3, force[~fresh], ".", markersize=2, color="0.75", label="held record")
+            d, rate, force = d[fresh], rate[fresh], force[fresh]
         law = k_hat * d + c_hat * rate
         ax.plot(d * 1e3, force, ".", markersize=2, color="tab:blue", label="measured |F|")
         ax.plot(d * 1e3, law, "-", linewidth=1.0, color="tab:red", label="k̂·d + ĉ·ḋ")
         order = np.argsort(d)
         ax.plot(d[order] * 1e3, k_hat * d[order], ":", linewidth=1.0, color="black", label="k̂·d")
+        if not fresh.all():
+            ax.legend(loc="upper left", fontsize="x-small")
         ax.set_title(f"#{int(c['index'])}: k̂ {k_hat / 1e3:.4g} N/mm, ĉ {c_hat / 1e3:.3g} N·s/mm", fontsize="small")
         ax.set_xlabel("penetration d, mm")
         ax.set_ylabel("force, N")
