@@ -476,28 +476,50 @@ def replay_command(log: str, compensator: str | None, desired_pose_topic: str | 
 @click.argument("log")
 @click.option("--forgetting", type=float, default=0.9, show_default=True,
               help="Forgetting factor b of the filter's noise estimate (the compensators use 0.98; see docs/identification.md).")
+@click.option("--columns", "columns", metavar="MAP", default=None,
+              help="Map your own column names, signs and units, e.g. 'fx=Fx_N,px=x_mm:mm,fz=-Fz' "
+                   "(keys t, fx.., mx.., px.., vx..; see docs/identification.md).")
+@click.option("--unchecked", is_flag=True,
+              help="Write the results even when a plausibility check fails (printed as warnings).")
+@click.option("--no-plots", is_flag=True, help="Do not write the figures.")
 @_with(_RECORDING_OPTIONS)
-def identify_command(log: str, forgetting: float, scenario: str | None, sets: tuple[str, ...],
-                     wrench_topic: str | None, pose_topic: str | None, twist_topic: str | None,
-                     out: str, force: bool) -> None:
+def identify_command(log: str, forgetting: float, columns: str | None, unchecked: bool, no_plots: bool,
+                     scenario: str | None, sets: tuple[str, ...], wrench_topic: str | None, pose_topic: str | None,
+                     twist_topic: str | None, out: str, force: bool) -> None:
     """Identify, per collision of LOG, the contact stiffness and damping (the compensators'
     identification: the Sage-Husa filter with the sensor-delay alignment, restarted per
-    collision) and the wall (point and normal), each with an uncertainty. Writes
-    identification.parquet (per tick), collisions.csv, collisions.json, scenario.toml.
+    collision) and the wall (point and normal), each with an uncertainty. LOG: a run folder,
+    a CSV or Parquet file, an MCAP file (--mcap of run/hil, or a ROS 2 bag in MCAP), a ROS 2
+    bag folder. Checks that the result is plausible (force's sign, units, a stiffness that
+    is positive, a wall near the poses) and refuses, naming the likely cause, when it is not.
+    Writes identification.parquet (per tick), collisions.csv, collisions.json,
+    scenario.toml and the figures identification.png (k and c over time) and
+    force_penetration.png (force against penetration with the fitted law, per collision).
 
     \b
     Example:
       hilcontact identify runs/p --out runs/p-id
-      hilcontact identify log.csv --scenario my.toml --out id
+      hilcontact identify runs/rt1.mcap --out runs/rt1-id
+      hilcontact identify log.csv --scenario my.toml --columns fz=-Fz,px=x_mm:mm --out id
       hilcontact identify bag/ --wrench-topic /ft --pose-topic /tip --out id
     """
-    from ..recording import identify, read_recording, save_identification
+    from ..recording import check_plausibility, identify, read_recording, save_identification
 
     if not 0.0 < forgetting < 1.0:
         _fail(f"--forgetting {forgetting}: must be between 0 and 1 (exclusive)", 2)
+    console = Console(stderr=True)
     with _errors():
         check_output_folder(out, overwrite=force)
-        recording = read_recording(log, scenario, parse_set_options(sets), wrench_topic, pose_topic, twist_topic)
+        recording = read_recording(log, scenario, parse_set_options(sets), wrench_topic, pose_topic, twist_topic,
+                                   columns=columns)
         ticks, collisions = identify(recording, forgetting)
-        save_identification(recording, ticks, collisions, out, force)
+        findings = check_plausibility(recording, ticks, collisions)
+        errors = [f for f in findings if f.level == "error"]
+        if errors and not unchecked:
+            raise ScenarioError(f"{log}: {errors[0].message}; --unchecked writes it anyway")
+        save_identification(recording, ticks, collisions, out, force, plots=not no_plots)
+    for note in recording.derived:
+        console.print(f"note: {escape(note)}")
+    for finding in findings:
+        console.print(f"[yellow]warning:[/yellow] {escape(finding.message)}")
     _report_identification(Console(), str(log), collisions)

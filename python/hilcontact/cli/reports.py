@@ -313,6 +313,8 @@ def _report_realtime(console: Console, run: Run) -> None:
             f"foreign {link.get('foreign')}, stale {link.get('stale')}",
             soft_wrap=True,
         )
+    for text, warning in _identification_lines(run):
+        console.print(("[yellow]warning:[/yellow] " if warning else "") + escape(text), soft_wrap=True)
     if rsi := rt.get("rsi"):
         ans = rsi.get("answer_latency_us", {})
         console.print(
@@ -320,6 +322,44 @@ def _report_realtime(console: Console, run: Run) -> None:
             f"late (> {rsi.get('deadline_us', 0):.0f} µs) {rsi.get('answers_late')}, unanswered {rsi.get('unanswered')}",
             soft_wrap=True,
         )
+
+
+#: The identification of a real-time run is said to drift beyond these: a mean stiffness error
+#: of 2 % (simulations stay below 0.2 %, docs/identification.md) or a mean damping error of
+#: 50 N·s/m (noisy simulations stay below 13).
+IDENTIFICATION_DRIFT = (0.02, 50.0)
+
+
+def _identification_lines(run: Run) -> list[tuple[str, bool]]:
+    """The summary's identification: k̂ and ĉ at the last contact tick, their mean errors
+    against the scenario (metrics.json's ``identification``), and a warning when they drift
+    (:data:`IDENTIFICATION_DRIFT`), naming the stale sensor records if there were many."""
+    import numpy as np
+
+    ident = run.metrics.get("identification")
+    series = run.timeseries
+    if not ident or "stiffness_estimate" not in series.columns:
+        return []
+    force = np.linalg.norm(series[[f"measured_force_{a}" for a in "xyz"]].to_numpy(dtype=float), axis=1)
+    k_hat, c_hat = series["stiffness_estimate"].to_numpy(dtype=float), series["damping_estimate"].to_numpy(dtype=float)
+    contact = np.flatnonzero((force > 3.0) & np.isfinite(k_hat))
+    if len(contact) == 0:
+        return []
+    last = contact[-1]
+    k, c = float(run.scenario.contact.stiffness), float(run.scenario.contact.damping)
+    k_err, c_err = ident.get("stiffness_error"), ident.get("damping_error")
+    line = (f"identification: k̂ {k_hat[last] / 1e3:.2f} N/mm, ĉ {c_hat[last] / 1e3:.3f} N·s/mm at the last contact "
+            f"(scenario {k / 1e3:.2f} N/mm, {c / 1e3:.3f} N·s/mm); mean error over {ident.get('samples')} contact "
+            f"samples after the first collision: k {k_err * 100:.3g} %, c {c_err / 1e3:.3g} N·s/mm")
+    lines = [(line, False)]
+    if k_err is not None and c_err is not None and (k_err > IDENTIFICATION_DRIFT[0] or c_err > IDENTIFICATION_DRIFT[1]):
+        rt = run.metrics.get("realtime") or {}
+        late, ticks = (rt.get("sensor") or {}).get("late", 0), rt.get("ticks") or 1
+        cause = (f"; {late / ticks:.0%} of the ticks had no new sensor record (late), so their force was older than "
+                 "the kinematics it was identified against (docs/identification.md, real time)") if late > 0.05 * ticks else ""
+        lines.append((f"the identification drifts (k {k_err * 100:.3g} % > {IDENTIFICATION_DRIFT[0] * 100:g} % "
+                      f"or c {c_err:.3g} > {IDENTIFICATION_DRIFT[1]:g} N·s/m){cause}", True))
+    return lines
 
 
 def _vector(values: Sequence[float] | None, scale: float = 1.0, fmt: str = ".2f") -> str:
