@@ -265,14 +265,29 @@ impl ContactGeometry {
         tip: &Vector3<f64>,
         tip_velocity: &Vector3<f64>,
     ) -> (Vector3<f64>, f64) {
+        self.force_with_added_damping(tip, tip_velocity, 0.0)
+    }
+
+    /// [`ContactGeometry::force_and_friction_power`] with a damping `added_damping` (N·s/m)
+    /// added to each pushing wall's normal force, `F_n = max(0, f(d, ḋ) + c_add·ḋ)` (never
+    /// pulling; friction acts on that `F_n`): the facility's own losses
+    /// (`facility.dissipation`), which the ideal reference does not have. Allocation-free.
+    pub fn force_with_added_damping(
+        &self,
+        tip: &Vector3<f64>,
+        tip_velocity: &Vector3<f64>,
+        added_damping: f64,
+    ) -> (Vector3<f64>, f64) {
         let mut force = Vector3::zeros();
         let mut power = 0.0;
         for wall in &self.walls {
             let d = wall.penetration(tip);
             if d > 0.0 {
-                let f_n = self
-                    .law
-                    .normal_force(d, wall.penetration_rate(tip_velocity));
+                let d_dot = wall.penetration_rate(tip_velocity);
+                let mut f_n = self.law.normal_force(d, d_dot);
+                if added_damping != 0.0 && f_n > 0.0 {
+                    f_n = (f_n + added_damping * d_dot).max(0.0);
+                }
                 force += wall.normal * f_n;
                 if let Some(friction) = &self.friction {
                     // sliding velocity: the tip's velocity along the wall

@@ -246,19 +246,19 @@ impl Facility for FacilityModel {
 }
 
 /// Contact force on the rod (`t`) and the wrench on the frame for the robot's actual motion,
-/// with the facility's added damping `dissipation` (N·s/m) along the force, never pulling.
+/// with the facility's added damping `dissipation` (N·s/m) on each pushing wall's normal force,
+/// never pulling ([`crate::contact::ContactGeometry::force_with_added_damping`]).
 fn physical_wrench(
     system: &TwoBodySystem,
     actual: &RelativeMotion,
     dissipation: f64,
 ) -> (Vector3<f64>, FrameWrench) {
-    let (mut force, tip) = system.contact_force_at(actual);
-    let magnitude = force.norm();
-    if dissipation > 0.0 && magnitude > 0.0 {
-        let normal = force / magnitude;
-        let speed = actual.point_velocity(&system.rod_tip).dot(&normal);
-        force = normal * (magnitude - dissipation * speed).max(0.0);
-    }
+    let tip = actual.point(&system.rod_tip);
+    let (force, _) = system.contact.force_with_added_damping(
+        &tip,
+        &actual.point_velocity(&system.rod_tip),
+        dissipation,
+    );
     (
         force,
         FrameWrench::from_rod_force(&force, &tip, &system.sensor_origin),
