@@ -14,13 +14,13 @@ import sys
 import threading
 from typing import Any
 
-__all__ = ["guard", "started"]
+__all__ = ["finishing", "guard", "is_command", "started"]
 
 #: The line printed when the command is stopped while it starts.
 LINE = b"interrupted: stopped while starting; nothing written\n"
 
 
-def _is_command() -> bool:
+def is_command() -> bool:
     """Whether this process is the ``hilcontact`` command (console script or ``-m``)."""
     if sys.argv and os.path.basename(sys.argv[0]) == "hilcontact":
         return True
@@ -37,7 +37,7 @@ def guard() -> None:
     """In the ``hilcontact`` command's main thread, while Python's own Ctrl-C handler is in
     place: a Ctrl-C or SIGTERM from now until :func:`started` prints :data:`LINE` and exits
     with code 130."""
-    if not _is_command() or threading.current_thread() is not threading.main_thread():
+    if not is_command() or threading.current_thread() is not threading.main_thread():
         return
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         signal.signal(signal.SIGINT, _quit)
@@ -54,3 +54,13 @@ def started() -> None:
         signal.signal(signal.SIGINT, signal.default_int_handler)
     if signal.getsignal(signal.SIGTERM) is _quit:
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def finishing() -> None:
+    """The command has done its work and exits: in the ``hilcontact`` command's main thread, a
+    Ctrl-C or SIGTERM from now on is ignored. (Python's finalisation puts the default handlers
+    back, and a signal landing there would end a finished command as killed, exit -2.)"""
+    if not is_command() or threading.current_thread() is not threading.main_thread():
+        return
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)

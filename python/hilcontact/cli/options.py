@@ -19,7 +19,7 @@ from typing import Any
 
 import click
 
-from .._startup import started
+from .._startup import finishing, started
 from ..errors import HilContactError, RealtimeOptionError, ScenarioError
 from ..limits import Limits
 from ..output import OutputError, ReplacedWhileRunning, check_output_folder, resolve_path, written_folders
@@ -96,31 +96,40 @@ class _Cli(click.Group):
         if not standalone_mode:
             return super().main(*args, standalone_mode=False, **kwargs)
         try:
-            try:
-                code = super().main(*args, standalone_mode=False, **kwargs)
-            except click.Abort as exc:
-                if not isinstance(exc.__cause__, KeyboardInterrupt):
-                    raise
-                raise _Interrupted() from None
+            code = self._exit_code(*args, **kwargs)
+            finishing()  # from here on a Ctrl-C is ignored: the command is done
         except (_Interrupted, KeyboardInterrupt):
             _interrupted_exit()
+        sys.exit(code)
+
+    def _exit_code(self, *args: Any, **kwargs: Any) -> int | str | None:
+        """Run the command; its exit code, after printing the one line of a usage error."""
+        try:
+            code = super().main(*args, standalone_mode=False, **kwargs)
+        except click.Abort as exc:
+            if isinstance(exc.__cause__, KeyboardInterrupt):
+                raise _Interrupted() from None
+            click.echo("Aborted!", err=True)
+            return 1
         except click.UsageError as exc:
             command = exc.ctx.command_path + ": " if exc.ctx is not None and exc.ctx.parent is not None else ""
             click.echo(_one_line(command + exc.format_message()), err=True)
-            sys.exit(exc.exit_code)
+            return exc.exit_code
         except click.ClickException as exc:
             click.echo(_one_line(exc.format_message()), err=True)
-            sys.exit(exc.exit_code)
-        except (click.Abort, EOFError):
+            return exc.exit_code
+        except EOFError:
             click.echo("Aborted!", err=True)
-            sys.exit(1)
-        sys.exit(code if isinstance(code, int) else 0)
+            return 1
+        except SystemExit as exc:  # a command's own exit (sys.exit)
+            return exc.code
+        return code if isinstance(code, int) else 0
 
 
 def _interrupted_exit() -> None:
     """Print :func:`interrupted_line` and exit with code 130; a second Ctrl-C meanwhile changes
     nothing."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    finishing()
     try:
         click.echo(interrupted_line(), err=True)
         sys.stderr.flush()
