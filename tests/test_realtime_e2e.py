@@ -160,7 +160,7 @@ PAIRS = [(sensor, robot) for robot in ("egm", "rsi") for sensor in ("rdt", "sri"
 def test_every_protocol_pair_runs_pida_faithfully_and_stops_none(core, tmp_path, sensor, robot):
     """The issue's matrix: for each sensor × robot protocol pair, emulator and loop as separate
     processes, pida at 20 ms keeps at least three rebounds at the ideal speed and `none` is
-    stopped by the force limit."""
+    stopped by the (predictive) force limit."""
     _, metrics = run_against_facility(tmp_path, tmp_path / "pida", 0, "compensator.kind=pida", "simulation.duration=3.5",
                                       sensor=sensor, robot=robot)
     rt = metrics["realtime"]
@@ -176,16 +176,21 @@ def test_every_protocol_pair_runs_pida_faithfully_and_stops_none(core, tmp_path,
     _, none = run_against_facility(tmp_path, tmp_path / "none", 3, "compensator.kind=none", "simulation.duration=6",
                                    sensor=sensor, robot=robot)
     stop = none["realtime"]["stop"]
-    assert stop["kind"] == "force-limit" and stop["value"] > stop["limit"] == 500.0, stop
+    assert stop["kind"] == "predicted-force-limit" and stop["value"] > stop["limit"] == 500.0, stop
 
 
 def test_uncompensated_loop_diverges_and_the_force_limit_stops_it(core, tmp_path):
     out = tmp_path / "rt-none"
     result, metrics = run_against_facility(tmp_path, out, 3, "compensator.kind=none", "simulation.duration=6")
     assert metrics["status"] == "stopped"
-    assert metrics["reason"].startswith("force limit: |F| = ") and "> 500.0 N" in metrics["reason"]
+    # the predictive limit (first line): the command that would press the rod beyond the limit
+    # is not sent
+    assert metrics["reason"].startswith("predicted force limit: the next command would press the rod with |F| = ")
+    assert "> 500.0 N" in metrics["reason"]
     stop = metrics["realtime"]["stop"]
-    assert stop["kind"] == "force-limit" and stop["exit_code"] == 3 and stop["value"] > stop["limit"] == 500.0
+    assert stop["kind"] == "predicted-force-limit" and stop["exit_code"] == 3 and stop["value"] > stop["limit"] == 500.0
+    assert metrics["realtime"]["safety"]["limit_line"] == "predicted"
+    assert metrics["realtime"]["safety"]["predicted_peak_force"] <= 500.0
     values = covs(metrics)
     assert values and values[0] > 1.3, values  # every rebound faster than the ideal one
     assert all(b > a for a, b in zip(values, values[1:])), values
@@ -193,7 +198,8 @@ def test_uncompensated_loop_diverges_and_the_force_limit_stops_it(core, tmp_path
     # everything up to the stop is recorded, the stop tick included
     assert len(series) == metrics["realtime"]["samples"] == round(stop["time"] / 0.001) + 1
     measured = (series[["measured_force_x", "measured_force_y", "measured_force_z"]] ** 2).sum(axis=1) ** 0.5
-    assert measured.iloc[-1] > 500.0 and measured.iloc[:-1].max() <= 500.0
+    # the measured line (second) never tripped: the predicted one stopped the run first
+    assert measured.max() <= 500.0
     assert "status: stopped" in result.stdout
 
 

@@ -51,11 +51,31 @@ pub enum StopKind {
     NonFinite,
     /// The virtual energy passed the scenario's divergence bound.
     Diverged,
+    /// The force the hardware would feel at the new command (the scenario's contact law at
+    /// the commanded rod tip) above the force limit: stopped before it is sent.
+    PredictedForceLimit,
+    /// The moment the hardware would feel at the new command above the moment limit.
+    PredictedMomentLimit,
+    /// The robot's cycle, measured from its own time stamps (RSI IPOC, EGM time), is not the
+    /// configured one.
+    RobotCycle,
+    /// Too many consecutive answers to a robot that paces the loop left after its deadline.
+    LateAnswers,
+    /// The measured force at the first contact disagrees with the scenario's stiffness at
+    /// the robot's penetration: the sensor's units or scale are wrong.
+    Units,
+    /// The sensor's connection was reset or closed by the sensor.
+    SensorConnection,
+    /// Too many sensor frames with a wrong checksum.
+    SensorChecksum,
+    /// The robot's sequence (RSI IPOC) went backwards: the controller restarted or another
+    /// sender took over.
+    RobotSequence,
 }
 
 impl StopKind {
     /// Every kind, in the order of [`StopKind::code`].
-    pub const ALL: [StopKind; 10] = [
+    pub const ALL: [StopKind; 18] = [
         StopKind::Completed,
         StopKind::User,
         StopKind::ForceLimit,
@@ -66,6 +86,14 @@ impl StopKind {
         StopKind::Tracking,
         StopKind::NonFinite,
         StopKind::Diverged,
+        StopKind::PredictedForceLimit,
+        StopKind::PredictedMomentLimit,
+        StopKind::RobotCycle,
+        StopKind::LateAnswers,
+        StopKind::Units,
+        StopKind::SensorConnection,
+        StopKind::SensorChecksum,
+        StopKind::RobotSequence,
     ];
 
     /// The run's status for this stop.
@@ -119,6 +147,30 @@ pub struct Stop {
     pub limit: f64,
 }
 
+/// The sensor unit a ratio measured/expected force points to (", the sensor seems to report
+/// kgf", ...), empty when it is near none of them (within 25 %).
+pub fn likely_unit(ratio: f64) -> &'static str {
+    const UNITS: [(f64, &str); 4] = [
+        (
+            1.0 / 9.80665,
+            ": the sensor seems to report kgf (ratio near 1/9.81)",
+        ),
+        (
+            1.0 / 4.448222,
+            ": the sensor seems to report lbf (ratio near 1/4.448)",
+        ),
+        (1000.0, ": the sensor seems to report mN (ratio near 1000)"),
+        (
+            1.0 / 1000.0,
+            ": the sensor seems to report kN (ratio near 1/1000)",
+        ),
+    ];
+    UNITS
+        .iter()
+        .find(|(r, _)| ratio > 0.0 && (ratio / r).ln().abs() < 1.25f64.ln())
+        .map_or("", |(_, text)| text)
+}
+
 fn finite_or_null<S: serde::Serializer>(v: &f64, s: S) -> std::result::Result<S::Ok, S::Error> {
     if v.is_finite() {
         s.serialize_f64(*v)
@@ -158,6 +210,14 @@ impl Stop {
             StopKind::Tracking => format!("tracking limit: the fed-back rod tip is {:.1} mm from every command of the tracking window > {:.1} mm (tracking_limit) at {t:.3} s: frozen or wrong feedback, or a robot that does not follow", v * 1e3, l * 1e3),
             StopKind::NonFinite => format!("a state, force or command stopped being finite at {t:.3} s"),
             StopKind::Diverged => format!("diverged: energy {v:.4} J passed the divergence bound {l:.4} J at {t:.3} s"),
+            StopKind::PredictedForceLimit => format!("predicted force limit: the next command would press the rod with |F| = {v:.1} N > {l:.1} N (force_limit, the scenario's contact law at the commanded rod tip) at {t:.3} s"),
+            StopKind::PredictedMomentLimit => format!("predicted moment limit: the next command would load the sensor with |M| = {v:.2} N·m > {l:.2} N·m (moment_limit, the scenario's contact law at the commanded rod tip) at {t:.3} s"),
+            StopKind::RobotCycle => format!("robot cycle: the {robot} robot's cycle measured from its time stamps is {:.1} ms, configured {:.1} ms (the robot's period option) at {t:.3} s", v * 1e3, l * 1e3),
+            StopKind::LateAnswers => format!("late answers: {v:.0} consecutive answers to the {robot} robot left after their deadline (max_late_answers {l:.0}), stopped before the controller would at {t:.3} s"),
+            StopKind::Units => format!("units check: at the first contact the measured force is {v:.3} times the scenario's contact law at the robot's penetration (allowed 1/{l:.1} to {l:.1}: units_check_factor){} at {t:.3} s", likely_unit(v)),
+            StopKind::SensorConnection => format!("sensor connection: the {sensor} sensor {} its connection at {t:.3} s", if v == 1.0 { "reset (TCP RST)" } else if v == 0.0 { "closed" } else { "failed on" }),
+            StopKind::SensorChecksum => format!("sensor checksum errors: {v:.0} {sensor} frames with a wrong checksum or length (max_checksum_errors {l:.0}) at {t:.3} s"),
+            StopKind::RobotSequence => format!("robot sequence went backwards: the {robot} robot's sequence (IPOC) fell by {v:.0} at {t:.3} s (a restarted controller or another sender)"),
         })
     }
 }

@@ -51,10 +51,13 @@ struct Shared {
     finished: AtomicBool,
     tick: AtomicU64,
     contact_force_bits: AtomicU64,
+    peak_contact_force_bits: AtomicU64,
     sensor: SharedLinkStats,
     robot: SharedLinkStats,
     overruns: AtomicU64,
     max_latency_ns: AtomicU64,
+    /// The robot's session end: 0 running (or none), 1 ended cleanly, 2 ended with an error.
+    session: std::sync::atomic::AtomicU8,
 }
 
 /// A snapshot of the emulator's counters.
@@ -68,6 +71,8 @@ pub struct FacilityStatus {
     pub time: f64,
     /// Magnitude of the physical contact force, N.
     pub contact_force: f64,
+    /// Largest magnitude of the physical contact force so far (what the hardware felt), N.
+    pub peak_contact_force: f64,
     /// The sensor's protocol, e.g. `"RDT"`.
     pub sensor_protocol: &'static str,
     /// The robot's protocol, e.g. `"EGM"`.
@@ -94,6 +99,10 @@ pub struct FacilityStatus {
     pub overruns: u64,
     /// Largest wake-up latency, µs.
     pub max_latency_us: f64,
+    /// How the robot's session ended (KUKA RSI): true with the PC's end signal, false with
+    /// the controller's error (too many late answers), None while it runs or without
+    /// sessions.
+    pub session_ended_cleanly: Option<bool>,
 }
 
 /// Where the emulator listens and sends.
@@ -161,6 +170,7 @@ impl FacilityHandle {
                 moment: Vector3::new(o.sensor_offset[3], o.sensor_offset[4], o.sensor_offset[5]),
             },
             command: initial,
+            unit: o.sensor_unit.newtons(),
         };
         let thread = std::thread::Builder::new()
             .name("hil-facility".into())
@@ -195,6 +205,7 @@ impl FacilityHandle {
             tick,
             time: tick as f64 * self.period,
             contact_force: f64::from_bits(s.contact_force_bits.load(Ordering::Relaxed)),
+            peak_contact_force: f64::from_bits(s.peak_contact_force_bits.load(Ordering::Relaxed)),
             sensor_protocol: self.protocols.0,
             robot_protocol: self.protocols.1,
             sensor,
@@ -206,6 +217,11 @@ impl FacilityHandle {
             corrections_dropped: robot.dropped(),
             overruns: s.overruns.load(Ordering::Relaxed),
             max_latency_us: s.max_latency_ns.load(Ordering::Relaxed) as f64 / 1e3,
+            session_ended_cleanly: match s.session.load(Ordering::Relaxed) {
+                1 => Some(true),
+                2 => Some(false),
+                _ => None,
+            },
         }
     }
 
@@ -254,6 +270,8 @@ struct Emulator {
     offset: Wrench,
     /// The command the robot follows (newest command, held), `t` frame.
     command: RelativeMotion,
+    /// Newtons per unit the sensor reports in (fault injection: 9.80665 for kgf).
+    unit: f64,
 }
 
 impl Emulator {
@@ -281,6 +299,12 @@ impl Emulator {
     fn publish(&self) {
         self.shared.sensor.store(self.sensor.stats());
         self.shared.robot.store(self.robot.stats());
+        let session = match self.robot.session_ended_cleanly() {
+            Some(true) => 1,
+            Some(false) => 2,
+            None => 0,
+        };
+        self.shared.session.store(session, Ordering::Relaxed);
     }
 
     fn step(&mut self, k: u64) {
@@ -290,13 +314,17 @@ impl Emulator {
             self.first_command.get_or_insert(k);
         }
         let m = self.facility.tick(&self.command);
-        self.shared.contact_force_bits.store(
-            self.facility.contact_force().norm().to_bits(),
-            Ordering::Relaxed,
-        );
+        let contact_force = self.facility.contact_force().norm();
+        self.shared
+            .contact_force_bits
+            .store(contact_force.to_bits(), Ordering::Relaxed);
+        // non-negative floats order as their bits
+        self.shared
+            .peak_contact_force_bits
+            .fetch_max(contact_force.to_bits(), Ordering::Relaxed);
         let wrench = Wrench {
-            force: m.force + self.offset.force,
-            moment: m.moment + self.offset.moment,
+            force: (m.force + self.offset.force) / self.unit,
+            moment: (m.moment + self.offset.moment) / self.unit,
         };
         let speaks = |after: Option<u64>| match (after, self.first_command) {
             (Some(after), Some(first)) => k < first.saturating_add(after),

@@ -12,6 +12,8 @@ use serde::{Deserialize, Serialize};
 
 use hilcontact_core::world::RelativeMotion;
 
+use crate::safety::CycleMeter;
+
 /// Longest extrapolation, s.
 pub const MAX_EXTRAPOLATION: f64 = 0.012;
 
@@ -54,6 +56,9 @@ struct Fed {
 pub struct FeedbackEstimator {
     mode: Extrapolation,
     fed: [Option<Fed>; 3],
+    /// The robot's cycle measured from the accepted poses' controller times (unchecked until
+    /// [`FeedbackEstimator::measure_cycle`]).
+    pub cycle: CycleMeter,
 }
 
 impl FeedbackEstimator {
@@ -62,7 +67,14 @@ impl FeedbackEstimator {
         FeedbackEstimator {
             mode,
             fed: [None; 3],
+            cycle: CycleMeter::new(0.0, 0.0),
         }
+    }
+
+    /// Measures the robot's cycle against `configured` s within `tolerance` (relative) from
+    /// the controller times of the poses accepted from now on ([`CycleMeter`]).
+    pub fn measure_cycle(&mut self, configured: f64, tolerance: f64) {
+        self.cycle = CycleMeter::new(configured, tolerance);
     }
 
     /// Adds a fed-back pose: controller time (s), local receive time (ns), position (m, `t`),
@@ -100,6 +112,7 @@ impl FeedbackEstimator {
             self.fed[0],
             self.fed[1],
         ];
+        self.cycle.push(robot_time);
         true
     }
 

@@ -44,5 +44,5 @@ pub use check::{check, CheckReport};
 pub use devices::{LinkStats, Pacing, RobotLink, RobotOptions, SensorLink, SensorOptions};
 pub use emulator::{EmulatorOptions, FacilityHandle};
 pub use error::{Result, RtError};
-pub use options::RuntimeOptions;
+pub use options::{ReportedUnit, RuntimeOptions};
 pub use runtime::HilHandle;

@@ -158,6 +158,34 @@ pub struct EmulatorOptions {
     /// Fault injection: an offset added to every measured wrench (an unbiased sensor),
     /// `[Fx, Fy, Fz]` N then `[Mx, My, Mz]` N·m, sensor frame.
     pub sensor_offset: [f64; 6],
+    /// Fault injection: the unit the sensor reports its wrench in while the loop takes N and
+    /// N·m (a box configured in kgf or lbf; moments scaled by the same factor).
+    pub sensor_unit: ReportedUnit,
+}
+
+/// The unit an emulated sensor reports in ([`EmulatorOptions::sensor_unit`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
+pub enum ReportedUnit {
+    /// Newtons (and N·m): right.
+    #[default]
+    N,
+    /// Kilogram-force: the wrench divided by 9.80665.
+    #[serde(rename = "kgf")]
+    Kgf,
+    /// Pound-force: the wrench divided by 4.448222.
+    #[serde(rename = "lbf")]
+    Lbf,
+}
+
+impl ReportedUnit {
+    /// Newtons per reported unit.
+    pub fn newtons(self) -> f64 {
+        match self {
+            ReportedUnit::N => 1.0,
+            ReportedUnit::Kgf => 9.80665,
+            ReportedUnit::Lbf => 4.448222,
+        }
+    }
 }
 
 /// The emulator's options once parsed ([`EmulatorOptions::parse`]): the devices' typed

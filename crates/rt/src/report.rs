@@ -22,7 +22,7 @@ use std::net::SocketAddr;
 use crate::clock::{SchedulingReport, TimingSummary};
 use crate::devices::{LinkStats, Pacing};
 use crate::error::{Result, RtError};
-use crate::safety::StopEvent;
+use crate::safety::{SafetyReport, StopEvent};
 
 /// One tick of the loop, as logged (fixed size, `Copy`): the simulation's record of a tick
 /// plus the loop's timing.
@@ -86,6 +86,9 @@ pub struct RunOutcome {
     pub sensor_offset: Option<[f64; 6]>,
     /// What the OS granted the loop thread: policy, priority, locked memory, CPU.
     pub scheduling: SchedulingReport,
+    /// What the safety functions saw: predicted and measured peaks, the limit line that
+    /// tripped, the robot's measured cycle, the units check.
+    pub safety: SafetyReport,
 }
 
 /// Everything a real-time run produces.
@@ -177,6 +180,7 @@ pub fn build_output(
         "robot_address": outcome.robot_address.map(|a| a.to_string()),
         "sensor_offset": outcome.sensor_offset,
         "scheduling": outcome.scheduling,
+        "safety": outcome.safety,
         "options": options,
     });
     // the links' own facts (RDT: counts_per_force, counts_per_torque, sensor_units; RSI: rsi)

@@ -12,7 +12,8 @@
 //! streaming is stopped, the sample log is drained, and the [`StopKind`] goes to
 //! `metrics.json` and the exit code.
 
-use hilcontact_core::frames::RelativeMotion;
+use hilcontact_core::frames::{FrameWrench, RelativeMotion};
+use hilcontact_core::world::TwoBodySystem;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
@@ -58,6 +59,22 @@ pub struct SafetyLimits {
     /// the command needs to move `tracking_limit`.
     #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub tracking_window: f64,
+    /// The predictive limit: each new command is checked, before it is sent, against
+    /// `force_limit` and `moment_limit` with the wrench the scenario's contact law gives at
+    /// the commanded rod tip (what the hardware will feel once the robot is there, one loop
+    /// delay later); the measured-wrench limits stay as a second line. `false` leaves only
+    /// the measured line.
+    pub predictive: bool,
+    /// The units check at the first contact: the measured force must be within this factor
+    /// (either way) of the scenario's contact law at the robot's fed-back penetration (> 1;
+    /// [`UnitsCheck`]).
+    #[schemars(extend("exclusiveMinimum" = 1.0))]
+    pub units_check_factor: f64,
+    /// Largest relative difference between the robot's cycle measured from its own time
+    /// stamps (RSI IPOC, EGM time) and the configured one, at the start and during the run
+    /// (> 0; [`CycleMeter`]).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    pub cycle_tolerance: f64,
 }
 
 impl Default for SafetyLimits {
@@ -72,6 +89,9 @@ impl Default for SafetyLimits {
             retreat_distance: 0.02,
             tracking_limit: 0.01,
             tracking_window: 0.5,
+            predictive: true,
+            units_check_factor: 3.0,
+            cycle_tolerance: 0.1,
         }
     }
 }
@@ -89,6 +109,7 @@ impl SafetyLimits {
             ("retreat_distance", self.retreat_distance),
             ("tracking_limit", self.tracking_limit),
             ("tracking_window", self.tracking_window),
+            ("cycle_tolerance", self.cycle_tolerance),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(RtError::option(
@@ -96,6 +117,13 @@ impl SafetyLimits {
                     format!("must be a positive number, got {v}"),
                 ));
             }
+        }
+        let f = self.units_check_factor;
+        if !(f.is_finite() && f > 1.0) {
+            return Err(RtError::option(
+                "units_check_factor",
+                format!("must be a number above 1, got {f}"),
+            ));
         }
         Ok(())
     }
@@ -131,6 +159,46 @@ pub fn check_wrench(
             kind: StopKind::MomentLimit,
             time,
             value: m,
+            limit: limits.moment_limit,
+        });
+    }
+    None
+}
+
+/// The wrench the hardware will feel once the robot has reached `command` (the relative
+/// motion commanded, `t`): the scenario's contact law at the commanded rod tip and its
+/// velocity, against the scenario's walls; returns `(|F|` N, `|M|` N·m about the sensor
+/// origin`)`, as the facility model computes the physical wrench. Never allocates.
+pub fn predicted_wrench(system: &TwoBodySystem, command: &RelativeMotion) -> (f64, f64) {
+    let (force, tip) = system.contact_force_at(command);
+    let wrench = FrameWrench::from_rod_force(&force, &tip, &system.sensor_origin);
+    (wrench.force.norm(), wrench.moment.norm())
+}
+
+/// The predictive limit on a new command's predicted wrench (`force` N, `moment` N·m, from
+/// [`predicted_wrench`]): a stop before the command is sent.
+pub fn check_predicted(
+    limits: &SafetyLimits,
+    force: f64,
+    moment: f64,
+    time: f64,
+) -> Option<StopEvent> {
+    if !limits.predictive {
+        return None;
+    }
+    if force.is_nan() || force > limits.force_limit {
+        return Some(StopEvent {
+            kind: StopKind::PredictedForceLimit,
+            time,
+            value: force,
+            limit: limits.force_limit,
+        });
+    }
+    if moment.is_nan() || moment > limits.moment_limit {
+        return Some(StopEvent {
+            kind: StopKind::PredictedMomentLimit,
+            time,
+            value: moment,
             limit: limits.moment_limit,
         });
     }
@@ -238,6 +306,184 @@ impl Tracking {
             limit: self.limit,
         })
     }
+}
+
+/// Steps of the robot's time stamps per measurement of its cycle ([`CycleMeter`]).
+pub const CYCLE_WINDOW: u32 = 10;
+
+/// The robot's cycle measured from its own time stamps (RSI: IPOC, ms; EGM: the feedback's
+/// time), against the configured one (`configured`, s) within `tolerance` (relative).
+///
+/// A step of the robot's time shorter than `configured·(1 − tolerance)` is a mismatch at
+/// once (the robot runs faster than configured); over each window of [`CYCLE_WINDOW`] steps
+/// the shortest step is the measured cycle (lost messages only lengthen steps), and a
+/// measured cycle longer than `configured·(1 + tolerance)` is a mismatch (the robot runs
+/// slower). A step that is not positive (a stale or repeated time) is not counted.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CycleMeter {
+    /// The configured cycle, s (0: nothing checked).
+    pub configured: f64,
+    /// Relative tolerance.
+    pub tolerance: f64,
+    last: Option<f64>,
+    window_min: f64,
+    window_steps: u32,
+    /// The shortest step of the last full window, s.
+    pub measured: Option<f64>,
+    /// The first mismatch: the measured cycle (or the too-short step), s.
+    pub mismatch: Option<f64>,
+}
+
+impl CycleMeter {
+    /// A meter of a robot configured at `configured` s (0 = unchecked), within `tolerance`.
+    pub fn new(configured: f64, tolerance: f64) -> Self {
+        CycleMeter {
+            configured,
+            tolerance,
+            last: None,
+            window_min: f64::INFINITY,
+            window_steps: 0,
+            measured: None,
+            mismatch: None,
+        }
+    }
+
+    /// Takes the robot's time stamp of an accepted message, s. Never allocates.
+    pub fn push(&mut self, robot_time: f64) {
+        let Some(last) = self.last.replace(robot_time) else {
+            return;
+        };
+        let step = robot_time - last;
+        if !(step > 0.0) || self.configured <= 0.0 {
+            return;
+        }
+        if step < self.configured * (1.0 - self.tolerance) && self.mismatch.is_none() {
+            self.measured = Some(step);
+            self.mismatch = Some(step);
+        }
+        self.window_min = self.window_min.min(step);
+        self.window_steps += 1;
+        if self.window_steps >= CYCLE_WINDOW {
+            let measured = self.window_min;
+            self.measured = Some(measured);
+            if measured > self.configured * (1.0 + self.tolerance) && self.mismatch.is_none() {
+                self.mismatch = Some(measured);
+            }
+            self.window_min = f64::INFINITY;
+            self.window_steps = 0;
+        }
+    }
+
+    /// Forgets the time stamps (not the result): e.g. after a restart of the stream.
+    pub fn restart(&mut self) {
+        self.last = None;
+        self.window_min = f64::INFINITY;
+        self.window_steps = 0;
+    }
+}
+
+/// The units and scale check of the first contact: the measured force against the force the
+/// scenario's contact law gives at the robot's fed-back pose (what the hardware feels, if the
+/// scenario's stiffness is the hardware's).
+///
+/// Both peaks are followed from the first tick the expected force passes `threshold`
+/// (`0.1·force_limit`); the check decides once the expected force has fallen below half its
+/// peak (the contact's first peak is past and the sensor, one delay later, has seen it), or
+/// when a force or moment stop comes first: the ratio of the peaks, measured / expected, must
+/// be within `1/factor ..= factor`; else the run stops ([`StopKind::Units`]) with the likely
+/// unit named ([`hilcontact_core::stop::likely_unit`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UnitsCheck {
+    /// Allowed factor either way (> 1).
+    pub factor: f64,
+    /// Expected force from which the contact counts, N.
+    pub threshold: f64,
+    peak_expected: f64,
+    peak_measured: f64,
+    /// The ratio of the peaks, once decided.
+    pub ratio: Option<f64>,
+}
+
+impl UnitsCheck {
+    /// A check with `limits.units_check_factor` from `0.1·limits.force_limit` on.
+    pub fn new(limits: &SafetyLimits) -> Self {
+        UnitsCheck {
+            factor: limits.units_check_factor,
+            threshold: 0.1 * limits.force_limit,
+            peak_expected: 0.0,
+            peak_measured: 0.0,
+            ratio: None,
+        }
+    }
+
+    /// Takes one tick's expected (N, from the law at the fed-back pose) and measured force
+    /// magnitudes; returns a stop when the check decides against the units. Never allocates.
+    pub fn push(&mut self, expected: f64, measured: f64, time: f64) -> Option<StopEvent> {
+        if self.ratio.is_some() {
+            return None;
+        }
+        if self.peak_expected < self.threshold && expected < self.threshold {
+            return None;
+        }
+        self.peak_expected = self.peak_expected.max(expected);
+        self.peak_measured = self.peak_measured.max(measured);
+        if expected < 0.5 * self.peak_expected {
+            return self.decide(time);
+        }
+        None
+    }
+
+    /// Decides with what was seen (a force or moment stop before the first peak was past):
+    /// the stop when the peaks disagree, None when they agree or no contact was seen.
+    pub fn decide(&mut self, time: f64) -> Option<StopEvent> {
+        if self.ratio.is_some() || self.peak_expected < self.threshold {
+            return None;
+        }
+        let ratio = self.peak_measured / self.peak_expected;
+        self.ratio = Some(ratio);
+        (!(ratio >= 1.0 / self.factor && ratio <= self.factor)).then_some(StopEvent {
+            kind: StopKind::Units,
+            time,
+            value: ratio,
+            limit: self.factor,
+        })
+    }
+
+    /// The expected and measured peaks so far, N.
+    pub fn peaks(&self) -> (f64, f64) {
+        (self.peak_expected, self.peak_measured)
+    }
+}
+
+/// What the safety functions saw over a run (`metrics.json` `realtime.safety`).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct SafetyReport {
+    /// Largest predicted force of the commands sent (the law at the commanded rod tip), N.
+    pub predicted_peak_force: f64,
+    /// Largest predicted moment of the commands sent, N·m.
+    pub predicted_peak_moment: f64,
+    /// Largest measured force magnitude, N.
+    pub measured_peak_force: f64,
+    /// Which line of the force and moment limits tripped: `"predicted"` (the command was
+    /// not sent), `"measured"`, or None.
+    pub limit_line: Option<&'static str>,
+    /// The robot's cycle measured from its time stamps, s (None: not enough of them).
+    pub robot_cycle: Option<f64>,
+    /// The configured robot cycle, s.
+    pub robot_cycle_configured: f64,
+    /// Virtual steps per robot cycle (robot pacing; 1 on the clock).
+    pub steps_per_cycle: u64,
+    /// The units check's ratio, measured / expected peak force at the first contact (None:
+    /// no contact reached the check's threshold).
+    pub units_ratio: Option<f64>,
+    /// The units check's expected peak (the law at the fed-back pose), N.
+    pub units_expected_peak: f64,
+    /// The units check's measured peak, N.
+    pub units_measured_peak: f64,
+    /// Whether the robot's session ended the way its program expects (KUKA RSI: the end
+    /// signal answered until the controller stopped sending); None: no end of session in the
+    /// protocol, or no pose to hold.
+    pub session_ended_cleanly: Option<bool>,
 }
 
 #[cfg(test)]
@@ -409,5 +655,89 @@ mod tests {
                 "feedback {feedback:?}, last command {last:?}"
             );
         }
+    }
+
+    #[test]
+    fn the_cycle_meter_finds_both_mismatches_and_tolerates_lost_messages() {
+        // a 4 ms robot with every third message lost: measured 4 ms, no mismatch
+        let mut m = CycleMeter::new(0.004, 0.1);
+        for i in 0..100u32 {
+            if i % 3 != 2 {
+                m.push(f64::from(i) * 0.004);
+            }
+        }
+        assert!((m.measured.unwrap() - 0.004).abs() < 1e-12 && m.mismatch.is_none());
+        // a 12 ms robot configured at 4 ms: the window's shortest step is 12 ms
+        let mut m = CycleMeter::new(0.004, 0.1);
+        for i in 0..(CYCLE_WINDOW + 1) {
+            assert!(m.mismatch.is_none());
+            m.push(f64::from(i) * 0.012);
+        }
+        assert!((m.mismatch.unwrap() - 0.012).abs() < 1e-12);
+        // a 4 ms robot configured at 12 ms: the first step
+        let mut m = CycleMeter::new(0.012, 0.1);
+        m.push(1.000);
+        m.push(1.004);
+        assert!((m.mismatch.unwrap() - 0.004).abs() < 1e-12);
+        // repeated or older stamps are not steps
+        let mut m = CycleMeter::new(0.004, 0.1);
+        for t in [1.0, 1.0, 0.9, 1.004] {
+            m.push(t);
+        }
+        assert!(m.mismatch.is_none());
+    }
+
+    #[test]
+    fn the_units_check_takes_the_peaks_and_names_the_unit() {
+        let limits = SafetyLimits::default(); // threshold 50 N, factor 3
+                                              // a half sine of 400 N expected, measured 3 ms late in `scale` units
+        for (scale, stops, unit) in [
+            (1.0, false, ""),
+            (9.80665, true, "kgf"),
+            (4.448222, true, "lbf"),
+            (1e-3, true, "mN"),
+            (2.0, false, ""),
+        ] {
+            let mut check = UnitsCheck::new(&limits);
+            let f = |t: f64| (400.0 * (t * std::f64::consts::PI / 0.25).sin()).max(0.0);
+            let mut stop = None;
+            for k in 0..400 {
+                let t = k as f64 * 0.001;
+                if let Some(s) = check.push(f(t), f(t - 0.003) / scale, t) {
+                    stop = Some(s);
+                    break;
+                }
+            }
+            let ratio = check.ratio.expect("decided");
+            assert!((ratio * scale - 1.0).abs() < 0.01, "{scale}: {ratio}");
+            assert_eq!(stop.is_some(), stops, "{scale}");
+            if let Some(s) = stop {
+                assert_eq!(s.kind, StopKind::Units);
+                assert!(s.reason().unwrap().contains(unit), "{:?}", s.reason());
+            }
+        }
+        // no contact above the threshold: nothing decided, nothing stopped
+        let mut check = UnitsCheck::new(&limits);
+        assert!(check.push(40.0, 4.0, 0.0).is_none() && check.decide(0.0).is_none());
+        assert!(check.ratio.is_none());
+    }
+
+    #[test]
+    fn the_predicted_limit_trips_above_the_limit_only_when_on() {
+        let l = SafetyLimits::default();
+        assert!(check_predicted(&l, 499.0, 10.0, 0.0).is_none());
+        assert_eq!(
+            check_predicted(&l, 501.0, 10.0, 0.0).unwrap().kind,
+            StopKind::PredictedForceLimit
+        );
+        assert_eq!(
+            check_predicted(&l, 10.0, 101.0, 0.0).unwrap().kind,
+            StopKind::PredictedMomentLimit
+        );
+        let off = SafetyLimits {
+            predictive: false,
+            ..l
+        };
+        assert!(check_predicted(&off, 1e6, 1e6, 0.0).is_none());
     }
 }

@@ -45,7 +45,7 @@ fn sri_pida_at_20ms_keeps_the_rebound_speed_in_real_time() {
 fn sri_uncompensated_loop_is_stopped_by_the_force_limit() {
     let m = run(CompensatorConfig::default(), 6.0);
     assert_eq!(m["status"], "stopped");
-    assert_eq!(m["realtime"]["stop"]["kind"], "force-limit");
+    assert_eq!(m["realtime"]["stop"]["kind"], "predicted-force-limit");
     assert_eq!(m["realtime"]["stop"]["exit_code"], 3);
     let covs = covs(&m);
     assert!(covs.first().is_some_and(|c| *c > 1.3), "{covs:?}");

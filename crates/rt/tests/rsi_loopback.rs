@@ -83,7 +83,7 @@ fn rsi_uncompensated_loop_is_stopped_by_the_force_limit() {
     let s = scenario(CompensatorConfig::default(), 6.0);
     let m = run(&s, CorrectionMode::Absolute);
     assert_eq!(m["status"], "stopped");
-    assert_eq!(m["realtime"]["stop"]["kind"], "force-limit");
+    assert_eq!(m["realtime"]["stop"]["kind"], "predicted-force-limit");
     assert_eq!(m["realtime"]["stop"]["exit_code"], 3);
     assert!(covs(&m).first().is_some_and(|c| *c > 1.3), "{:?}", covs(&m));
 }

@@ -152,6 +152,12 @@ pub trait SensorLink: Send {
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
         serde_json::Map::new()
     }
+
+    /// A fault the link saw and named, which stops the run (e.g. the sensor reset its TCP
+    /// connection, too many checksum errors); None while there is none. Never allocates.
+    fn fault(&self) -> Option<LinkFault> {
+        None
+    }
 }
 
 /// A robot controller's external-motion interface as the loop sees it: feedback in, command
@@ -226,6 +232,32 @@ pub trait RobotLink: Send {
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
         serde_json::Map::new()
     }
+
+    /// A fault the link saw and named, which stops the run (e.g. too many late answers, the
+    /// robot's sequence going backwards); None while there is none. Never allocates.
+    fn fault(&self) -> Option<LinkFault> {
+        None
+    }
+
+    /// Ends the robot's session after the run's last hold, holding `pose` (`t`), the way the
+    /// robot's program expects (KUKA RSI: answers with the end signal until the controller
+    /// stops sending); returns whether the session ended cleanly (None: the protocol has no
+    /// end of session). Not real-time.
+    fn end_session(&mut self, _pose: &RelativeMotion) -> Option<bool> {
+        None
+    }
+}
+
+/// A fault a link saw, named by the stop it causes: its kind, the offending value and its
+/// limit (units as in [`hilcontact_core::stop::Stop`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkFault {
+    /// The stop it causes (e.g. `LateAnswers`, `SensorConnection`).
+    pub kind: hilcontact_core::stop::StopKind,
+    /// The offending value (a count, a drop of the sequence), NaN when there is none.
+    pub value: f64,
+    /// Its limit, NaN when there is none.
+    pub limit: f64,
 }
 
 /// What a link needs to know of the run when it is opened.
@@ -464,6 +496,14 @@ pub trait RobotEndpoint: Send {
     /// feedback of its `actual` motion (`t` frame, m) when the protocol's own period is due;
     /// `send = false` sends nothing (fault injection: a silent robot). Never allocates.
     fn feedback(&mut self, k: u64, actual: &RelativeMotion, send: bool);
+
+    /// How the robot's session ended, as the controller sees it: Some(true) once the PC
+    /// ended it with the protocol's end signal (KUKA RSI: `<Stop>1</Stop>`), Some(false) once
+    /// the controller stopped it with an error (too many late answers), None while it runs or
+    /// when the protocol has no session.
+    fn session_ended_cleanly(&self) -> Option<bool> {
+        None
+    }
 
     /// The endpoint's counters (`sent`: feedback messages; `accepted`: commands taken).
     fn stats(&self) -> &LinkStats;

@@ -12,6 +12,7 @@ use crate::clock::now_ns;
 use crate::devices::Wrench;
 use crate::error::{Result, RtError};
 use crate::offset::{OffsetMode, WrenchStats};
+use crate::safety::CYCLE_WINDOW;
 
 impl Loop {
     /// Start-up (not real-time): requests streaming, waits for the first record and feedback,
@@ -34,15 +35,24 @@ impl Loop {
             if let Some(pose) = self.estimator.last_pose() {
                 self.robot.hold(&pose, now_ns().saturating_sub(self.t0_ns));
             }
-            if self.sensor.stats().accepted > 0 && self.estimator.has_feedback() {
+            let cycle = &self.estimator.cycle;
+            let cycle_known = cycle.measured.is_some() || cycle.mismatch.is_some();
+            if self.sensor.stats().accepted > 0 && self.estimator.has_feedback() && cycle_known {
                 break;
             }
             if now - start > timeout_ns {
-                let missing = missing_peers(
+                let mut missing = missing_peers(
                     self.sensor.as_ref(),
                     self.robot.as_ref(),
                     self.estimator.has_feedback(),
                 );
+                if missing.is_empty() {
+                    missing.push(format!(
+                        "too few {} messages to measure the robot's cycle ({} steps of its time stamps)",
+                        self.robot.name(),
+                        CYCLE_WINDOW
+                    ));
+                }
                 return Err(RtError::Connect(format!(
                     "{} within {} s (connect_timeout)",
                     missing.join(" and "),
@@ -54,6 +64,17 @@ impl Loop {
                 last_request = now;
             }
             std::thread::sleep(Duration::from_millis(1));
+        }
+        // the robot's cycle, from its own time stamps, must be the configured one
+        if let Some(measured) = self.estimator.cycle.mismatch {
+            self.hold(None);
+            return Err(RtError::Connect(format!(
+                "the {} robot's cycle measured from its time stamps is {:.1} ms, configured {:.1} ms (the robot's period option; cycle_tolerance {:.0} %): configure the same cycle on both sides",
+                self.robot.name(),
+                measured * 1e3,
+                self.estimator.cycle.configured * 1e3,
+                self.limits.cycle_tolerance * 1e2
+            )));
         }
         // the robot must be where the scenario starts
         let actual = self

@@ -26,7 +26,7 @@ use crate::output::events::realtime_end;
 use crate::output::run_folder::RunFolder;
 use crate::output::Outputs;
 use crate::report::{HilOutput, RunOutcome, Sample};
-use crate::safety::Tracking;
+use crate::safety::{SafetyReport, Tracking, UnitsCheck};
 
 /// A running HIL loop.
 pub struct HilHandle {
@@ -85,10 +85,13 @@ impl HilHandle {
         outputs: Outputs,
     ) -> Result<Self> {
         let o = options;
-        if let Err(e) = check_pacing(robot.as_ref(), plan.period) {
-            outputs.discard();
-            return Err(e);
-        }
+        let steps = match check_pacing(robot.as_ref(), plan.period) {
+            Ok(steps) => steps,
+            Err(e) => {
+                outputs.discard();
+                return Err(e);
+            }
+        };
         let pacing = robot.pacing();
         let feedback_period = robot.feedback_period();
 
@@ -115,6 +118,15 @@ impl HilHandle {
             period,
             period_ns: (period * 1e9).round() as u64,
             ticks,
+            system: plan.system.clone(),
+            steps,
+            last_step: 0,
+            units: UnitsCheck::new(&o.limits),
+            safety: SafetyReport {
+                robot_cycle_configured: feedback_period,
+                steps_per_cycle: steps,
+                ..Default::default()
+            },
             limits: o.limits,
             start_tip,
             initial: RelativeMotion {
@@ -135,7 +147,11 @@ impl HilHandle {
             moment: Vector3::zeros(),
             robot,
             last_robot_ns: 0,
-            estimator: FeedbackEstimator::new(o.extrapolation),
+            estimator: {
+                let mut e = FeedbackEstimator::new(o.extrapolation);
+                e.measure_cycle(feedback_period, o.limits.cycle_tolerance);
+                e
+            },
             last_command: None,
             last_free: None,
             tracking: Tracking::new(&o.limits, period),

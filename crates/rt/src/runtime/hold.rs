@@ -20,7 +20,7 @@ impl Loop {
             Pacing::Robot => {
                 let n = self
                     .robot
-                    .wait(now_ns() + 2 * self.period_ns, &mut self.estimator);
+                    .wait(now_ns() + 2 * self.cycle_ns(), &mut self.estimator);
                 self.robot_arrived(n, now_ns());
             }
         }
@@ -47,7 +47,8 @@ impl Loop {
         let Some(pose) = at.or_else(|| self.checked_pose()) else {
             return;
         };
-        let periods = (self.hold_time / self.period).ceil() as u64;
+        let cycle = self.cycle_ns() as f64 * 1e-9;
+        let periods = (self.hold_time / cycle).ceil() as u64;
         let start = now_ns();
         for i in 0..periods.max(1) {
             self.next_stop_period(start, i);
@@ -74,8 +75,9 @@ impl Loop {
         // never farther than retreat_distance: along the same line
         let reach = (self.limits.retreat_distance / distance).min(1.0);
         let speed = self.limits.retreat_speed;
-        let periods = (distance * reach / (speed * self.period)).ceil() as u64;
-        let velocity = (free.position - from.position) * (reach / (periods as f64 * self.period));
+        let cycle = self.cycle_ns() as f64 * 1e-9;
+        let periods = (distance * reach / (speed * cycle)).ceil() as u64;
+        let velocity = (free.position - from.position) * (reach / (periods as f64 * cycle));
         let start = now_ns();
         let mut command = from;
         for i in 1..=periods {

@@ -47,8 +47,10 @@ pub(crate) fn link_context(plan: &Plan, options: &RuntimeOptions) -> LinkContext
 }
 
 /// Refuses a robot link whose feedback period is not a positive number, or that paces the
-/// loop ([`Pacing::Robot`]) at another period than the scenario's (`period`, s).
-pub(crate) fn check_pacing(robot: &dyn RobotLink, period: f64) -> Result<()> {
+/// loop ([`Pacing::Robot`]) at a cycle that is not a whole multiple of the scenario's `period`
+/// (s); returns the virtual steps per loop wake-up: the robot's cycle / `period` on robot
+/// pacing (the virtual dynamics keep the scenario's period), 1 on the clock.
+pub(crate) fn check_pacing(robot: &dyn RobotLink, period: f64) -> Result<u64> {
     let feedback_period = robot.feedback_period();
     if !(feedback_period.is_finite() && feedback_period > 0.0) {
         return Err(RtError::option(
@@ -59,19 +61,24 @@ pub(crate) fn check_pacing(robot: &dyn RobotLink, period: f64) -> Result<()> {
             ),
         ));
     }
-    if robot.pacing() == Pacing::Robot && (feedback_period - period).abs() > 1e-6 * feedback_period
-    {
+    if robot.pacing() == Pacing::Clock {
+        return Ok(1);
+    }
+    let steps = (feedback_period / period).round();
+    if steps < 1.0 || (steps * period - feedback_period).abs() > 1e-6 * feedback_period {
         return Err(RtError::option(
             "simulation.period",
             format!(
-                "the {} robot paces the loop every {} s: set simulation.period = {}",
+                "the {} robot paces the loop every {} s, which is not a whole number of simulation.period = {} s: use a period that divides {} s (e.g. {} or 0.001)",
                 robot.name(),
+                feedback_period,
+                period,
                 feedback_period,
                 feedback_period
             ),
         ));
     }
-    Ok(())
+    Ok(steps as u64)
 }
 
 /// What is missing at start: "no RDT record from the sensor at ..." and/or "no EGM feedback

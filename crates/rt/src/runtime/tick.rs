@@ -19,7 +19,11 @@ use crate::error::Result;
 use crate::feedback::FeedbackEstimator;
 use crate::offset::{OffsetMode, OffsetOptions};
 use crate::report::{RunOutcome, Sample};
-use crate::safety::{check_workspace, check_wrench, SafetyLimits, StopEvent, StopKind, Tracking};
+use crate::safety::{
+    check_predicted, check_workspace, check_wrench, predicted_wrench, SafetyLimits, SafetyReport,
+    StopEvent, StopKind, Tracking, UnitsCheck,
+};
+use hilcontact_core::world::TwoBodySystem;
 
 /// Below this measured force magnitude the rod is taken as free of contact (the retreat
 /// target of a force stop), N.
@@ -33,6 +37,18 @@ pub(super) struct Loop {
     pub(super) period: f64,
     pub(super) period_ns: u64,
     pub(super) ticks: u64,
+    /// The scenario's two bodies and contact (the predicted wrench of a command, the
+    /// expected force at the robot's pose).
+    pub(super) system: TwoBodySystem,
+    /// Virtual steps per robot message (robot pacing: the robot's cycle / `period`; 1 on
+    /// the clock).
+    pub(super) steps: u64,
+    /// The last virtual step run.
+    pub(super) last_step: u64,
+    /// The units check of the first contact.
+    pub(super) units: UnitsCheck,
+    /// What the safety functions saw (peaks, the line that tripped, the cycle).
+    pub(super) safety: SafetyReport,
     pub(super) limits: SafetyLimits,
     pub(super) start_tip: Vector3<f64>,
     pub(super) initial: RelativeMotion,
@@ -73,6 +89,23 @@ pub(super) struct Loop {
     pub(super) scheduling: SchedulingReport,
 }
 
+/// Whether a stop of `kind` backs the robot away from the contact before it holds: the
+/// stops that may find the rod pressed into a wall and a robot that still follows.
+pub(super) fn retreats(kind: StopKind) -> bool {
+    matches!(
+        kind,
+        StopKind::ForceLimit
+            | StopKind::MomentLimit
+            | StopKind::PredictedForceLimit
+            | StopKind::PredictedMomentLimit
+            | StopKind::Units
+            | StopKind::RobotCycle
+            | StopKind::LateAnswers
+            | StopKind::SensorConnection
+            | StopKind::SensorChecksum
+    )
+}
+
 impl Loop {
     pub(super) fn run(&mut self) -> Result<RunOutcome> {
         let connected = self.connect();
@@ -85,6 +118,7 @@ impl Loop {
         let mut stop = StopEvent::plain(StopKind::Completed, self.ticks as f64 * self.period);
         let mut last_wake: Option<u64> = None;
         let mut k = 0u64;
+        let cycle_ns = self.cycle_ns();
         while k <= self.ticks {
             let (wake, deadline) = match self.pacing {
                 Pacing::Clock => {
@@ -97,38 +131,44 @@ impl Loop {
             let latency = wake.saturating_sub(deadline);
             self.wake.record(latency);
             if let Some(prev) = last_wake {
-                self.period_hist
-                    .record((wake - prev).abs_diff(self.period_ns));
+                self.period_hist.record((wake - prev).abs_diff(cycle_ns));
             }
             last_wake = Some(wake);
             let outcome = self.tick(k, wake, latency);
             let end = now_ns();
             self.compute.record(end - wake);
-            if end > deadline + self.period_ns {
+            if end > deadline + cycle_ns {
                 self.overruns += 1;
             }
-            self.publish(k + 1, latency);
+            self.publish(self.last_step + 1, latency);
             if let Some(event) = outcome {
                 stop = event;
                 break;
             }
-            k += 1;
+            k += self.steps;
         }
         let wall_time = (now_ns() - self.t0_ns) as f64 * 1e-9;
         self.shared
             .stop_code
             .store(stop.kind.code(), Ordering::Release);
         self.shared.phase.store(2, Ordering::Release);
-        // a force or moment stop first backs away from the contact, then holds there
-        let retreated = matches!(stop.kind, StopKind::ForceLimit | StopKind::MomentLimit)
-            .then(|| self.retreat())
-            .flatten();
+        // a stop that may find the rod in contact first backs away from it, then holds there
+        let retreated = retreats(stop.kind).then(|| self.retreat()).flatten();
+        self.safety.robot_cycle = self.estimator.cycle.measured;
+        self.safety.units_ratio = self.units.ratio;
+        (
+            self.safety.units_expected_peak,
+            self.safety.units_measured_peak,
+        ) = self.units.peaks();
         self.hold(retreated);
+        if let Some(pose) = retreated.or_else(|| self.checked_pose()) {
+            self.safety.session_ended_cleanly = self.robot.end_session(&pose);
+        }
         self.sensor.stop_streaming();
         let robot = *self.robot.stats();
         Ok(RunOutcome {
             stop,
-            ticks: k.min(self.ticks) + 1,
+            ticks: self.last_step.min(self.ticks) + 1,
             wall_time,
             wake_latency: self.wake.summary(),
             period_error: self.period_hist.summary(),
@@ -150,7 +190,14 @@ impl Loop {
                 [f.x, f.y, f.z, m.x, m.y, m.z]
             }),
             scheduling: self.scheduling.clone(),
+            safety: self.safety,
         })
+    }
+
+    /// The time between two of the loop's wake-ups, ns: the robot's cycle on robot pacing,
+    /// the period on the clock.
+    pub(super) fn cycle_ns(&self) -> u64 {
+        self.steps * self.period_ns
     }
 
     /// Robot pacing: waits for the robot's next packet, at most the watchdog (then the tick
@@ -163,7 +210,7 @@ impl Loop {
             .wait(start + self.limits.watchdog_ns(), &mut self.estimator);
         let wake = now_ns();
         self.robot_arrived(n, wake);
-        let deadline = last_wake.map_or(wake, |w| w + self.period_ns);
+        let deadline = last_wake.map_or(wake, |w| w + self.cycle_ns());
         (wake, deadline)
     }
 
@@ -194,29 +241,44 @@ impl Loop {
         self.last_robot_ns = now;
     }
 
-    /// One control tick; returns a stop, if any. Never allocates.
+    /// One control tick: the links polled once, then `steps` virtual steps from `k` (one on
+    /// the clock; as many as fit in the robot's cycle on robot pacing, the robot's motion
+    /// estimated at each step's time), the last command sent; returns a stop, if any. Never
+    /// allocates.
     pub(super) fn tick(&mut self, k: u64, wake: u64, latency: u64) -> Option<StopEvent> {
         if !self.poll_links(wake) {
             self.sensor.stats_mut().late += 1;
         }
-        let actual = self.estimator.estimate(wake).unwrap_or(self.initial);
-        if self.force.norm() < CONTACT_FREE_FORCE {
-            self.last_free = self.estimator.last_pose();
-        }
-        let m = Measurement {
-            force: self.force,
-            moment: self.moment,
-            actual,
-        };
-        match self.virtual_step(k, &m, wake, latency) {
-            Ok(command) => {
-                self.robot
-                    .send(&command, now_ns().saturating_sub(self.t0_ns));
-                self.last_command = Some(command);
-                None
+        if let Some(pose) = self.estimator.last_pose() {
+            let expected = predicted_wrench(&self.system, &pose).0;
+            if self.force.norm() < CONTACT_FREE_FORCE && expected < CONTACT_FREE_FORCE {
+                self.last_free = Some(pose);
             }
-            Err(stop) => Some(stop),
         }
+        let mut command = None;
+        for j in 0..self.steps {
+            let kk = k + j;
+            if kk > self.ticks {
+                break;
+            }
+            let at = wake + j * self.period_ns;
+            let actual = self.estimator.estimate(at).unwrap_or(self.initial);
+            let m = Measurement {
+                force: self.force,
+                moment: self.moment,
+                actual,
+            };
+            self.last_step = kk;
+            match self.virtual_step(kk, &m, wake, latency) {
+                Ok(c) => command = Some(c),
+                Err(stop) => return Some(stop),
+            }
+        }
+        let command = command?;
+        self.robot
+            .send(&command, now_ns().saturating_sub(self.t0_ns));
+        self.last_command = Some(command);
+        None
     }
 
     /// Stops that are the loop's, not the dynamics': `stop()` and the links' watchdogs.
@@ -232,6 +294,25 @@ impl Loop {
                 time,
                 value: sensor_silence as f64 * 1e-6,
                 limit: self.limits.watchdog_ms,
+            });
+        }
+        for fault in [self.sensor.fault(), self.robot.fault()]
+            .into_iter()
+            .flatten()
+        {
+            return Some(StopEvent {
+                kind: fault.kind,
+                time,
+                value: fault.value,
+                limit: fault.limit,
+            });
+        }
+        if let Some(measured) = self.estimator.cycle.mismatch {
+            return Some(StopEvent {
+                kind: StopKind::RobotCycle,
+                time,
+                value: measured,
+                limit: self.estimator.cycle.configured,
             });
         }
         let robot_silence = wake.saturating_sub(self.last_robot_ns);
@@ -271,8 +352,15 @@ impl Loop {
         if let Some(stop) = self.loop_checks(time, wake) {
             return Err(stop);
         }
-        if let Some(stop) = check_wrench(&self.limits, &m.force, &m.moment, time) {
+        let measured = m.force.norm();
+        self.safety.measured_peak_force = self.safety.measured_peak_force.max(measured);
+        let expected = predicted_wrench(&self.system, &m.actual).0;
+        if let Some(stop) = self.units.push(expected, measured, time) {
             return Err(stop);
+        }
+        if let Some(stop) = check_wrench(&self.limits, &m.force, &m.moment, time) {
+            self.safety.limit_line = Some("measured");
+            return Err(self.units.decide(time).unwrap_or(stop));
         }
         if let Some(fed_back) = self.estimator.last_pose() {
             if let Some(stop) = self.tracking.check(&fed_back.point(&self.rod), time) {
@@ -284,6 +372,13 @@ impl Loop {
             return Err(stop);
         }
         let command = self.step.advance(k as usize)?;
+        let (force, moment) = predicted_wrench(&self.system, &command);
+        if let Some(stop) = check_predicted(&self.limits, force, moment, time) {
+            self.safety.limit_line = Some("predicted");
+            return Err(self.units.decide(time).unwrap_or(stop));
+        }
+        self.safety.predicted_peak_force = self.safety.predicted_peak_force.max(force);
+        self.safety.predicted_peak_moment = self.safety.predicted_peak_moment.max(moment);
         if let Some(stop) = check_workspace(
             &self.limits,
             &command.point(&self.rod),

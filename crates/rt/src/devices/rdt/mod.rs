@@ -153,8 +153,20 @@ impl SensorDevice for RdtSensor {
         let (counts, calibration) = match c.counts {
             Some(counts) => (counts, None),
             None => {
-                let c = fetch_counts(&o.host, o.http_port, Duration::from_secs_f64(context.connect_timeout.min(5.0)))
-                    .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit: {e} (or give counts_per_force and counts_per_torque)")))?;
+                // a box still booting refuses the connection: the page is asked again until
+                // connect_timeout; any other answer (a bad page) is final
+                let give_up =
+                    std::time::Instant::now() + Duration::from_secs_f64(context.connect_timeout);
+                let c = loop {
+                    let attempt = fetch_counts(&o.host, o.http_port, Duration::from_secs_f64(context.connect_timeout.clamp(0.1, 5.0)));
+                    match attempt {
+                        Err(RtError::Io { .. }) if std::time::Instant::now() + Duration::from_millis(100) < give_up => {
+                            std::thread::sleep(Duration::from_millis(100));
+                        }
+                        other => break other,
+                    }
+                }
+                .map_err(|e| RtError::Connect(format!("cannot read the sensor's counts per unit within {} s (connect_timeout): {e} (or give counts_per_force and counts_per_torque)", context.connect_timeout)))?;
                 (c.counts, Some(c))
             }
         };

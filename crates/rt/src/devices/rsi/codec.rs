@@ -147,7 +147,15 @@ pub struct RsiAnswer {
     pub correction: KukaPose,
     /// The echoed time stamp.
     pub ipoc: u64,
+    /// The end signal: `<Stop>1</Stop>` ([`END_ELEMENT`]) in the answer.
+    pub end: bool,
 }
+
+/// The answer's end-of-session element: `<Stop>1</Stop>` asks the controller to end the
+/// sensor-guided motion (a `RECEIVE` element `Stop`, `TYPE="BOOL"`, wired to the RSI
+/// context's STOP object, or to `ST_BREAKMOVE` in RSI 2.x), after which `RSI_MOVECORR()`
+/// returns and the KRL program goes on to `RSI_OFF()`.
+pub const END_ELEMENT: &str = "Stop";
 
 /// The rotation of KUKA angles `A, B, C` (degrees): `Rz(A)·Ry(B)·Rx(C)`.
 pub fn abc_to_quaternion(a: f64, b: f64, c: f64) -> UnitQuaternion<f64> {
@@ -193,6 +201,7 @@ pub fn decode_answer(xml: &[u8], names: &RsiNames) -> Result<RsiAnswer, RsiError
     Ok(RsiAnswer {
         correction: pose(xml, names.correction.as_bytes())?,
         ipoc: ipoc(xml)?,
+        end: element_text(xml, END_ELEMENT.as_bytes()).is_some_and(|t| t == b"1"),
     })
 }
 
@@ -214,12 +223,19 @@ impl AnswerEncoder {
 
     /// `<Sen Type="…"><RKorr X=… …/><IPOC>…</IPOC></Sen>` (4 decimals: 0.1 µm, 0.0001°).
     pub fn encode(&mut self, correction: &KukaPose, ipoc: u64) -> &[u8] {
+        self.encode_with_end(correction, ipoc, false)
+    }
+
+    /// [`AnswerEncoder::encode`], with the end signal `<Stop>1</Stop>` ([`END_ELEMENT`])
+    /// before the IPOC when `end`.
+    pub fn encode_with_end(&mut self, correction: &KukaPose, ipoc: u64, end: bool) -> &[u8] {
         let n = &self.names;
         let [x, y, z, a, b, c] = *correction;
         let mut cursor = &mut self.buf[..];
+        let stop = if end { "<Stop>1</Stop>" } else { "" };
         let written = write!(
             cursor,
-            "<Sen Type=\"{}\"><{} X=\"{x:.4}\" Y=\"{y:.4}\" Z=\"{z:.4}\" A=\"{a:.4}\" B=\"{b:.4}\" C=\"{c:.4}\" /><IPOC>{ipoc}</IPOC></Sen>",
+            "<Sen Type=\"{}\"><{} X=\"{x:.4}\" Y=\"{y:.4}\" Z=\"{z:.4}\" A=\"{a:.4}\" B=\"{b:.4}\" C=\"{c:.4}\" />{stop}<IPOC>{ipoc}</IPOC></Sen>",
             n.sen_type, n.correction
         );
         let left = cursor.len();
@@ -334,6 +350,16 @@ fn ipoc(xml: &[u8]) -> Result<u64, RsiError> {
         .position(|&b| b == b'<')
         .ok_or(RsiError::MissingIpoc)?;
     digits(&rest[..close]).ok_or(RsiError::MissingIpoc)
+}
+
+/// The trimmed text of the first element `name` (`<name>text</name>`), if any.
+fn element_text<'a>(xml: &'a [u8], name: &[u8]) -> Option<&'a [u8]> {
+    let at = find_element(xml, name)?;
+    let rest = &xml[at..];
+    let open = rest.iter().position(|&b| b == b'>')?;
+    let rest = &rest[open + 1..];
+    let close = rest.iter().position(|&b| b == b'<')?;
+    Some(trim(&rest[..close]))
 }
 
 fn trim(mut s: &[u8]) -> &[u8] {

@@ -46,12 +46,14 @@ use self::codec::{
 use super::transport::{bind_address_for, decode_counted, Ipoc, SequenceTracker, UdpInbox};
 use super::{
     check_host, local_addr, resolve, wait_readable, EmulatedRobot, EndpointContext, FeedbackPose,
-    LinkContext, LinkStats, Pacing, RobotDevice, RobotEndpoint, RobotIdentity, RobotLink,
+    LinkContext, LinkFault, LinkStats, Pacing, RobotDevice, RobotEndpoint, RobotIdentity,
+    RobotLink,
 };
 use crate::clock::{now_ns, Histogram};
 use crate::devices::pose::{PoseMapping, PoseMm};
 use crate::error::{Result, RtError};
 use crate::feedback::FeedbackEstimator;
+use hilcontact_core::stop::StopKind;
 
 /// How the answer's correction (`RKorr`) relates to the target pose (the controller's RSI
 /// correction object must be configured the same way).
@@ -89,6 +91,15 @@ pub struct RsiOptions {
     /// and <= `period`).
     #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub deadline: f64,
+    /// Consecutive late answers (later than `deadline`, or a message superseded before it was
+    /// answered) after which the loop stops itself (`late-answers`), before the controller
+    /// would (its `Timeout`, typically 100; >= 1).
+    #[schemars(range(min = 1))]
+    pub max_late_answers: u64,
+    /// Longest time the end of the session waits for the controller to stop sending once the
+    /// end signal (`<Stop>1</Stop>`) is in the answers, s (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
+    pub end_timeout: f64,
     /// `Type` of the answer's `<Sen>` (the configuration file's `SENTYPE`).
     pub sen_type: String,
     /// The actual-pose element of the state message (`DEF_RIst`: `RIst`).
@@ -112,6 +123,8 @@ impl Default for RsiOptions {
             robot_host: None,
             period: RSI_PERIOD,
             deadline: 0.002,
+            max_late_answers: 50,
+            end_timeout: 1.0,
             sen_type: names.sen_type,
             state_element: names.state,
             correction_element: names.correction,
@@ -200,9 +213,22 @@ pub struct RsiRobot {
     latency: Histogram,
     answers_late: u64,
     unanswered: u64,
+    /// Late answers in a row (late or superseded), and the limit.
+    consecutive_late: u64,
+    max_late_answers: u64,
+    end_timeout: f64,
+    /// The newest IPOC accepted, ms.
+    last_ipoc: Option<u64>,
+    /// The first fall of the IPOC from the robot by more than [`IPOC_RESTART_CYCLES`]
+    /// cycles, ms.
+    ipoc_backwards: Option<u64>,
     encoder: AnswerEncoder,
     stats: LinkStats,
 }
+
+/// A fall of the robot's IPOC by more than this many cycles is the sequence going backwards
+/// (a restarted controller), not a reordered datagram (counted `stale`).
+pub const IPOC_RESTART_CYCLES: u64 = 3;
 
 /// An RSI link's options once parsed ([`RobotDevice::parse`] of [`RsiRobot`]): hosts' form, cycle and deadline
 /// checked, the XML names and the pose mapping built.
@@ -235,6 +261,18 @@ impl RobotDevice for RsiRobot {
             check_host("robot_host", host)?;
         }
         check_period("rsi.period", o.period)?;
+        if o.max_late_answers == 0 {
+            return Err(RtError::option(
+                "rsi.max_late_answers",
+                "must be at least 1",
+            ));
+        }
+        if !(o.end_timeout.is_finite() && o.end_timeout > 0.0) {
+            return Err(RtError::option(
+                "rsi.end_timeout",
+                format!("must be a positive time in s, got {}", o.end_timeout),
+            ));
+        }
         if !(o.deadline.is_finite() && o.deadline > 0.0 && o.deadline <= o.period) {
             return Err(RtError::option(
                 "rsi.deadline",
@@ -281,6 +319,11 @@ impl RobotDevice for RsiRobot {
             latency: Histogram::new(20_000),
             answers_late: 0,
             unanswered: 0,
+            consecutive_late: 0,
+            max_late_answers: o.max_late_answers,
+            end_timeout: o.end_timeout,
+            last_ipoc: None,
+            ipoc_backwards: None,
             encoder: AnswerEncoder::new(names),
             stats: LinkStats::default(),
         })
@@ -314,6 +357,13 @@ impl RobotLink for RsiRobot {
             let Some(state) = decode_counted(decoded, &mut self.stats) else {
                 continue;
             };
+            let step_ms = (self.period * 1e3).round() as u64;
+            if let Some(last) = self.last_ipoc {
+                let from_robot = self.identity.address() == Some(from);
+                if from_robot && state.ipoc + IPOC_RESTART_CYCLES * step_ms < last {
+                    self.ipoc_backwards.get_or_insert(last - state.ipoc);
+                }
+            }
             let actual = from_kuka(&state.actual);
             let (position, orientation) = self.mapping.from_device(&actual);
             let pose = FeedbackPose {
@@ -336,8 +386,10 @@ impl RobotLink for RsiRobot {
             if self.reference.is_none() {
                 self.reference = Some(state.setpoint.map_or(actual, |s| from_kuka(&s)));
             }
+            self.last_ipoc = Some(state.ipoc);
             if self.pending.is_some() {
                 self.unanswered += 1;
+                self.consecutive_late += 1;
             }
             self.pending = Some((state.ipoc, now_ns));
             self.controller_delay = state.delay.or(self.controller_delay);
@@ -378,6 +430,65 @@ impl RobotLink for RsiRobot {
         self.latency.record(latency);
         if latency > self.deadline_ns {
             self.answers_late += 1;
+            self.consecutive_late += 1;
+        } else {
+            self.consecutive_late = 0;
+        }
+    }
+
+    fn fault(&self) -> Option<LinkFault> {
+        if let Some(fall) = self.ipoc_backwards {
+            return Some(LinkFault {
+                kind: StopKind::RobotSequence,
+                value: fall as f64,
+                limit: f64::NAN,
+            });
+        }
+        (self.consecutive_late >= self.max_late_answers).then_some(LinkFault {
+            kind: StopKind::LateAnswers,
+            value: self.consecutive_late as f64,
+            limit: self.max_late_answers as f64,
+        })
+    }
+
+    /// Answers every state message with `pose` and the end signal (`<Stop>1</Stop>`) until
+    /// the controller stops sending (no message for 5 cycles: its `RSI_MOVECORR` returned),
+    /// at most `end_timeout`; true when it stopped.
+    fn end_session(&mut self, pose: &RelativeMotion) -> Option<bool> {
+        let reference = self.reference?;
+        let mut estimator = FeedbackEstimator::new(Default::default());
+        let end = now_ns() + (self.end_timeout * 1e9) as u64;
+        let quiet_ns = (5.0 * self.period * 1e9) as u64;
+        let target = self.mapping.to_device(pose).pose;
+        let mut signalled = false;
+        loop {
+            let now = now_ns();
+            if now >= end {
+                return Some(false);
+            }
+            let n = self.wait((now + quiet_ns).min(end), &mut estimator);
+            if n == 0 {
+                if signalled && now_ns() < end {
+                    return Some(true);
+                }
+                continue;
+            }
+            let (Some(addr), Some((ipoc, _))) = (self.identity.address(), self.pending) else {
+                continue;
+            };
+            let korr = match self.mode {
+                CorrectionMode::Absolute => correction(&reference, &target),
+                CorrectionMode::Relative => {
+                    let k = correction(&reference, &target);
+                    self.reference = Some(target);
+                    k
+                }
+            };
+            let bytes = self.encoder.encode_with_end(&korr, ipoc, true);
+            let sent = self.inbox.socket().send_to(bytes, addr);
+            self.stats.count_send(sent);
+            self.pending = None;
+            signalled = true;
         }
     }
 
@@ -400,6 +511,7 @@ impl RobotLink for RsiRobot {
                 "answer_latency_us": self.latency.summary(),
                 "deadline_us": self.deadline_ns as f64 / 1e3,
                 "answers_late": self.answers_late,
+                "max_late_answers": self.max_late_answers,
                 "unanswered": self.unanswered,
                 "controller_delay": self.controller_delay,
                 "correction": self.mode,
@@ -442,6 +554,10 @@ pub struct RsiEndpointOptions {
     pub offset_mm: [f64; 3],
     /// Rotation from `t` to `e`, quaternion `[w, x, y, z]`.
     pub rotation: [f64; 4],
+    /// Fault injection: once this many answers were taken, the IPOC falls back by 1000 ms (a
+    /// restarted controller; None = never; >= 1).
+    #[schemars(range(min = 1))]
+    pub ipoc_back_after: Option<u64>,
 }
 
 impl Default for RsiEndpointOptions {
@@ -459,6 +575,7 @@ impl Default for RsiEndpointOptions {
             max_late: 100,
             offset_mm: [0.0; 3],
             rotation: [1.0, 0.0, 0.0, 0.0],
+            ipoc_back_after: None,
         }
     }
 }
@@ -497,6 +614,12 @@ pub struct RsiEndpoint {
     outstanding: Option<u64>,
     consecutive_late: u64,
     stopped: bool,
+    /// Fault injection: the answers after which the IPOC falls back, and by how much, ms.
+    ipoc_back_after: Option<u64>,
+    ipoc_back: u64,
+    /// Whether the session ended with the PC's end signal (true) or the controller's error
+    /// (false).
+    ended_cleanly: Option<bool>,
     encoder: StateEncoder,
     stats: LinkStats,
 }
@@ -566,6 +689,9 @@ impl EmulatedRobot for RsiEndpoint {
             outstanding: None,
             consecutive_late: 0,
             stopped: false,
+            ipoc_back_after: o.ipoc_back_after,
+            ipoc_back: 0,
+            ended_cleanly: None,
             stats: LinkStats::default(),
         })
     }
@@ -610,6 +736,11 @@ impl RobotEndpoint for RsiEndpoint {
             self.consecutive_late = 0;
             self.stats.accepted += 1;
             newest = Some(answer.correction);
+            if answer.end && !self.stopped {
+                // the KRL program's RSI_MOVECORR returns: the session ends without error
+                self.stopped = true;
+                self.ended_cleanly = Some(true);
+            }
         }
         let korr = newest?;
         self.setpoint = corrected(&self.reference, &korr);
@@ -634,10 +765,18 @@ impl RobotEndpoint for RsiEndpoint {
             self.consecutive_late += 1;
             if self.consecutive_late >= self.max_late {
                 self.stopped = true; // the controller's "RSI stopped"
+                self.ended_cleanly = Some(false);
                 return;
             }
         }
-        self.ipoc = FIRST_IPOC + k / self.every * self.step_ms;
+        if self
+            .ipoc_back_after
+            .is_some_and(|n| self.stats.accepted >= n)
+        {
+            self.ipoc_back_after = None;
+            self.ipoc_back = 1000;
+        }
+        self.ipoc = FIRST_IPOC + k / self.every * self.step_ms - self.ipoc_back;
         let actual = to_kuka(&self.mapping.to_device(actual).pose);
         let setpoint = to_kuka(&self.setpoint);
         let bytes = self
@@ -650,6 +789,10 @@ impl RobotEndpoint for RsiEndpoint {
 
     fn stats(&self) -> &LinkStats {
         &self.stats
+    }
+
+    fn session_ended_cleanly(&self) -> Option<bool> {
+        self.ended_cleanly
     }
 }
 

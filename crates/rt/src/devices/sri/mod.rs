@@ -26,15 +26,16 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use self::codec::{
-    parse_matrix, FrameReader, SriAck, SriCommand, SriFrame, SriRateCommand, SriRequest, MAX_LINE,
-    SRI_PORT,
+    parse_matrix, FrameReader, SriAck, SriCommand, SriFrame, SriRateCommand, SriRequest, FRAME_LEN,
+    MAX_LINE, SRI_PORT,
 };
 use super::transport::SequenceTracker;
 use super::{
-    check_host, resolve, EmulatedSensor, EndpointContext, LinkContext, LinkStats, SensorDevice,
-    SensorEndpoint, SensorLink, Transport, Wrench,
+    check_host, resolve, EmulatedSensor, EndpointContext, LinkContext, LinkFault, LinkStats,
+    SensorDevice, SensorEndpoint, SensorLink, Transport, Wrench,
 };
 use crate::error::{Result, RtError};
+use hilcontact_core::stop::StopKind;
 
 /// Options of an SRI M812x sensor link (`[sensor] kind = "sri"`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -55,6 +56,10 @@ pub struct SriOptions {
     /// the box to the bridge signals in mV/V (sent with `AT+DCPCU=MVPV`); None: the matrix
     /// stored in the box is used.
     pub decoupling_matrix: Option<Box<[[f64; 6]; 6]>>,
+    /// Consecutive frames with a wrong checksum (or length) after which the run stops
+    /// (`sensor-checksum`; >= 1).
+    #[schemars(range(min = 1))]
+    pub max_checksum_errors: u64,
 }
 
 impl Default for SriOptions {
@@ -65,6 +70,7 @@ impl Default for SriOptions {
             sample_rate: None,
             rate_command: SriRateCommand::Smpr,
             decoupling_matrix: None,
+            max_checksum_errors: 10,
         }
     }
 }
@@ -81,6 +87,12 @@ pub struct SriSensor {
     packages: SequenceTracker<u16>,
     /// The connection was closed or failed: nothing more is read.
     closed: bool,
+    /// How the connection ended, when the box ended it: "reset" (TCP RST) or "closed".
+    closed_by_box: Option<&'static str>,
+    /// Frames with a wrong checksum or length: in a row, in all, and the limit in a row.
+    checksum_run: u64,
+    checksum_errors: u64,
+    max_checksum_errors: u64,
     stats: LinkStats,
     line: [u8; MAX_LINE],
 }
@@ -202,8 +214,11 @@ impl SriSensor {
             self.stats.received += 1;
             let Ok(frame) = result else {
                 self.stats.malformed += 1;
+                self.checksum_errors += 1;
+                self.checksum_run += 1;
                 continue;
             };
+            self.checksum_run = 0;
             self.stats.lost += self.packages.advance(frame.package) as u64;
             let v = frame.values;
             if !v.iter().all(|x| x.is_finite()) {
@@ -254,11 +269,24 @@ impl SensorDevice for SriSensor {
         let rate = c.sample_rate(context.period)?;
         let peer = resolve("sensor_host", &o.host, o.port)?;
         let timeout = Duration::from_secs_f64(context.connect_timeout.max(0.1));
-        let stream = TcpStream::connect_timeout(&peer, timeout).map_err(|e| {
-            RtError::Connect(format!(
-                "cannot connect to the SRI box at {peer} (TCP): {e}"
-            ))
-        })?;
+        // a box still booting refuses the connection: retried until connect_timeout
+        let give_up = std::time::Instant::now() + timeout;
+        let stream = loop {
+            let left = give_up.saturating_duration_since(std::time::Instant::now());
+            match TcpStream::connect_timeout(&peer, left.max(Duration::from_millis(10))) {
+                Ok(stream) => break stream,
+                Err(e) if std::time::Instant::now() + Duration::from_millis(100) < give_up => {
+                    let _ = e;
+                    std::thread::sleep(Duration::from_millis(100));
+                }
+                Err(e) => {
+                    return Err(RtError::Connect(format!(
+                        "cannot connect to the SRI box at {peer} (TCP) within {:.1} s (connect_timeout): {e}",
+                        timeout.as_secs_f64()
+                    )))
+                }
+            }
+        };
         let io = |e: std::io::Error| RtError::io(format!("SRI box at {peer}"), &e);
         stream.set_nodelay(true).map_err(io)?;
         stream
@@ -273,6 +301,10 @@ impl SensorDevice for SriSensor {
             reader: FrameReader::new(),
             packages: SequenceTracker::new(),
             closed: false,
+            closed_by_box: None,
+            checksum_run: 0,
+            checksum_errors: 0,
+            max_checksum_errors: o.max_checksum_errors.max(1),
             stats: LinkStats::default(),
             line: [0u8; MAX_LINE],
         };
@@ -334,8 +366,9 @@ impl SensorLink for SriSensor {
             }
             match self.stream.read(self.reader.space()) {
                 Ok(0) => {
-                    // the box closed the connection: counted once, the watchdog stops the run
+                    // the box closed the connection: counted once, named, and a stop
                     self.closed = true;
+                    self.closed_by_box = Some("closed");
                     self.stats.io_errors += 1;
                 }
                 Ok(n) => {
@@ -344,8 +377,12 @@ impl SensorLink for SriSensor {
                 }
                 Err(e) if e.kind() == ErrorKind::WouldBlock => break,
                 Err(e) if e.kind() == ErrorKind::Interrupted => continue,
-                Err(_) => {
+                Err(e) => {
                     self.closed = true;
+                    self.closed_by_box = Some(match e.kind() {
+                        ErrorKind::ConnectionReset | ErrorKind::ConnectionAborted => "reset",
+                        _ => "failed",
+                    });
                     self.stats.io_errors += 1;
                 }
             }
@@ -355,8 +392,35 @@ impl SensorLink for SriSensor {
 
     super::link::stats_accessors!();
 
+    fn fault(&self) -> Option<LinkFault> {
+        if let Some(how) = self.closed_by_box {
+            return Some(LinkFault {
+                kind: StopKind::SensorConnection,
+                value: match how {
+                    "reset" => 1.0,
+                    "closed" => 0.0,
+                    _ => 2.0,
+                },
+                limit: f64::NAN,
+            });
+        }
+        (self.checksum_run >= self.max_checksum_errors).then_some(LinkFault {
+            kind: StopKind::SensorChecksum,
+            value: self.checksum_run as f64,
+            limit: self.max_checksum_errors as f64,
+        })
+    }
+
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
         let mut m = serde_json::Map::new();
+        m.insert(
+            "sensor_faults".into(),
+            serde_json::json!({
+                "connection": self.closed_by_box,
+                "checksum_errors": self.checksum_errors,
+                "max_checksum_errors": self.max_checksum_errors,
+            }),
+        );
         m.insert("sensor_sample_rate".into(), self.rate.into());
         m.insert(
             "sensor_rate_command".into(),
@@ -388,6 +452,14 @@ pub struct SriEndpointOptions {
     pub bind_host: String,
     /// TCP port (4008 on a real box) (CLI `--sensor-port`).
     pub port: u16,
+    /// Fault injection: after this many frames streamed the box resets the connection
+    /// (TCP RST; None = never; >= 1).
+    #[schemars(range(min = 1))]
+    pub reset_after_frames: Option<u64>,
+    /// Fault injection: from this many frames streamed on, every frame has a wrong checksum
+    /// (None = never; >= 1).
+    #[schemars(range(min = 1))]
+    pub bad_checksum_after_frames: Option<u64>,
 }
 
 impl Default for SriEndpointOptions {
@@ -395,7 +467,28 @@ impl Default for SriEndpointOptions {
         SriEndpointOptions {
             bind_host: "127.0.0.1".into(),
             port: SRI_PORT,
+            reset_after_frames: None,
+            bad_checksum_after_frames: None,
         }
+    }
+}
+
+/// Makes the close of `stream` a reset (TCP RST: `SO_LINGER` with a zero timeout).
+fn reset(stream: &TcpStream) {
+    use std::os::fd::AsRawFd;
+    let linger = libc::linger {
+        l_onoff: 1,
+        l_linger: 0,
+    };
+    // SAFETY: a valid socket descriptor and a `linger` of the size passed
+    unsafe {
+        libc::setsockopt(
+            stream.as_raw_fd(),
+            libc::SOL_SOCKET,
+            libc::SO_LINGER,
+            (&linger as *const libc::linger).cast(),
+            std::mem::size_of::<libc::linger>() as libc::socklen_t,
+        );
     }
 }
 
@@ -431,6 +524,10 @@ pub struct SriEndpoint {
     last_reading: [f64; 6],
     stats: LinkStats,
     read_buf: [u8; 512],
+    /// Frames streamed, and the fault injection ([`SriEndpointOptions`]).
+    frames: u64,
+    reset_after_frames: Option<u64>,
+    bad_checksum_after_frames: Option<u64>,
 }
 
 impl SriEndpoint {
@@ -463,6 +560,9 @@ impl SriEndpoint {
             last_reading: [0.0; 6],
             stats: LinkStats::default(),
             read_buf: [0u8; 512],
+            frames: 0,
+            reset_after_frames: o.reset_after_frames,
+            bad_checksum_after_frames: o.bad_checksum_after_frames,
         })
     }
 
@@ -702,15 +802,29 @@ impl SensorEndpoint for SriEndpoint {
             *v = (self.last_reading[i] - self.bias[i]) as f32;
         }
         self.package = self.package.wrapping_add(1);
-        let frame = SriFrame {
+        let mut frame = SriFrame {
             package: self.package,
             values,
         }
         .encode();
+        self.frames += 1;
+        if self
+            .bad_checksum_after_frames
+            .is_some_and(|n| self.frames >= n)
+        {
+            frame[FRAME_LEN - 1] = frame[FRAME_LEN - 1].wrapping_add(1);
+        }
         if self.queue(&frame) {
             self.stats.sent += 1;
         }
         self.flush();
+        if self.reset_after_frames.is_some_and(|n| self.frames >= n) {
+            self.reset_after_frames = None;
+            if let Some(client) = &self.client {
+                reset(client);
+            }
+            self.drop_client();
+        }
     }
 
     fn stats(&self) -> &LinkStats {
