@@ -51,11 +51,14 @@ pub enum StopKind {
     NonFinite,
     /// The virtual energy passed the scenario's divergence bound.
     Diverged,
+    /// Stopped by an operator from the live view (its `/hilcontact/stop` service): the same
+    /// path as a force limit (retreat, hold).
+    Operator,
 }
 
 impl StopKind {
     /// Every kind, in the order of [`StopKind::code`].
-    pub const ALL: [StopKind; 10] = [
+    pub const ALL: [StopKind; 11] = [
         StopKind::Completed,
         StopKind::User,
         StopKind::ForceLimit,
@@ -66,6 +69,7 @@ impl StopKind {
         StopKind::Tracking,
         StopKind::NonFinite,
         StopKind::Diverged,
+        StopKind::Operator,
     ];
 
     /// The run's status for this stop.
@@ -158,6 +162,7 @@ impl Stop {
             StopKind::Tracking => format!("tracking limit: the fed-back rod tip is {:.1} mm from every command of the tracking window > {:.1} mm (tracking_limit) at {t:.3} s: frozen or wrong feedback, or a robot that does not follow", v * 1e3, l * 1e3),
             StopKind::NonFinite => format!("a state, force or command stopped being finite at {t:.3} s"),
             StopKind::Diverged => format!("diverged: energy {v:.4} J passed the divergence bound {l:.4} J at {t:.3} s"),
+            StopKind::Operator => format!("operator: stopped from the live view at {t:.3} s"),
         })
     }
 }

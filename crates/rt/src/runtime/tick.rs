@@ -120,9 +120,12 @@ impl Loop {
             .store(stop.kind.code(), Ordering::Release);
         self.shared.phase.store(2, Ordering::Release);
         // a force or moment stop first backs away from the contact, then holds there
-        let retreated = matches!(stop.kind, StopKind::ForceLimit | StopKind::MomentLimit)
-            .then(|| self.retreat())
-            .flatten();
+        let retreated = matches!(
+            stop.kind,
+            StopKind::ForceLimit | StopKind::MomentLimit | StopKind::Operator
+        )
+        .then(|| self.retreat())
+        .flatten();
         self.hold(retreated);
         self.sensor.stop_streaming();
         let robot = *self.robot.stats();
@@ -223,6 +226,9 @@ impl Loop {
     pub(super) fn loop_checks(&self, time: f64, wake: u64) -> Option<StopEvent> {
         if self.shared.stop_requested.load(Ordering::Acquire) {
             return Some(StopEvent::plain(StopKind::User, time));
+        }
+        if self.shared.control.operator_stop_requested() {
+            return Some(StopEvent::plain(StopKind::Operator, time));
         }
         let watchdog = self.limits.watchdog_ns();
         let sensor_silence = wake.saturating_sub(self.last_sensor_ns);
