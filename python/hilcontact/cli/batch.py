@@ -16,6 +16,7 @@ from ..limits import Limits, check_run
 from ..output import OutputError, check_output_folder
 from ..run import Run, simulate
 from ..scenario import load_scenario, presets
+from .live import live_flags, live_settings
 from .options import (
     _FORCE_HELP,
     _LIMIT_OPTIONS,
@@ -52,17 +53,23 @@ def _compensators_option(help: str) -> Any:
 @click.argument("scenario")
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @_with(_run_output_options("runs/<scenario name>"))
+@_with(live_flags(replay=True))
 def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool,
-        max_memory: float, max_time: float) -> None:
-    """Simulate SCENARIO (a preset name or a TOML file) and save the results."""
+        max_memory: float, max_time: float, live: str | None, live_control: bool, live_remote: bool,
+        live_wait: float, speed: float) -> None:
+    """Simulate SCENARIO (a preset name or a TOML file) and save the results. With --live, the
+    finished run is replayed to a Foxglove live view at --speed times real time (as a
+    real-time run is shown), then saved."""
     _stop_on_sigterm()
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
         check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / resolved.name, force)
         mcap_path = _mcap_file(mcap, folder, force)
+        settings = live_settings(live, live_control, live_remote, live_wait, speed)
+        outputs = {"live": settings} if settings else None
         with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
-            result = simulate(resolved, mcap=mcap_path, overwrite=force)
+            result = simulate(resolved, mcap=mcap_path, overwrite=force, outputs=outputs)
         result.save(folder, plots=not no_plots, overwrite=force)
     console = Console()
     _report(console, result, folder)

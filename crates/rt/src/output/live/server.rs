@@ -26,6 +26,8 @@ use crate::report::Sample;
 pub const STOP_SERVICE: &str = "/hilcontact/stop";
 /// The operator's mark service.
 pub const MARK_SERVICE: &str = "/hilcontact/mark";
+/// How long the server stays up after the run's end while viewers are connected.
+const LINGER: Duration = Duration::from_millis(500);
 /// Longest mark label kept, characters (a longer one is cut).
 const MAX_LABEL: usize = 200;
 
@@ -192,6 +194,25 @@ impl LiveSink {
                 )
             })?;
         let port = server.port();
+        // where to connect, once bound (a refused address or port never gets here)
+        let shown = if options.host.contains(':') {
+            format!("[{}]", options.host)
+        } else {
+            options.host.clone()
+        };
+        eprintln!(
+            "live view: ws://{shown}:{port} ({}{})",
+            if options.control {
+                "stop and mark accepted"
+            } else {
+                "view only: no --live-control"
+            },
+            if options.wait > 0.0 {
+                format!("; waiting up to {} s for a viewer", options.wait)
+            } else {
+                String::new()
+            }
+        );
         let advertised = channels.iter().flatten().count() + scene_channels.len();
         let begun = Instant::now();
         while begun.elapsed().as_secs_f64() < options.wait
@@ -269,6 +290,11 @@ impl LiveSink {
     }
 
     fn shutdown(&mut self) {
+        // the SDK does not flush its per-client queues when stopped: give the viewers a moment
+        // to receive the run's last messages (the loop has ended; only the writer waits)
+        if self.counters.clients.load(Ordering::Relaxed) > 0 {
+            std::thread::sleep(LINGER);
+        }
         if let Some(server) = self.server.take() {
             server.stop().wait_blocking();
         }
