@@ -71,11 +71,14 @@ pub enum StopKind {
     /// The robot's sequence (RSI IPOC) went backwards: the controller restarted or another
     /// sender took over.
     RobotSequence,
+    /// Stopped by an operator from the live view (its `/hilcontact/stop` service): the same
+    /// path as a force limit (retreat, hold).
+    Operator,
 }
 
 impl StopKind {
     /// Every kind, in the order of [`StopKind::code`].
-    pub const ALL: [StopKind; 18] = [
+    pub const ALL: [StopKind; 19] = [
         StopKind::Completed,
         StopKind::User,
         StopKind::ForceLimit,
@@ -94,6 +97,7 @@ impl StopKind {
         StopKind::SensorConnection,
         StopKind::SensorChecksum,
         StopKind::RobotSequence,
+        StopKind::Operator,
     ];
 
     /// The run's status for this stop.
@@ -218,6 +222,7 @@ impl Stop {
             StopKind::SensorConnection => format!("sensor connection: the {sensor} sensor {} its connection at {t:.3} s", if v == 1.0 { "reset (TCP RST)" } else if v == 0.0 { "closed" } else { "failed on" }),
             StopKind::SensorChecksum => format!("sensor checksum errors: {v:.0} {sensor} frames with a wrong checksum or length (max_checksum_errors {l:.0}) at {t:.3} s"),
             StopKind::RobotSequence => format!("robot sequence went backwards: the {robot} robot's sequence (IPOC) fell by {v:.0} at {t:.3} s (a restarted controller or another sender)"),
+            StopKind::Operator => format!("operator: stopped from the live view at {t:.3} s"),
         })
     }
 }

@@ -26,6 +26,7 @@ use crate::devices::{
 use crate::error::{Result, RtError};
 use crate::feedback::Extrapolation;
 use crate::offset::OffsetOptions;
+use crate::output::live::LiveOptions;
 use crate::output::mcap::McapOptions;
 use crate::safety::SafetyLimits;
 
@@ -68,6 +69,11 @@ pub struct RuntimeOptions {
     /// the file and its chunk interval ([`crate::output::mcap`]). The file is created before
     /// anything is opened or started; `metrics.json` reports it in `realtime.mcap`.
     pub mcap: Option<McapOptions>,
+    /// A Foxglove live view of the run (`--live [HOST:]PORT`): None, or the server's address,
+    /// whether the operator's stop and mark are accepted, the per-client backlog
+    /// ([`crate::output::live`]). Bound before anything else is opened; `metrics.json`
+    /// reports it in `realtime.live`.
+    pub live: Option<LiveOptions>,
 }
 
 impl Default for RuntimeOptions {
@@ -83,6 +89,7 @@ impl Default for RuntimeOptions {
             offset: OffsetOptions::default(),
             scheduling: SchedulingOptions::default(),
             mcap: None,
+            live: None,
         }
     }
 }
@@ -107,6 +114,9 @@ impl RuntimeOptions {
         o.scheduling.validate()?;
         if let Some(mcap) = &o.mcap {
             mcap.validate()?;
+        }
+        if let Some(live) = &o.live {
+            live.validate()?;
         }
         let sensor = o.sensor.parse()?;
         let robot = o.robot.parse()?;

@@ -1,6 +1,6 @@
 """The ``hilcontact`` command line.
 
-    hilcontact run SCENARIO [--set KEY=VALUE ...] [--out DIR] [--no-plots] [--mcap FILE]
+    hilcontact run SCENARIO [--set KEY=VALUE ...] [--out DIR] [--no-plots] [--mcap FILE] [--live PORT [--speed X]]
     hilcontact compare SCENARIO [--set KEY=VALUE ...] [--compensators LIST] [--out DIR] [--no-plots] [--run-figures]
     hilcontact plot RUN_OR_COMPARISON_DIR
     hilcontact identify LOG --out DIR [--scenario FILE] [--wrench-topic T --pose-topic T ...]
@@ -18,6 +18,7 @@
                    --robot-option KEY=VALUE --force-limit N --rt-priority 80 --cpu N ...] [--out DIR] [--mcap FILE]
     hilcontact check SCENARIO --sensor HOST [the options of hil] [--duration 1] [--out DIR]
     hilcontact demo-rt [SCENARIO] [--compensator pida] [--rt-priority 80 --no-lock-memory --cpu N] [--out DIR] [--mcap FILE]
+    hilcontact layout > hil.json
     hilcontact --version
 
 Bad input (scenario, override, option, output folder) prints one ``error: ...`` line on stderr
@@ -46,7 +47,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from . import batch, realtime_commands  # noqa: F401  (each registers its commands on the group)
+from . import batch, live, realtime_commands  # noqa: F401  (each registers its commands on the group)
 from . import bench  # noqa: F401  (registers benchmark)
 from .options import cli, parse_set_options
 

@@ -16,6 +16,7 @@ from ..limits import Limits, check_run
 from ..output import OutputError, check_output_folder, note_written
 from ..run import Run, simulate
 from ..scenario import load_scenario, presets
+from .live import live_flags, live_settings
 from .options import (
     _FORCE_HELP,
     _LIMIT_OPTIONS,
@@ -56,19 +57,26 @@ def _compensators_option(help: str) -> Any:
               help="Run a compensator written in Python (path/to/file.py:ClassName or module:ClassName).")
 @click.option("--step-limit", type=POSITIVE, default=None, metavar="S",
               help="Longest time one step of a Python compensator may take, s [default: 0.5].")
+@_with(live_flags(replay=True))
 def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool,
-        max_memory: float, max_time: float, entry: str | None = None, step_limit: float | None = None) -> None:
-    """Simulate SCENARIO (a preset name or a TOML file) and save the results."""
+        max_memory: float, max_time: float, live: str | None, live_control: bool, live_remote: bool,
+        live_wait: float, speed: float, entry: str | None = None, step_limit: float | None = None) -> None:
+    """Simulate SCENARIO (a preset name or a TOML file) and save the results. With --live, the
+    finished run is replayed to a Foxglove live view at --speed times real time (as a
+    real-time run is shown), then saved."""
     _stop_on_sigterm()
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
         check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / resolved.name, force)
         mcap_path = _mcap_file(mcap, folder, force)
+        settings = live_settings(live, live_control, live_remote, live_wait, speed)
+        outputs = {"live": settings} if settings else None
         before = _file_state(mcap_path)
         try:
             with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
-                result = simulate(resolved, mcap=mcap_path, overwrite=force, compensator=entry, step_limit=step_limit)
+                result = simulate(resolved, mcap=mcap_path, overwrite=force, outputs=outputs, compensator=entry,
+                                  step_limit=step_limit)
         except KeyboardInterrupt:  # Ctrl-C during the simulation: the part of a recording it wrote goes too
             if mcap_path is not None and _file_state(mcap_path) not in (before, None):
                 mcap_path.unlink(missing_ok=True)

@@ -32,6 +32,7 @@ from .options import (
     cli,
     parse_set_options,
 )
+from .live import live_flags, live_report_line, live_settings
 from .realtime_flags import RealtimeFlag, flags_from_schema, options_from_flags
 from .reports import (
     _facility_errors,
@@ -192,13 +193,15 @@ def _scheduling_options(rt_priority: int | None, no_lock_memory: bool | None, cp
 
 
 def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots: bool, force: bool,
-                  mcap: Path | None = None) -> None:
+                  mcap: Path | None = None, live: dict[str, Any] | None = None) -> None:
     from ..realtime import exit_code, run_hil
 
     if mcap is not None:
         options = {**options, "mcap": {"path": str(mcap), "overwrite": force}}
     _stop_on_signals()
     stderr = Console(stderr=True)
+    if live is not None:
+        options = {**options, "live": live}  # the server prints where it listens once bound
     with stderr.status(f"{escape(resolved.name)}: connecting to the sensor and the robot ...") as status:
         result = run_hil(resolved, options, on_status=lambda s: status.update(escape(_hil_line(s))))
     result.save(folder, plots=not no_plots, overwrite=force)
@@ -206,6 +209,9 @@ def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots
     _report(console, result, folder)
     _report_realtime(console, result)
     _report_mcap(console, result.mcap)
+    live_summary = live_report_line(result.metrics.get("realtime", {}).get("live"))
+    if live_summary:
+        console.print(escape(live_summary), soft_wrap=True)
     code = exit_code(result)
     if code:
         raise click.exceptions.Exit(code)
@@ -216,8 +222,10 @@ def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @_with(_link_flags("runtime", _RUNTIME_FLAGS))
 @_with(_run_output_options("runs/<scenario name>-rt"))
+@_with(live_flags())
 def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool,
-                max_memory: float, max_time: float, **kw: Any) -> None:
+                max_memory: float, max_time: float, live: str | None, live_control: bool, live_remote: bool,
+                live_wait: float, **kw: Any) -> None:
     """Run the HIL loop of SCENARIO in real time: RDT client of the F/T sensor at --sensor,
     EGM endpoint on UDP --egm-port for the robot controller, the scenario's compensator and
     virtual dynamics in a Rust real-time thread. Shows a live line; writes the same files as
@@ -238,7 +246,9 @@ def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots:
         check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-rt", force)
         mcap_path = _mcap_file(mcap, folder, force)
-        _run_realtime(resolved, _realtime_options("runtime", _RUNTIME_FLAGS, kw), folder, no_plots, force, mcap_path)
+        settings = live_settings(live, live_control, live_remote, live_wait)
+        _run_realtime(resolved, _realtime_options("runtime", _RUNTIME_FLAGS, kw), folder, no_plots, force, mcap_path,
+                      settings)
 
 
 @cli.command(name="check", short_help="Dry run: connect to the sensor and the robot as `hil` would, command nothing, report.")
@@ -311,9 +321,11 @@ def _demo_options(sensor_protocol: str | None, robot_protocol: str | None) -> tu
 @_protocol_option("robot", "facility")
 @_with([flag.option for flag in _SCHEDULING_FLAGS])
 @_with(_run_output_options("runs/<scenario name>-demo-rt"))
+@_with(live_flags())
 def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay: float, sensor_protocol: str | None,
             robot_protocol: str | None, opt_rt_priority: int | None, opt_no_lock_memory: bool | None, opt_cpu: int | None,
-            out: str | None, no_plots: bool, mcap: str | None, force: bool, max_memory: float, max_time: float) -> None:
+            out: str | None, no_plots: bool, mcap: str | None, force: bool, max_memory: float, max_time: float,
+            live: str | None, live_control: bool, live_remote: bool, live_wait: float) -> None:
     """Run the emulated facility and the real-time HIL loop on loopback in one process (free
     ports, HTTP included): `hilcontact facility` and `hilcontact hil` together.
 
@@ -338,6 +350,7 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
         check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-demo-rt", force)
         mcap_path = _mcap_file(mcap, folder, force)
+        settings = live_settings(live, live_control, live_remote, live_wait)
         scheduling = _scheduling_options(opt_rt_priority, opt_no_lock_memory, opt_cpu)
         if scheduling:
             runtime_options["scheduling"] = scheduling
@@ -350,7 +363,7 @@ def demo_rt(scenario: str, sets: tuple[str, ...], compensator: str, robot_delay:
                 soft_wrap=True,
             )
             try:
-                _run_realtime(resolved, runtime_options, folder, no_plots, force, mcap_path)
+                _run_realtime(resolved, runtime_options, folder, no_plots, force, mcap_path, settings)
             finally:
                 final = facility.stop()
                 if final.get("io_errors"):

@@ -45,8 +45,8 @@ LINKS = ("sensor", "robot")
 #: Groups whose options are flags named by the option alone (``--force-limit``).
 UNPREFIXED_GROUPS = ("limits",)
 
-#: Options handled elsewhere than by a generated flag (``--mcap FILE``).
-SKIPPED = ("mcap",)
+#: Options handled elsewhere than by a generated flag (``--mcap FILE``, ``--live [HOST:]PORT``).
+SKIPPED = ("mcap", "live")
 
 #: The flags of earlier versions whose names the naming rule does not give, per section: the
 #: option's path (``(group, key)``, or ``(link, protocol or ANY_KIND, key)``) -> the flag. A

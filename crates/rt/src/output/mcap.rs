@@ -308,6 +308,13 @@ impl Cdr {
         self
     }
 
+    /// A `float32`.
+    pub fn f32(&mut self, v: f32) -> &mut Self {
+        self.align(4);
+        self.buf.extend_from_slice(&v.to_le_bytes());
+        self
+    }
+
     /// A `uint32`.
     pub fn u32(&mut self, v: u32) -> &mut Self {
         self.align(4);

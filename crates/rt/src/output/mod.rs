@@ -6,7 +6,11 @@
 //! the run's events ([`Event`]: their texts in [`events`]) and [`Outputs`], the set of sinks a
 //! run opened. The sinks:
 //!
-//! - [`mcap`]: an MCAP recording (ROS 2 messages) for robotics viewers, option `mcap`.
+//! - [`mcap`]: an MCAP recording (ROS 2 messages) for robotics viewers, option `mcap`;
+//! - [`live`]: a Foxglove WebSocket server streaming the same channels live, with the
+//!   operator's stop and mark services, option `live` (cargo feature `live`).
+//!
+//! Both draw the facility in 3-D from [`scene`] (walls, rods, contact, force arrow, frames).
 //!
 //! Beside them, not a sink: [`run_folder`], the samples of a real-time run, from which its
 //! time series, reference and metrics are built (the run folder); every real-time run has it,
@@ -36,6 +40,11 @@
 
 pub mod events;
 pub mod run_folder;
+pub mod scene;
+
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 
 use nalgebra::{UnitQuaternion, Vector3};
 use serde_json::Value;
@@ -81,6 +90,8 @@ macro_rules! outputs {
 outputs! {
     // an MCAP recording (ROS 2 messages, crash-safe chunks) for robotics viewers
     mcap;
+    // a Foxglove live view (WebSocket server, the same channels, stop and mark services)
+    live;
 }
 
 /// A run time in ns (negative or non-finite: 0).
@@ -155,6 +166,56 @@ pub struct RunInfo {
     pub estimates_contact: bool,
     /// The resolved scenario as JSON.
     pub scenario_json: String,
+    /// What the sinks share with the running loop (an operator's stop).
+    pub control: Arc<RunControl>,
+}
+
+/// What a run's sinks share with its loop, lock-free: a stop asked by an operator (the live
+/// view's `/hilcontact/stop`; the loop reads it each tick and stops as after a force limit).
+#[derive(Debug, Default)]
+pub struct RunControl {
+    operator_stop: AtomicBool,
+    /// Events from a sink's threads (an operator's mark, a refused call), for every sink.
+    events: Mutex<VecDeque<(EventLevel, String)>>,
+    has_events: AtomicBool,
+}
+
+/// Most events [`RunControl`] holds until the writer takes them (more are dropped: a client
+/// calling in a loop cannot grow the memory).
+pub const MAX_PENDING_EVENTS: usize = 64;
+
+impl RunControl {
+    /// Asks the loop to stop (reason `operator`).
+    pub fn request_operator_stop(&self) {
+        self.operator_stop.store(true, Ordering::Release);
+    }
+
+    /// An event for every sink of the run (given at the newest sample's time); dropped when
+    /// [`MAX_PENDING_EVENTS`] wait already.
+    pub fn push_event(&self, level: EventLevel, text: String) {
+        if let Ok(mut events) = self.events.lock() {
+            if events.len() < MAX_PENDING_EVENTS {
+                events.push_back((level, text));
+                self.has_events.store(true, Ordering::Release);
+            }
+        }
+    }
+
+    /// The events pushed since the last call (none: nothing is locked).
+    pub fn take_events(&self) -> Vec<(EventLevel, String)> {
+        if !self.has_events.swap(false, Ordering::AcqRel) {
+            return Vec::new();
+        }
+        self.events
+            .lock()
+            .map(|mut e| e.drain(..).collect())
+            .unwrap_or_default()
+    }
+
+    /// Whether an operator asked for a stop.
+    pub fn operator_stop_requested(&self) -> bool {
+        self.operator_stop.load(Ordering::Acquire)
+    }
 }
 
 impl RunInfo {
@@ -170,6 +231,7 @@ impl RunInfo {
             sensor_orientation: plan.sensor.orientation,
             estimates_contact: VirtualDynamics::new(plan).estimates_contact(),
             scenario_json: serde_json::to_string(&plan.scenario).unwrap_or_default(),
+            control: Arc::default(),
         }
     }
 
@@ -193,6 +255,7 @@ pub struct SinkContext<'a> {
 /// event before the first sample, then samples and events in time order.
 pub struct Outputs {
     sinks: Vec<(&'static str, Box<dyn Sink>)>,
+    control: Arc<RunControl>,
     start_text: String,
     started: bool,
     /// Run time of the newest sample or event, s.
@@ -208,6 +271,7 @@ impl Outputs {
         let context = SinkContext { plan, info };
         let mut outputs = Outputs {
             sinks: Vec::new(),
+            control: info.control.clone(),
             start_text: start_text(info),
             started: false,
             last_time: 0.0,
@@ -246,6 +310,11 @@ impl Outputs {
         Self::open(plan, info, options)
     }
 
+    /// What the sinks share with the loop (the loop reads the operator's stop from it).
+    pub fn control(&self) -> Arc<RunControl> {
+        self.control.clone()
+    }
+
     /// Whether no output was asked for (then nothing is fed, and no event is even made).
     pub fn is_empty(&self) -> bool {
         self.sinks.is_empty()
@@ -265,6 +334,9 @@ impl Outputs {
             sink.sample(s);
         }
         self.last_time = self.last_time.max(s.record.time);
+        for (level, text) in self.control.take_events() {
+            self.event(self.last_time, level, &text);
+        }
     }
 
     /// An event to every sink, at run time `time` (s; not before the newest sample or event).
@@ -370,6 +442,7 @@ mod tests {
     fn outputs(log: &Arc<Mutex<Vec<String>>>) -> Outputs {
         Outputs {
             sinks: vec![("log", Box::new(Log(log.clone())))],
+            control: Arc::default(),
             start_text: "start".into(),
             started: false,
             last_time: 0.0,

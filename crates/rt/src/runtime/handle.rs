@@ -105,7 +105,10 @@ impl HilHandle {
         let period = plan.period;
         let ticks = plan.ticks as u64;
 
-        let shared = Arc::new(SharedStatus::default());
+        let shared = Arc::new(SharedStatus {
+            control: outputs.control(),
+            ..SharedStatus::default()
+        });
         let (producer, consumer) = rtrb::RingBuffer::<Sample>::new(RING_CAPACITY);
         let writer = spawn_writer(consumer, shared.clone(), RunFolder::new(ticks), outputs)?;
 

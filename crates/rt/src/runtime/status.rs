@@ -4,9 +4,12 @@
 
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicU8, Ordering};
 
+use std::sync::Arc;
+
 use serde::Serialize;
 
 use crate::counters::{LoopCounters, SharedLinkStats};
+use crate::output::RunControl;
 use crate::safety::StopKind;
 
 /// Names of the phases, by their code in [`SharedStatus::phase`].
@@ -28,6 +31,8 @@ pub(super) struct SharedStatus {
     pub(super) overruns: AtomicU64,
     pub(super) sensor: SharedLinkStats,
     pub(super) robot: SharedLinkStats,
+    /// Shared with the outputs: an operator's stop (the live view's).
+    pub(super) control: Arc<RunControl>,
 }
 
 impl SharedStatus {

@@ -103,6 +103,7 @@ pub(super) fn retreats(kind: StopKind) -> bool {
             | StopKind::LateAnswers
             | StopKind::SensorConnection
             | StopKind::SensorChecksum
+            | StopKind::Operator
     )
 }
 
@@ -285,6 +286,9 @@ impl Loop {
     pub(super) fn loop_checks(&self, time: f64, wake: u64) -> Option<StopEvent> {
         if self.shared.stop_requested.load(Ordering::Acquire) {
             return Some(StopEvent::plain(StopKind::User, time));
+        }
+        if self.shared.control.operator_stop_requested() {
+            return Some(StopEvent::plain(StopKind::Operator, time));
         }
         let watchdog = self.limits.watchdog_ns();
         let sensor_silence = wake.saturating_sub(self.last_sensor_ns);

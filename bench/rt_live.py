@@ -1,0 +1,183 @@
+"""The live view's cost to the real-time loop (docs/realtime.md, "Live view", quotes it): the
+loop's wake-up latency, overruns and the process's peak memory without ``--live``, with a
+viewer that stops reading, and with 20 viewers.
+
+    python bench/rt_live.py [--duration 10] [--repeats 2] [--configs none,stalled,clients20] [--json FILE]
+
+Each run is ``hilcontact demo-rt paper-table1`` (emulated facility and HIL loop in one process
+on loopback: 1 kHz, 20 ms robot delay, ``pida``) for ``--duration`` s. Configurations:
+
+- ``none``: no ``--live``;
+- ``stalled``: ``--live``, one viewer that subscribes to every channel and then never reads
+  (its socket buffers fill, then the server's per-client queue, bounded by the live view's
+  ``backlog``, 4096 messages, drops the oldest);
+- ``clients20``: ``--live``, 20 viewers subscribed to every channel, each reading everything.
+
+The run starts once a viewer has subscribed (``--live-wait``). Runs alternate between the
+configurations, so that a change of the machine's background load hits them alike; the table
+gives the medians over the repeats. Peak memory is the process's ``VmHWM`` (Linux).
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import os
+import platform
+import socket
+import statistics
+import struct
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+
+def free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def connect(port: int, timeout: float = 60.0) -> socket.socket:
+    """A viewer subscribed to every channel (foxglove.sdk.v1), its socket positioned after the
+    subscription."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            sock = socket.create_connection(("127.0.0.1", port), timeout=5)
+            break
+        except OSError:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.05)
+    sock.settimeout(30)
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall((f"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                  f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n"
+                  f"Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n").encode())
+    buf = b""
+    while b"\r\n\r\n" not in buf:
+        buf += sock.recv(4096)
+    buf = buf.split(b"\r\n\r\n", 1)[1]
+
+    def exact(n: int) -> bytes:
+        nonlocal buf
+        while len(buf) < n:
+            buf += sock.recv(1 << 16)
+        out, buf = buf[:n], buf[n:]
+        return out
+
+    while True:
+        b0, b1 = exact(2)
+        n = b1 & 0x7F
+        if n == 126:
+            n = struct.unpack(">H", exact(2))[0]
+        elif n == 127:
+            n = struct.unpack(">Q", exact(8))[0]
+        data = exact(n)
+        if b0 & 0x0F == 1 and json.loads(data).get("op") == "advertise":
+            ids = [c["id"] for c in json.loads(data)["channels"]]
+            break
+    message = json.dumps({"op": "subscribe", "subscriptions": [{"id": i, "channelId": c} for i, c in enumerate(ids)]})
+    mask = os.urandom(4)
+    payload = message.encode()
+    head = bytes([0x81, 0x80 | 126]) + struct.pack(">H", len(payload)) if len(payload) >= 126 else bytes([0x81, 0x80 | len(payload)])
+    sock.sendall(head + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload)))
+    return sock
+
+
+def drain(sock: socket.socket) -> None:
+    try:
+        while sock.recv(1 << 16):
+            pass
+    except OSError:
+        pass
+
+
+def peak_memory_mb(pid: int) -> float | None:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        return None
+    return None
+
+
+def run_once(name: str, duration: float, folder: Path) -> dict:
+    out = folder / name
+    port = free_tcp_port()
+    cmd = [sys.executable, "-m", "hilcontact", "demo-rt", "paper-table1", "--set", f"simulation.duration={duration}",
+           "--no-plots", "--out", str(out)]
+    if name != "none":
+        cmd += ["--live", str(port), "--live-wait", "60"]
+    process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sockets: list[socket.socket] = []
+    threads: list[threading.Thread] = []
+    if name == "stalled":
+        sockets.append(connect(port))  # never read again
+    elif name == "clients20":
+        for _ in range(20):
+            s = connect(port)
+            sockets.append(s)
+            t = threading.Thread(target=drain, args=(s,), daemon=True)
+            t.start()
+            threads.append(t)
+    peak = None
+    while process.poll() is None:
+        peak = peak_memory_mb(process.pid) or peak
+        time.sleep(0.2)
+    stdout, stderr = process.communicate()
+    for s in sockets:
+        s.close()
+    if process.returncode not in (0, 3):
+        raise SystemExit(f"{' '.join(cmd)}: exit {process.returncode}\n{stderr}{stdout}")
+    rt = json.loads((out / "metrics.json").read_text())["realtime"]
+    lat = rt["timing"]["wake_latency_us"]
+    live = rt.get("live") or {}
+    return {
+        "config": name, "ticks": rt["ticks"], "stop": rt["stop"]["kind"],
+        "p50": lat["p50"], "p99": lat["p99"], "max": lat["max"], "overruns": rt["timing"]["overruns"],
+        "samples_dropped": rt["samples_dropped"], "peak_mb": peak,
+        "live_messages": live.get("messages"), "peak_clients": live.get("peak_clients"),
+        "load_average": os.getloadavg()[0], "command": " ".join(cmd[1:]),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--duration", type=float, default=10.0, help="seconds per run [10]")
+    parser.add_argument("--repeats", type=int, default=2, help="runs per configuration [2]")
+    parser.add_argument("--configs", default="none,stalled,clients20", help="comma-separated: none, stalled, clients20")
+    parser.add_argument("--json", type=Path, default=None, help="write every run's numbers here")
+    args = parser.parse_args()
+    names = args.configs.split(",")
+    print(f"machine: {platform.platform()}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at start; "
+          f"{args.duration:g} s per run", flush=True)
+    runs: list[dict] = []
+    with tempfile.TemporaryDirectory(prefix="rt-live-") as tmp:
+        for i in range(args.repeats):
+            for name in names:
+                r = run_once(name, args.duration, Path(tmp) / str(i))
+                runs.append(r)
+                print(f"{name:10s} run {i + 1}: wake latency p50/p99/max {r['p50']:.0f}/{r['p99']:.0f}/{r['max']:.0f} µs, "
+                      f"overruns {r['overruns']} of {r['ticks']} ({r['stop']}), samples dropped {r['samples_dropped']}, "
+                      f"peak memory {r['peak_mb'] or 0:.1f} MB, live messages {r['live_messages']}, "
+                      f"peak clients {r['peak_clients']}; load average {r['load_average']:.1f}", flush=True)
+    print("\n| live view | wake-up latency p50 | p99 | max | overruns (per run) | peak memory |")
+    print("|---|---|---|---|---|---|")
+    for name in names:
+        rs = [r for r in runs if r["config"] == name]
+        med = lambda key: statistics.median(r[key] for r in rs)  # noqa: E731
+        print(f"| {name} | {med('p50'):.0f} µs | {med('p99'):.0f} µs | {max(r['max'] for r in rs):.0f} µs | "
+              f"{', '.join(str(r['overruns']) for r in rs)} | {med('peak_mb'):.1f} MB |")
+    if args.json is not None:
+        args.json.write_text(json.dumps(runs, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,420 @@
+//! The facility in 3-D, as the live view ([`super::live`]) draws it: the walls, the virtual
+//! (commanded) and the actual rod, the contact point and the contact force as an arrow
+//! (`/hil/scene`, `visualization_msgs/msg/MarkerArray`), and the frames of both servicers in
+//! the target frame `t` (`/tf`, `tf2_msgs/msg/TFMessage`), encoded as CDR with
+//! [`Cdr`] like every channel of the MCAP recording, at [`SCENE_RATE`] of run time.
+//!
+//! Frames: `t` the target (mockup) frame; `servicer` the commanded servicer body (its origin
+//! `p_tip − R·r_tip`, `R` its attitude relative to `t`, `r_tip` the rod tip in its frame);
+//! `servicer_actual` the robot's actual one.
+
+use nalgebra::{UnitQuaternion, Vector3};
+
+use hilcontact_core::Plan;
+
+use super::mcap::{schema_text, Cdr, ChannelScope, ChannelSpec, FRAME_TARGET};
+use crate::report::Sample;
+
+/// Scene messages per second of run time (at most one per tick), Hz.
+pub const SCENE_RATE: f64 = 30.0;
+
+/// Frame id of the commanded servicer body.
+pub const FRAME_SERVICER: &str = "servicer";
+
+/// Frame id of the robot's actual servicer body.
+pub const FRAME_SERVICER_ACTUAL: &str = "servicer_actual";
+
+/// Length of the force arrow per newton of contact force, m/N.
+pub const FORCE_ARROW_SCALE: f64 = 0.001;
+
+/// The scene's channels (the one list; docs/realtime.md shows it).
+pub const SCENE_CHANNELS: [ChannelSpec; 2] = [
+    ChannelSpec {
+        topic: "/hil/scene",
+        schema: "visualization_msgs/msg/MarkerArray",
+        frame: FRAME_TARGET,
+        scope: ChannelScope::Always,
+        doc: "walls (grey), the virtual rod (blue) and the actual rod (orange), the contact point and the contact force arrow (red, 1 mm/N), at 30 Hz of run time",
+    },
+    ChannelSpec {
+        topic: "/tf",
+        schema: "tf2_msgs/msg/TFMessage",
+        frame: FRAME_TARGET,
+        scope: ChannelScope::Always,
+        doc: "the commanded and the actual servicer frames (servicer, servicer_actual) in t, at 30 Hz of run time",
+    },
+];
+
+/// Marker ids of the scene (walls after them, `WALLS + i`).
+const ROD: i32 = 0;
+const ROD_ACTUAL: i32 = 1;
+const CONTACT: i32 = 2;
+const FORCE: i32 = 3;
+const WALLS: i32 = 10;
+
+/// `visualization_msgs/Marker` types used.
+const ARROW: i32 = 0;
+const CUBE: i32 = 1;
+const SPHERE: i32 = 2;
+const LINE_STRIP: i32 = 4;
+
+/// RGBA colours.
+const GREY: [f32; 4] = [0.6, 0.6, 0.6, 0.5];
+const BLUE: [f32; 4] = [0.12, 0.47, 0.71, 1.0];
+const ORANGE: [f32; 4] = [1.0, 0.5, 0.05, 1.0];
+const RED: [f32; 4] = [0.84, 0.15, 0.16, 1.0];
+
+/// What the scene is drawn from: the plan's walls and rod, and the encoder.
+pub struct Scene {
+    walls: Vec<(Vector3<f64>, UnitQuaternion<f64>)>,
+    wall_size: f64,
+    rod_tip: Vector3<f64>,
+    contact_threshold: f64,
+    /// Ticks between two scene messages (>= 1).
+    pub every: u64,
+    cdr: Cdr,
+}
+
+impl Scene {
+    /// The scene of `plan`: each wall a thin square plate (side 4 × the rod's length, at least
+    /// 0.2 m) centred on its point, normal to its normal.
+    pub fn new(plan: &Plan) -> Self {
+        let rod_tip = plan.system.rod_tip;
+        let walls = plan
+            .system
+            .contact
+            .walls
+            .iter()
+            .map(|w| {
+                let q = UnitQuaternion::rotation_between(&Vector3::z(), &w.normal).unwrap_or_else(
+                    || UnitQuaternion::from_euler_angles(std::f64::consts::PI, 0.0, 0.0),
+                );
+                (w.point, q)
+            })
+            .collect();
+        Scene {
+            walls,
+            wall_size: (4.0 * rod_tip.norm()).max(0.2),
+            rod_tip,
+            contact_threshold: plan.contact_threshold,
+            every: ((1.0 / (SCENE_RATE * plan.period)).round() as u64).max(1),
+            cdr: Cdr::new(),
+        }
+    }
+
+    /// Whether tick `k` carries a scene message.
+    pub fn due(&self, k: u64) -> bool {
+        k.is_multiple_of(self.every)
+    }
+
+    /// The servicer's origin in `t` from its rod tip and attitude, m.
+    pub fn origin(&self, tip: &Vector3<f64>, attitude: &UnitQuaternion<f64>) -> Vector3<f64> {
+        tip - attitude * self.rod_tip
+    }
+
+    /// The `/hil/scene` message of one sample at run time `t_ns` (ns).
+    pub fn markers(&mut self, t_ns: u64, s: &Sample) -> &[u8] {
+        let r = &s.record;
+        let base = self.origin(&r.tip_position, &r.orientation);
+        let base_actual = self.origin(&r.actual_tip_position, &r.actual_orientation);
+        let force = r.contact_force;
+        let in_contact = force.norm() > self.contact_threshold;
+        let walls = std::mem::take(&mut self.walls);
+        let size = self.wall_size;
+        let c = self.cdr.begin();
+        c.u32(4 + walls.len() as u32);
+        let none = UnitQuaternion::identity();
+        let zero = Vector3::zeros();
+        marker(
+            c,
+            t_ns,
+            ROD,
+            LINE_STRIP,
+            &zero,
+            &none,
+            [0.01, 0.0, 0.0],
+            BLUE,
+            &[base, r.tip_position],
+        );
+        let tip_actual = r.actual_tip_position;
+        marker(
+            c,
+            t_ns,
+            ROD_ACTUAL,
+            LINE_STRIP,
+            &zero,
+            &none,
+            [0.01, 0.0, 0.0],
+            ORANGE,
+            &[base_actual, tip_actual],
+        );
+        let mut contact_colour = RED;
+        contact_colour[3] = if in_contact { 1.0 } else { 0.0 };
+        marker(
+            c,
+            t_ns,
+            CONTACT,
+            SPHERE,
+            &tip_actual,
+            &none,
+            [0.02; 3],
+            contact_colour,
+            &[],
+        );
+        let end = tip_actual + force * FORCE_ARROW_SCALE;
+        marker(
+            c,
+            t_ns,
+            FORCE,
+            ARROW,
+            &zero,
+            &none,
+            [0.005, 0.01, 0.01],
+            contact_colour,
+            &[tip_actual, end],
+        );
+        for (i, (point, q)) in walls.iter().enumerate() {
+            marker(
+                c,
+                t_ns,
+                WALLS + i as i32,
+                CUBE,
+                point,
+                q,
+                [size, size, 0.002],
+                GREY,
+                &[],
+            );
+        }
+        self.walls = walls;
+        self.cdr.bytes()
+    }
+
+    /// The `/tf` message of one sample: `servicer` and `servicer_actual` in `t`.
+    pub fn transforms(&mut self, t_ns: u64, s: &Sample) -> &[u8] {
+        let r = &s.record;
+        let base = self.origin(&r.tip_position, &r.orientation);
+        let base_actual = self.origin(&r.actual_tip_position, &r.actual_orientation);
+        let c = self.cdr.begin();
+        c.u32(2);
+        for (child, p, q) in [
+            (FRAME_SERVICER, base, r.orientation),
+            (FRAME_SERVICER_ACTUAL, base_actual, r.actual_orientation),
+        ] {
+            c.header(t_ns, FRAME_TARGET)
+                .string(child)
+                .vector3(&p)
+                .quaternion(&q);
+        }
+        self.cdr.bytes()
+    }
+}
+
+/// One `visualization_msgs/Marker` (namespace `hilcontact`, frame `t`, no lifetime).
+#[allow(clippy::too_many_arguments)]
+fn marker(
+    c: &mut Cdr,
+    t_ns: u64,
+    id: i32,
+    kind: i32,
+    position: &Vector3<f64>,
+    attitude: &UnitQuaternion<f64>,
+    scale: [f64; 3],
+    colour: [f32; 4],
+    points: &[Vector3<f64>],
+) {
+    c.header(t_ns, FRAME_TARGET)
+        .string("hilcontact")
+        .i32(id)
+        .i32(kind)
+        .i32(0);
+    c.vector3(position).quaternion(attitude);
+    c.vector3(&Vector3::from(scale));
+    for v in colour {
+        c.f32(v);
+    }
+    c.i32(0).u32(0); // lifetime: forever
+    c.u8(0); // frame_locked
+    c.u32(points.len() as u32);
+    for p in points {
+        c.vector3(p);
+    }
+    c.u32(0); // colors
+    c.string("").string("").u8(0); // text, mesh_resource, mesh_use_embedded_materials
+}
+
+const DEF_MARKER: &str = "MSG: visualization_msgs/Marker\n\
+int32 ARROW=0\nint32 CUBE=1\nint32 SPHERE=2\nint32 CYLINDER=3\nint32 LINE_STRIP=4\n\
+int32 LINE_LIST=5\nint32 CUBE_LIST=6\nint32 SPHERE_LIST=7\nint32 POINTS=8\n\
+int32 TEXT_VIEW_FACING=9\nint32 MESH_RESOURCE=10\nint32 TRIANGLE_LIST=11\n\
+int32 ADD=0\nint32 MODIFY=0\nint32 DELETE=2\nint32 DELETEALL=3\n\
+std_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\n\
+geometry_msgs/Pose pose\ngeometry_msgs/Vector3 scale\nstd_msgs/ColorRGBA color\n\
+builtin_interfaces/Duration lifetime\nbool frame_locked\ngeometry_msgs/Point[] points\n\
+std_msgs/ColorRGBA[] colors\nstring text\nstring mesh_resource\nbool mesh_use_embedded_materials\n";
+
+/// The `ros2msg` schema of a scene channel (the MarkerArray's here, the others'
+/// [`schema_text`]).
+pub fn scene_schema_text(schema: &str) -> String {
+    if schema != "visualization_msgs/msg/MarkerArray" {
+        return schema_text(schema);
+    }
+    let sep = "================================================================================\n";
+    let mut text = String::from("visualization_msgs/Marker[] markers\n");
+    for dep in [
+        DEF_MARKER,
+        "MSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n",
+        "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n",
+        "MSG: geometry_msgs/Pose\nPoint position\nQuaternion orientation\n",
+        "MSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n",
+        "MSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\nfloat64 w\n",
+        "MSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n",
+        "MSG: std_msgs/ColorRGBA\nfloat32 r\nfloat32 g\nfloat32 b\nfloat32 a\n",
+        "MSG: builtin_interfaces/Duration\nint32 sec\nuint32 nanosec\n",
+    ] {
+        text.push_str(sep);
+        text.push_str(dep);
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn plan() -> Plan {
+        let path = format!(
+            "{}/../../python/hilcontact/scenarios/paper-table1.toml",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let scenario: hilcontact_core::Scenario =
+            toml::from_str(&std::fs::read_to_string(path).expect("preset")).expect("toml");
+        scenario.resolve().expect("plan")
+    }
+
+    #[test]
+    fn the_servicer_origin_puts_the_rod_tip_where_the_record_says() {
+        let plan = plan();
+        let scene = Scene::new(&plan);
+        let q = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.1);
+        let tip = Vector3::new(0.1, -0.4, 0.25);
+        let origin = scene.origin(&tip, &q);
+        assert!(((origin + q * plan.system.rod_tip) - tip).norm() < 1e-12);
+        assert_eq!(
+            scene.every,
+            ((1.0 / (30.0 * plan.period)).round() as u64).max(1)
+        );
+    }
+
+    /// A reader of the CDR layout (alignment relative to the 4-byte header).
+    struct Reader<'a>(&'a [u8], usize);
+
+    impl Reader<'_> {
+        fn take(&mut self, n: usize) -> &[u8] {
+            while !(self.1 - 4).is_multiple_of(n.min(8)) {
+                self.1 += 1;
+            }
+            self.1 += n;
+            &self.0[self.1 - n..self.1]
+        }
+        fn u32(&mut self) -> u32 {
+            u32::from_le_bytes(self.take(4).try_into().unwrap())
+        }
+        fn f64(&mut self) -> f64 {
+            f64::from_le_bytes(self.take(8).try_into().unwrap())
+        }
+        fn string(&mut self) -> String {
+            let n = self.u32() as usize;
+            self.1 += n;
+            String::from_utf8(self.0[self.1 - n..self.1 - 1].to_vec()).unwrap()
+        }
+    }
+
+    #[test]
+    fn transforms_decode_to_both_servicer_frames_in_t() {
+        let plan = plan();
+        let mut scene = Scene::new(&plan);
+        let mut s = Sample::default();
+        s.record.tip_position = Vector3::new(0.3, 0.1, -0.2);
+        s.record.orientation = UnitQuaternion::from_euler_angles(0.1, 0.2, 0.3);
+        s.record.actual_tip_position = Vector3::new(0.31, 0.1, -0.2);
+        s.record.actual_orientation = UnitQuaternion::from_euler_angles(0.1, 0.2, 0.31);
+        let bytes = scene.transforms(1_500_000_000, &s).to_vec();
+        let mut r = Reader(&bytes, 4);
+        assert_eq!(r.u32(), 2);
+        for (child, tip, q) in [
+            (FRAME_SERVICER, s.record.tip_position, s.record.orientation),
+            (
+                FRAME_SERVICER_ACTUAL,
+                s.record.actual_tip_position,
+                s.record.actual_orientation,
+            ),
+        ] {
+            assert_eq!((r.u32(), r.u32()), (1, 500_000_000)); // 1.5 s
+            assert_eq!(r.string(), FRAME_TARGET);
+            assert_eq!(r.string(), child);
+            let p = Vector3::new(r.f64(), r.f64(), r.f64());
+            let rotation = [r.f64(), r.f64(), r.f64(), r.f64()];
+            assert!(
+                (p + q * plan.system.rod_tip - tip).norm() < 1e-12,
+                "{child}"
+            );
+            assert_eq!(rotation, [q.i, q.j, q.k, q.w]);
+        }
+        assert_eq!(r.1, bytes.len(), "nothing after the second transform");
+    }
+
+    #[test]
+    fn the_force_arrow_is_the_contact_force_at_the_actual_tip() {
+        let plan = plan();
+        let mut scene = Scene::new(&plan);
+        let mut s = Sample::default();
+        s.record.actual_tip_position = Vector3::new(0.2, 0.0, 0.1);
+        s.record.contact_force = Vector3::new(-150.0, 20.0, 0.0);
+        let bytes = scene.markers(0, &s).to_vec();
+        let mut r = Reader(&bytes, 4);
+        let n = r.u32();
+        assert_eq!(n as usize, 4 + plan.system.contact.walls.len());
+        let mut kinds = Vec::new();
+        for _ in 0..n {
+            r.u32();
+            r.u32();
+            assert_eq!(r.string(), FRAME_TARGET);
+            assert_eq!(r.string(), "hilcontact");
+            let (id, kind, action) = (r.u32(), r.u32(), r.u32());
+            assert_eq!(action, 0);
+            let position = Vector3::new(r.f64(), r.f64(), r.f64());
+            let _q = [r.f64(), r.f64(), r.f64(), r.f64()];
+            let _scale = [r.f64(), r.f64(), r.f64()];
+            let colour: Vec<f32> = (0..4)
+                .map(|_| f32::from_le_bytes(r.take(4).try_into().unwrap()))
+                .collect();
+            r.u32();
+            r.u32();
+            r.take(1);
+            let points: Vec<Vector3<f64>> = (0..r.u32())
+                .map(|_| Vector3::new(r.f64(), r.f64(), r.f64()))
+                .collect();
+            assert_eq!(r.u32(), 0);
+            r.string();
+            r.string();
+            r.take(1);
+            if id as i32 == FORCE {
+                let end = s.record.actual_tip_position + s.record.contact_force * FORCE_ARROW_SCALE;
+                assert_eq!(points, vec![s.record.actual_tip_position, end]);
+                assert_eq!(colour[3], 1.0, "in contact: shown");
+            }
+            if id as i32 >= WALLS {
+                let wall = plan.system.contact.walls[(id as i32 - WALLS) as usize];
+                assert!((position - wall.point).norm() < 1e-12);
+            }
+            kinds.push(kind as i32);
+        }
+        assert_eq!(r.1, bytes.len(), "every marker read");
+        assert_eq!(kinds[..4], [LINE_STRIP, LINE_STRIP, SPHERE, ARROW]);
+        assert!(kinds[4..].iter().all(|k| *k == CUBE));
+        let text = scene_schema_text("visualization_msgs/msg/MarkerArray");
+        assert!(text.starts_with("visualization_msgs/Marker[] markers\n"));
+        assert!(text.contains("MSG: std_msgs/ColorRGBA\n"));
+    }
+}

@@ -1,0 +1,372 @@
+//! The live view against a real run on loopback: a minimal Foxglove WebSocket client
+//! (`foxglove.sdk.v1`, the SDK's name of `foxglove.websocket.v1`, over `tungstenite`) subscribes to every channel of a run of the
+//! loop against the emulated facility, receives every tick of the force channel, the scene, and
+//! stops the run through `/hilcontact/stop`; without `live.control` the stop is refused; bad
+//! input from another client changes nothing.
+#![cfg(feature = "live")]
+
+mod common;
+
+use std::collections::{BTreeMap, HashMap};
+use std::io::Write;
+use std::net::{SocketAddr, TcpStream};
+use std::time::{Duration, Instant};
+
+use common::{delayed, finish_both, free_tcp_port, loopback_options, start_both};
+use hilcontact_core::compensator::CompensatorConfig;
+use hilcontact_rt::output::live::LiveOptions;
+use serde_json::{json, Value};
+use tungstenite::client::IntoClientRequest;
+use tungstenite::{Message, WebSocket};
+
+/// A viewer: the socket, the advertised channels (id -> topic) and services (name -> id).
+struct Viewer {
+    ws: WebSocket<TcpStream>,
+    channels: HashMap<u64, String>,
+    services: HashMap<String, u64>,
+    /// subscription id -> topic
+    subscriptions: HashMap<u32, String>,
+}
+
+/// What a viewer saw: per topic the log times (ns) of its messages, the service responses and
+/// failures (JSON), and the `/hil/events` texts' raw payloads.
+#[derive(Debug, Default)]
+struct Seen {
+    times: BTreeMap<String, Vec<u64>>,
+    payloads: BTreeMap<String, Vec<Vec<u8>>>,
+    responses: Vec<u32>,
+    failures: Vec<Value>,
+    clock: Vec<u64>,
+}
+
+impl Viewer {
+    /// Connects (retrying for 20 s: the server binds when the run starts) and reads the
+    /// advertisements.
+    fn connect(port: u16) -> Viewer {
+        let addr = SocketAddr::from(([127, 0, 0, 1], port));
+        let begun = Instant::now();
+        let stream = loop {
+            match TcpStream::connect_timeout(&addr, Duration::from_secs(1)) {
+                Ok(s) => break s,
+                Err(e) if begun.elapsed() < Duration::from_secs(20) => {
+                    let _ = e;
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                Err(e) => panic!("no live view on {addr}: {e}"),
+            }
+        };
+        stream
+            .set_read_timeout(Some(Duration::from_secs(20)))
+            .unwrap();
+        let mut request = format!("ws://{addr}/").into_client_request().unwrap();
+        request
+            .headers_mut()
+            .insert("Sec-WebSocket-Protocol", "foxglove.sdk.v1".parse().unwrap());
+        let (ws, response) = tungstenite::client::client(request, stream).expect("handshake");
+        assert_eq!(
+            response.headers()["Sec-WebSocket-Protocol"],
+            "foxglove.sdk.v1"
+        );
+        let mut v = Viewer {
+            ws,
+            channels: HashMap::new(),
+            services: HashMap::new(),
+            subscriptions: HashMap::new(),
+        };
+        while v.channels.is_empty() || v.services.is_empty() {
+            let Message::Text(text) = v.ws.read().expect("advertisements") else {
+                continue;
+            };
+            let m: Value = serde_json::from_str(&text).unwrap();
+            match m["op"].as_str() {
+                Some("advertise") => {
+                    for c in m["channels"].as_array().unwrap() {
+                        v.channels.insert(
+                            c["id"].as_u64().unwrap(),
+                            c["topic"].as_str().unwrap().into(),
+                        );
+                    }
+                }
+                Some("advertiseServices") => {
+                    for s in m["services"].as_array().unwrap() {
+                        v.services.insert(
+                            s["name"].as_str().unwrap().into(),
+                            s["id"].as_u64().unwrap(),
+                        );
+                    }
+                }
+                _ => {}
+            }
+        }
+        v
+    }
+
+    fn send_json(&mut self, v: Value) {
+        self.ws.send(Message::Text(v.to_string().into())).unwrap();
+    }
+
+    fn subscribe_all(&mut self) {
+        let mut subs = Vec::new();
+        for (i, (id, topic)) in self.channels.iter().enumerate() {
+            subs.push(json!({"id": i as u32, "channelId": id}));
+            self.subscriptions.insert(i as u32, topic.clone());
+        }
+        self.send_json(json!({"op": "subscribe", "subscriptions": subs}));
+    }
+
+    /// A service call (binary op 2: service id, call id, encoding, payload).
+    fn call(&mut self, service: &str, call: u32, payload: &[u8]) {
+        let id = self.services[service] as u32;
+        let mut b = vec![2u8];
+        b.extend_from_slice(&id.to_le_bytes());
+        b.extend_from_slice(&call.to_le_bytes());
+        b.extend_from_slice(&4u32.to_le_bytes());
+        b.extend_from_slice(b"json");
+        b.extend_from_slice(payload);
+        self.ws.send(Message::Binary(b.into())).unwrap();
+    }
+
+    /// Reads until the server closes; calls `stop` (once) when the force channel passes
+    /// `stop_at` s of run time.
+    fn read_all(mut self, stop_at: Option<f64>) -> Seen {
+        let mut seen = Seen::default();
+        let mut stopped = false;
+        loop {
+            let message = match self.ws.read() {
+                Ok(m) => m,
+                Err(_) => break, // closed by the server at the run's end
+            };
+            match message {
+                Message::Binary(b) if b[0] == 1 => {
+                    let sub = u32::from_le_bytes(b[1..5].try_into().unwrap());
+                    let t = u64::from_le_bytes(b[5..13].try_into().unwrap());
+                    let topic = self.subscriptions[&sub].clone();
+                    seen.times.entry(topic.clone()).or_default().push(t);
+                    if topic == "/hil/events" || topic == "/hil/scene" {
+                        seen.payloads
+                            .entry(topic.clone())
+                            .or_default()
+                            .push(b[13..].to_vec());
+                    }
+                    if let Some(at) = stop_at {
+                        if !stopped && topic == "/hil/measured_wrench" && t as f64 * 1e-9 >= at {
+                            stopped = true;
+                            self.call("/hilcontact/stop", 7, b"{}");
+                        }
+                    }
+                }
+                Message::Binary(b) if b[0] == 2 => {
+                    seen.clock
+                        .push(u64::from_le_bytes(b[1..9].try_into().unwrap()));
+                }
+                Message::Binary(b) if b[0] == 3 => {
+                    seen.responses
+                        .push(u32::from_le_bytes(b[5..9].try_into().unwrap()));
+                }
+                Message::Text(text) => {
+                    let m: Value = serde_json::from_str(&text).unwrap();
+                    if m["op"] == "serviceCallFailure" {
+                        seen.failures.push(m);
+                    }
+                }
+                Message::Close(_) => break,
+                _ => {}
+            }
+        }
+        seen
+    }
+}
+
+/// Runs the loop (PID-free default compensator, 20 ms robot delay) for `duration` s against the
+/// emulator with a live view; `viewer` runs in its own thread with the port. Returns the
+/// metrics, the viewer's result and the phases the loop was seen in.
+fn run_live<T: Send + 'static>(
+    duration: f64,
+    live: LiveOptions,
+    viewer: impl FnOnce(u16) -> T + Send + 'static,
+) -> (Value, T, Vec<&'static str>) {
+    let s = delayed(CompensatorConfig::default(), duration);
+    let (emu, mut rt) = loopback_options();
+    let port = free_tcp_port();
+    rt.live = Some(LiveOptions {
+        port,
+        wait: 20.0,
+        ..live
+    });
+    let client = std::thread::spawn(move || viewer(port));
+    let (facility, hil) = start_both(&s, &emu, &rt);
+    let mut phases = Vec::new();
+    let begun = Instant::now();
+    while !hil.wait(Duration::from_millis(2)) && begun.elapsed().as_secs_f64() < duration + 30.0 {
+        let phase = hil.status().phase;
+        if phases.last() != Some(&phase) {
+            phases.push(phase);
+        }
+    }
+    let (out, status) = finish_both(facility, hil, Duration::from_secs(10));
+    let out = out.unwrap_or_else(|e| panic!("{e}; emulator: {status:?}"));
+    (out.metrics, client.join().expect("viewer"), phases)
+}
+
+/// The run times (ns) of every tick of a run of `ticks` ticks (the preset's 1 ms period).
+fn tick_times(ticks: u64) -> Vec<u64> {
+    let period = delayed(CompensatorConfig::default(), 1.0).simulation.period;
+    assert_eq!(period, 0.001);
+    (0..ticks)
+        .map(|k| hilcontact_rt::output::time_ns(k as f64 * period))
+        .collect()
+}
+
+#[test]
+fn a_viewer_gets_every_force_sample_and_the_scene_and_stops_the_run() {
+    let live = LiveOptions {
+        control: true,
+        ..LiveOptions::default()
+    };
+    let (m, seen, phases) = run_live(4.0, live, |port| {
+        let mut v = Viewer::connect(port);
+        v.subscribe_all();
+        v.read_all(Some(1.0))
+    });
+    let rt = &m["realtime"];
+    // the stop: the operator's, through the force limit's path
+    assert_eq!(rt["stop"]["kind"], "operator", "{rt}");
+    assert_eq!(rt["stop"]["exit_code"], 3);
+    assert_eq!(m["status"], "stopped");
+    assert!(phases.contains(&"holding"), "{phases:?}");
+    let stopped_at = rt["stop"]["time"].as_f64().unwrap();
+    assert!((1.0..3.0).contains(&stopped_at), "{stopped_at}");
+    // every tick's force sample, in order, none dropped
+    assert_eq!(rt["samples_dropped"], 0);
+    let ticks = rt["ticks"].as_u64().unwrap();
+    let force = &seen.times["/hil/measured_wrench"];
+    assert_eq!(force, &tick_times(ticks), "every tick, in order");
+    for topic in [
+        "/hil/contact_force",
+        "/hil/tip/actual",
+        "/hil/energy",
+        "/hil/loop_timing",
+    ] {
+        assert_eq!(seen.times[topic].len() as u64, ticks, "{topic}");
+    }
+    // the scene at 30 Hz of run time, the server's clock with it
+    let scenes = seen.times["/hil/scene"].len() as u64;
+    assert_eq!(
+        scenes,
+        ticks.div_ceil(33),
+        "{scenes} scenes in {ticks} ticks"
+    );
+    assert_eq!(seen.times["/tf"].len() as u64, scenes);
+    assert_eq!(seen.times["/tf_static"].len(), 1);
+    assert_eq!(seen.clock.len() as u64, scenes);
+    // the call answered, logged as an event, counted
+    assert_eq!(seen.responses, [7]);
+    let events: Vec<String> = seen.payloads["/hil/events"]
+        .iter()
+        .map(|p| String::from_utf8_lossy(p).into_owned())
+        .collect();
+    assert!(
+        events
+            .iter()
+            .any(|e| e.contains("operator stop from client")),
+        "{events:?}"
+    );
+    let live = &rt["live"];
+    assert_eq!(live["stop_calls"], 1, "{live}");
+    assert_eq!(live["refused_calls"], 0);
+    assert_eq!(live["connections"], 1);
+}
+
+#[test]
+fn without_control_a_stop_is_refused_and_the_run_goes_on() {
+    // 1 s: the uncompensated run meets the force limit later (about 1.3 s)
+    let (m, seen, _) = run_live(1.0, LiveOptions::default(), |port| {
+        let mut v = Viewer::connect(port);
+        v.subscribe_all();
+        v.read_all(Some(0.3))
+    });
+    let rt = &m["realtime"];
+    assert_eq!(rt["stop"]["kind"], "completed", "{rt}");
+    assert_eq!(seen.failures.len(), 1, "{:?}", seen.failures);
+    assert!(seen.failures[0]["message"]
+        .as_str()
+        .unwrap()
+        .contains("--live-control"));
+    assert_eq!(rt["live"]["refused_calls"], 1);
+    assert_eq!(rt["live"]["stop_calls"], 0);
+    let events = String::from_utf8_lossy(&seen.payloads["/hil/events"].concat()).into_owned();
+    assert!(events.contains("refused from client"), "{events}");
+}
+
+#[test]
+fn bad_input_on_the_live_port_changes_nothing() {
+    let live = LiveOptions {
+        control: true,
+        ..LiveOptions::default()
+    };
+    let (m, seen, _) = run_live(1.0, live, |port| {
+        // a hostile client first: garbage, unknown ops, a huge message, publishing, thousands
+        // of subscriptions to channels that do not exist, an unknown service, a raw TCP
+        // client that never completes its handshake
+        let mut bad = Viewer::connect(port);
+        let mut raw = TcpStream::connect(("127.0.0.1", port)).unwrap();
+        let _ = raw.write_all(b"GET / HTTP/1.1\r\n\r\n\x00\x01garbage");
+        // the server may close the hostile client at any point: its sends may fail
+        let service_call = |id: u32, payload: &[u8]| {
+            let mut b = vec![2u8];
+            b.extend_from_slice(&id.to_le_bytes());
+            b.extend_from_slice(&1u32.to_le_bytes());
+            b.extend_from_slice(&4u32.to_le_bytes());
+            b.extend_from_slice(b"json");
+            b.extend_from_slice(payload);
+            Message::Binary(b.into())
+        };
+        let mark = bad.services["/hilcontact/mark"] as u32;
+        let mut publish = vec![1u8];
+        publish.extend_from_slice(&1u32.to_le_bytes());
+        publish.extend_from_slice(b"{\"x\": 1e9}");
+        let subs: Vec<Value> = (0..5000)
+            .map(|i| json!({"id": i, "channelId": 100000 + i}))
+            .collect();
+        let hostile = [
+            Message::Binary(vec![0xff, 1, 2, 3].into()),
+            Message::Binary(vec![2, 0, 0].into()),
+            Message::Text("not json".into()),
+            Message::Text(json!({"op": "launchMissiles"}).to_string().into()),
+            Message::Text(
+                json!({"op": "advertise", "channels": [{"id": 1, "topic": "/hil/command",
+                    "encoding": "json", "schemaName": "x"}]})
+                .to_string()
+                .into(),
+            ),
+            Message::Binary(publish.into()),
+            Message::Text(
+                json!({"op": "subscribe", "subscriptions": subs})
+                    .to_string()
+                    .into(),
+            ),
+            service_call(mark, &vec![b'x'; 2 << 20]),
+            service_call(999, b"{}"),
+        ];
+        let mut sent = 0;
+        for m in hostile {
+            if bad.ws.send(m).is_ok() {
+                sent += 1;
+            }
+        }
+        eprintln!("hostile client: {sent} of 9 messages sent before the server closed it");
+        // then a good viewer: it must see every tick
+        let mut v = Viewer::connect(port);
+        v.subscribe_all();
+        let seen = v.read_all(None);
+        drop(bad);
+        drop(raw);
+        seen
+    });
+    let rt = &m["realtime"];
+    assert_eq!(rt["stop"]["kind"], "completed", "{rt}");
+    let ticks = rt["ticks"].as_u64().unwrap();
+    assert_eq!(seen.times["/hil/measured_wrench"], tick_times(ticks));
+    // the huge mark was a mark (its label cut); nothing else was accepted
+    assert_eq!(rt["live"]["stop_calls"], 0, "{}", rt["live"]);
+}
