@@ -12,7 +12,7 @@ use std::io::Write;
 use std::net::{SocketAddr, TcpStream};
 use std::time::{Duration, Instant};
 
-use common::{delayed, finish_both, free_tcp_port, loopback_options, start_both};
+use common::{delayed, free_tcp_port, loopback_options, start_both};
 use hilcontact_core::compensator::CompensatorConfig;
 use hilcontact_rt::output::live::LiveOptions;
 use serde_json::{json, Value};
@@ -179,12 +179,13 @@ impl Viewer {
 
 /// Runs the loop (PID-free default compensator, 20 ms robot delay) for `duration` s against the
 /// emulator with a live view; `viewer` runs in its own thread with the port. Returns the
-/// metrics, the viewer's result and the phases the loop was seen in.
+/// metrics, the viewer's result, the phases the loop was seen in and how long the finish took
+/// (the outputs finished after the loop's end).
 fn run_live<T: Send + 'static>(
     duration: f64,
     live: LiveOptions,
     viewer: impl FnOnce(u16) -> T + Send + 'static,
-) -> (Value, T, Vec<&'static str>) {
+) -> (Value, T, Vec<&'static str>, Duration) {
     let s = delayed(CompensatorConfig::default(), duration);
     let (emu, mut rt) = loopback_options();
     let port = free_tcp_port();
@@ -203,9 +204,18 @@ fn run_live<T: Send + 'static>(
             phases.push(phase);
         }
     }
-    let (out, status) = finish_both(facility, hil, Duration::from_secs(10));
+    assert!(hil.wait(Duration::from_secs(10)), "the run did not end");
+    let finishing = Instant::now();
+    let out = hil.finish();
+    let finish_time = finishing.elapsed();
+    let status = facility.join();
     let out = out.unwrap_or_else(|e| panic!("{e}; emulator: {status:?}"));
-    (out.metrics, client.join().expect("viewer"), phases)
+    (
+        out.metrics,
+        client.join().expect("viewer"),
+        phases,
+        finish_time,
+    )
 }
 
 /// The run times (ns) of every tick of a run of `ticks` ticks (the preset's 1 ms period).
@@ -223,7 +233,7 @@ fn a_viewer_gets_every_force_sample_and_the_scene_and_stops_the_run() {
         control: true,
         ..LiveOptions::default()
     };
-    let (m, seen, phases) = run_live(4.0, live, |port| {
+    let (m, seen, phases, _) = run_live(4.0, live, |port| {
         let mut v = Viewer::connect(port);
         v.subscribe_all();
         v.read_all(Some(1.0))
@@ -280,7 +290,7 @@ fn a_viewer_gets_every_force_sample_and_the_scene_and_stops_the_run() {
 #[test]
 fn without_control_a_stop_is_refused_and_the_run_goes_on() {
     // 1 s: the uncompensated run meets the force limit later (about 1.3 s)
-    let (m, seen, _) = run_live(1.0, LiveOptions::default(), |port| {
+    let (m, seen, _, _) = run_live(1.0, LiveOptions::default(), |port| {
         let mut v = Viewer::connect(port);
         v.subscribe_all();
         v.read_all(Some(0.3))
@@ -304,7 +314,7 @@ fn bad_input_on_the_live_port_changes_nothing() {
         control: true,
         ..LiveOptions::default()
     };
-    let (m, seen, _) = run_live(1.0, live, |port| {
+    let (m, seen, _, _) = run_live(1.0, live, |port| {
         // a hostile client first: garbage, unknown ops, a huge message, publishing, thousands
         // of subscriptions to channels that do not exist, an unknown service, a raw TCP
         // client that never completes its handshake
@@ -369,4 +379,29 @@ fn bad_input_on_the_live_port_changes_nothing() {
     assert_eq!(seen.times["/hil/measured_wrench"], tick_times(ticks));
     // the huge mark was a mark (its label cut); nothing else was accepted
     assert_eq!(rt["live"]["stop_calls"], 0, "{}", rt["live"]);
+}
+
+#[test]
+fn a_viewer_that_stops_reading_neither_slows_the_loop_nor_holds_the_end() {
+    // subscribes to everything, then never reads again: its socket buffers and its queue fill
+    // (the oldest dropped); the run must end on time and the finish must not wait for it
+    // 1 s: the uncompensated run meets the force limit later (about 1.3 s)
+    let (m, ended_after, _, finish_time) = run_live(1.0, LiveOptions::default(), |port| {
+        let mut v = Viewer::connect(port);
+        v.subscribe_all();
+        let begun = Instant::now();
+        // hold the socket open, unread, until the server gives up on it or the run is over
+        std::thread::sleep(Duration::from_secs(8));
+        drop(v);
+        begun.elapsed()
+    });
+    let rt = &m["realtime"];
+    assert_eq!(rt["stop"]["kind"], "completed", "{rt}");
+    assert_eq!(rt["samples_dropped"], 0);
+    assert_eq!(rt["ticks"], 1001);
+    assert!(ended_after >= Duration::from_secs(8), "{ended_after:?}");
+    // the finish (a 0.5 s linger, then at most 1 s for the server's tasks) did not wait for
+    // the stalled client, which held its socket for 8 s
+    assert!(finish_time < Duration::from_secs(4), "{finish_time:?}");
+    assert_eq!(rt["live"]["peak_clients"], 1);
 }

@@ -28,6 +28,8 @@ pub const STOP_SERVICE: &str = "/hilcontact/stop";
 pub const MARK_SERVICE: &str = "/hilcontact/mark";
 /// How long the server stays up after the run's end while viewers are connected.
 const LINGER: Duration = Duration::from_millis(500);
+/// Longest wait for the server's tasks to end after the run.
+const SHUTDOWN_WAIT: Duration = Duration::from_secs(1);
 /// Longest mark label kept, characters (a longer one is cut).
 const MAX_LABEL: usize = 200;
 
@@ -296,7 +298,19 @@ impl LiveSink {
             std::thread::sleep(LINGER);
         }
         if let Some(server) = self.server.take() {
-            server.stop().wait_blocking();
+            // a stalled client can keep its connection's task from ending: wait for the
+            // server's tasks at most SHUTDOWN_WAIT, then leave them to end in the background
+            let handle = server.stop();
+            let (done, ended) = std::sync::mpsc::channel();
+            let waiter = std::thread::Builder::new()
+                .name("live-shutdown".into())
+                .spawn(move || {
+                    handle.wait_blocking();
+                    let _ = done.send(());
+                });
+            if waiter.is_ok() {
+                let _ = ended.recv_timeout(SHUTDOWN_WAIT);
+            }
         }
     }
 }
