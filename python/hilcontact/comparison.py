@@ -27,6 +27,7 @@ from .errors import ArgumentError, HilContactError, ScenarioError, describe
 from .registry import KINDS
 from .output import write_atomically
 from .run import Run, simulate
+from .verdict import Violation, _finite, _judge, _ratio  # noqa: F401  (Violation is part of this module's API)
 from .scenario import COMPENSATOR_MODELS, Scenario, _check_overrides, _override_steps, _read_source, load_scenario
 
 if TYPE_CHECKING:
@@ -185,24 +186,6 @@ RANKING_RULE = (
 
 
 @dataclass(frozen=True)
-class Violation:
-    """One tolerance a run broke: which collision (None: lost or extra collisions), which
-    metric, its value and the limit of the scenario's ``[metrics]``."""
-
-    collision: int | None
-    metric: str  # "|CoV − 1|", "CoF", "velocity error (%)", "lost collisions", "extra collisions"
-    value: float
-    limit: float
-
-    def __str__(self) -> str:
-        if self.collision is None:
-            return f"{self.metric} {self.value:g} > {self.limit:g}"
-        if self.metric == "velocity error (%)":
-            return f"collision {self.collision}: velocity error {self.value:.2f} % > {self.limit:g} %"
-        return f"collision {self.collision}: {self.metric} {self.value:.3f} > {self.limit:g}"
-
-
-@dataclass(frozen=True)
 class Standing:
     """A compensator's place in :attr:`Comparison.ranking` (:data:`RANKING_RULE`).
 
@@ -231,51 +214,6 @@ class Standing:
         """Why it is not faithful (on every collision): its worst violation and how many more,
         or its stop; empty when faithful."""
         return _why_not(self) if self.verdict != "faithful" else ""
-
-
-def _ratio(value: float, limit: float) -> float:
-    if limit > 0:
-        return value / limit
-    return math.inf if value > 0 else 0.0
-
-
-def _judge(run: Run) -> tuple[int | None, float, list[Violation]]:
-    """(faithful_from, margin, violations) of a run against its scenario's ``[metrics]``."""
-    tol = run.scenario.metrics
-    collisions = [c for c in run.metrics.get("collisions") or [] if _finite(c.get("cov"))]
-    violations: list[Violation] = []
-    margins: dict[int, float] = {}
-    for c in collisions:
-        n = int(c["index"])
-        if n < tol.judge_from:
-            continue
-        cov_error = abs(float(c["cov"]) - 1.0)
-        cof = float(c["cof"]) if _finite(c.get("cof")) else 0.0
-        v_error = float(c["velocity_error"]) if _finite(c.get("velocity_error")) else 0.0
-        margins[n] = max(_ratio(cov_error, tol.cov_tolerance), _ratio(cof, tol.max_cof),
-                         _ratio(v_error, tol.max_velocity_error))
-        if cov_error > tol.cov_tolerance:
-            violations.append(Violation(n, "|CoV − 1|", cov_error, tol.cov_tolerance))
-        if cof > tol.max_cof:
-            violations.append(Violation(n, "CoF", cof, tol.max_cof))
-        if v_error > tol.max_velocity_error:
-            violations.append(Violation(n, "velocity error (%)", 100.0 * v_error, 100.0 * tol.max_velocity_error))
-    counted = True
-    for key, limit, name in (("lost_collisions", tol.max_lost_collisions, "lost collisions"),
-                             ("extra_collisions", tol.max_extra_collisions, "extra collisions")):
-        count = len(run.metrics.get(key) or [])
-        if count > limit:
-            violations.append(Violation(None, name, count, limit))
-            counted = False
-    start = max([tol.judge_from] + [v.collision + 1 for v in violations if v.collision is not None])
-    later = [m for n, m in margins.items() if n >= start]
-    if run.status in ("ok", "unfaithful") and counted and later:
-        return start, max(later), violations
-    return None, max(margins.values(), default=math.nan), violations
-
-
-def _finite(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _nan(value: Any) -> float:

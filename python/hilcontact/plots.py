@@ -623,7 +623,7 @@ def _panel_title(kind: str, run: RunData) -> str:
     if run.status == "ok":
         return f"{kind}: ok"
     if run.status == "unfaithful":
-        from .comparison import _judge
+        from .verdict import _judge
 
         start = _judge(run)[0]  # type: ignore[arg-type]
         return f"{kind}: OK FROM #{start}" if start is not None else f"{kind}: UNFAITHFUL"
