@@ -20,10 +20,18 @@ use hilcontact_rt::devices::rdt::RdtOptions;
 use hilcontact_rt::safety::SafetyLimits;
 use hilcontact_rt::{HilHandle, RobotOptions, RuntimeOptions, SensorOptions};
 
-/// `paper-table1` run for `duration` s.
+/// `paper-table1` run for `duration` s, its walls moved 1 m back: the scripted sensor reads
+/// no force, as a rod that touches nothing (with the walls where they are, the predictive
+/// limit and the units check rightly stop a run whose commanded rod is in a wall while the
+/// sensor reads zero, before the fault a test injects).
 fn table1_for(duration: f64) -> hilcontact_core::Scenario {
     let mut s = preset("paper-table1");
     s.simulation.duration = duration;
+    for wall in &mut s.walls {
+        for i in 0..3 {
+            wall.point[i] -= wall.normal[i];
+        }
+    }
     s
 }
 

@@ -23,6 +23,7 @@ use hilcontact_rt::devices::rdt::{RdtEndpoint, RdtEndpointOptions, RdtOptions, R
 use hilcontact_rt::devices::{wait_readable, LinkStats, Pacing, SensorEndpoint, Wrench};
 use hilcontact_rt::feedback::FeedbackEstimator;
 use hilcontact_rt::offset::{OffsetMode, OffsetOptions};
+use hilcontact_rt::safety::CYCLE_WINDOW;
 use hilcontact_rt::{
     HilHandle, RobotLink, RobotOptions, RuntimeOptions, SensorLink, SensorOptions,
 };
@@ -167,6 +168,14 @@ fn robot_paced_loop_runs_one_tick_per_robot_packet_and_answers_each() {
     s.simulation.period = PERIOD;
     s.simulation.duration = 10.0;
     s.compensator = CompensatorConfig::default();
+    // the walls 1 m back: the free sensor reads no force, as a rod that touches nothing (with
+    // the walls where they are, the predictive limit and the units check rightly stop a run
+    // whose commanded rod is in a wall while the sensor reads zero)
+    for wall in &mut s.walls {
+        for i in 0..3 {
+            wall.point[i] -= wall.normal[i];
+        }
+    }
     let link_socket = UdpSocket::bind("127.0.0.1:0").unwrap();
     link_socket.set_nonblocking(true).unwrap();
     let link_addr = link_socket.local_addr().unwrap();
@@ -254,9 +263,10 @@ fn robot_paced_loop_runs_one_tick_per_robot_packet_and_answers_each() {
     assert!(echoed.windows(2).all(|w| w[1] > w[0]), "{echoed:?}");
     let running_from = running_from.unwrap();
     // one tick per packet after the first answer (the connect phase answered the first
-    // ones); the last tick is the watchdog's, after the silence
+    // ones, among them the CYCLE_WINDOW steps that measure the robot's cycle); the last tick
+    // is the watchdog's, after the silence
     let ticks = rt["ticks"].as_u64().unwrap();
-    let packets = sent - running_from + 1;
+    let packets = sent - running_from + 1 - u64::from(CYCLE_WINDOW);
     let slack = 3 + unanswered;
     assert!(
         ticks + slack >= packets && ticks <= packets + 3,
@@ -279,9 +289,14 @@ fn robot_paced_loop_runs_one_tick_per_robot_packet_and_answers_each() {
     assert!(robot_stats["sent"].as_u64().unwrap() >= ticks - 1);
 }
 
+/// A robot that paces the loop every 2 ms takes a scenario period that divides its cycle
+/// (1 ms: two virtual steps per packet, the run starts) and refuses one that does not (3 ms),
+/// naming both numbers.
 #[test]
-fn robot_paced_link_needs_the_scenario_period_to_match() {
-    let s = preset("paper-table1"); // 1 ms
+fn robot_paced_link_needs_a_scenario_period_that_divides_its_cycle() {
+    let mut s = preset("paper-table1");
+    s.simulation.period = 0.003;
+    s.facility.round_delays = true;
     let socket = UdpSocket::bind("127.0.0.1:0").unwrap();
     let robot = FakePacedRobot::new(socket);
     let sensor = FreeSensor::default();
@@ -293,7 +308,23 @@ fn robot_paced_link_needs_the_scenario_period_to_match() {
     )
     .err()
     .unwrap();
-    assert!(err.to_string().contains("simulation.period"), "{err}");
+    let err = err.to_string();
+    assert!(err.contains("simulation.period"), "{err}");
+    assert!(err.contains("0.002 s") && err.contains("0.003 s"), "{err}");
+    // 1 ms divides 2 ms: started (and stopped at once: nothing answers)
+    let s = preset("paper-table1");
+    let hil = HilHandle::start_with_links(
+        &s,
+        &RuntimeOptions {
+            connect_timeout: 0.2,
+            ..Default::default()
+        },
+        Box::new(FreeSensor::default()),
+        Box::new(FakePacedRobot::new(UdpSocket::bind("127.0.0.1:0").unwrap())),
+    )
+    .expect("a period that divides the cycle is taken");
+    hil.stop();
+    assert!(hil.wait(std::time::Duration::from_secs(10)));
 }
 
 #[test]
