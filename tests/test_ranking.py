@@ -225,5 +225,5 @@ def test_cell_rule(seeds, tolerate, faithful):
 
 
 def test_stability_map_rejects_a_bad_tolerate():
-    with pytest.raises(hc.HilContactError, match="tolerate must be an integer >= 0"):
+    with pytest.raises(hc.HilContactError, match="tolerate: expected an integer >= 0, got -1"):
         stability_map(_seeded_rows({0.01: [True]}), tolerate=-1)
