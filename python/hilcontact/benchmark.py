@@ -360,7 +360,7 @@ def _run_on_dask(dask: str | Any, pending: list[tuple[Entrant, BenchCase]], step
                  save: Callable[[dict[str, Any]], None]) -> None:
     from dask.distributed import as_completed
 
-    from .sweep import _dask_client
+    from .sweep import _close_dask_client, _dask_client
 
     client = _dask_client(dask) if isinstance(dask, str) else dask
     try:
@@ -373,10 +373,7 @@ def _run_on_dask(dask: str | Any, pending: list[tuple[Entrant, BenchCase]], step
                 save(row)
     finally:
         if isinstance(dask, str):
-            cluster = getattr(client, "cluster", None)
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            _close_dask_client(client)
 
 
 # ---- reading and tables --------------------------------------------------------------------

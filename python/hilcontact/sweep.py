@@ -674,6 +674,14 @@ def _dask_client(address: str) -> Any:
         raise HilContactError(f"--dask {address}: cannot reach the scheduler: {exc}") from None
 
 
+def _close_dask_client(client: Any) -> None:
+    """Closes a client made by :func:`_dask_client`, and its LocalCluster if it made one."""
+    cluster = getattr(client, "cluster", None)
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
 def _execute(
     plan: SweepPlan,
     pending: list[tuple[str, int, str, int]],
@@ -718,10 +726,7 @@ def _execute(
                 done.add(next(reversed(running)))
     finally:
         if isinstance(dask, str):
-            cluster = getattr(client, "cluster", None)
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            _close_dask_client(client)
 
 
 def sweep(
