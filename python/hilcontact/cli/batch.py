@@ -332,10 +332,15 @@ def sweep_command(
                     progress=lambda done, total: bar.update(task, completed=done, total=total),
                 )
         except KeyboardInterrupt:
-            from ..sweep import load_results
+            from ..sweep import RESULTS_FILE, _write_parquet_atomically, load_results
 
             try:
-                saved = len(load_results(out))
+                finished = load_results(out)
+                saved = len(finished)
+                if saved and not (Path(out) / RESULTS_FILE).is_file():
+                    # the interrupt came before the sweep merged its parts: merge them now, so
+                    # that the file this line names holds what it says
+                    _write_parquet_atomically(finished, Path(out) / RESULTS_FILE)
             except HilContactError:
                 saved = 0
             click.echo(
