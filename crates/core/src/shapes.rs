@@ -101,6 +101,8 @@ struct Piece {
     pose: Isometry3<f64>,
     /// The piece's bounding box in the body frame, radius included.
     aabb: Aabb,
+    /// A triangle's unit normal in the body frame (`None` for other pieces).
+    normal: Option<Vector3<f64>>,
 }
 
 /// A collision shape fixed in a body (its pose in the body frame).
@@ -142,7 +144,16 @@ fn y_to_z() -> UnitQuaternion<f64> {
 /// A piece at `pose` (body frame) with its bounding box.
 fn piece(core: SharedShape, pose: Isometry3<f64>, radius: f64) -> Piece {
     let aabb = core.compute_aabb(&pose).loosened(radius);
-    Piece { core, pose, aabb }
+    let normal = core
+        .as_triangle()
+        .and_then(|t| t.normal())
+        .map(|n| pose * n.into_inner());
+    Piece {
+        core,
+        pose,
+        aabb,
+        normal,
+    }
 }
 
 impl BodyShape {
@@ -195,6 +206,7 @@ impl BodyShape {
                     core: SharedShape::new(core),
                     pose,
                     aabb: Aabb::new_invalid(),
+                    normal: None,
                 };
                 (0.0, vec![p])
             }
@@ -335,12 +347,6 @@ impl Seen {
     }
 }
 
-/// The unit normal of a triangle piece (`t`, at `pose`); `None` for other pieces.
-fn triangle_normal(piece: &Piece, pose: &Isometry3<f64>) -> Option<Vector3<f64>> {
-    let tri = piece.core.as_triangle()?;
-    tri.normal().map(|n| pose * n.into_inner())
-}
-
 impl ShapePairs {
     /// Whether there are no shapes (only the rod tip and the walls).
     pub fn is_empty(&self) -> bool {
@@ -364,26 +370,47 @@ impl ShapePairs {
                         if !t.is_unbounded() && !aabb_s.intersects(&pt.aabb) {
                             continue;
                         }
-                        let id = (pair << 48) ^ ((i as u64) << 24) ^ j as u64;
-                        // a mesh's triangle: its face normal, to tell a face contact from one
-                        // on an edge or a corner of the triangle
+                        // a mesh's triangle: its face normal (`t`), to cull the triangles
+                        // whose plane the other core is far from, and to tell a face contact
+                        // from one on an edge or a corner of the triangle
                         let face = if mesh {
-                            triangle_normal(pt, &pt.pose).or_else(|| triangle_normal(ps, &pose_s))
+                            pt.normal.or_else(|| ps.normal.map(|n| pose.rotation * n))
                         } else {
                             None
                         };
-                        piece_contacts(ps, &pose_s, pt, s.radius, t.radius, reach, id, &mut |c| {
-                            let on_face = face.is_none_or(|n| c.normal.dot(&n).abs() > 1.0 - 1e-9);
-                            seen.insert(
-                                &ContactPoint {
-                                    servicer_shape: a,
-                                    target_shape: b,
-                                    ..*c
-                                },
-                                on_face,
-                                &mut f,
-                            );
-                        });
+                        if let (Some(n), Some(_)) = (face, pt.normal) {
+                            if !near_plane(ps, &pose_s, &n, pt, reach) {
+                                continue;
+                            }
+                        }
+                        if face.is_none() && !t.is_unbounded() && separated(ps, &pose_s, pt, reach)
+                        {
+                            continue;
+                        }
+                        let id = (pair << 48) ^ ((i as u64) << 24) ^ j as u64;
+                        piece_contacts(
+                            ps,
+                            &pose_s,
+                            &aabb_s,
+                            pt,
+                            s.radius,
+                            t.radius,
+                            reach,
+                            id,
+                            &mut |c| {
+                                let on_face =
+                                    face.is_none_or(|n| c.normal.dot(&n).abs() > 1.0 - 1e-9);
+                                seen.insert(
+                                    &ContactPoint {
+                                        servicer_shape: a,
+                                        target_shape: b,
+                                        ..*c
+                                    },
+                                    on_face,
+                                    &mut f,
+                                );
+                            },
+                        );
                     }
                 }
                 seen.finish(reach, &mut f);
@@ -402,6 +429,34 @@ impl ShapePairs {
                 far.norm()
             })
             .fold(0.0, f64::max)
+    }
+
+    /// Whether every piece of the servicer's shapes at `pose` is more than `threshold` (m)
+    /// from every piece of the target's: bounding boxes first, the cores' distance only where
+    /// the boxes come closer than that. (The reference's free-flight test: no point of the
+    /// servicer can move `threshold` in the period.)
+    pub fn clear_of(&self, pose: &Isometry3<f64>, threshold: f64) -> bool {
+        for s in &self.servicer {
+            for t in &self.target {
+                let reach = s.radius + t.radius;
+                for ps in &s.pieces {
+                    let pose_s = pose * ps.pose;
+                    let aabb_s = ps.core.compute_aabb(&pose_s).loosened(s.radius);
+                    for pt in &t.pieces {
+                        if !t.is_unbounded()
+                            && (aabb_distance(&aabb_s, &pt.aabb) > threshold
+                                || separated(ps, &pose_s, pt, reach + threshold))
+                        {
+                            continue;
+                        }
+                        if core_distance(ps, &pose_s, pt) - reach <= threshold {
+                            return false;
+                        }
+                    }
+                }
+            }
+        }
+        true
     }
 
     /// A lower bound of the smallest gap between the servicer's and the target's surfaces
@@ -435,6 +490,61 @@ impl ShapePairs {
     }
 }
 
+/// Whether the core of `ps` (at `pose_s`) comes within `reach` of the plane of the triangle
+/// `pt` (unit normal `n`, `t`): the triangle is culled otherwise.
+fn near_plane(
+    ps: &Piece,
+    pose_s: &Isometry3<f64>,
+    n: &Vector3<f64>,
+    pt: &Piece,
+    reach: f64,
+) -> bool {
+    let Some(tri) = pt.core.as_triangle() else {
+        return true;
+    };
+    let Some(map) = ps.core.as_support_map() else {
+        return true;
+    };
+    let offset = (pt.pose * tri.a).coords.dot(n);
+    let dir = Unit::new_unchecked(*n);
+    let above = map.support_point(pose_s, &-dir).coords.dot(n) - offset;
+    let below = offset - map.support_point(pose_s, &dir).coords.dot(n);
+    above < reach && below < reach
+}
+
+/// Whether the cores of `ps` (at `pose_s`) and `pt` are more than `gap` (m) apart along one of
+/// the six axes of their own frames (each core's extent along an axis from its support points;
+/// a cheap separating-axis test before a distance query). `false` says nothing.
+fn separated(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece, gap: f64) -> bool {
+    let (Some(a), Some(b)) = (ps.core.as_support_map(), pt.core.as_support_map()) else {
+        return false;
+    };
+    let extent = |map: &dyn parry3d_f64::shape::SupportMap,
+                  pose: &Isometry3<f64>,
+                  axis: &Unit<Vector3<f64>>| {
+        let hi = map.support_point(pose, axis).coords.dot(axis);
+        let lo = map.support_point(pose, &-*axis).coords.dot(axis);
+        (lo, hi)
+    };
+    for rotation in [&pt.pose.rotation, &pose_s.rotation] {
+        for axis in [Vector3::x_axis(), Vector3::y_axis(), Vector3::z_axis()] {
+            let axis = Unit::new_unchecked(rotation * axis.into_inner());
+            let (s_lo, s_hi) = extent(a, pose_s, &axis);
+            let (t_lo, t_hi) = extent(b, &pt.pose, &axis);
+            if s_lo - t_hi > gap || t_lo - s_hi > gap {
+                return true;
+            }
+        }
+    }
+    false
+}
+
+/// Distance of the point `p` to the box `b` (0 inside), m.
+fn aabb_point_distance(b: &Aabb, p: &Point3<f64>) -> f64 {
+    let gap = (b.mins - p).sup(&(p - b.maxs)).sup(&Vector3::zeros());
+    gap.norm()
+}
+
 /// Distance between the bounding boxes `a` and `b` (0 when they overlap), m.
 fn aabb_distance(a: &Aabb, b: &Aabb) -> f64 {
     let gap = (a.mins - b.maxs)
@@ -445,7 +555,12 @@ fn aabb_distance(a: &Aabb, b: &Aabb) -> f64 {
 
 /// Distance between two pieces' cores (0 when they overlap), m.
 fn core_distance(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece) -> f64 {
-    query::distance(pose_s, &*ps.core, &pt.pose, &*pt.core).unwrap_or(0.0)
+    // (a half-space first: parry's own order, as in `piece_contacts`)
+    if pt.core.as_halfspace().is_some() {
+        query::distance(&pt.pose, &*pt.core, pose_s, &*ps.core).unwrap_or(0.0)
+    } else {
+        query::distance(pose_s, &*ps.core, &pt.pose, &*pt.core).unwrap_or(0.0)
+    }
 }
 
 /// The signed distance of the point `v` (`t`) to a piece's core at `pose`, m (negative inside,
@@ -487,6 +602,7 @@ fn signed_distance(
 fn piece_contacts(
     ps: &Piece,
     pose_s: &Isometry3<f64>,
+    aabb_s: &Aabb,
     pt: &Piece,
     r_s: f64,
     r_t: f64,
@@ -532,8 +648,13 @@ fn piece_contacts(
     if let Some((map, _)) = ps.core.as_polygonal_feature_map() {
         let dir = Unit::new_normalize(pose_s.inverse_transform_vector(&-n));
         map.local_support_feature(&dir, &mut feature);
+        let bounded = pt.core.as_halfspace().is_none();
         for k in 0..feature.num_vertices {
             let v = pose_s * feature.vertices[k];
+            // out of the target piece's reach by its bounding box: no need to project
+            if bounded && aabb_point_distance(&pt.aabb, &v) >= r_s {
+                continue;
+            }
             let (on_t, dist, normal) = signed_distance(pt, &pt.pose, &v, &n);
             if dist < reach {
                 let depth = reach - dist;
@@ -549,6 +670,9 @@ fn piece_contacts(
         map.local_support_feature(&dir, &mut feature);
         for k in 0..feature.num_vertices {
             let v = pt.pose * feature.vertices[k];
+            if aabb_point_distance(aabb_s, &v) >= r_t {
+                continue;
+            }
             let (on_s, dist, outward) = signed_distance(ps, pose_s, &v, &-n);
             let normal = -outward;
             if dist < reach {

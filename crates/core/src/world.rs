@@ -343,25 +343,46 @@ impl TwoBodySystem {
         set
     }
 
-    /// How far a contact point may stray over a free-flight period from what the clearances
-    /// at its ends show, m: for the rod tip, the bend of its path, `|Δv_tip|·T/2`; with shapes,
-    /// the farthest any point of the servicer's shapes can move in the period,
-    /// `T·(|v| + |ω|·R)` at the faster end, `R` the shapes' largest distance from the
-    /// servicer's centre of mass.
-    fn bend(
+    /// The free-flight step with shapes: one force-free step over `period` if the rod tip stays
+    /// clear of the walls (as without shapes) and no point of the servicer's shapes can reach
+    /// the target within the period: every piece farther from the target's than
+    /// `1.1·T·(|v| + |ω|·R)` at the faster end ([`crate::shapes::ShapePairs::clear_of`]).
+    /// Returns whether it stepped.
+    fn free_flight_with_shapes(
         &self,
+        x: &mut TwoBodyState,
         start: &RelativeMotion,
-        end: &RelativeMotion,
         tip_velocity: &Vector3<f64>,
         period: f64,
-    ) -> f64 {
-        let tip = (end.point_velocity(&self.rod_tip) - tip_velocity).norm() * period / 2.0;
-        if self.contact.shapes.is_empty() {
-            return tip;
+    ) -> bool {
+        let mut y = *x;
+        y.servicer.drift(&self.servicer, period);
+        y.target.drift(&self.target, period);
+        let end = self.relative_motion(&y);
+        if !self.contact.walls.is_empty() {
+            let tip = (end.point_velocity(&self.rod_tip) - tip_velocity).norm() * period / 2.0;
+            let clear = |m: &RelativeMotion| self.contact.clearance(&m.point(&self.rod_tip));
+            let set = self
+                .contact
+                .active_set(&start.point(&self.rod_tip), tip_velocity);
+            if set != 0 || clear(start) <= tip || clear(&end) <= tip {
+                return false;
+            }
         }
         let r = self.contact.shapes.servicer_extent();
         let speed = |m: &RelativeMotion| m.velocity.norm() + m.angular_velocity.norm() * r;
-        tip.max(period * speed(start).max(speed(end)))
+        let reach = 1.1 * period * speed(start).max(speed(&end));
+        if !self.contact.shapes.clear_of(&servicer_pose(start), reach) {
+            return false;
+        }
+        *x = y;
+        true
+    }
+
+    /// How far the rod tip's path may stray over a free-flight period from what the clearances
+    /// at its ends show, m: the bend of its path, `|Δv_tip|·T/2`.
+    fn bend(&self, end: &RelativeMotion, tip_velocity: &Vector3<f64>, period: f64) -> f64 {
+        (end.point_velocity(&self.rod_tip) - tip_velocity).norm() * period / 2.0
     }
 
     /// A lower bound of the smallest gap between the servicer and the target, m (negative in
@@ -389,12 +410,16 @@ impl TwoBodySystem {
     pub fn step_reference(&self, x: &mut TwoBodyState, period: f64, substeps: u32) -> f64 {
         let start = self.relative_motion(x);
         let tip_velocity = start.point_velocity(&self.rod_tip);
-        if self.active_set_at(&start) == 0 {
+        if !self.contact.shapes.is_empty() {
+            if self.free_flight_with_shapes(x, &start, &tip_velocity, period) {
+                return 0.0;
+            }
+        } else if self.active_set_at(&start) == 0 {
             let mut y = *x;
             y.servicer.drift(&self.servicer, period);
             y.target.drift(&self.target, period);
             let end = self.relative_motion(&y);
-            let bend = self.bend(&start, &end, &tip_velocity, period);
+            let bend = self.bend(&end, &tip_velocity, period);
             let clear = |m: &RelativeMotion| self.clearance_at(m);
             if clear(&start) > bend && clear(&end) > bend {
                 *x = y;
