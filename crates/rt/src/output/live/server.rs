@@ -366,6 +366,10 @@ fn services(control_on: bool, run: &Arc<RunControl>, counters: &Arc<Counters>) -
 }
 
 impl Sink for LiveSink {
+    fn paced(&self) -> bool {
+        !self.info.realtime()
+    }
+
     fn sample(&mut self, s: &Sample) {
         if !self.info.realtime() {
             if self.control.operator_stop_requested() {
