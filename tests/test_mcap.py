@@ -49,7 +49,18 @@ SCHEMAS = {
     "/hil/loop_timing": "hilcontact_msgs/msg/LoopTiming",
     "/hil/events": "rcl_interfaces/msg/Log",
     "/tf_static": "tf2_msgs/msg/TFMessage",
+    # the facility in 3-D, as the live view draws it (the Rust `output::scene::SCENE_CHANNELS`)
+    "/hil/scene": "visualization_msgs/msg/MarkerArray",
+    "/tf": "tf2_msgs/msg/TFMessage",
 }
+#: The scene's channels, one message every SCENE_EVERY ticks (30 Hz of run time at 1 ms).
+SCENE = ["/hil/scene", "/tf"]
+SCENE_EVERY = 33
+
+
+def scene_messages(n: int) -> int:
+    """Scene messages per scene channel of a run of ``n`` ticks (ticks 0, 33, 66, ...)."""
+    return (n - 1) // SCENE_EVERY + 1
 
 
 def read_decoded(path: Path) -> tuple[dict[str, list], object, dict]:
@@ -85,6 +96,18 @@ def rosbags_store(summary) -> object:
     return store
 
 
+def own_definitions_store(summary, name: str) -> object:
+    """A `rosbags` type store with only the file's own definition of ``name`` and its
+    dependencies (the scene's Marker is ROS 1/Foxy's, without Humble's texture and mesh
+    fields, as its schema in the file says)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    store = get_typestore(Stores.EMPTY)
+    schema = next(s for s in summary.schemas.values() if s.name == name)
+    store.register(get_types_from_msg(schema.data.decode(), schema.name))
+    return store
+
+
 def stamp(decoded) -> int:
     """A header's stamp, ns."""
     return decoded.header.stamp.sec * 1_000_000_000 + decoded.header.stamp.nanosec
@@ -114,6 +137,7 @@ def test_run_records_every_channel_with_the_run_s_sample_count(core, tmp_path, c
     # every channel, with one message per tick (the estimates only for a compensator that
     # identifies the contact; no loop timing in a simulation)
     expected = {topic: n for topic in PER_TICK} | {"/hil/events": 2, "/tf_static": 1}
+    expected |= {topic: scene_messages(n) for topic in SCENE}
     if compensator == "pida":
         expected["/hil/estimates"] = n
     assert {t: len(m) for t, m in messages.items()} == expected
@@ -173,9 +197,10 @@ def test_run_records_every_channel_with_the_run_s_sample_count(core, tmp_path, c
 
     # an independent decoder of the same bytes: rosbags' CDR deserializer
     store = rosbags_store(summary)
+    scene_store = own_definitions_store(summary, SCHEMAS["/hil/scene"])
     for topic, items in messages.items():
         for message, decoded_message in (items[0], items[-1]):
-            msg = store.deserialize_cdr(message.data, SCHEMAS[topic])
+            msg = (scene_store if topic == "/hil/scene" else store).deserialize_cdr(message.data, SCHEMAS[topic])
             if topic == "/hil/measured_wrench":
                 assert (msg.wrench.force.x, msg.wrench.torque.z) == (
                     decoded_message.wrench.force.x, decoded_message.wrench.torque.z)
@@ -187,6 +212,20 @@ def test_run_records_every_channel_with_the_run_s_sample_count(core, tmp_path, c
                     decoded_message.header.frame_id)
     energy = store.deserialize_cdr(messages["/hil/energy"][-1][0].data, "hilcontact_msgs/msg/Energy")
     assert energy.energy == series["energy"].iloc[-1]
+
+    # the facility in 3-D, as the live view draws it: every 33rd tick, the rods from the time
+    # series, the servicer frames in t
+    scene_ticks = list(range(0, n, SCENE_EVERY))
+    assert [m.log_time for m, _ in messages["/hil/scene"]] == [t[k] for k in scene_ticks]
+    for (_, markers), k in zip(messages["/hil/scene"], scene_ticks):
+        by_id = {m.id: m for m in markers.markers}
+        assert {0, 1, 2, 3} <= set(by_id) and all(m.header.frame_id == "t" for m in markers.markers)
+        tip, actual = by_id[0].points[1], by_id[1].points[1]
+        assert (tip.x, tip.y, tip.z) == tuple(series[f"tip_position_{a}"].iloc[k] for a in "xyz")
+        assert (actual.x, actual.y, actual.z) == tuple(series[f"actual_tip_position_{a}"].iloc[k] for a in "xyz")
+        assert len(markers.markers) == 4 + 2  # the rods, contact, force arrow, paper-table1's two walls
+    for _, frames in messages["/tf"]:
+        assert sorted(f.child_frame_id for f in frames.transforms) == ["servicer", "servicer_actual"]
 
 
 def test_an_existing_mcap_file_is_refused_unless_forced(core, tmp_path):
@@ -223,7 +262,7 @@ def test_simulate_from_python_records_and_refuses_to_overwrite(core, tmp_path):
     assert run.mcap is not None and run.mcap["complete"] and run.mcap["write_errors"] == 0
     assert run.mcap["path"] == str(path) and run.mcap["bytes"] == path.stat().st_size
     n = len(run.timeseries)
-    assert run.mcap["messages"] == len(PER_TICK) * n + 2 + 1
+    assert run.mcap["messages"] == len(PER_TICK) * n + 2 + 1 + len(SCENE) * scene_messages(n)
     with pytest.raises(RealtimeOptionError, match="exists"):
         hc.simulate("paper-table1", mcap=path)
     again = hc.simulate("paper-table1", mcap=path, overwrite=True)
@@ -253,6 +292,8 @@ def test_a_real_time_run_across_processes_records_every_channel(core, tmp_path):
     messages, summary, metadata = read_decoded(path)
     for topic in [*PER_TICK, "/hil/estimates", "/hil/loop_timing"]:
         assert len(messages[topic]) == n, topic
+    for topic in SCENE:
+        assert len(messages[topic]) == scene_messages(n), topic
     assert recorded["messages"] == sum(len(m) for m in messages.values()) == summary.statistics.message_count
     decoded = {topic: [d for _, d in m] for topic, m in messages.items()}
     assert [stamp(d) for d in decoded["/hil/measured_wrench"]] == ns(series["time"])

@@ -35,7 +35,7 @@ from .errors import HilContactError, RealtimeError, RealtimeOptionError, Scenari
 from .native import VERSION as __version__
 from .plugin import Compensator, PluginError
 from .realtime import Facility, run_hil, start_facility
-from .run import Run, simulate
+from .run import Run, RunInterrupted, simulate
 from .scenario import Scenario, apply_overrides, load_scenario, presets
 from .stability import StabilityMap, stability_map
 from .sweep import load_results, sweep
@@ -49,6 +49,7 @@ __all__ = [
     "RealtimeError",
     "RealtimeOptionError",
     "Run",
+    "RunInterrupted",
     "Scenario",
     "ScenarioError",
     "StabilityMap",

@@ -20,6 +20,10 @@ def simulate(scenario_json: str, outputs: str | None = None) -> dict[str, Any]:
     result then has, under each output's key (``"mcap"``), what it wrote as JSON text (else
     None). An unknown key or an existing file raises RealtimeOptionError.
 
+    ``"interrupted"``: whether a Ctrl-C came while it ran; the first one stops the loop at its
+    next tick and the run so far is returned (status ``interrupted``, the reference over the
+    same span); a second one raises KeyboardInterrupt.
+
     Raises ``hilcontact.errors.ScenarioError`` for an invalid scenario.
     """
 

@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "COLUMN_UNITS",
-    "OPTIONAL_TIMESERIES_COLUMNS", "REFERENCE_COLUMNS", "TIMESERIES_COLUMNS", "Run", "simulate"]
+    "OPTIONAL_TIMESERIES_COLUMNS", "REFERENCE_COLUMNS", "TIMESERIES_COLUMNS", "Run", "RunInterrupted", "simulate"]
 
 
 def _table_columns() -> dict[str, list[tuple[str, str, str]]]:
@@ -183,6 +183,24 @@ class Run:
             self.plot(folder)
 
 
+class RunInterrupted(KeyboardInterrupt):
+    """A Ctrl-C stopped :func:`simulate`: a ``KeyboardInterrupt`` (code that stops on one
+    stops on it) carrying the run so far as :attr:`run`: status ``interrupted``, its tables
+    and metrics up to the tick it stopped at (``metrics["stop"]["time"]``, s), the reference
+    over the same span; or the whole run (its own status) when the Ctrl-C came after its last
+    tick."""
+
+    def __init__(self, run: Run) -> None:
+        super().__init__()
+        #: The run so far.
+        self.run = run
+
+    @property
+    def time(self) -> float:
+        """Run time of the last tick run, s."""
+        return float(self.run.timeseries["time"].iloc[-1]) if len(self.run.timeseries) else 0.0
+
+
 def simulate(
     scenario: Scenario | str | os.PathLike[str],
     mcap: str | os.PathLike[str] | None = None,
@@ -212,7 +230,10 @@ def simulate(
     ``mcap`` or ``outputs``. A plug-in that fails raises :class:`~hilcontact.plugin.PluginError`.
 
     Raises ScenarioError for an invalid scenario. A diverging loop is not an error: the run's
-    ``status`` is ``"diverged"`` and ``metrics["reason"]`` says why.
+    ``status`` is ``"diverged"`` and ``metrics["reason"]`` says why. A Ctrl-C stops the loop
+    at its next tick and raises :class:`RunInterrupted` (a ``KeyboardInterrupt``) with the run
+    so far (status ``"interrupted"``; recorded to ``mcap`` and ``outputs`` up to there); a
+    second Ctrl-C meanwhile is a plain ``KeyboardInterrupt``.
     """
     if outputs is not None and not isinstance(outputs, Mapping):
         raise ArgumentError(f"outputs: expected a mapping output -> options, e.g. {{'mcap': {{'path': 'run.mcap'}}}}, got {describe(outputs)}")
@@ -235,13 +256,16 @@ def simulate(
     result = core.simulate(scenario.to_json(), json.dumps(wanted)) if wanted else core.simulate(scenario.to_json())
     metrics = json.loads(result["metrics"])
     recorded = result.get("mcap")
-    return Run(
+    run = Run(
         scenario=scenario,
         metrics=metrics,
         timeseries=_frame(result["timeseries"], TIMESERIES_COLUMNS + OPTIONAL_TIMESERIES_COLUMNS),
         reference=_frame(result["reference"], REFERENCE_COLUMNS),
         mcap=json.loads(recorded) if recorded else None,
     )
+    if result.get("interrupted"):
+        raise RunInterrupted(run)
+    return run
 
 
 def _simulate_python(scenario: Scenario, compensator: Any, step_limit: float | None) -> Run:

@@ -32,7 +32,7 @@ import sys
 import time
 import tomllib
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -261,6 +261,9 @@ class SweepPlan:
     scenarios: dict[tuple[int, str], dict[str, Any]]
     points: list[dict[str, Any]]
     frequencies: dict[int, float]
+    #: (grid point, compensator) -> its scenario's JSON without ``facility`` (which carries the
+    #: seed), made once: the whole scenario's JSON per run was most of the Python per run.
+    _json_without_facility: dict[tuple[int, str], str] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def size(self) -> int:
@@ -286,8 +289,13 @@ class SweepPlan:
     def scenario_json(self, point: int, kind: str, seed: int) -> str:
         """The resolved scenario of one run, as JSON for the core."""
         data = self.scenarios[(point, kind)]
-        facility = dict(data["facility"], seed=seed)
-        return json.dumps({**data, "facility": facility})
+        rest = self._json_without_facility.get((point, kind))
+        if rest is None:
+            rest = json.dumps({key: value for key, value in data.items() if key != "facility"})
+            self._json_without_facility[(point, kind)] = rest
+        facility = json.dumps(dict(data["facility"], seed=seed))
+        # the same object as {**data, "facility": ...}, the facility last
+        return f'{{"facility": {facility}}}' if rest == "{}" else f'{rest[:-1]}, "facility": {facility}}}'
 
 
 def run_key(values: Mapping[str, Any], kind: str, seed: int) -> str:
@@ -397,13 +405,28 @@ def plan_sweep(
     # each value alone first, so that a bad value is reported with its key; the most
     # demanding value of each key scales the estimate
     memory_factor = time_factor = 1.0
+    # a one-key grid's points are its values: each is built here once, as the grid below
+    # would build it (loading is most of the plan's time), and its estimate read from it; a
+    # value that does not build is loaded alone, so that the error is the same as without
+    shipped = [k for k in kinds if not k.startswith("py:")]
+    reusable = len(axes) == 1 and not python and bool(shipped) and not axes[0].key.startswith("compensator.")
+    built: dict[int, dict[str, Any]] = {}
     for axis in axes:
         worst = Estimate(0.0, 0.0)
-        for value in axis.values:
-            try:
-                alone = run_estimate(load_scenario(base, {axis.key: value}), saved=False)
-            except ScenarioError as exc:
-                raise ScenarioError(f"--grid {axis.key}={value!r}: {exc}") from None
+        for i, value in enumerate(axis.values):
+            scenario_alone = None
+            if reusable:
+                try:
+                    built[i] = comparison_scenarios(base, shipped, {axis.key: value})
+                    scenario_alone = next(iter(built[i].values()))
+                except ScenarioError:
+                    pass
+            if scenario_alone is None:
+                try:
+                    scenario_alone = load_scenario(base, {axis.key: value})
+                except ScenarioError as exc:
+                    raise ScenarioError(f"--grid {axis.key}={value!r}: {exc}") from None
+            alone = run_estimate(scenario_alone, saved=False)
             worst = Estimate(max(worst.memory, alone.memory), max(worst.time, alone.time))
         memory_factor *= worst.memory / per_run.memory
         time_factor *= worst.time / per_run.time
@@ -416,8 +439,7 @@ def plan_sweep(
     frequencies: dict[int, float] = {}
     for point, values in enumerate(points):
         try:
-            shipped = [k for k in kinds if not k.startswith("py:")]
-            resolved = comparison_scenarios(base, shipped, values) if shipped else {}
+            resolved = built.get(point) or (comparison_scenarios(base, shipped, values) if shipped else {})
             if python:
                 from .plugin import with_python_compensators
 

@@ -42,6 +42,8 @@ pub struct VirtualDynamics {
     /// Sensor attitude in `t` (sensor to `t`).
     sensor_orientation: UnitQuaternion<f64>,
     compensator: Box<dyn Compensator>,
+    /// Whether the coming measurement is a new sensor record ([`CompensatorInput::fresh`]).
+    sensor_fresh: bool,
     /// Whether the compensator reads the tip's mobility.
     mobility: bool,
 }
@@ -62,9 +64,16 @@ impl VirtualDynamics {
             state: plan.initial,
             period: plan.period,
             sensor_orientation: plan.sensor.orientation,
+            sensor_fresh: true,
             mobility: compensator.uses_tip_mobility(),
             compensator,
         }
+    }
+
+    /// Whether the measurements from now on are new sensor records (the default) or the last
+    /// one held ([`CompensatorInput::fresh`]): the real-time loop says so at every tick.
+    pub fn set_sensor_fresh(&mut self, fresh: bool) {
+        self.sensor_fresh = fresh;
     }
 
     /// The virtual state of both satellites.
@@ -123,6 +132,7 @@ impl VirtualDynamics {
             } else {
                 Matrix3::zeros()
             },
+            fresh: self.sensor_fresh,
         }
     }
 
@@ -238,6 +248,12 @@ impl HilStep {
     /// The virtual dynamics (state, command, energy, what the compensator reports).
     pub fn dynamics(&self) -> &VirtualDynamics {
         &self.virt
+    }
+
+    /// Whether the coming measurements are new sensor records or the last one held
+    /// ([`VirtualDynamics::set_sensor_fresh`]).
+    pub fn set_sensor_fresh(&mut self, fresh: bool) {
+        self.virt.set_sensor_fresh(fresh);
     }
 
     /// The relative motion the robot must reproduce now.

@@ -2,6 +2,8 @@
 //! [`FacilityLoop`] the emulated facility runs too), the recorded time series and the metrics. Allocates its records up front; the per-tick code
 //! (facility, compensator, dynamics) does not allocate.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::compensator::{Compensator, CompensatorInput};
@@ -14,7 +16,7 @@ use crate::hil::{HilStep, VirtualDynamics};
 pub use crate::metrics::Trace;
 use crate::metrics::{self, EnergySummary, Metrics, TraceSample};
 use crate::plan::Plan;
-use crate::stop::{Status, Stop};
+use crate::stop::{Status, Stop, StopKind};
 
 /// Named columns of equal length.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -193,12 +195,23 @@ pub fn run_hil_against(
 
 /// The HIL loop of a [`HilStep`] built elsewhere (e.g. with a compensator from outside the
 /// core, [`VirtualDynamics::with_compensator`]) against `facility`, which must not have ticked.
-pub fn run_hil_step(
+pub fn run_hil_step(plan: &Plan, facility: FacilityLoop, step: HilStep, keep_rows: bool) -> HilRun {
+    run_hil_step_until(plan, facility, step, keep_rows, &AtomicBool::new(false))
+}
+
+/// [`run_hil_step`] that the user can stop: `stop` is read once per tick (one relaxed load,
+/// no allocation), after the tick's record; once it is set the run ends there as a
+/// [`StopKind::User`] stop at that tick's time (status `interrupted`), with every record so
+/// far. A stop of the step itself (divergence, a value no longer finite) at the same tick
+/// comes first.
+pub fn run_hil_step_until(
     plan: &Plan,
     mut facility: FacilityLoop,
     mut step: HilStep,
     keep_rows: bool,
+    stop: &AtomicBool,
 ) -> HilRun {
+    let user_stop = stop;
     let n = plan.ticks;
     let estimates = step.dynamics().estimates_contact();
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
@@ -209,12 +222,16 @@ pub fn run_hil_step(
     let stop = loop {
         let m = facility.tick(&command);
         let (row, stop) = step.observe(k, &m, Some(facility.physical_contact()));
+        let time = row.time;
         push_record(&mut trace, &row, &plan.sensor.orientation, estimates);
         if keep_rows {
             rows.push(row);
         }
         if let Some(stop) = stop {
             break stop;
+        }
+        if user_stop.load(Ordering::Relaxed) {
+            break Stop::plain(StopKind::User, time);
         }
         match step.advance(k) {
             Ok(next) => command = next,
@@ -272,11 +289,20 @@ pub fn simulate_plan(plan: &Plan) -> SimulationOutput {
 /// As [`simulate_plan`], also handing back the HIL loop's records, one per tick (what a
 /// recording such as an MCAP file is written from).
 pub fn simulate_plan_with_records(plan: &Plan) -> (SimulationOutput, Vec<HilRecord>) {
+    simulate_plan_until(plan, &AtomicBool::new(false))
+}
+
+/// [`simulate_plan_with_records`] that the user can stop (Ctrl-C): once `stop` is set, the HIL
+/// loop ends at its next tick ([`run_hil_step_until`]) and the run is returned as it stands:
+/// status `interrupted` (never `ok`), the records up to that tick, and the reference and the
+/// metrics over the same span (`0..=k` ticks). A flag set while the reference runs stops the
+/// loop at its first tick.
+pub fn simulate_plan_until(plan: &Plan, stop: &AtomicBool) -> (SimulationOutput, Vec<HilRecord>) {
     let Runs {
         reference,
         hil,
         metrics,
-    } = run(plan, true);
+    } = run_with(plan, true, None, stop);
     let output = SimulationOutput {
         timeseries: hil_table(&hil.rows, hil.estimates_contact, hil.observes_energy),
         reference: reference_table(&reference),
@@ -453,11 +479,21 @@ pub fn simulate_plan_with_compensator(
     compensator: Box<dyn Compensator>,
     keep_rows: bool,
 ) -> (SimulationOutput, Vec<HilRecord>) {
+    simulate_plan_with_compensator_until(plan, compensator, keep_rows, &AtomicBool::new(false))
+}
+
+/// [`simulate_plan_with_compensator`] that the user can stop, as [`simulate_plan_until`].
+pub fn simulate_plan_with_compensator_until(
+    plan: &Plan,
+    compensator: Box<dyn Compensator>,
+    keep_rows: bool,
+    stop: &AtomicBool,
+) -> (SimulationOutput, Vec<HilRecord>) {
     let Runs {
         reference,
         hil,
         metrics,
-    } = run_with(plan, keep_rows, Some(compensator));
+    } = run_with(plan, keep_rows, Some(compensator), stop);
     let output = SimulationOutput {
         timeseries: hil_table(&hil.rows, hil.estimates_contact, hil.observes_energy),
         reference: reference_table(&reference),
@@ -467,26 +503,38 @@ pub fn simulate_plan_with_compensator(
 }
 
 fn run(plan: &Plan, keep_rows: bool) -> Runs {
-    run_with(plan, keep_rows, None)
+    run_with(plan, keep_rows, None, &AtomicBool::new(false))
 }
 
-/// The reference and the HIL loop, with the plan's compensator or `compensator`.
-fn run_with(plan: &Plan, keep_rows: bool, compensator: Option<Box<dyn Compensator>>) -> Runs {
-    let (reference_trace, reference) = run_reference(plan, keep_rows);
+/// The reference and the HIL loop, with the plan's compensator or `compensator`; `stop`: the
+/// user's stop ([`run_hil_step_until`]), after which the reference is run again over the HIL
+/// loop's span, so that both tables and the metrics cover the same ticks.
+fn run_with(
+    plan: &Plan,
+    keep_rows: bool,
+    compensator: Option<Box<dyn Compensator>>,
+    stop: &AtomicBool,
+) -> Runs {
+    let (mut reference_trace, mut reference) = run_reference(plan, keep_rows);
     let reference_energy = &reference_trace.energy;
     let bound = metrics::divergence_bound(
         plan.divergence_energy_ratio,
         reference_energy[0],
         reference_energy,
     );
-    let hil = match compensator {
-        None => run_hil(plan, bound, keep_rows),
-        Some(c) => {
-            let step =
-                HilStep::with_dynamics(plan, bound, VirtualDynamics::with_compensator(plan, c));
-            run_hil_step(plan, FacilityLoop::new(plan), step, keep_rows)
-        }
+    let step = match compensator {
+        None => HilStep::new(plan, bound),
+        Some(c) => HilStep::with_dynamics(plan, bound, VirtualDynamics::with_compensator(plan, c)),
     };
+    let hil = run_hil_step_until(plan, FacilityLoop::new(plan), step, keep_rows, stop);
+    if hil.stop.kind == StopKind::User {
+        // the reference over the same span: ticks 0..=k of the interrupted loop
+        let span = Plan {
+            ticks: hil.trace.time.len().saturating_sub(1),
+            ..plan.clone()
+        };
+        (reference_trace, reference) = run_reference(&span, keep_rows);
+    }
     let metrics = trace_metrics(
         plan,
         &reference_trace,

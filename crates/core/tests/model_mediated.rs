@@ -96,6 +96,7 @@ fn one_contact(
             tip_position_desired: p_des,
             tip_velocity_desired: v_des,
             tip_mobility: nalgebra::Matrix3::zeros(), // not read by model-mediated
+            fresh: true,
         });
     }
     c

@@ -200,14 +200,26 @@ const SIGNAL_POLL: Duration = Duration::from_millis(20);
 /// checking Python's signals every [`SIGNAL_POLL`] (`py.check_signals()`): a Ctrl-C (or a
 /// SIGTERM that Python turns into KeyboardInterrupt) raises within that time instead of after
 /// the whole run. `work` gets a flag that is set then, so that work made of many runs stops
-/// before its next one; a single simulation cannot stop early (the core has no stop hook), so
-/// it runs on to its end on its thread, and its result is dropped. Signals are checked once
-/// more before returning: nothing converts a result into Python objects (numpy arrays) with a
+/// before its next one; its result is dropped. Signals are checked once more before
+/// returning: nothing converts a result into Python objects (numpy arrays) with a
 /// KeyboardInterrupt pending.
 fn run_interruptible<R: Send + 'static>(
     py: Python<'_>,
     work: impl FnOnce(&AtomicBool) -> R + Send + 'static,
 ) -> PyResult<R> {
+    run_on_thread(py, work, false).map(|(value, _)| value)
+}
+
+/// [`run_interruptible`] for work that stops early and returns what it has when its flag is
+/// set (a simulation: `sim::simulate_plan_until`): if `keep`, the first Ctrl-C sets the flag
+/// and the call waits for the work's result, returned with `true` (interrupted); a second
+/// Ctrl-C meanwhile raises KeyboardInterrupt (the result is dropped). Without `keep`, as
+/// [`run_interruptible`].
+fn run_on_thread<R: Send + 'static>(
+    py: Python<'_>,
+    work: impl FnOnce(&AtomicBool) -> R + Send + 'static,
+    keep: bool,
+) -> PyResult<(R, bool)> {
     let cancel = Arc::new(AtomicBool::new(false));
     let flag = Arc::clone(&cancel);
     let (done, mut result) = sync_channel(1);
@@ -222,11 +234,15 @@ fn run_interruptible<R: Send + 'static>(
         let (received, back) = py.allow_threads(move || (result.recv_timeout(SIGNAL_POLL), result));
         result = back;
         if let Err(interrupt) = py.check_signals() {
+            if !keep || cancel.load(Ordering::Relaxed) {
+                cancel.store(true, Ordering::Relaxed);
+                return Err(interrupt);
+            }
             cancel.store(true, Ordering::Relaxed);
-            return Err(interrupt);
+            // the work ends at its next tick: wait for what it has (a finished result too)
         }
         match received {
-            Ok(value) => return Ok(value),
+            Ok(value) => return Ok((value, cancel.load(Ordering::Relaxed))),
             Err(RecvTimeoutError::Timeout) => continue,
             Err(RecvTimeoutError::Disconnected) => {
                 return Err(PanicException::new_err(
@@ -475,6 +491,13 @@ fn table_to_dict<'py>(py: Python<'py>, table: Table) -> PyResult<Bound<'py, PyDi
 /// write_errors, error, complete). The outputs are opened before the simulation runs: an
 /// unknown key or an existing file (without `overwrite`) raises RealtimeOptionError, a path
 /// that cannot be created RealtimeError, both naming it.
+///
+/// Ctrl-C: the first one stops the HIL loop at its next tick (`sim::simulate_plan_until`) and
+/// the run so far is returned, with `"interrupted": True`: its metrics' status is
+/// `interrupted` (stop `user`, at that tick's time), its tables and metrics cover the ticks
+/// run (the reference the same span), the outputs get its records (a live replay stops). A run
+/// that had finished when the Ctrl-C came is returned whole, also with `"interrupted": True`.
+/// A second Ctrl-C meanwhile raises KeyboardInterrupt. Otherwise `"interrupted"` is False.
 #[pyfunction]
 #[pyo3(signature = (scenario_json, outputs=None))]
 fn simulate<'py>(
@@ -494,20 +517,24 @@ fn simulate<'py>(
         }
         None => None,
     };
-    let (output, reports) = run_interruptible(py, move |_| match outputs {
-        Some((outputs, info)) if !outputs.is_empty() => {
-            let (output, records) = hilcontact_core::sim::simulate_plan_with_records(&plan);
-            let reports = outputs.record_simulation(&info, &records, &output.metrics);
-            (output, reports)
-        }
-        _ => (hilcontact_core::sim::simulate_plan(&plan), Vec::new()),
-    })?;
+    let work = move |stop: &AtomicBool| {
+        let (output, records) = hilcontact_core::sim::simulate_plan_until(&plan, stop);
+        let reports = match outputs {
+            Some((outputs, info)) if !outputs.is_empty() => {
+                outputs.record_simulation_until(&info, &records, &output.metrics, stop)
+            }
+            _ => Vec::new(),
+        };
+        (output, reports)
+    };
+    let ((output, reports), interrupted) = run_on_thread(py, work, true)?;
     let metrics =
         serde_json::to_string(&output.metrics).map_err(|e| PyValueError::new_err(e.to_string()))?;
     let result = PyDict::new(py);
     result.set_item("timeseries", table_to_dict(py, output.timeseries)?)?;
     result.set_item("reference", table_to_dict(py, output.reference)?)?;
     result.set_item("metrics", metrics)?;
+    result.set_item("interrupted", interrupted)?;
     for o in OUTPUTS {
         result.set_item(o.key, py.None())?;
     }

@@ -285,6 +285,21 @@ fn a_viewer_gets_every_force_sample_and_the_scene_and_stops_the_run() {
     assert_eq!(live["stop_calls"], 1, "{live}");
     assert_eq!(live["refused_calls"], 0);
     assert_eq!(live["connections"], 1);
+    // the client by address (read from the SDK's log: its API gives an id only); other tests
+    // of this process may have clients connected at the same time ("one of ...")
+    assert_eq!(live["addresses_known"], true, "{live}");
+    assert!(
+        events
+            .iter()
+            .any(|e| e.contains("client connected from 127.0.0.1:")),
+        "{events:?}"
+    );
+    assert!(
+        events
+            .iter()
+            .any(|e| e.contains("operator stop from client") && e.contains("127.0.0.1:")),
+        "{events:?}"
+    );
 }
 
 #[test]
@@ -379,6 +394,18 @@ fn bad_input_on_the_live_port_changes_nothing() {
     assert_eq!(seen.times["/hil/measured_wrench"], tick_times(ticks));
     // the huge mark was a mark (its label cut); nothing else was accepted
     assert_eq!(rt["live"]["stop_calls"], 0, "{}", rt["live"]);
+    // the bad input counted, as the SDK logs it: messages it could not parse, the raw client's
+    // failed handshake (at least: other tests of this process count into it too)
+    assert!(
+        rt["live"]["invalid_messages"].as_u64().unwrap() >= 1,
+        "{}",
+        rt["live"]
+    );
+    assert!(
+        rt["live"]["failed_handshakes"].as_u64().unwrap() >= 1,
+        "{}",
+        rt["live"]
+    );
 }
 
 #[test]

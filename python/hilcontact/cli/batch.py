@@ -14,7 +14,7 @@ from ..comparison import ALL_KINDS, Comparison, comparison_scenarios, run_compar
 from ..errors import HilContactError, ScenarioError
 from ..limits import Limits, check_run
 from ..output import OutputError, check_output_folder, note_written
-from ..run import Run, simulate
+from ..run import Run, RunInterrupted, simulate
 from ..scenario import load_scenario, presets
 from .live import live_flags, live_settings
 from .options import (
@@ -77,7 +77,9 @@ def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, m
             with Console(stderr=True).status(f"Simulating {escape(resolved.name)} ..."):
                 result = simulate(resolved, mcap=mcap_path, overwrite=force, outputs=outputs, compensator=entry,
                                   step_limit=step_limit)
-        except KeyboardInterrupt:  # Ctrl-C during the simulation: the part of a recording it wrote goes too
+        except RunInterrupted as stopped:  # Ctrl-C during the simulation: the run so far is saved
+            _save_interrupted(stopped, folder, mcap_path, force, no_plots)
+        except KeyboardInterrupt:  # a second Ctrl-C: the part of a recording it wrote goes too
             if mcap_path is not None and _file_state(mcap_path) not in (before, None):
                 mcap_path.unlink(missing_ok=True)
             raise
@@ -87,6 +89,27 @@ def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, m
     console = Console()
     _report(console, result, folder)
     _report_mcap(console, result.mcap)
+
+
+def _save_interrupted(stopped: RunInterrupted, folder: Path, mcap_path: Path | None, force: bool,
+                      no_plots: bool) -> None:
+    """A run stopped by Ctrl-C: save it as it stands (its metrics say ``interrupted`` and at
+    which time; no figures, ``hilcontact plot`` draws them), its MCAP recording up to there,
+    then one ``interrupted: ...`` line naming what was saved, and exit code 130."""
+    from ..output import written_folders
+    from .options import EXIT_INTERRUPTED
+
+    run = stopped.run
+    if mcap_path is not None:
+        note_written(mcap_path)
+    run.save(folder, plots=False, overwrite=force)
+    duration = run.scenario.simulation.duration
+    when = (f"the run had finished ({run.status})" if run.status != "interrupted"
+            else f"the simulation stopped at t = {stopped.time:.3f} s of {duration:g} s, saved as 'interrupted'")
+    figures = "" if no_plots else f", no figures (hilcontact plot {folder} draws them)"
+    saved = ", ".join(str(f) for f in written_folders())
+    click.echo(f"interrupted: {when}{figures}; stopped after saving {saved}", err=True)
+    raise click.exceptions.Exit(EXIT_INTERRUPTED)
 
 
 def _file_state(path: Path | None) -> tuple[int, int, int] | None:

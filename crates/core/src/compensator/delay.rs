@@ -12,6 +12,13 @@
 //! - `align` (default): identify `F_mea(k)` against the robot kinematics from `τ_p` earlier
 //!   (those that produced it), then predict the present force from the model and the motion
 //!   since: `F_act = F_mea + (k̂·Δd + ĉ·Δḋ)·e` over the last `τ_p`.
+//!
+//! Held records ([`CompensatorInput::fresh`] false: the real-time loop reuses the last sensor
+//! record when no new one came): the filter, the detector and the lead's difference learn
+//! only from new records, each paired with the kinematics that produced it; a record held for
+//! `h` ticks is `h·T` older, which the prediction adds to the measurement delay (up to
+//! [`MAX_HELD_TICKS`]). Pairing a held force with the present kinematics drifted k̂ low and ĉ
+//! negative (docs/identification.md, "Stale sensor records").
 
 use nalgebra::{Matrix2, Vector2, Vector3};
 
@@ -48,6 +55,10 @@ struct Sample {
     in_contact: bool,
 }
 
+/// The longest a held record's age is counted as extra measurement delay, in ticks (the
+/// robot kinematics kept; older records are paired with the kinematics this long before).
+pub const MAX_HELD_TICKS: usize = 64;
+
 /// Delay compensation and online identification of the contact.
 #[derive(Debug, Clone)]
 pub struct ContactEstimator {
@@ -58,9 +69,16 @@ pub struct ContactEstimator {
     sensor_delay: f64,
     delay_ticks: usize,
     sensor_origin: Vector3<f64>,
-    /// Robot tip position and velocity of the last `τ_p/T + 1` ticks.
+    /// Robot tip position and velocity of the last `τ_p/T + 1 + MAX_HELD_TICKS` ticks.
     kinematics: DelayLine<(Vector3<f64>, Vector3<f64>)>,
+    /// The present sensor record (force, moment): the last new one.
+    last_record: (Vector3<f64>, Vector3<f64>),
+    /// The sensor record before it.
     previous_measured: (Vector3<f64>, Vector3<f64>),
+    /// Ticks between that record and the present one (≥ 1).
+    record_gap: usize,
+    /// Ticks the present record has been held (0: new at this tick).
+    held: usize,
     previous_sample: Option<Sample>,
     /// The adaptive Kalman filter.
     pub filter: SageHusaFilter,
@@ -90,8 +108,14 @@ impl ContactEstimator {
             sensor_delay: context.sensor_delay(),
             delay_ticks,
             sensor_origin: context.sensor_origin,
-            kinematics: DelayLine::new(delay_ticks, (Vector3::zeros(), Vector3::zeros())),
+            kinematics: DelayLine::new(
+                delay_ticks + MAX_HELD_TICKS,
+                (Vector3::zeros(), Vector3::zeros()),
+            ),
+            last_record: (Vector3::zeros(), Vector3::zeros()),
             previous_measured: (Vector3::zeros(), Vector3::zeros()),
+            record_gap: 1,
+            held: 0,
             previous_sample: None,
             filter,
         }
@@ -100,51 +124,81 @@ impl ContactEstimator {
     /// Forgets everything but the parameters.
     pub fn reset(&mut self) {
         self.kinematics.fill((Vector3::zeros(), Vector3::zeros()));
+        self.last_record = (Vector3::zeros(), Vector3::zeros());
         self.previous_measured = (Vector3::zeros(), Vector3::zeros());
+        self.record_gap = 1;
+        self.held = 0;
         self.previous_sample = None;
         self.detector.reset();
         self.filter.reset();
     }
 
     /// One tick: delay compensation, identification, contact direction. Allocation-free.
+    /// A held record ([`CompensatorInput::fresh`] false) adds nothing to the identification.
     pub fn step(&mut self, input: &CompensatorInput) -> ContactView {
         let (f_mea, m_mea) = (input.measured.force, input.measured.moment);
         let (p_act, v_act) = (input.tip_position_actual, input.tip_velocity_actual);
-        if self.previous_sample.is_none() {
+        let first = self.previous_sample.is_none();
+        let fresh = input.fresh || first;
+        if first {
             // first tick: the kinematics held their present value for all earlier time
             self.kinematics.fill((p_act, v_act));
+            self.last_record = (f_mea, m_mea);
             self.previous_measured = (f_mea, m_mea);
+        } else if fresh {
+            self.previous_measured = self.last_record;
+            self.record_gap = self.held + 1;
+            self.last_record = (f_mea, m_mea);
+            self.held = 0;
+        } else {
+            self.held = (self.held + 1).min(MAX_HELD_TICKS);
         }
         self.kinematics.push((p_act, v_act));
+        // the present record was measured τ_p before it arrived, `held` ticks ago
+        let lag = self.delay_ticks + self.held;
 
-        // the identification sample: a force and the kinematics that produced it
+        // the lead's difference over the ticks between the last two records
+        let (sensor_delay, period, gap) = (self.sensor_delay, self.period, self.record_gap);
         let lead = |now: Vector3<f64>, before: Vector3<f64>| {
-            now + (now - before) * (self.sensor_delay / self.period)
+            now + (now - before) * (sensor_delay / (period * gap as f64))
         };
-        let (force, (position, velocity)) = match self.mode {
-            // (6) F_act = F_mea + τ_p dF_mea/dt, against the present kinematics
-            DelayMode::Lead => (lead(f_mea, self.previous_measured.0), (p_act, v_act)),
-            DelayMode::Align => (f_mea, self.kinematics.delayed(self.delay_ticks)),
+        let sample = match self.previous_sample {
+            // a held record: the sample it made when it was new
+            Some(held) if !fresh => held,
+            _ => {
+                // the identification sample: a force and the kinematics that produced it
+                let (force, (position, velocity)) = match self.mode {
+                    // (6) F_act = F_mea + τ_p dF_mea/dt, against the present kinematics
+                    DelayMode::Lead => (lead(f_mea, self.previous_measured.0), (p_act, v_act)),
+                    DelayMode::Align => (f_mea, self.kinematics.delayed(self.delay_ticks)),
+                };
+                let sample = Sample {
+                    force,
+                    position,
+                    velocity,
+                    in_contact: self.detector.update(&force),
+                };
+                if let (true, Some(prev)) = (
+                    sample.in_contact,
+                    self.previous_sample.filter(|s| s.in_contact),
+                ) {
+                    // (7) e = F/|F|; (8)-(10) increments along e. An increment over a gap of
+                    // g ticks (records held between) is weighted 1/g (h and z scaled by
+                    // 1/√g): the record's own time is known to a tick only, so that the fit
+                    // over many gaps telescopes as over every tick (g = 1: unchanged)
+                    let e = sample.force.normalize();
+                    let w = (gap as f64).sqrt().recip();
+                    let h = Vector2::new(
+                        (sample.position - prev.position).dot(&e),
+                        (sample.velocity - prev.velocity).dot(&e),
+                    ) * w;
+                    self.filter
+                        .update(&h, (sample.force - prev.force).dot(&e) * w);
+                }
+                self.previous_sample = Some(sample);
+                sample
+            }
         };
-        let sample = Sample {
-            force,
-            position,
-            velocity,
-            in_contact: self.detector.update(&force),
-        };
-        if let (true, Some(prev)) = (
-            sample.in_contact,
-            self.previous_sample.filter(|s| s.in_contact),
-        ) {
-            // (7) e = F/|F|; (8)-(10) increments along e
-            let e = sample.force.normalize();
-            let h = Vector2::new(
-                (sample.position - prev.position).dot(&e),
-                (sample.velocity - prev.velocity).dot(&e),
-            );
-            self.filter.update(&h, (sample.force - prev.force).dot(&e));
-        }
-        self.previous_sample = Some(sample);
         let (stiffness, damping) = (self.filter.x[0], self.filter.x[1]);
 
         let (force, moment) = match self.mode {
@@ -152,7 +206,7 @@ impl ContactEstimator {
             DelayMode::Align if sample.in_contact => {
                 // predict the present force from the model and the robot's motion since
                 let e = f_mea.normalize();
-                let (p_then, v_then) = self.kinematics.delayed(self.delay_ticks);
+                let (p_then, v_then) = self.kinematics.delayed(lag);
                 let increment =
                     stiffness * (p_act - p_then).dot(&e) + damping * (v_act - v_then).dot(&e);
                 let magnitude = (f_mea.dot(&e) + increment).max(0.0); // never pulls
@@ -165,7 +219,6 @@ impl ContactEstimator {
             }
             DelayMode::Align => (f_mea, m_mea),
         };
-        self.previous_measured = (f_mea, m_mea);
         // F_act against the detector's present level (without noise, the fixed threshold)
         let in_contact = sample.in_contact && force.norm() > self.detector.off_threshold();
         ContactView {

@@ -54,6 +54,11 @@ pub struct CompensatorInput {
     /// tip velocity by `K·J` ([`crate::world::TwoBodySystem::tip_mobility`]); zero unless the
     /// compensator [`Compensator::uses_tip_mobility`].
     pub tip_mobility: Matrix3<f64>,
+    /// Whether `measured` is a new sensor record at this tick (`false`: the last record held
+    /// because none came, as the real-time loop does on a late sensor). The identifying
+    /// compensators learn only from new records and count a held record's age as extra
+    /// measurement delay ([`ContactEstimator`]); a simulation's records are all new.
+    pub fresh: bool,
 }
 
 /// Identified contact parameters.

@@ -9,7 +9,9 @@
 //! **Encoding.** ROS 2 messages, CDR-encoded (`message_encoding = "cdr"`), with their `ros2msg`
 //! definitions as the schemas (profile `ros2`): `geometry_msgs` for the wrenches, poses,
 //! velocities and the contact force, `rcl_interfaces/msg/Log` for the run's events,
-//! `tf2_msgs/msg/TFMessage` for the sensor frame, and three small `hilcontact_msgs` types (their
+//! `tf2_msgs/msg/TFMessage` for the sensor frame, the facility in 3-D as the live view draws it
+//! (`/hil/scene` and `/tf`, [`super::scene`], when opened as a run's output: a recording and a
+//! live run look the same), and three small `hilcontact_msgs` types (their
 //! definitions travel in the file) for the energy, the estimates and the loop's timing. The
 //! messages have a fixed layout, so they are encoded here by hand ([`Cdr`]) into one reused
 //! buffer. Every message's log and publish time, and its header stamp, is the run's time: tick ×
@@ -41,7 +43,9 @@ use serde::{Deserialize, Serialize};
 
 use hilcontact_core::hil::HilRecord;
 use hilcontact_core::metrics::Metrics;
+use hilcontact_core::Plan;
 
+use super::scene::{scene_schema_text, Scene, SCENE_CHANNELS};
 use super::{feed_simulation, time_ns, Event, EventLevel, RunInfo, Sink, SinkContext};
 use crate::error::{Result, RtError};
 use crate::report::Sample;
@@ -543,6 +547,43 @@ struct ChannelState {
     sequence: u32,
 }
 
+/// What became of a message ([`write_message`]).
+enum Written {
+    Ok,
+    NoWriter,
+    Failed(String),
+    Panicked,
+}
+
+/// Writes one message on `channel` at run time `t_ns` (its sequence advanced when written),
+/// catching the mcap crate's panics.
+fn write_message(
+    writer: &mut Option<McapWriter>,
+    channel: &mut ChannelState,
+    t_ns: u64,
+    data: &[u8],
+) -> Written {
+    let Some(writer) = writer.as_mut() else {
+        return Written::NoWriter;
+    };
+    let header = MessageHeader {
+        channel_id: channel.id,
+        sequence: channel.sequence,
+        log_time: t_ns,
+        publish_time: t_ns,
+    };
+    match catch_unwind(AssertUnwindSafe(|| {
+        writer.write_to_known_channel(&header, data)
+    })) {
+        Ok(Ok(())) => {
+            channel.sequence = channel.sequence.wrapping_add(1);
+            Written::Ok
+        }
+        Ok(Err(e)) => Written::Failed(e.to_string()),
+        Err(_) => Written::Panicked,
+    }
+}
+
 type McapWriter = Writer<BufWriter<File>>;
 
 /// Writes a run as MCAP: the channels of [`CHANNELS`] that the run has, one message per tick and
@@ -550,6 +591,11 @@ type McapWriter = Writer<BufWriter<File>>;
 pub struct McapRecorder {
     writer: Option<McapWriter>,
     channels: [Option<ChannelState>; CHANNELS.len()],
+    /// The facility in 3-D ([`SCENE_CHANNELS`]), when the recording has it.
+    scene: Option<Scene>,
+    scene_channels: [Option<ChannelState>; SCENE_CHANNELS.len()],
+    /// Samples recorded (the scene is drawn every [`Scene::every`] of them).
+    ticks: u64,
     cdr: Cdr,
     info: RunInfo,
     path: PathBuf,
@@ -568,6 +614,17 @@ impl McapRecorder {
     /// JSON, the wall-clock time of creation), the schemas, the channels and `/tf_static`, as a first chunk written out at once. Fails, naming the path,
     /// when the file exists (unless `overwrite`) or cannot be created.
     pub fn create(options: &McapOptions, info: &RunInfo) -> Result<Self> {
+        Self::create_with(options, info, None)
+    }
+
+    /// [`McapRecorder::create`] with the facility in 3-D of `plan` ([`SCENE_CHANNELS`]:
+    /// `/hil/scene` and `/tf` at [`super::scene::SCENE_RATE`] of run time), as the live view
+    /// draws it: what a run's `mcap` output records.
+    pub fn create_with_scene(options: &McapOptions, info: &RunInfo, plan: &Plan) -> Result<Self> {
+        Self::create_with(options, info, Some(Scene::new(plan)))
+    }
+
+    fn create_with(options: &McapOptions, info: &RunInfo, scene: Option<Scene>) -> Result<Self> {
         options.validate()?;
         let path = options.path.clone();
         let file = open_file(&path, options.overwrite)?;
@@ -585,6 +642,9 @@ impl McapRecorder {
         let mut recorder = McapRecorder {
             writer: Some(writer),
             channels: Default::default(),
+            scene,
+            scene_channels: Default::default(),
+            ticks: 0,
             cdr: Cdr::new(),
             info: info.clone(),
             path: path.clone(),
@@ -660,6 +720,29 @@ impl McapRecorder {
                 .map_err(|e| e.to_string())?;
             self.channels[i] = Some(ChannelState { id, sequence: 0 });
         }
+        if self.scene.is_some() {
+            for (i, spec) in SCENE_CHANNELS.iter().enumerate() {
+                let schema_id = match schemas.get(spec.schema) {
+                    Some(id) => *id,
+                    None => {
+                        let text = scene_schema_text(spec.schema);
+                        let id = writer
+                            .add_schema(spec.schema, "ros2msg", text.as_bytes())
+                            .map_err(|e| e.to_string())?;
+                        schemas.insert(spec.schema, id);
+                        id
+                    }
+                };
+                let metadata = BTreeMap::from([
+                    ("frame_id".to_string(), spec.frame.to_string()),
+                    ("description".to_string(), spec.doc.to_string()),
+                ]);
+                let id = writer
+                    .add_channel(schema_id, spec.topic, "cdr", &metadata)
+                    .map_err(|e| e.to_string())?;
+                self.scene_channels[i] = Some(ChannelState { id, sequence: 0 });
+            }
+        }
         self.cdr.tf_message(
             0,
             FRAME_TARGET,
@@ -734,6 +817,14 @@ impl McapRecorder {
                 .header_f64s(t, "", &[s.wake_latency, s.sensor_age, s.robot_age]);
             self.put(Topic::LoopTiming, t);
         }
+        if let Some(mut scene) = self.scene.take() {
+            if scene.due(self.ticks) {
+                self.put_scene(0, t, scene.markers(t, s));
+                self.put_scene(1, t, scene.transforms(t, s));
+            }
+            self.scene = Some(scene);
+        }
+        self.ticks += 1;
     }
 
     /// An event on `/hil/events` at run time `time` (s; not before the newest message, so that
@@ -754,28 +845,30 @@ impl McapRecorder {
         let Some(channel) = self.channels[topic as usize].as_mut() else {
             return;
         };
-        let Some(writer) = self.writer.as_mut() else {
-            self.stats.write_errors += 1;
+        let written = write_message(&mut self.writer, channel, t_ns, self.cdr.bytes());
+        self.written(written, t_ns);
+    }
+
+    /// Writes `data` (encoded by the scene) to scene channel `i` of [`SCENE_CHANNELS`].
+    fn put_scene(&mut self, i: usize, t_ns: u64, data: &[u8]) {
+        let Some(channel) = self.scene_channels[i].as_mut() else {
             return;
         };
-        let header = MessageHeader {
-            channel_id: channel.id,
-            sequence: channel.sequence,
-            log_time: t_ns,
-            publish_time: t_ns,
-        };
-        let data = self.cdr.bytes();
-        match catch_unwind(AssertUnwindSafe(|| {
-            writer.write_to_known_channel(&header, data)
-        })) {
-            Ok(Ok(())) => {
-                channel.sequence = channel.sequence.wrapping_add(1);
+        let written = write_message(&mut self.writer, channel, t_ns, data);
+        self.written(written, t_ns);
+    }
+
+    /// Counts a message written, or its failure.
+    fn written(&mut self, written: Written, t_ns: u64) {
+        match written {
+            Written::Ok => {
                 self.stats.messages += 1;
                 self.pending = true;
                 self.last_ns = self.last_ns.max(t_ns);
             }
-            Ok(Err(e)) => self.failed(e.to_string()),
-            Err(_) => self.panicked(),
+            Written::NoWriter => self.stats.write_errors += 1,
+            Written::Failed(e) => self.failed(e),
+            Written::Panicked => self.panicked(),
         }
     }
 
@@ -875,7 +968,11 @@ impl McapRecorder {
 pub fn open(context: &SinkContext<'_>, options: &serde_json::Value) -> Result<Box<dyn Sink>> {
     let options: McapOptions = serde_json::from_value(options.clone())
         .map_err(|e| RtError::option("mcap", e.to_string()))?;
-    Ok(Box::new(McapRecorder::create(&options, context.info)?))
+    Ok(Box::new(McapRecorder::create_with_scene(
+        &options,
+        context.info,
+        context.plan,
+    )?))
 }
 
 impl Sink for McapRecorder {
@@ -1047,6 +1144,50 @@ mod tests {
         let wrench = schema_text("geometry_msgs/msg/WrenchStamped");
         assert!(wrench.starts_with("std_msgs/Header header\nWrench wrench\n"));
         assert!(wrench.contains(&format!("{SEPARATOR}MSG: geometry_msgs/Vector3\n")));
+    }
+
+    #[test]
+    fn a_runs_recording_draws_the_scene_as_the_live_view_does() {
+        let plan = plan("pida");
+        let info = RunInfo::new(&plan, false);
+        let path = temp("scene.mcap");
+        let mut recorder =
+            McapRecorder::create_with_scene(&McapOptions::new(&path), &info, &plan).expect("create");
+        let n = 100;
+        for s in samples(n, plan.period) {
+            recorder.sample(&s);
+        }
+        let stats = recorder.finish();
+        assert!(stats.complete, "{stats:?}");
+        let (seen, summary) = counts(&path);
+        // 30 Hz of run time at 1 ms: ticks 0, 33, 66, 99, on both scene channels
+        let every = Scene::new(&plan).every;
+        assert_eq!(every, 33);
+        let expected = (n as u64 - 1) / every + 1;
+        for spec in SCENE_CHANNELS {
+            assert_eq!(seen[spec.topic], expected, "{}", spec.topic);
+            let channel = summary
+                .channels
+                .values()
+                .find(|c| c.topic == spec.topic)
+                .expect("channel");
+            let schema = channel.schema.as_ref().expect("schema");
+            assert_eq!(schema.name, spec.schema);
+            assert_eq!(
+                std::str::from_utf8(&schema.data).unwrap(),
+                scene_schema_text(spec.schema)
+            );
+        }
+        // every per-tick channel is there as before
+        assert_eq!(seen["/hil/measured_wrench"], n as u64);
+        // and a recording created without the scene has none
+        let bare = temp("bare.mcap");
+        let mut recorder = McapRecorder::create(&McapOptions::new(&bare), &info).expect("create");
+        for s in samples(n, plan.period) {
+            recorder.sample(&s);
+        }
+        recorder.finish();
+        assert!(!counts(&bare).0.contains_key("/hil/scene"));
     }
 
     fn samples(n: usize, period: f64) -> Vec<Sample> {

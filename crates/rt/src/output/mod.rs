@@ -121,6 +121,13 @@ pub trait Sink: Send {
     /// The run never started (a link could not be opened, a peer did not answer): gives the
     /// output up and removes what it created.
     fn discard(self: Box<Self>);
+
+    /// Whether this sink replays a simulation at wall-clock speed (the live view): the user's
+    /// stop ([`Outputs::record_simulation_until`]) skips its remaining samples, where a file
+    /// gets every record of the run.
+    fn paced(&self) -> bool {
+        false
+    }
 }
 
 /// Severity of an event (`rcl_interfaces/msg/Log` levels).
@@ -375,13 +382,27 @@ impl Outputs {
 
     /// A simulation's whole run to every sink ([`feed_simulation`]), then finishes them.
     pub fn record_simulation(
-        mut self,
+        self,
         info: &RunInfo,
         records: &[HilRecord],
         metrics: &Metrics,
     ) -> Vec<(&'static str, Value)> {
+        self.record_simulation_until(info, records, metrics, &AtomicBool::new(false))
+    }
+
+    /// [`Outputs::record_simulation`] that the user can stop (Ctrl-C): once `stop` is set, a
+    /// sink that replays at wall-clock speed ([`Sink::paced`], the live view) gets no more
+    /// samples, only the end event; the others get every record.
+    pub fn record_simulation_until(
+        mut self,
+        info: &RunInfo,
+        records: &[HilRecord],
+        metrics: &Metrics,
+        stop: &AtomicBool,
+    ) -> Vec<(&'static str, Value)> {
         for (_, sink) in &mut self.sinks {
-            feed_simulation(sink.as_mut(), info, records, metrics);
+            let stop = sink.paced().then_some(stop);
+            feed_simulation_until(sink.as_mut(), info, records, metrics, stop);
         }
         self.finish()
     }
@@ -395,12 +416,26 @@ pub fn feed_simulation(
     records: &[HilRecord],
     metrics: &Metrics,
 ) {
+    feed_simulation_until(sink, info, records, metrics, None);
+}
+
+/// [`feed_simulation`], skipping the samples left once `stop` (if any) is set.
+fn feed_simulation_until(
+    sink: &mut dyn Sink,
+    info: &RunInfo,
+    records: &[HilRecord],
+    metrics: &Metrics,
+    stop: Option<&AtomicBool>,
+) {
     sink.event(&Event {
         time: 0.0,
         level: EventLevel::Info,
         text: &start_text(info),
     });
     for record in records {
+        if stop.is_some_and(|stop| stop.load(Ordering::Relaxed)) {
+            break;
+        }
         sink.sample(&Sample {
             record: *record,
             ..Sample::default()

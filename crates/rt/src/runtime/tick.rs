@@ -247,7 +247,8 @@ impl Loop {
     /// estimated at each step's time), the last command sent; returns a stop, if any. Never
     /// allocates.
     pub(super) fn tick(&mut self, k: u64, wake: u64, latency: u64) -> Option<StopEvent> {
-        if !self.poll_links(wake) {
+        let new_record = self.poll_links(wake);
+        if !new_record {
             self.sensor.stats_mut().late += 1;
         }
         if let Some(pose) = self.estimator.last_pose() {
@@ -270,6 +271,9 @@ impl Loop {
                 actual,
             };
             self.last_step = kk;
+            // a record is new at the first step after it came; held otherwise (the
+            // compensators' identification learns only from new ones)
+            self.step.set_sensor_fresh(new_record && j == 0);
             match self.virtual_step(kk, &m, wake, latency) {
                 Ok(c) => command = Some(c),
                 Err(stop) => return Some(stop),

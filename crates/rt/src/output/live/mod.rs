@@ -31,6 +31,8 @@ use super::{Sink, SinkContext};
 use crate::error::{Result, RtError};
 
 #[cfg(feature = "live")]
+mod clients;
+#[cfg(feature = "live")]
 mod server;
 
 /// Options of the live view (`--live [HOST:]PORT`, `--live-control`, `--live-remote`).

@@ -15,6 +15,7 @@ use foxglove::{
 use serde::Serialize;
 use serde_json::Value;
 
+use super::clients::{self, ClientLog};
 use super::LiveOptions;
 use crate::error::{Result, RtError};
 use crate::output::mcap::{schema_text, Cdr, ChannelScope, CHANNELS, FRAME_SENSOR, FRAME_TARGET};
@@ -111,6 +112,15 @@ pub struct LiveReport {
     pub mark_calls: u64,
     /// Calls refused (no `--live-control`).
     pub refused_calls: u64,
+    /// Whether clients are known by address (the SDK's log is read: [`clients`]); else the
+    /// connections and calls are logged by the SDK's client id.
+    pub addresses_known: bool,
+    /// Messages from clients the server could not parse (garbage frames, unknown ops), as
+    /// the SDK logs them; 0 when `addresses_known` is false.
+    pub invalid_messages: u64,
+    /// Connections dropped at the WebSocket handshake (not a WebSocket client), as the SDK
+    /// logs them; 0 when `addresses_known` is false.
+    pub failed_handshakes: u64,
     /// The per-client backlog, messages.
     pub backlog: u32,
 }
@@ -126,6 +136,7 @@ pub struct LiveSink {
     info: RunInfo,
     control: Arc<RunControl>,
     counters: Arc<Counters>,
+    clients: Arc<ClientLog>,
     speed: f64,
     wall_start: Option<Instant>,
     tick: u64,
@@ -140,6 +151,7 @@ impl LiveSink {
         let info = context.info.clone();
         let control = info.control.clone();
         let counters = Arc::new(Counters::default());
+        let clients = clients::watch(control.clone());
         let ctx = Context::new();
         let raw = |topic: &str, schema: &str, text: String, frame: &str, doc: &str| {
             let mut metadata = BTreeMap::new();
@@ -178,7 +190,7 @@ impl LiveSink {
                 spec.doc,
             )?);
         }
-        let services = services(options.control, &control, &counters);
+        let services = services(options.control, &control, &counters, &clients);
         let server = WebSocketServer::new()
             .context(&ctx)
             .name(format!("hilcontact {}", info.scenario))
@@ -232,6 +244,7 @@ impl LiveSink {
             info,
             control,
             counters,
+            clients,
             speed: options.speed,
             wall_start: None,
             tick: 0,
@@ -288,6 +301,9 @@ impl LiveSink {
         r.stop_calls = c.stop_calls.load(Ordering::Relaxed);
         r.mark_calls = c.mark_calls.load(Ordering::Relaxed);
         r.refused_calls = c.refused_calls.load(Ordering::Relaxed);
+        r.addresses_known = clients::addresses_known();
+        r.invalid_messages = self.clients.invalid_messages.load(Ordering::Relaxed);
+        r.failed_handshakes = self.clients.failed_handshakes.load(Ordering::Relaxed);
         r.clone()
     }
 
@@ -316,12 +332,29 @@ impl LiveSink {
 }
 
 /// The stop and mark services: each call is logged (stderr, and an event for the run's sinks
-/// through [`RunControl`]) with the client; refused without `control`.
-fn services(control_on: bool, run: &Arc<RunControl>, counters: &Arc<Counters>) -> Vec<Service> {
-    let (r, c) = (run.clone(), counters.clone());
+/// through [`RunControl`]) with the client (its id, and its address when known:
+/// [`ClientLog::who`]); refused without `control`.
+fn services(
+    control_on: bool,
+    run: &Arc<RunControl>,
+    counters: &Arc<Counters>,
+    clients: &Arc<ClientLog>,
+) -> Vec<Service> {
+    let who = {
+        let clients = clients.clone();
+        move |request: &Request| {
+            let id = u32::from(request.client_id());
+            if clients::addresses_known() {
+                format!("client {id} ({})", clients.who())
+            } else {
+                format!("client {id}")
+            }
+        }
+    };
+    let (r, c, name) = (run.clone(), counters.clone(), who.clone());
     let stop = Service::builder(STOP_SERVICE, ServiceSchema::new("hilcontact/Stop")).handler_fn(
         move |request: Request| -> std::result::Result<Vec<u8>, String> {
-            let who = format!("client {}", u32::from(request.client_id()));
+            let who = name(&request);
             if !control_on {
                 up(&c.refused_calls, None);
                 let text = format!("live view: {STOP_SERVICE} refused from {who} (no --live-control)");
@@ -340,7 +373,7 @@ fn services(control_on: bool, run: &Arc<RunControl>, counters: &Arc<Counters>) -
     let (r, c) = (run.clone(), counters.clone());
     let mark = Service::builder(MARK_SERVICE, ServiceSchema::new("hilcontact/Mark")).handler_fn(
         move |request: Request| -> std::result::Result<Vec<u8>, String> {
-            let who = format!("client {}", u32::from(request.client_id()));
+            let who = who(&request);
             if !control_on {
                 up(&c.refused_calls, None);
                 let text = format!("live view: {MARK_SERVICE} refused from {who} (no --live-control)");
@@ -366,6 +399,10 @@ fn services(control_on: bool, run: &Arc<RunControl>, counters: &Arc<Counters>) -
 }
 
 impl Sink for LiveSink {
+    fn paced(&self) -> bool {
+        !self.info.realtime()
+    }
+
     fn sample(&mut self, s: &Sample) {
         if !self.info.realtime() {
             if self.control.operator_stop_requested() {
