@@ -28,9 +28,7 @@
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use parry3d_f64::bounding_volume::{Aabb, BoundingVolume};
 use parry3d_f64::query;
-use parry3d_f64::shape::{
-    Ball, Cone, Cuboid, Cylinder, HalfSpace, PolygonalFeature, Segment, SharedShape, Triangle,
-};
+use parry3d_f64::shape::{Ball, Cone, Cuboid, Cylinder, HalfSpace, Segment, SharedShape, Triangle};
 
 /// Most contact points kept apart per pair of shapes in one evaluation (more are still
 /// applied, but no longer merged with their neighbours).
@@ -103,6 +101,70 @@ struct Piece {
     aabb: Aabb,
     /// A triangle's unit normal in the body frame (`None` for other pieces).
     normal: Option<Vector3<f64>>,
+    /// The core's fixed vertices in its own frame (a box's corners, a segment's ends, a
+    /// triangle's corners, four points of each rim of a cylinder, a cone's base rim and apex;
+    /// none for a sphere or a half-space) and how many.
+    vertices: [Point3<f64>; 8],
+    n_vertices: usize,
+    /// The diagonal of the core's own bounding box, m (`+∞` for a half-space): of two pieces,
+    /// the smaller one's vertices are tested against the larger one's core.
+    size: f64,
+}
+
+impl Piece {
+    /// The core's fixed vertices (its own frame).
+    fn vertices(&self) -> &[Point3<f64>] {
+        &self.vertices[..self.n_vertices]
+    }
+}
+
+/// The fixed vertices of a core (its own frame) and how many: see [`Piece::vertices`].
+fn core_vertices(core: &SharedShape) -> ([Point3<f64>; 8], usize) {
+    let mut out = [Point3::origin(); 8];
+    let mut n = 0;
+    let mut push = |p: Point3<f64>| {
+        out[n] = p;
+        n += 1;
+    };
+    if let Some(b) = core.as_cuboid() {
+        let h = b.half_extents;
+        for sx in [-1.0, 1.0] {
+            for sy in [-1.0, 1.0] {
+                for sz in [-1.0, 1.0] {
+                    push(Point3::new(sx * h.x, sy * h.y, sz * h.z));
+                }
+            }
+        }
+    } else if let Some(c) = core.as_cylinder() {
+        for y in [-c.half_height, c.half_height] {
+            for (x, z) in [
+                (c.radius, 0.0),
+                (-c.radius, 0.0),
+                (0.0, c.radius),
+                (0.0, -c.radius),
+            ] {
+                push(Point3::new(x, y, z));
+            }
+        }
+    } else if let Some(c) = core.as_cone() {
+        for (x, z) in [
+            (c.radius, 0.0),
+            (-c.radius, 0.0),
+            (0.0, c.radius),
+            (0.0, -c.radius),
+        ] {
+            push(Point3::new(x, -c.half_height, z));
+        }
+        push(Point3::new(0.0, c.half_height, 0.0));
+    } else if let Some(s) = core.as_segment() {
+        push(s.a);
+        push(s.b);
+    } else if let Some(t) = core.as_triangle() {
+        push(t.a);
+        push(t.b);
+        push(t.c);
+    }
+    (out, n)
 }
 
 /// A collision shape fixed in a body (its pose in the body frame).
@@ -148,11 +210,17 @@ fn piece(core: SharedShape, pose: Isometry3<f64>, radius: f64) -> Piece {
         .as_triangle()
         .and_then(|t| t.normal())
         .map(|n| pose * n.into_inner());
+    let (vertices, n_vertices) = core_vertices(&core);
+    let local = core.compute_local_aabb();
+    let size = (local.maxs - local.mins).norm();
     Piece {
         core,
         pose,
         aabb,
         normal,
+        vertices,
+        n_vertices,
+        size,
     }
 }
 
@@ -207,6 +275,9 @@ impl BodyShape {
                     pose,
                     aabb: Aabb::new_invalid(),
                     normal: None,
+                    vertices: [Point3::origin(); 8],
+                    n_vertices: 0,
+                    size: f64::INFINITY,
                 };
                 (0.0, vec![p])
             }
@@ -630,8 +701,6 @@ fn piece_contacts(
     // from the target into free space
     let n = c.normal2.into_inner();
     let deepest = reach - c.dist;
-    let mut found_deepest = false;
-    let mut found = 0;
     let mut point = |on_s: Point3<f64>, on_t: Point3<f64>, normal: Vector3<f64>, depth, code| {
         let p = 0.5 * ((on_s.coords - normal * r_s) + (on_t.coords + normal * r_t));
         emit(&ContactPoint {
@@ -643,14 +712,15 @@ fn piece_contacts(
             id: mix(id ^ (code << 40)),
         });
     };
-    let mut feature = PolygonalFeature::default();
-    // the servicer core's vertices toward the target, within reach of the target's core
-    if let Some((map, _)) = ps.core.as_polygonal_feature_map() {
-        let dir = Unit::new_normalize(pose_s.inverse_transform_vector(&-n));
-        map.local_support_feature(&dir, &mut feature);
+    // the fixed vertices of the smaller piece's core within reach of the larger one's core
+    // (fixed points of the shape, not a direction's support feature, which would switch with
+    // the direction and make the force jump; each enters at depth 0; one side only, so that a
+    // contact of two ends is not counted from both)
+    let mut deepest_vertex: f64 = 0.0;
+    if ps.size <= pt.size {
         let bounded = pt.core.as_halfspace().is_none();
-        for k in 0..feature.num_vertices {
-            let v = pose_s * feature.vertices[k];
+        for (k, local) in ps.vertices().iter().enumerate() {
+            let v = pose_s * local;
             // out of the target piece's reach by its bounding box: no need to project
             if bounded && aabb_point_distance(&pt.aabb, &v) >= r_s {
                 continue;
@@ -658,34 +728,30 @@ fn piece_contacts(
             let (on_t, dist, normal) = signed_distance(pt, &pt.pose, &v, &n);
             if dist < reach {
                 let depth = reach - dist;
-                found_deepest |= depth >= deepest - 1e-9 * reach.max(1e-3);
-                found += 1;
+                deepest_vertex = deepest_vertex.max(depth);
                 point(v, on_t, normal, depth, 1 + k as u64);
             }
         }
-    }
-    // the target core's vertices toward the servicer, within reach of the servicer's core
-    if let Some((map, _)) = pt.core.as_polygonal_feature_map() {
-        let dir = Unit::new_normalize(pt.pose.inverse_transform_vector(&n));
-        map.local_support_feature(&dir, &mut feature);
-        for k in 0..feature.num_vertices {
-            let v = pt.pose * feature.vertices[k];
+    } else {
+        for (k, local) in pt.vertices().iter().enumerate() {
+            let v = pt.pose * local;
             if aabb_point_distance(aabb_s, &v) >= r_t {
                 continue;
             }
             let (on_s, dist, outward) = signed_distance(ps, pose_s, &v, &-n);
-            let normal = -outward;
             if dist < reach {
                 let depth = reach - dist;
-                found_deepest |= depth >= deepest - 1e-9 * reach.max(1e-3);
-                found += 1;
-                point(on_s, v, normal, depth, 5 + k as u64);
+                deepest_vertex = deepest_vertex.max(depth);
+                point(on_s, v, -outward, depth, 17 + k as u64);
             }
         }
     }
-    // the cores' closest pair, unless a vertex is as deep
-    if found == 0 || !found_deepest {
-        point(c.point1, c.point2, n, deepest, 9);
+    // the cores' closest pair (an edge across an edge, a cylinder's rim between its fixed
+    // points, a sphere) for the depth beyond the deepest vertex's: none when a vertex is the
+    // closest point, all of it when no vertex is in reach, and no jump in between
+    let excess = deepest - deepest_vertex;
+    if excess > 1e-12 * reach.max(1e-3) {
+        point(c.point1, c.point2, n, excess, 33);
     }
 }
 
