@@ -65,7 +65,7 @@ class ContactMatch:
             False: constant (``friction_damping``), MuJoCo's own regularisation.
     """
 
-    impedance: float = 1e-3
+    impedance: float = 1e-4
     tip_radius: float = 1e-4
     wall_half_size: float = 20.0
     wall_half_thickness: float = 0.05
