@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from . import require
-from .mjcf import ContactMatch, MatchedContact, wall_geom_name, write_mjcf
+from .mjcf import ContactMatch, MatchedContact, rotation_matrix, wall_geom_name, write_mjcf
 
 __all__ = ["CASES", "Case", "Episode", "MujocoTrace", "crosscheck", "simulate_mujoco", "table"]
 
@@ -96,22 +96,13 @@ class MujocoTrace:
     xml: str
 
 
-def _rotation(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-
-
 def relative_tip_motion(qpos_s: np.ndarray, qvel_s: np.ndarray, qpos_t: np.ndarray, qvel_t: np.ndarray,
                         tip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The rod tip's velocity relative to the target and the servicer's angular velocity
     relative to the target, both in ``t`` (as the core's ``RelativeMotion::point_velocity``
     gives them), from two free joints' ``qpos`` (position, quaternion [w, x, y, z]) and ``qvel``
     (world linear velocity, body angular velocity)."""
-    r_s, r_t = _rotation(qpos_s[3:7]), _rotation(qpos_t[3:7])
+    r_s, r_t = rotation_matrix(qpos_s[3:7]), rotation_matrix(qpos_t[3:7])
     w_s, w_t = r_s @ qvel_s[3:6], r_t @ qvel_t[3:6]
     arm = r_s @ tip
     tip_world = qpos_s[:3] + arm
@@ -162,7 +153,7 @@ def simulate_mujoco(scenario: Any, timestep: float, duration: float,
                                                       d.qpos[qt:qt + 7], d.qvel[vt:vt + 6], tip)
         normal[:] = 0.0
         if d.ncon:
-            r_t = _rotation(d.qpos[qt + 3:qt + 7])
+            r_t = rotation_matrix(d.qpos[qt + 3:qt + 7])
             for i in range(d.ncon):
                 c = d.contact[i]
                 if c.efc_address < 0:

@@ -20,8 +20,7 @@ import numpy as np
 
 from ..errors import ScenarioError
 from . import require
-from .crosscheck import _rotation
-from .mjcf import ContactMatch, MatchedContact, write_mjcf
+from .mjcf import ContactMatch, MatchedContact, rotation_matrix, write_mjcf
 
 __all__ = ["MujocoContact", "simulate_facility"]
 
@@ -105,7 +104,7 @@ class MujocoContact:
         d.qpos[self._qpos:self._qpos + 3] = position
         d.qpos[self._qpos + 3:self._qpos + 7] = q
         d.qvel[self._dof:self._dof + 3] = velocity
-        d.qvel[self._dof + 3:self._dof + 6] = _rotation(q).T @ np.asarray(angular_velocity, dtype=float)
+        d.qvel[self._dof + 3:self._dof + 6] = rotation_matrix(q).T @ np.asarray(angular_velocity, dtype=float)
         if self._track:
             # friction's viscous slope follows the normal force (docs/mujoco.md): a first pass
             # gives each pair's normal force, the second the forces with that slope

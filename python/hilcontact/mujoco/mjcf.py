@@ -33,7 +33,7 @@ import numpy as np
 
 from ..errors import ScenarioError
 
-__all__ = ["ContactMatch", "MatchedContact", "inertia_matrix", "rotation_z_to", "wall_geom_name", "write_mjcf"]
+__all__ = ["ContactMatch", "MatchedContact", "inertia_matrix", "rotation_matrix", "rotation_z_to", "wall_geom_name", "write_mjcf"]
 
 
 @dataclass(frozen=True)
@@ -110,6 +110,16 @@ def inertia_matrix(value: Any) -> np.ndarray:
     """A scenario's inertia (principal moments or a 3x3 tensor) as a 3x3 matrix, kg m²."""
     a = np.asarray(value, dtype=float)
     return np.diag(a) if a.shape == (3,) else a.reshape(3, 3)
+
+
+def rotation_matrix(q: np.ndarray) -> np.ndarray:
+    """The rotation matrix of a quaternion [w, x, y, z] (normalised here)."""
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
 
 
 def rotation_z_to(n: np.ndarray) -> np.ndarray:
