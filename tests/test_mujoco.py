@@ -96,7 +96,7 @@ def test_crosscheck_regularisation_is_what_differs(core):
     with v_ε ten times smaller the models are matched again."""
     loose = cc.run_case(_case("oblique mu=0.3"))
     assert loose[0]["velocity_error"] > VELOCITY_TOLERANCE
-    tight = cc.run_case(_case("oblique mu=0.3, v_eps=0.1 mm/s"))
+    tight = cc.run_case(_case("oblique mu=0.3 v_eps=0.1mm/s"))
     _check(tight)
 
 

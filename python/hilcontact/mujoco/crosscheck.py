@@ -68,7 +68,7 @@ CASES: tuple[Case, ...] = (
          "the same with Coulomb friction 0.1 (sliding throughout)"),
     Case("oblique mu=0.3", "oblique-6dof", {**_SHORT, "contact.friction.kinetic": 0.3},
          "the same with friction 0.3 (the tip sticks part of the time)"),
-    Case("oblique mu=0.3, v_eps=0.1 mm/s", "oblique-6dof",
+    Case("oblique mu=0.3 v_eps=0.1mm/s", "oblique-6dof",
          {**_SHORT, "contact.friction.kinetic": 0.3, "contact.friction.stick_velocity": 1e-4},
          "friction 0.3 with a regularisation ten times narrower: the law is Coulomb's while sliding"),
     Case("corner frictionless", "oblique-6dof", {**_SHORT, **_CORNER},
