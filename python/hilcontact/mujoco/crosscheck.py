@@ -8,6 +8,9 @@ Per episode (an interval where a contact force acts, matched by order), at the f
   ``velocity_error = |v_mj − v_ref| / |v_ref|``;
 - the servicer's angular velocity relative to the target (``t``):
   ``angular_velocity_error = |ω_mj − ω_ref| / |ω_ref|``;
+- the angular impulse on the target's frame about the sensor origin ``H = ∫M dt`` (what turns
+  both bodies: the reference records only their relative angular velocity):
+  ``angular_impulse_error = |H_mj − H_ref| / |H_ref|``;
 - the contact impulse ``J = ∫F dt`` on the rod (``t``): its normal part along each wall the
   episode touched (``J·n``) and its tangential part (``J − Σ(J·n)n`` for one wall), with
   ``normal_impulse_error = |J_n,mj − J_n,ref| / |J_n,ref|`` (the largest over the walls) and
@@ -86,12 +89,15 @@ class MujocoTrace:
     relative to the target (``velocity``, ``t``, m/s), the servicer's angular velocity relative
     to the target (``angular_velocity``, ``t``, rad/s), the contact force on the rod per wall
     (``wall_force``, steps × walls × 3, ``t``, N; the force acting during the step after the
-    row's time), and the matched parameters."""
+    row's time), the moment of the contact forces on the target's frame about the sensor origin
+    (``moment``, steps × 3, ``t``, N·m; each force at its contact point), and the matched
+    parameters."""
 
     time: np.ndarray
     velocity: np.ndarray
     angular_velocity: np.ndarray
     wall_force: np.ndarray
+    moment: np.ndarray
     matched: MatchedContact
     xml: str
 
@@ -137,6 +143,8 @@ def simulate_mujoco(scenario: Any, timestep: float, duration: float,
     velocity = np.empty((steps + 1, 3))
     angular = np.empty((steps + 1, 3))
     force = np.zeros((steps + 1, len(scenario.walls), 3))
+    moment = np.zeros((steps + 1, 3))
+    sensor = np.asarray(scenario.facility.sensor_position, dtype=float)
     (qs, vs), (qt, vt) = joints["servicer"], joints["target"]
     f6 = np.zeros(6)
     normal = np.zeros(len(scenario.walls))  # each pair's normal force at the last step, N
@@ -167,9 +175,12 @@ def simulate_mujoco(scenario: Any, timestep: float, duration: float,
                     j, sign = walls[c.geom1], 1.0
                 else:
                     continue
-                force[k, j] += sign * (r_t.T @ on_geom2)
+                on_rod = sign * (r_t.T @ on_geom2)
+                force[k, j] += on_rod
+                point = r_t.T @ (c.pos - d.qpos[qt:qt + 3])
+                moment[k] += np.cross(point - sensor, -on_rod)
                 normal[j] += f6[0]
-    return MujocoTrace(time, velocity, angular, force, matched, xml)
+    return MujocoTrace(time, velocity, angular, force, moment, matched, xml)
 
 
 @dataclass
@@ -249,6 +260,12 @@ def _reference_walls(scenario: Any, reference: Any) -> np.ndarray:
     return mid
 
 
+def _angular_impulse(time: np.ndarray, moment: np.ndarray, dt: float, episode: Episode) -> np.ndarray:
+    """``∫M dt`` over an episode's samples (the moment on the frame about the sensor origin)."""
+    rows = (time >= episode.start - 1e-12) & (time < episode.end - 1e-12)
+    return moment[rows].sum(axis=0) * dt
+
+
 def _at(time: np.ndarray, values: np.ndarray, t: float) -> np.ndarray:
     k = int(np.searchsorted(time, t - 1e-12))
     return values[min(k, len(time) - 1)]
@@ -264,8 +281,9 @@ def crosscheck(scenario: Any, *, timestep: float | None = None, reference_period
     scenario's ``facility.mujoco_timestep``) against the ideal reference (sampled every
     ``reference_period`` s), one dict per contact episode matched by order: ``episode``,
     ``start``, ``end``, ``mujoco_start``, ``mujoco_end`` (s), ``velocity_error``,
-    ``angular_velocity_error``, ``normal_impulse_error``, ``tangential_impulse_error``
-    (fractions), ``normal_impulse`` (reference, N·s, per wall touched), ``tangential_impulse``
+    ``angular_velocity_error``, ``normal_impulse_error``, ``tangential_impulse_error``,
+    ``angular_impulse_error`` (the moment on the frame about the sensor origin, integrated over
+    the episode: what turns both bodies) (fractions), ``normal_impulse`` (reference, N·s, per wall touched), ``tangential_impulse``
     (reference, N·s), ``rebound_velocity`` (reference, m/s, ``t``), and ``walls`` (the walls'
     indices that pushed)."""
     timestep = float(scenario.facility.mujoco_timestep if timestep is None else timestep)
@@ -275,6 +293,8 @@ def crosscheck(scenario: Any, *, timestep: float | None = None, reference_period
     r_force = _reference_walls(scenario, reference)
     r_vel = reference[["tip_velocity_x", "tip_velocity_y", "tip_velocity_z"]].to_numpy()
     r_ang = reference[["angular_velocity_x", "angular_velocity_y", "angular_velocity_z"]].to_numpy()
+    r_moment = reference[["contact_moment_x", "contact_moment_y", "contact_moment_z"]].to_numpy()
+    r_moment = 0.5 * (r_moment + np.vstack([r_moment[1:], r_moment[-1:]]))  # trapezoid
     mj = simulate_mujoco(scenario, timestep, duration, match)
     gap = 2e-3
     ref_eps = _episodes(r_time, r_force, reference_period, gap)
@@ -293,8 +313,11 @@ def crosscheck(scenario: Any, *, timestep: float | None = None, reference_period
         j_ref, j_mj = r.impulse.sum(axis=0), m.impulse.sum(axis=0)
         jt_ref = np.array([r.impulse[j] - (r.impulse[j] @ normals[j]) * normals[j] for j in touched]).sum(axis=0)
         jt_mj = np.array([m.impulse[j] - (m.impulse[j] @ normals[j]) * normals[j] for j in touched]).sum(axis=0)
+        h_ref = _angular_impulse(r_time, r_moment, reference_period, r)
+        h_mj = _angular_impulse(mj.time, mj.moment, timestep, m)
         rows.append({
             "episode": i,
+            "angular_impulse_error": _ratio(float(np.linalg.norm(h_mj - h_ref)), float(np.linalg.norm(h_ref))),
             "start": r.start, "end": r.end, "mujoco_start": m.start, "mujoco_end": m.end,
             "walls": touched,
             "rebound_velocity": v_ref.tolist(),
@@ -325,8 +348,8 @@ def table(cases: tuple[Case, ...] = CASES, timesteps: tuple[float, ...] = (1e-4,
     out = []
     if echo:
         echo("| case | MuJoCo step (s) | episode | walls | rebound velocity error | angular velocity error "
-             "| normal impulse error | tangential impulse error (of |J|) | |J_t| ref (N s) |")
-        echo("|---|---|---|---|---|---|---|---|---|")
+             "| normal impulse error | tangential impulse error (of \\|J\\|) | angular impulse error | \\|J_t\\| ref (N s) |")
+        echo("|---|---|---|---|---|---|---|---|---|---|")
     for case in cases:
         for h in timesteps:
             for row in run_case(case, h, match):
@@ -336,5 +359,6 @@ def table(cases: tuple[Case, ...] = CASES, timesteps: tuple[float, ...] = (1e-4,
                     echo(f"| {case.name} | {h:g} | {row['episode']} | {','.join(map(str, row['walls']))} "
                          f"| {row['velocity_error']:.3%} | {row['angular_velocity_error']:.3%} "
                          f"| {row['normal_impulse_error']:.3%} | {row['tangential_impulse_error']:.3%} "
+                         f"| {row['angular_impulse_error']:.3%} "
                          f"| {row['tangential_impulse']:.4g} |")
     return out
