@@ -61,6 +61,7 @@ def _check(rows, velocity=VELOCITY_TOLERANCE, impulse=IMPULSE_TOLERANCE, episode
         assert row["velocity_error"] <= velocity, row
         assert row["normal_impulse_error"] <= impulse, row
         assert row["tangential_impulse_error"] <= impulse, row
+        assert row["angular_impulse_error"] <= impulse, row
 
 
 def test_crosscheck_frictionless_oblique_6dof(core):
