@@ -188,3 +188,60 @@ def test_run_folder_of_a_mujoco_run_reloads(core, tmp_path):
     back = hc.Run.load(tmp_path / "r")
     assert back.scenario.facility.kind == "mujoco"
     assert json.loads((tmp_path / "r" / "metrics.json").read_text())["status"] == run.status
+
+
+class _LawInPython:
+    """The scenario's frictionless linear law at the rod tip, written in Python: a contact engine
+    for ``_core.simulate_facility`` that must give the model facility's run (the adapter adds
+    nothing of its own)."""
+
+    def __init__(self, scenario, fail_at=None, bad_length=False):
+        self.s = scenario
+        self.calls = 0
+        self.fail_at = fail_at
+        self.bad_length = bad_length
+
+    def contact_flat(self, motion):
+        from hilcontact.mujoco.mjcf import rotation_matrix
+
+        self.calls += 1
+        if self.fail_at is not None and self.calls >= self.fail_at:
+            raise RuntimeError("engine broke")
+        if self.bad_length:
+            return [0.0] * 8
+        p, q, v, w = (np.asarray(motion[a:b]) for a, b in ((0, 3), (3, 7), (7, 10), (10, 13)))
+        arm = rotation_matrix(q) @ np.asarray(self.s.rod.tip)
+        tip, tip_v = p + arm, v + np.cross(w, arm)
+        k, c = self.s.contact.stiffness, self.s.contact.damping
+        force = np.zeros(3)
+        for wall in self.s.walls:
+            n = np.asarray(wall.normal) / np.linalg.norm(wall.normal)
+            d = -(tip - np.asarray(wall.point)) @ n
+            if d > 0:
+                force += max(0.0, k * d + c * (-tip_v @ n)) * n
+        moment = np.cross(tip - np.asarray(self.s.facility.sensor_position), -force)
+        return [*force, *(-force), *moment]
+
+
+@pytest.mark.parametrize("preset", ["paper-table1", "oblique-6dof"])
+def test_python_engine_with_the_models_law_reproduces_the_model_facility(core, preset):
+    """The adapter (crates/py/src/facility.rs) with the model's own law in Python: the same run as
+    the model facility (robot delay, sensor delay and noise included), to rounding."""
+    over = {"facility.robot_delay": 0.01, "facility.sensor_delay": 0.002, "facility.sensor_noise": 0.5,
+            "compensator.kind": "pida", "simulation.duration": 2.0}
+    s = hc.load_scenario(preset, over)
+    model = hc.simulate(s)
+    result = core.simulate_facility(s.to_json(), _LawInPython(s))
+    ours = json.loads(result["metrics"])
+    for column in ("measured_force_x", "measured_moment_y", "actual_tip_position_x", "tip_velocity_x"):
+        assert np.asarray(result["timeseries"][column]) == pytest.approx(model.timeseries[column].to_numpy(), rel=1e-9, abs=1e-9)
+    assert ours["status"] == model.metrics["status"]
+    assert [c["cov"] for c in ours["collisions"]] == pytest.approx([c["cov"] for c in model.metrics["collisions"]], rel=1e-9)
+
+
+def test_python_engine_errors_stop_the_run_and_are_raised(core):
+    s = hc.load_scenario("paper-table1", {"simulation.duration": 1.0})
+    with pytest.raises(RuntimeError, match="engine broke"):
+        core.simulate_facility(s.to_json(), _LawInPython(s, fail_at=50))
+    with pytest.raises(ValueError, match="expected 9 numbers, got 8"):
+        core.simulate_facility(s.to_json(), _LawInPython(s, bad_length=True))
