@@ -245,3 +245,10 @@ def test_python_engine_errors_stop_the_run_and_are_raised(core):
         core.simulate_facility(s.to_json(), _LawInPython(s, fail_at=50))
     with pytest.raises(ValueError, match="expected 9 numbers, got 8"):
         core.simulate_facility(s.to_json(), _LawInPython(s, bad_length=True))
+
+
+def test_sweep_refuses_the_mujoco_facility_before_writing(core, tmp_path):
+    result = invoke("sweep", "paper-table1", "--grid", "facility.robot_delay=0.01,0.02", "--compensators", "none",
+                    "--set", "facility.kind=mujoco", "--out", "sw", cwd=tmp_path)
+    assert_one_error_line(result, "facility.kind", "sweep")
+    assert list(tmp_path.iterdir()) == []
