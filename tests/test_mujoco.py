@@ -252,3 +252,36 @@ def test_sweep_refuses_the_mujoco_facility_before_writing(core, tmp_path):
                     "--set", "facility.kind=mujoco", "--out", "sw", cwd=tmp_path)
     assert_one_error_line(result, "facility.kind", "sweep")
     assert list(tmp_path.iterdir()) == []
+
+
+def _random_scene(rng):
+    """oblique-6dof with a random wall tilt, masses, stiffness and damping (up to 30 % of
+    critical), the wall a few mm ahead of the tip along its normal."""
+    s = hc.load_scenario("oblique-6dof")
+    tip = np.array([0.005, 0.10, 0.05])  # the rod tip's start in t (the preset's)
+    yaw, pitch = rng.uniform(-0.7, 0.7), rng.uniform(-0.5, 0.5)
+    n = -np.array([np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)])
+    m_s, m_t = rng.uniform(50, 2000), rng.uniform(500, 10000)
+    k = 10 ** rng.uniform(4, 6)
+    mu = m_s * m_t / (m_s + m_t)
+    c = rng.uniform(0, 0.3) * 2 * np.sqrt(k * mu)
+    speed = rng.uniform(0.01, 0.05)
+    gap = 0.004
+    approach = gap / (speed * -n[0])
+    duration = approach + 3 * np.pi * np.sqrt(mu / k) + 0.05
+    return hc.load_scenario(s, {
+        "walls": [{"name": "w", "point": (tip - gap * n).tolist(), "normal": n.tolist()}],
+        "servicer.mass": m_s, "target.mass": m_t, "servicer.velocity": [speed, 0.0, 0.0],
+        "contact.stiffness": k, "contact.damping": c, "simulation.duration": float(duration),
+        "facility.robot_delay": 0.0,
+    })
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_crosscheck_random_frictionless_scenes(core, seed):
+    """Random tilts, masses, stiffness and damping (seeded): the matched law agrees within the
+    targets on every one (the damping's b' is matched too)."""
+    s = _random_scene(np.random.default_rng(seed))
+    rows = cc.crosscheck(s)
+    _check(rows)
+    assert rows[0]["walls"] == [0]
