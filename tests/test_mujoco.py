@@ -285,3 +285,15 @@ def test_crosscheck_random_frictionless_scenes(core, seed):
     rows = cc.crosscheck(s)
     _check(rows)
     assert rows[0]["walls"] == [0]
+
+
+def test_mujoco_facility_with_sliding_friction(core):
+    """μ = 0.1 at zero delay: MuJoCo's friction in the facility (its slope following the normal
+    force at the robot's pose) gives the model facility's CoV and CoF within the tolerances."""
+    over = {"facility.robot_delay": 0.0, "contact.friction.kinetic": 0.1}
+    model = hc.simulate(hc.load_scenario("oblique-6dof", over))
+    mj = hc.simulate(hc.load_scenario("oblique-6dof", {**over, "facility.kind": "mujoco"}))
+    assert model.status == mj.status == "ok"
+    for (cov_m, cof_m), (cov_j, cof_j) in zip(_collisions(model), _collisions(mj)):
+        assert abs(cov_j - cov_m) <= VELOCITY_TOLERANCE
+        assert abs(cof_j - cof_m) <= IMPULSE_TOLERANCE
