@@ -220,7 +220,7 @@ class _LawInPython:
             if d > 0:
                 force += max(0.0, k * d + c * (-tip_v @ n)) * n
         moment = np.cross(tip - np.asarray(self.s.facility.sensor_position), -force)
-        return [*force, *(-force), *moment]
+        return [*force, *(-force), *moment, 0.0, 0.0, 0.0]
 
 
 @pytest.mark.parametrize("preset", ["paper-table1", "oblique-6dof"])
@@ -243,7 +243,7 @@ def test_python_engine_errors_stop_the_run_and_are_raised(core):
     s = hc.load_scenario("paper-table1", {"simulation.duration": 1.0})
     with pytest.raises(RuntimeError, match="engine broke"):
         core.simulate_facility(s.to_json(), _LawInPython(s, fail_at=50))
-    with pytest.raises(ValueError, match="expected 9 numbers, got 8"):
+    with pytest.raises(ValueError, match="expected 12 numbers, got 8"):
         core.simulate_facility(s.to_json(), _LawInPython(s, bad_length=True))
 
 

@@ -35,8 +35,9 @@ def simulate_batch(scenarios: list[str], threads: int | None = None) -> dict[str
 def simulate_facility(scenario_json: str, engine: Any) -> dict[str, Any]:
     """Run one HIL simulation whose facility's contact is computed by ``engine`` (a Python
     object with ``contact_flat(motion)``: 13 numbers in (the robot's actual relative motion:
-    position m, quaternion [w, x, y, z], velocity m/s, angular velocity rad/s, all in ``t``), 9
-    out (force on the rod, force on the frame, its moment about the sensor origin, ``t``); e.g.
+    position m, quaternion [w, x, y, z], velocity m/s, angular velocity rad/s, all in ``t``), 12
+    out (force on the rod, force on the frame, its moment about the sensor origin, the friction
+    part of the force on the rod, ``t``); e.g.
     ``hilcontact.mujoco.facility.MujocoContact``), the robot and the sensor as the facility
     model's. Returns what :func:`simulate` returns without outputs; an error raised by the
     engine stops the run and is raised again."""
@@ -206,3 +207,8 @@ def frames(scenario_json: str, sensor_vectors: Any | None = None, points: list[A
     wall, ``t``); per array of ``points`` (rows of x, y, z in ``t``, m) the signed distance of
     each point to each wall's plane (m, < 0 inside), shaped (walls, rows). Raises
     ``ScenarioError`` for a bad scenario, ``ValueError`` for an array that is not (rows, 3)."""
+
+def read_mesh(path: str) -> tuple[list[list[float]], list[list[int]]]:
+    """A mesh file's vertices (its units) and triangles (vertex indices), STL (binary or ASCII)
+    or OBJ by its extension. Raises ValueError with the reason."""
+    ...

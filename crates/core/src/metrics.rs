@@ -50,6 +50,9 @@ pub struct Trace {
     pub force: Vec<f64>,
     /// The physical contact force on the rod, `t` frame, N.
     pub contact_force: Vec<Vector3<f64>>,
+    /// Its friction (tangential) part, `t` frame, N (`contact_force − friction_force` is the
+    /// normal part; zero without friction and on a real facility).
+    pub friction_force: Vec<Vector3<f64>>,
     /// Velocity of the (virtual) rod tip relative to the target, `t` frame, m/s.
     pub velocity: Vec<Vector3<f64>>,
     /// Angular velocity of the (virtual) servicer relative to the target, `t` frame, rad/s.
@@ -75,6 +78,8 @@ pub struct TraceSample {
     pub time: f64,
     /// Physical contact force on the rod, `t`, N.
     pub contact_force: Vector3<f64>,
+    /// Its friction (tangential) part, `t`, N.
+    pub friction_force: Vector3<f64>,
     /// Rod tip velocity relative to the target, `t`, m/s.
     pub velocity: Vector3<f64>,
     /// Servicer angular velocity relative to the target, `t`, rad/s.
@@ -93,6 +98,7 @@ impl Trace {
             time: Vec::with_capacity(n),
             force: Vec::with_capacity(n),
             contact_force: Vec::with_capacity(n),
+            friction_force: Vec::with_capacity(n),
             velocity: Vec::with_capacity(n),
             angular_velocity: Vec::with_capacity(n),
             wrench_force: Vec::with_capacity(n),
@@ -109,6 +115,7 @@ impl Trace {
         self.time.push(s.time);
         self.force.push(s.contact_force.norm());
         self.contact_force.push(s.contact_force);
+        self.friction_force.push(s.friction_force);
         self.velocity.push(s.velocity);
         self.angular_velocity.push(s.angular_velocity);
         self.wrench_force.push(s.wrench.force);
@@ -759,6 +766,7 @@ mod tests {
             t.push(&TraceSample {
                 time: i as f64 * 0.1,
                 contact_force: Vector3::new(-f, 0.0, 0.0),
+                friction_force: Vector3::zeros(),
                 velocity: *v,
                 angular_velocity: Vector3::new(0.0, 0.0, 0.01),
                 wrench: FrameWrench {

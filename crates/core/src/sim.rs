@@ -64,6 +64,7 @@ fn push_record(
     trace.push(&TraceSample {
         time: row.time,
         contact_force: row.contact_force,
+        friction_force: row.friction_force,
         velocity: row.tip_velocity,
         angular_velocity: row.angular_velocity,
         wrench: FrameWrench {
@@ -90,6 +91,8 @@ pub struct ReferenceRecord {
     pub angular_velocity: Vector3<f64>,
     /// Contact force on the rod, `t` frame, N.
     pub contact_force: Vector3<f64>,
+    /// Its friction (tangential) part, `t` frame, N (the rest is the normal part).
+    pub friction_force: Vector3<f64>,
     /// Moment of the contact force on the frame about the sensor origin, `t` frame, N·m.
     pub contact_moment: Vector3<f64>,
     /// Kinetic energy of the relative motion, J.
@@ -122,14 +125,15 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
     let mut friction_work = 0.0;
     for k in 0..=n {
         let rel = system.relative_motion(&x);
-        let (contact_force, tip) = system.contact_force_at(&rel);
-        let wrench = FrameWrench::from_rod_force(&contact_force, &tip, &system.sensor_origin);
+        let contact = system.contact_at(&rel, 0.0);
+        let (contact_force, wrench) = (contact.force, contact.wrench);
         let row = ReferenceRecord {
             time: k as f64 * period,
-            tip_position: tip,
+            tip_position: contact.tip,
             tip_velocity: rel.point_velocity(&system.rod_tip),
             angular_velocity: rel.angular_velocity,
             contact_force,
+            friction_force: contact.friction_force,
             contact_moment: wrench.moment,
             energy: system.energy(&x),
             friction_work,
@@ -137,6 +141,7 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
         trace.push(&TraceSample {
             time: row.time,
             contact_force,
+            friction_force: contact.friction_force,
             velocity: row.tip_velocity,
             angular_velocity: row.angular_velocity,
             wrench,
@@ -203,7 +208,7 @@ pub fn run_hil_step(
     let mut k = 0;
     let stop = loop {
         let m = facility.tick(&command);
-        let (row, stop) = step.observe(k, &m, Some(facility.contact_force()));
+        let (row, stop) = step.observe(k, &m, Some(facility.physical_contact()));
         push_record(&mut trace, &row, &plan.sensor.orientation, estimates);
         if keep_rows {
             rows.push(row);
@@ -344,7 +349,7 @@ pub const fn vector<R>(
 /// (virtual) and actual (robot) rod tip in `t`, the physical contact force on the rod (`t`),
 /// the sensor's wrench and the applied wrench (sensor frame and convention), the energy, and
 /// the estimates of the compensators that make them.
-pub const HIL_FIELDS: [Field<HilRecord>; 15] = [
+pub const HIL_FIELDS: [Field<HilRecord>; 16] = [
     scalar("time", "s", |r| r.time),
     vector("tip_position", "m", |r| r.tip_position),
     vector("tip_velocity", "m/s", |r| r.tip_velocity),
@@ -352,6 +357,7 @@ pub const HIL_FIELDS: [Field<HilRecord>; 15] = [
     vector("actual_tip_position", "m", |r| r.actual_tip_position),
     vector("actual_tip_velocity", "m/s", |r| r.actual_tip_velocity),
     vector("contact_force", "N", |r| r.contact_force),
+    vector("friction_force", "N", |r| r.friction_force),
     vector("measured_force", "N", |r| r.measured_force),
     vector("measured_moment", "N m", |r| r.measured_moment),
     vector("applied_force", "N", |r| r.applied_force),
@@ -374,12 +380,13 @@ pub const HIL_FIELDS: [Field<HilRecord>; 15] = [
 /// The reference's table: rod tip (`t`), the servicer's angular velocity relative to the
 /// target (`t`), the contact force on the rod and its moment on the frame about the sensor
 /// origin (`t`), the energy and the energy friction has dissipated so far.
-pub const REFERENCE_FIELDS: [Field<ReferenceRecord>; 8] = [
+pub const REFERENCE_FIELDS: [Field<ReferenceRecord>; 9] = [
     scalar("time", "s", |r| r.time),
     vector("tip_position", "m", |r| r.tip_position),
     vector("tip_velocity", "m/s", |r| r.tip_velocity),
     vector("angular_velocity", "rad/s", |r| r.angular_velocity),
     vector("contact_force", "N", |r| r.contact_force),
+    vector("friction_force", "N", |r| r.friction_force),
     vector("contact_moment", "N m", |r| r.contact_moment),
     scalar("energy", "J", |r| r.energy),
     scalar("friction_work", "J", |r| r.friction_work),

@@ -24,9 +24,9 @@ use pyo3::types::{PyDict, PyTuple};
 pub const MOTION_LEN: usize = 13;
 
 /// Numbers the Python engine's `contact_flat` returns, in this order: the contact force on the
-/// rod (`t`, N, 3), the force on the mockup's frame (`t`, N, 3) and its moment about the sensor
-/// origin (`t`, N·m, 3).
-pub const CONTACT_LEN: usize = 9;
+/// rod (`t`, N, 3), the force on the mockup's frame (`t`, N, 3), its moment about the sensor
+/// origin (`t`, N·m, 3), and the friction (tangential) part of the force on the rod (`t`, N, 3).
+pub const CONTACT_LEN: usize = 12;
 
 /// The core's `Facility` around a Python contact engine. A failed call (the engine raises or
 /// returns something else than [`CONTACT_LEN`] numbers, Ctrl-C) is kept in `fault` and the
@@ -38,15 +38,18 @@ struct PyFacility {
     sensor: SensorModel,
     /// Contact force on the rod at the last measurement, `t`, N.
     contact_force: Vector3<f64>,
+    /// Its friction part, `t`, N.
+    friction_force: Vector3<f64>,
     fault: Arc<Mutex<Option<PyErr>>>,
 }
 
-/// The contact of `engine` for the relative motion `m`: (force on the rod, wrench on the frame).
+/// The contact of `engine` for the relative motion `m`: (force on the rod, wrench on the frame,
+/// friction part of the force on the rod).
 fn contact(
     py: Python<'_>,
     engine: &Py<PyAny>,
     m: &RelativeMotion,
-) -> PyResult<(Vector3<f64>, FrameWrench)> {
+) -> PyResult<(Vector3<f64>, FrameWrench, Vector3<f64>)> {
     let q = m.orientation;
     let mut data = [0.0; MOTION_LEN];
     data[0..3].copy_from_slice(m.position.as_slice());
@@ -70,6 +73,7 @@ fn contact(
             force: v(3),
             moment: v(6),
         },
+        v(9),
     ))
 }
 
@@ -97,6 +101,7 @@ impl Facility for PyFacility {
             }
         };
         self.contact_force = force_on_rod;
+        self.friction_force = friction;
         let (force, moment) = self.sensor.sample(&wrench);
         Measurement {
             force,
@@ -107,6 +112,10 @@ impl Facility for PyFacility {
 
     fn contact_force(&self) -> Vector3<f64> {
         self.contact_force
+    }
+
+    fn friction_force(&self) -> Vector3<f64> {
+        self.friction_force
     }
 }
 
@@ -135,13 +144,14 @@ pub fn simulate_facility<'py>(
         f.servo_damping,
         &initial,
     );
-    let (contact_force, initial_wrench) = contact(py, &engine, robot.actual())?;
+    let (contact_force, initial_wrench, friction_force) = contact(py, &engine, robot.actual())?;
     let fault = Arc::new(Mutex::new(None));
     let facility = PyFacility {
         engine: engine.clone_ref(py),
         sensor: SensorModel::new(&plan, &initial_wrench),
         robot,
         contact_force,
+        friction_force,
         fault: fault.clone(),
     };
     let (reference, hil, metrics) = py.allow_threads(|| {

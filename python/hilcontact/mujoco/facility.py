@@ -60,6 +60,8 @@ class MujocoContact:
         self._track = self.matched is not None and self.matched.solreffriction_per_newton != 0.0
         #: MuJoCo contacts at the last call.
         self.contacts = 0
+        #: The friction (tangential) part of the force on the rod at the last call, ``t``, N.
+        self.friction = np.zeros(3)
 
     def _forces(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Force on the rod, force on the mockup and its moment about the sensor origin (``t``),
@@ -67,6 +69,7 @@ class MujocoContact:
         mj, m, d = self._mj, self.model, self.data
         mj.mj_forward(m, d)
         on_rod = np.zeros(3)
+        friction = np.zeros(3)
         moment = np.zeros(3)
         normal = np.zeros(max(m.npair, 1))
         for i in range(d.ncon):
@@ -78,13 +81,17 @@ class MujocoContact:
             if rod1 == rod2:
                 continue
             mj.mj_contactForce(m, d, i, self._f6)
-            on_geom2 = c.frame.reshape(3, 3).T @ self._f6[:3]
+            frame = c.frame.reshape(3, 3)
+            on_geom2 = frame.T @ self._f6[:3]
+            tangential = frame[1:].T @ self._f6[1:3]
             f = on_geom2 if rod2 else -on_geom2
             on_rod += f
+            friction += tangential if rod2 else -tangential
             moment += np.cross(c.pos - self._sensor, -f)
             if self._track:
                 normal[self._pair_of(c)] += self._f6[0]
         self.contacts = int(d.ncon)
+        self.friction = friction
         return on_rod, moment, normal
 
     def _pair_of(self, contact: Any) -> int:
@@ -116,9 +123,11 @@ class MujocoContact:
 
     def contact_flat(self, motion: Any) -> list[float]:
         """:meth:`contact` for the core (``crates/py/src/facility.rs``): ``motion`` the 13
-        numbers position, quaternion, velocity, angular velocity; returns 9 numbers."""
+        numbers position, quaternion, velocity, angular velocity; returns 12 numbers: the force on
+        the rod, the force on the mockup, its moment, and the friction part of the force on the
+        rod (:attr:`friction`, the tangential parts of MuJoCo's contact forces)."""
         on_rod, force, moment = self.contact(motion[0:3], motion[3:7], motion[7:10], motion[10:13])
-        return [*on_rod.tolist(), *force.tolist(), *moment.tolist()]
+        return [*on_rod.tolist(), *force.tolist(), *moment.tolist(), *self.friction.tolist()]
 
 
 def simulate_facility(scenario: Any, match: ContactMatch | None = None) -> dict[str, Any]:
