@@ -84,22 +84,23 @@ impl Facility for PyFacility {
 
     fn measure(&mut self) -> Measurement {
         let actual = *self.robot.actual();
-        let (force_on_rod, wrench) = match Python::with_gil(|py| contact(py, &self.engine, &actual))
-        {
-            Ok(result) => result,
-            Err(error) => {
-                let mut fault = self.fault.lock().unwrap_or_else(|e| e.into_inner());
-                fault.get_or_insert(error);
-                let nan = Vector3::repeat(f64::NAN);
-                (
-                    nan,
-                    FrameWrench {
-                        force: nan,
-                        moment: nan,
-                    },
-                )
-            }
-        };
+        let (force_on_rod, wrench, friction) =
+            match Python::with_gil(|py| contact(py, &self.engine, &actual)) {
+                Ok(result) => result,
+                Err(error) => {
+                    let mut fault = self.fault.lock().unwrap_or_else(|e| e.into_inner());
+                    fault.get_or_insert(error);
+                    let nan = Vector3::repeat(f64::NAN);
+                    (
+                        nan,
+                        FrameWrench {
+                            force: nan,
+                            moment: nan,
+                        },
+                        nan,
+                    )
+                }
+            };
         self.contact_force = force_on_rod;
         self.friction_force = friction;
         let (force, moment) = self.sensor.sample(&wrench);
