@@ -161,6 +161,28 @@ def _geom(name: str, kind: str, size: Any, pos: Any, quat: Any) -> str:
     )
 
 
+def _shape_geoms(body: str, shapes: Any) -> list[tuple[str, str]]:
+    """The geoms of a body's ``shapes`` (``[[servicer.shapes]]``, ``[[target.shapes]]``): (name,
+    XML). Box (full sizes → MuJoCo's half sizes), sphere, capsule (``length`` between the cap
+    centres), cylinder (``length`` along z); a shape's ``margin`` (edge rounding) has no MuJoCo
+    equivalent: its edges stay sharp. Cones, half-spaces and meshes are not written yet
+    (ScenarioError naming the shape)."""
+    out = []
+    for i, shape in enumerate(shapes or []):
+        kind = str(shape.kind)
+        name = f"{body}-shape{i}" + (f"-{shape.name}" if shape.name else "")
+        if kind == "box":
+            size = [0.5 * float(v) for v in shape.size]
+        elif kind == "sphere":
+            size = [float(shape.radius)]
+        elif kind in ("capsule", "cylinder"):
+            size = [float(shape.radius), 0.5 * float(shape.length)]
+        else:
+            raise ScenarioError(f"{body}.shapes[{i}].kind: the MJCF writer has no {kind!r} geom yet (box, sphere, capsule, cylinder)")
+        out.append((name, _geom(name, kind, size, shape.position, shape.orientation)))
+    return out
+
+
 def _match(scenario: Any, match: ContactMatch, diag: float) -> MatchedContact:
     c = scenario.contact
     if c.model != "linear":
@@ -219,6 +241,13 @@ def _document(scenario: Any, timestep: float, match: ContactMatch, matched: Matc
         walls.append(_geom(name, "box", [match.wall_half_size, match.wall_half_size, h], centre,
                            rotation_z_to(n)))
         pairs.append(f'    <pair geom1="rod-tip" geom2={quoteattr(name)} {contact}/>\n')
+    servicer_shapes = _shape_geoms("servicer", getattr(scenario.servicer, "shapes", None))
+    target_shapes = _shape_geoms("target", getattr(scenario.target, "shapes", None))
+    walls += [xml for _, xml in target_shapes]
+    tip += "".join(xml for _, xml in servicer_shapes)
+    for a, _ in servicer_shapes:
+        for b, _ in target_shapes:
+            pairs.append(f'    <pair geom1={quoteattr(a)} geom2={quoteattr(b)} {contact}/>\n')
     servicer = _body_xml("servicer", scenario.servicer, [tip], free=True)
     if fixed_target:
         target = "".join(walls).replace("      <geom", "    <geom")
