@@ -249,7 +249,7 @@ def _reference_walls(scenario: Any, reference: Any) -> np.ndarray:
     walls = [(np.asarray(w.point, float), np.asarray(w.normal, float) / np.linalg.norm(w.normal))
              for w in scenario.walls]
     # which walls the tip penetrates; one wall: the whole force is that wall's
-    inside = np.stack([((tip - p) @ n) < 0.0 for p, n in walls], axis=1)
+    inside = np.stack([((tip - p) @ n) < 0.0 for p, n in walls], axis=1) if walls else np.zeros((len(total), 0), bool)
     force = np.zeros((len(total), len(walls), 3))
     single = inside.sum(axis=1) == 1
     for j in range(len(walls)):
