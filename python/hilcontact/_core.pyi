@@ -36,6 +36,16 @@ def simulate_batch(scenarios: list[str], threads: int | None = None) -> dict[str
     has no such value). Raises ScenarioError for an invalid scenario.
     """
 
+def simulate_facility(scenario_json: str, engine: Any) -> dict[str, Any]:
+    """Run one HIL simulation whose facility's contact is computed by ``engine`` (a Python
+    object with ``contact_flat(motion)``: 13 numbers in (the robot's actual relative motion:
+    position m, quaternion [w, x, y, z], velocity m/s, angular velocity rad/s, all in ``t``), 12
+    out (force on the rod, force on the frame, its moment about the sensor origin, the friction
+    part of the force on the rod, ``t``); e.g.
+    ``hilcontact.mujoco.facility.MujocoContact``), the robot and the sensor as the facility
+    model's. Returns what :func:`simulate` returns without outputs; an error raised by the
+    engine stops the run and is raised again."""
+
 def contact_frequency(scenario_json: str) -> float:
     """Undamped contact frequency of a linear contact, Hz (``sqrt(k/μ)/2π``, μ the reduced
     mass); NaN for Hunt-Crossley. Raises ScenarioError for an invalid scenario."""

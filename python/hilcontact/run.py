@@ -245,6 +245,10 @@ def simulate(
         scenario = load_scenario(scenario)
     if compensator is None:
         compensator = scenario.python_entry
+    if scenario.facility.kind == "mujoco":
+        if compensator is not None or mcap is not None or outputs:
+            raise ScenarioError("facility.kind: a run on the mujoco facility cannot be recorded or use a Python compensator yet")
+        return _simulate_mujoco(scenario)
     if compensator is not None:
         if mcap is not None or outputs:
             raise ScenarioError("mcap, outputs: a run with a Python compensator cannot be recorded yet")
@@ -266,6 +270,22 @@ def simulate(
     if result.get("interrupted"):
         raise RunInterrupted(run)
     return run
+
+
+def _simulate_mujoco(scenario: Scenario) -> Run:
+    """A run on the MuJoCo facility (``facility.kind = "mujoco"``, :mod:`hilcontact.mujoco`)."""
+    from .mujoco import require
+
+    require()
+    from .mujoco.facility import simulate_facility
+
+    result = simulate_facility(scenario)
+    return Run(
+        scenario=scenario,
+        metrics=json.loads(result["metrics"]),
+        timeseries=_frame(result["timeseries"], TIMESERIES_COLUMNS + OPTIONAL_TIMESERIES_COLUMNS),
+        reference=_frame(result["reference"], REFERENCE_COLUMNS),
+    )
 
 
 def _simulate_python(scenario: Scenario, compensator: Any, step_limit: float | None) -> Run:

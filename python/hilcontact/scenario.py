@@ -898,9 +898,19 @@ def _read_source(source: Any) -> dict[str, Any]:
             raise ScenarioError(f"{text}: not a UTF-8 text file") from None
         except OSError as exc:
             raise ScenarioError(f"{text}: cannot read: {exc.strerror}") from None
-        return _read_meshes(_parse_toml(content, text), text)
+        return _beside_file(_read_meshes(_parse_toml(content, text), text), text)
     names = ", ".join(sorted(files)) or "(none)"
     raise ScenarioError(f"unknown scenario {text!r}: not a preset and no such file; presets: {names}")
+
+
+def _beside_file(raw: dict[str, Any], path: str) -> dict[str, Any]:
+    """``facility.mujoco_model`` of a scenario file made relative to the file's folder (a path
+    in a scenario file names a file beside it)."""
+    facility = raw.get("facility")
+    model = facility.get("mujoco_model") if isinstance(facility, dict) else None
+    if isinstance(model, str) and model and not os.path.isabs(model):
+        facility["mujoco_model"] = os.path.join(os.path.dirname(os.path.abspath(path)), model)
+    return raw
 
 
 def _read_meshes(raw: dict[str, Any], scenario_file: str | None) -> dict[str, Any]:

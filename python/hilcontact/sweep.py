@@ -449,6 +449,8 @@ def plan_sweep(
             shown = ", ".join(f"{k}={v!r}" for k, v in values.items())
             raise ScenarioError(f"--grid point {shown}: {exc}") from None
         for kind, s in resolved.items():
+            if s.facility.kind == "mujoco":  # a Python engine: the core's batch cannot run it
+                raise ScenarioError("facility.kind: a sweep cannot run the mujoco facility yet (its engine is Python, docs/mujoco.md): use hilcontact run or compare")
             scenarios[(point, kind)] = s.to_dict()
         frequencies[point] = contact_frequency(next(iter(resolved.values())))
     first_seed = int(base["facility"].get("seed", 1))

@@ -288,6 +288,12 @@ pub enum FacilityKind {
     /// delay, noise and quantisation (the keys of `[facility]`).
     #[default]
     Model,
+    /// MuJoCo (the `mujoco` Python package): the rod touches the mockup in a MuJoCo model
+    /// (`facility.mujoco_model`, or one written from the scenario), the robot and the sensor
+    /// as the facility model's. A Python engine: `hilcontact` (Python) runs it through
+    /// `hilcontact._core.simulate_facility`; the core alone cannot build it
+    /// ([`crate::facility::build`] refuses it).
+    Mujoco,
 }
 
 /// The facility: which engine stands in for the hardware, the facility model's robot response
@@ -351,9 +357,23 @@ pub struct FacilityConfig {
     #[serde(default)]
     pub round_delays: bool,
     /// Which engine stands in for the hardware: `"model"` (the facility model, the default; the
-    /// keys above are its parameters and the sensor's mounting).
+    /// keys above are its parameters and the sensor's mounting) or `"mujoco"` (MuJoCo for the
+    /// contact, docs/mujoco.md; the robot and sensor keys above apply as well).
     #[serde(default)]
     pub kind: FacilityKind,
+    /// `kind = "mujoco"`: an MJCF file of the hardware, relative to the scenario file (empty,
+    /// the default: the model is written from the scenario's bodies, rod and walls).
+    #[serde(default)]
+    pub mujoco_model: String,
+    /// `kind = "mujoco"` and the MuJoCo cross-check: MuJoCo's integration step, s (1e-7 to
+    /// 1e-2; default 1e-4).
+    #[serde(default = "default_mujoco_timestep")]
+    #[schemars(range(min = 1e-7, max = 1e-2))]
+    pub mujoco_timestep: f64,
+}
+
+fn default_mujoco_timestep() -> f64 {
+    1e-4
 }
 
 fn default_servo_damping() -> f64 {
@@ -377,6 +397,8 @@ impl Default for FacilityConfig {
             seed: 0,
             round_delays: false,
             kind: FacilityKind::Model,
+            mujoco_model: String::new(),
+            mujoco_timestep: default_mujoco_timestep(),
         }
     }
 }

@@ -267,7 +267,9 @@ pub fn compensator_inputs(plan: &Plan) -> Vec<CompensatorInput> {
 /// Runs the reference and the HIL loop of a scenario and computes the metrics, without
 /// keeping the records (what a sweep keeps of a run).
 pub fn simulate_metrics(s: &Scenario) -> Result<Metrics> {
-    Ok(simulate_plan_metrics(&s.resolve()?))
+    let plan = s.resolve()?;
+    crate::facility::buildable(&plan)?;
+    Ok(simulate_plan_metrics(&plan))
 }
 
 /// Runs the reference and the HIL loop of a resolved plan and computes the metrics, without
@@ -278,7 +280,9 @@ pub fn simulate_plan_metrics(plan: &Plan) -> Metrics {
 
 /// Runs the reference and the HIL loop of a scenario and computes the metrics.
 pub fn simulate(s: &Scenario) -> Result<SimulationOutput> {
-    Ok(simulate_plan(&s.resolve()?))
+    let plan = s.resolve()?;
+    crate::facility::buildable(&plan)?;
+    Ok(simulate_plan(&plan))
 }
 
 /// Runs the reference and the HIL loop of a resolved plan and computes the metrics.

@@ -16,6 +16,7 @@ use pyo3::prelude::*;
 use pyo3::sync::GILOnceCell;
 use pyo3::types::{PyDict, PyTuple, PyType};
 
+mod facility;
 mod mesh;
 mod plugin;
 
@@ -437,6 +438,8 @@ fn start_facility(
     scenario_json: &str,
     options_json: &str,
 ) -> PyResult<PyFacilityHandle> {
+    let plan = parse_scenario(py, scenario_json)?;
+    hilcontact_core::facility::buildable(&plan).map_err(|e| to_py_err(py, e))?;
     let handle = run_released(py, scenario_json, options_json, FacilityHandle::start)?;
     Ok(PyFacilityHandle(Held {
         inner: Some(handle),
@@ -506,6 +509,7 @@ fn simulate<'py>(
     outputs: Option<&str>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let plan = parse_scenario(py, scenario_json)?;
+    hilcontact_core::facility::buildable(&plan).map_err(|e| to_py_err(py, e))?;
     let outputs = match outputs {
         Some(json) => {
             let options: serde_json::Value = parse_options(py, json)?;
@@ -563,7 +567,11 @@ fn simulate_batch<'py>(
     use rayon::prelude::*;
     let parsed = scenarios
         .iter()
-        .map(|json| parse_scenario(py, json))
+        .map(|json| {
+            let plan = parse_scenario(py, json)?;
+            hilcontact_core::facility::buildable(&plan).map_err(|e| to_py_err(py, e))?;
+            Ok(plan)
+        })
         .collect::<PyResult<Vec<_>>>()?;
     // on Ctrl-C, the runs not yet started are skipped (the call raises KeyboardInterrupt)
     let results = run_interruptible(py, move |cancel| {
@@ -917,6 +925,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mesh::read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(plugin::simulate_python, m)?)?;
     m.add_function(wrap_pyfunction!(plugin::compensator_context, m)?)?;
+    m.add_function(wrap_pyfunction!(facility::simulate_facility, m)?)?;
     m.add_class::<PyHilHandle>()?;
     m.add_class::<PyFacilityHandle>()?;
     let errors = error_classes(m.py())?;

@@ -141,6 +141,7 @@ pub fn simulate_python<'py>(
     name: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let plan = crate::parse_scenario(py, scenario_json)?;
+    hilcontact_core::facility::buildable(&plan).map_err(|e| crate::to_py_err(py, e))?;
     let q = plan.sensor.orientation;
     let ctx = context_dict(py, &plan)?;
     let bound = adapter.bind(py);

@@ -5,9 +5,11 @@
 //!   with the command, measure (the sensor's wrench and the robot's actual motion), and the
 //!   physical contact force that a real facility does not report.
 //! - [`build`]: the engine of a plan, chosen by `[facility] kind`
-//!   ([`crate::config::FacilityKind`]); today one kind, `"model"`, the facility model
+//!   ([`crate::config::FacilityKind`]): `"model"`, the facility model
 //!   (`facility/model.rs`, [`FacilityModel`]: robot delay and servo lag, the contact law with
-//!   the walls, sensor delay, noise and quantisation).
+//!   the walls, sensor delay, noise and quantisation). `"mujoco"` is an engine written in
+//!   Python (`hilcontact.mujoco`): the core cannot build it ([`buildable`] says so); the
+//!   bindings run it through [`FacilityLoop::with`] and [`crate::sim::run_hil_against`].
 //! - [`FacilityLoop`]: the facility's side of every control tick, the one loop the simulation
 //!   ([`crate::sim::run_hil`]) and the emulated facility (`hilcontact_rt::emulator`) run.
 //!
@@ -26,6 +28,7 @@ pub use model::{FacilityModel, RobotModel, SensorModel};
 use nalgebra::Vector3;
 
 use crate::config::FacilityKind;
+use crate::error::{CoreError, Result};
 use crate::frames::RelativeMotion;
 use crate::plan::Plan;
 
@@ -84,12 +87,37 @@ pub trait Facility: Send {
     }
 }
 
+/// Whether the core can build the facility engine of a plan ([`build`]): `Err` naming
+/// `facility.kind` for an engine written outside the core (`"mujoco"`, a Python engine that
+/// `hilcontact` runs through the bindings' `simulate_facility`). Every caller of [`build`]
+/// ([`FacilityLoop::new`]) that can refuse checks this first.
+pub fn buildable(plan: &Plan) -> Result<()> {
+    match plan.facility.kind {
+        FacilityKind::Model => Ok(()),
+        FacilityKind::Mujoco => Err(CoreError::invalid(
+            "facility.kind",
+            "\"mujoco\" is an engine written in Python: the core cannot build it; run the \
+             scenario with hilcontact (Python: `hilcontact run`/`compare`, \
+             `hilcontact.simulate`), which steps MuJoCo (`pip install 'hilcontact[mujoco]'`)",
+        )),
+    }
+}
+
 /// The facility engine of a plan, by `[facility] kind`, with the robot at rest at
 /// `initial_command` (the relative motion `t` of the tick 0; its velocities are ignored).
 /// Allocates once, here.
+///
+/// # Panics
+/// For a kind the core cannot build ([`buildable`] is `Err`: `"mujoco"`); the entry points
+/// that reach here (`sim::simulate`, the bindings, the emulated facility) refuse such a plan
+/// with that error first.
 pub fn build(plan: &Plan, initial_command: &RelativeMotion) -> Box<dyn Facility> {
     match plan.facility.kind {
         FacilityKind::Model => Box::new(FacilityModel::new(plan, initial_command)),
+        FacilityKind::Mujoco => match buildable(plan) {
+            Ok(()) => unreachable!("a mujoco facility is never buildable by the core"),
+            Err(e) => panic!("{e}"),
+        },
     }
 }
 
