@@ -1103,18 +1103,26 @@ def compare_cov_cof_figure(runs: Mapping[str, RunData]) -> Figure:
 
 def compare_velocity_error_figure(runs: Mapping[str, RunData]) -> Figure:
     """Grouped bars of the rebound velocity error and angular velocity error per collision
-    (%), one colour per compensator; a dashed line at the scenario's velocity tolerance."""
+    (%), one colour per compensator; a dashed line at the scenario's velocity tolerance. With
+    friction (:func:`has_friction`) also the rebound direction error (degrees) and the
+    tangential impulse error (%, dashed: its tolerance)."""
     run = next(iter(runs.values()))
     tolerance = 100.0 * float(run.scenario.metrics.max_velocity_error)
-    return _bars_figure(
-        runs,
-        [
-            ("velocity_error", "velocity error (%)", tolerance, 100.0, ()),
-            ("angular_velocity_error", "angular velocity error (%)", None, 100.0, ()),
-        ],
-        "Rebound velocity errors per collision: |v − v_ref|/|v_ref|, |ω − ω_ref|/|ω_ref| "
-        f"(0 = ideal; dashed: tolerance {tolerance:g} %)",
-    )
+    rows: list[tuple[str, str, float | None, float, tuple[float, ...]]] = [
+        ("velocity_error", "velocity error (%)", tolerance, 100.0, ()),
+        ("angular_velocity_error", "angular velocity error (%)", None, 100.0, ()),
+    ]
+    title = ("Rebound velocity errors per collision: |v − v_ref|/|v_ref|, |ω − ω_ref|/|ω_ref| "
+             f"(0 = ideal; dashed: tolerance {tolerance:g} %)")
+    if any(has_friction(r) for r in runs.values()):
+        impulse = 100.0 * float(run.scenario.metrics.max_tangential_impulse_error)
+        rows += [
+            ("direction_error", "direction error (°)", None, 1.0, ()),
+            ("tangential_impulse_error", "J_t error (%)", impulse, 100.0, ()),
+        ]
+        title = ("Rebound velocity, angular velocity and direction errors, tangential impulse error per "
+                 f"collision (0 = ideal; dashed: tolerances {tolerance:g} %, {impulse:g} %)")
+    return _bars_figure(runs, rows, title)
 
 
 def compare_measured_applied_figure(runs: Mapping[str, RunData]) -> Figure | None:
