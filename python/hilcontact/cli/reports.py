@@ -63,7 +63,7 @@ def _report(console: Console, result: Run, folder: Path) -> None:
         console.print("status: [green]ok[/green]")
     elif result.status == "unfaithful":
         violations = result.metrics.get("violations") or []
-        console.print("[bold yellow]status: unfaithful[/bold yellow] (tolerances in the scenario's [metrics])")
+        console.print("[bold yellow]status: unfaithful[/bold yellow] (tolerances in the scenario's \\[metrics])")
         for line in violations:
             console.print(f"  [yellow]{escape(str(line))}[/yellow]", soft_wrap=True)
     else:
