@@ -6,6 +6,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::compensator::{Compensator, CompensatorInput};
 use crate::config::{ContactModelKind, Scenario};
+use crate::contact::ContactGeometry;
 use crate::error::Result;
 use crate::facility::FacilityLoop;
 use crate::frames::FrameWrench;
@@ -47,16 +48,45 @@ impl Table {
 /// The trace of HIL records (with estimates if `estimates_contact`), for the metrics.
 pub fn hil_trace(plan: &Plan, rows: &[HilRecord], estimates_contact: bool) -> Trace {
     let mut trace = Trace::with_capacity(rows.len(), estimates_contact);
+    let normal_law = frictionless(plan);
     for row in rows {
-        push_record(&mut trace, plan, row, estimates_contact);
+        push_record(&mut trace, plan, &normal_law, row, estimates_contact);
     }
     trace
 }
 
+/// The plan's contact without friction: the normal part of a contact force is this
+/// contact's force at the same tip and velocity (its friction part the rest).
+fn frictionless(plan: &Plan) -> ContactGeometry {
+    ContactGeometry {
+        friction: None,
+        ..plan.system.contact.clone()
+    }
+}
+
 /// Appends a HIL record to a trace (the sensor's attitude in `t` and its origin from `plan`).
-/// The contact moment is the physical force's at the actual rod tip about the sensor origin.
-fn push_record(trace: &mut Trace, plan: &Plan, row: &HilRecord, estimates_contact: bool) {
+/// The contact moment is the physical force's at the actual rod tip about the sensor origin;
+/// its friction part is the contact force less `normal_law`'s ([`frictionless`]) at the actual
+/// tip with the facility's added damping. Allocation-free.
+fn push_record(
+    trace: &mut Trace,
+    plan: &Plan,
+    normal_law: &ContactGeometry,
+    row: &HilRecord,
+    estimates_contact: bool,
+) {
     let sensor_to_t: &UnitQuaternion<f64> = &plan.sensor.orientation;
+    let normal = if row.contact_force == Vector3::zeros() {
+        Vector3::zeros()
+    } else {
+        normal_law
+            .force_with_added_damping(
+                &row.actual_tip_position,
+                &row.actual_tip_velocity,
+                plan.facility.dissipation,
+            )
+            .0
+    };
     let physical = FrameWrench::from_rod_force(
         &row.contact_force,
         &row.actual_tip_position,
@@ -65,7 +95,7 @@ fn push_record(trace: &mut Trace, plan: &Plan, row: &HilRecord, estimates_contac
     trace.push(&TraceSample {
         time: row.time,
         contact_force: row.contact_force,
-        friction_force: Vector3::zeros(),
+        friction_force: row.contact_force - normal,
         contact_moment: physical.moment,
         velocity: row.tip_velocity,
         angular_velocity: row.angular_velocity,
@@ -123,6 +153,7 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
     let mut trace = Trace::with_capacity(n + 1, false);
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut friction_work = 0.0;
+    let normal_law = frictionless(plan);
     for k in 0..=n {
         let rel = system.relative_motion(&x);
         let (contact_force, tip) = system.contact_force_at(&rel);
@@ -140,7 +171,7 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
         trace.push(&TraceSample {
             time: row.time,
             contact_force,
-            friction_force: Vector3::zeros(),
+            friction_force: contact_force - normal_law.force_on_rod(&tip, &row.tip_velocity),
             contact_moment: wrench.moment,
             velocity: row.tip_velocity,
             angular_velocity: row.angular_velocity,
@@ -203,13 +234,14 @@ pub fn run_hil_step(
     let estimates = step.dynamics().estimates_contact();
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut trace = Trace::with_capacity(n + 1, estimates);
+    let normal_law = frictionless(plan);
     // the command for the coming tick (the first tick does not read it)
     let mut command = step.command();
     let mut k = 0;
     let stop = loop {
         let m = facility.tick(&command);
         let (row, stop) = step.observe(k, &m, Some(facility.contact_force()));
-        push_record(&mut trace, plan, &row, estimates);
+        push_record(&mut trace, plan, &normal_law, &row, estimates);
         if keep_rows {
             rows.push(row);
         }
