@@ -482,6 +482,31 @@ def _friction_parts(frame: pd.DataFrame) -> np.ndarray | None:
     return _vectors(frame, "friction_force")
 
 
+def tangential_force(run: RunData, frame: pd.DataFrame, tip_column: str) -> np.ndarray | None:
+    """The tangential (friction) part of ``frame``'s contact force, rows of (x, y, z), N: its
+    ``friction_force`` columns, or without them the force less its projection on the normals
+    of the walls the tip (``tip_column``) is inside of (exact on one wall; in a corner a
+    wall's friction along another wall's normal counts as normal). None without the force."""
+    recorded = _friction_parts(frame)
+    force = _vectors(frame, "contact_force")
+    if recorded is not None or force is None:
+        return recorded
+    tip = _vectors(frame, tip_column)
+    if tip is None or not len(tip):
+        return np.zeros_like(force)
+    frames = _frames(run, points=[tip])
+    normals = np.asarray(frames["normals"])  # walls x 3
+    inside = np.asarray(frames["distances"][0]) < 0.0  # walls x rows
+    tangential = force.copy()
+    for pattern in {tuple(column) for column in inside.T if column.any()}:
+        rows = (inside.T == np.asarray(pattern)).all(axis=1)
+        basis = normals[np.asarray(pattern)].T  # 3 x active walls
+        coefficients, *_ = np.linalg.lstsq(basis, force[rows].T, rcond=None)
+        tangential[rows] = force[rows] - (basis @ coefficients).T
+    tangential[~inside.any(axis=0)] = 0.0
+    return tangential
+
+
 def has_friction(run: RunData) -> bool:
     """Whether the run's contact has friction: a friction coefficient in the scenario, or a
     non-zero friction force in the reference."""
@@ -640,7 +665,8 @@ def normal_tangential_figure(run: RunData) -> Figure:
         force = _vectors(frame, "contact_force")
         if force is None:
             continue
-        tangential = _friction_parts(frame)
+        tip_column = "actual_tip_position" if frame is run.timeseries else "tip_position"
+        tangential = tangential_force(run, frame, tip_column)
         if tangential is None:
             tangential = np.zeros_like(force)
         time = frame["time"].to_numpy()
