@@ -1094,10 +1094,12 @@ def _collision_bars(
 
 
 def _bars_figure(
-    runs: Mapping[str, RunData], rows: list[tuple[str, str, float | None, float, tuple[float, ...]]], title: str
+    runs: Mapping[str, RunData], rows: list[tuple[str, str, float | None, float, tuple[float, ...]]], title: str,
+    height: float = 7.0,
 ) -> Figure:
-    """One axis of grouped bars per ``(key, label, line, scale, tolerances)``, collisions across."""
-    figure = Figure(figsize=(11.0, 7.0))
+    """One axis of grouped bars per ``(key, label, line, scale, tolerances)``, collisions across;
+    ``height`` in inches."""
+    figure = Figure(figsize=(11.0, height))
     FigureCanvasAgg(figure)
     axes = figure.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
     _margins(figure, left=0.8, right=1.9, top=_top_margin(2) - _PANEL_TITLE, bottom=0.55, hspace=0.08)
@@ -1148,7 +1150,7 @@ def compare_velocity_error_figure(runs: Mapping[str, RunData]) -> Figure:
         ]
         title = ("Rebound velocity, angular velocity and direction errors, tangential impulse error per "
                  f"collision (0 = ideal; dashed: tolerances {tolerance:g} %, {impulse:g} %)")
-    return _bars_figure(runs, rows, title)
+    return _bars_figure(runs, rows, title, height=3.5 * len(rows))
 
 
 def compare_measured_applied_figure(runs: Mapping[str, RunData]) -> Figure | None:
