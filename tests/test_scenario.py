@@ -342,7 +342,7 @@ BAD_INPUT = [
     ({"contact.model": "hertz"}, "contact.model: must be one of 'linear' or 'hunt-crossley', got 'hertz'"),
     ({"compensator.kind": "magic"}, "compensator.kind: unknown compensator kind 'magic'; allowed: 'none', 'pic', "
                                      "'dac', 'pida', 'tdpa-impedance', 'tdpa-admittance', 'model-mediated'"),
-    ({"walls": []}, "walls: at least one [[walls]] table is required"),
+    ({"walls": []}, "walls: at least one [[walls]] table (or shapes on both bodies, [[servicer.shapes]] and [[target.shapes]]) is required"),
     ({"walls": "front"}, ("walls", "expected one or more [[walls]] tables")),
     ({"servicer": 3}, "servicer: expected a table, got 3"),
     ({"walls[0].name": "rear"}, ("walls[1].name", "duplicate wall name 'rear'")),
@@ -370,7 +370,7 @@ def test_bad_values_give_one_clear_line(overrides, expected):
         ("rod", "tip", "rod.tip: missing required value"),
         (None, "name", "name: missing required value"),
         (None, "target", "target: missing required table [target]"),
-        (None, "walls", "walls: missing; at least one [[walls]] table is required"),
+        (None, "walls", "walls: at least one [[walls]] table (or shapes on both bodies"),
     ],
 )
 def test_missing_required_values(table, key, expected):

@@ -203,3 +203,8 @@ def frames(scenario_json: str, sensor_vectors: Any | None = None, points: list[A
     wall, ``t``); per array of ``points`` (rows of x, y, z in ``t``, m) the signed distance of
     each point to each wall's plane (m, < 0 inside), shaped (walls, rows). Raises
     ``ScenarioError`` for a bad scenario, ``ValueError`` for an array that is not (rows, 3)."""
+
+def read_mesh(path: str) -> tuple[list[list[float]], list[list[int]]]:
+    """A mesh file's vertices (its units) and triangles (vertex indices), STL (binary or ASCII)
+    or OBJ by its extension. Raises ValueError with the reason."""
+    ...

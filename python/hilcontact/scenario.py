@@ -883,7 +883,8 @@ def _read_source(source: Any) -> dict[str, Any]:
         raise ArgumentError(f"scenario: expected a preset name, a TOML file path or a Scenario, got {_show(source)}")
     files = _preset_files()
     if isinstance(source, str) and text in files:
-        return _parse_toml(files[text].read_text(encoding="utf-8"), f"preset {text!r}")
+        raw = _parse_toml(files[text].read_text(encoding="utf-8"), f"preset {text!r}")
+        return _read_meshes(raw, os.fspath(files[text]))
     if "\x00" in text:
         raise ScenarioError(f"scenario {_show(text)}: a path cannot hold a NUL character")
     problem = _not_a_file(text)
@@ -897,9 +898,35 @@ def _read_source(source: Any) -> dict[str, Any]:
             raise ScenarioError(f"{text}: not a UTF-8 text file") from None
         except OSError as exc:
             raise ScenarioError(f"{text}: cannot read: {exc.strerror}") from None
-        return _parse_toml(content, text)
+        return _read_meshes(_parse_toml(content, text), text)
     names = ", ".join(sorted(files)) or "(none)"
     raise ScenarioError(f"unknown scenario {text!r}: not a preset and no such file; presets: {names}")
+
+
+def _read_meshes(raw: dict[str, Any], scenario_file: str | None) -> dict[str, Any]:
+    """Fills the ``vertices`` and ``triangles`` of every mesh shape that names a ``file`` and
+    has none yet, reading the file relative to ``scenario_file``'s folder (the working folder
+    without one). A missing or malformed file: one line naming the key and the file."""
+    base = os.path.dirname(os.path.abspath(scenario_file)) if scenario_file else os.getcwd()
+    for body in ("servicer", "target"):
+        table = raw.get(body)
+        shapes = table.get("shapes") if isinstance(table, Mapping) else None
+        if not isinstance(shapes, list):
+            continue
+        for i, shape in enumerate(shapes):
+            if not isinstance(shape, dict) or shape.get("kind") != "mesh":
+                continue
+            name = shape.get("file")
+            if not isinstance(name, str) or not name or shape.get("vertices"):
+                continue
+            path = os.path.join(base, name)
+            try:
+                vertices, triangles = _core.read_mesh(path)
+            except (ValueError, OSError) as exc:
+                raise ScenarioError(f"{body}.shapes[{i}].file: cannot read mesh {name!r} ({path}): {exc}") from None
+            shape["vertices"] = vertices
+            shape["triangles"] = triangles
+    return raw
 
 
 def load_scenario(source: Any, overrides: Mapping[str, Any] | None = None) -> Scenario:

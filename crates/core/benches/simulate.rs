@@ -1,6 +1,8 @@
 //! `cargo bench -p hilcontact-core --bench simulate`: one whole `paper-table1` run with `pida`
 //! at 20 ms robot delay (5.5 s simulated, 1 kHz control, 10 kHz plant, reference included),
-//! as a sweep runs it (metrics only) and with its time series, and its two halves.
+//! as a sweep runs it (metrics only) and with its time series, and its two halves; and the
+//! shapes' cost: `rod-in-frame` (6 s, 1 kHz, a cylinder rod against four boxes with friction)
+//! against `paper-table1` as they are (`none`, 10 ms), the bound being 3×.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use hilcontact_core::compensator::{CompensatorConfig, ModelMediatedParams, ModelParams};
@@ -39,6 +41,14 @@ fn bench(c: &mut Criterion) {
     });
     c.bench_function("paper-table1 pida 20 ms: HIL loop only", |b| {
         b.iter(|| run_hil(black_box(&plan), f64::INFINITY, false))
+    });
+    let table1 = preset("paper-table1");
+    c.bench_function("paper-table1 as it is: metrics only", |b| {
+        b.iter(|| simulate_metrics(black_box(&table1)).expect("run"))
+    });
+    let rod = preset("rod-in-frame");
+    c.bench_function("rod-in-frame as it is: metrics only", |b| {
+        b.iter(|| simulate_metrics(black_box(&rod)).expect("run"))
     });
 }
 

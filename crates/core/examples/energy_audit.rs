@@ -43,7 +43,7 @@ fn main() {
     let mut rows = Vec::new();
     for k in 0..=plan.ticks {
         let m = facility.measure();
-        let (row, stop) = step.observe(k, &m, Some(facility.contact_force()));
+        let (row, stop) = step.observe(k, &m, Some(facility.physical_contact()));
         ke.push(row.energy);
         obs.push(row.observed_energy);
         applied.push(row.applied_force.norm());

@@ -40,8 +40,9 @@ pub struct Scenario {
     pub target: BodyConfig,
     /// The rod on the servicer.
     pub rod: RodConfig,
-    /// Planar walls fixed in the target frame.
-    #[schemars(length(min = 1))]
+    /// Planar walls fixed in the target frame, met by the rod tip (at least one wall, or
+    /// shapes on both bodies).
+    #[serde(default)]
     pub walls: Vec<WallConfig>,
     /// Contact law between the rod tip and the walls.
     pub contact: ContactConfig,
@@ -119,6 +120,101 @@ pub struct BodyConfig {
     #[serde(default)]
     #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e3))]
     pub angular_velocity: [f64; 3],
+    /// Collision shapes fixed in the body (`[[servicer.shapes]]`, `[[target.shapes]]`): every
+    /// servicer shape meets every target shape, besides the rod tip against the walls.
+    #[serde(default)]
+    #[schemars(length(max = 64))]
+    pub shapes: Vec<ShapeConfig>,
+}
+
+/// What a collision shape is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum ShapeKind {
+    /// A sphere: `radius`.
+    Sphere,
+    /// A box: `size` (full edge lengths), edges rounded by `margin`.
+    Box,
+    /// A cylinder along the shape's z axis: `radius`, `length`, edges rounded by `margin`.
+    Cylinder,
+    /// A capsule along z: `radius`, `length` between the centres of its end caps.
+    Capsule,
+    /// A cone along z: base `radius` at z = −length/2, apex at +length/2, rounded by `margin`.
+    Cone,
+    /// A half-space (target only): the plane through `position` with outward `normal`.
+    HalfSpace,
+    /// A triangle mesh from `file` (STL or OBJ, relative to the scenario file), times `scale`.
+    Mesh,
+}
+
+/// A collision shape in its body's frame. Which keys a kind reads: sphere `radius`; box `size`,
+/// `margin`; cylinder and cone `radius`, `length`, `margin`; capsule `radius`, `length`;
+/// half-space `normal`; mesh `file`, `scale` (or `vertices` and `triangles`). Every kind:
+/// `position`, `orientation`, `material`, `name`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ShapeConfig {
+    /// Name for reports. Default: the kind and its index (`box2`).
+    #[serde(default)]
+    pub name: String,
+    /// What the shape is.
+    pub kind: ShapeKind,
+    /// Radius, m (sphere, capsule, cylinder; the cone's base), 0 to 100.
+    #[serde(default)]
+    #[schemars(range(min = 0.0, max = 100.0))]
+    pub radius: f64,
+    /// Length along the shape's z axis, m (cylinder, cone; the capsule's between its cap
+    /// centres), 0 to 100.
+    #[serde(default)]
+    #[schemars(range(min = 0.0, max = 100.0))]
+    pub length: f64,
+    /// Full edge lengths of a box along x, y, z, m.
+    #[serde(default)]
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 100.0))]
+    pub size: [f64; 3],
+    /// Edge rounding of a box, cylinder or cone, m (0 to 0.1; below half its smallest
+    /// dimension): its edges and corners are rounded by it, its outer size unchanged.
+    #[serde(default = "default_margin")]
+    #[schemars(range(min = 0.0, max = 0.1))]
+    pub margin: f64,
+    /// The shape's origin in the body frame, m (the centre of a box, sphere, cylinder, capsule
+    /// or cone; a point of a half-space's plane; a mesh's origin).
+    #[serde(default)]
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e3))]
+    pub position: [f64; 3],
+    /// The shape's attitude in the body frame, unit quaternion [w, x, y, z] (shape to body).
+    #[serde(default = "identity_quaternion")]
+    #[schemars(extend("x-value" = "quaternion", "x-magnitude" = 1e6))]
+    pub orientation: [f64; 4],
+    /// Normal from the plane into free space: a half-space's, body frame (normalised).
+    #[serde(default)]
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e6))]
+    pub normal: [f64; 3],
+    /// Material name (for reports; friction is `[contact.friction]`'s for every pair).
+    #[serde(default)]
+    pub material: String,
+    /// A mesh's file, STL or OBJ, relative to the scenario file (read by the scenario loader,
+    /// which fills `vertices` and `triangles`).
+    #[serde(default)]
+    pub file: String,
+    /// A mesh file's length unit in m (0.001 for a CAD file in mm), > 0, <= 1000.
+    #[serde(default = "default_scale")]
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1000.0))]
+    pub scale: f64,
+    /// A mesh's vertices in the shape frame, m (after `scale`).
+    #[serde(default)]
+    pub vertices: Vec<[f64; 3]>,
+    /// A mesh's triangles, vertex indices from 0.
+    #[serde(default)]
+    pub triangles: Vec<[u32; 3]>,
+}
+
+fn default_margin() -> f64 {
+    0.0005
+}
+
+fn default_scale() -> f64 {
+    1.0
 }
 
 /// An inertia given as principal moments `[Ixx, Iyy, Izz]` or as a full 3×3 tensor, kg·m².

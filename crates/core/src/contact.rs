@@ -11,6 +11,8 @@
 //! `μ(s) = μ_k + (μ_s − μ_k)·exp(−(s/v_s)²)` (docs/model.md, "Friction").
 
 use nalgebra::Vector3;
+
+use crate::shapes::ShapePairs;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -239,6 +241,17 @@ impl Wall {
     }
 }
 
+/// The contact force at one point of the rod (or summed over several), `t` frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PointForce {
+    /// The whole contact force on the rod (normal and friction parts), N.
+    pub force: Vector3<f64>,
+    /// Its friction (tangential) part, N (zero without friction).
+    pub friction_force: Vector3<f64>,
+    /// The friction's power, W (≤ 0: `Σ F_t·v_t`, the rate at which friction dissipates).
+    pub friction_power: f64,
+}
+
 /// The collision geometry and the contact law: everything needed to compute the physical
 /// contact force from the rod tip's motion relative to the target.
 #[derive(Debug, Clone, PartialEq)]
@@ -247,39 +260,31 @@ pub struct ContactGeometry {
     pub walls: Vec<Wall>,
     /// The contact law.
     pub law: ContactModel,
-    /// Friction between rod and walls (`None`: frictionless).
+    /// Friction between rod and walls, and between shapes (`None`: frictionless).
     pub friction: Option<Friction>,
+    /// The bodies' collision shapes (empty: only the rod tip against the walls).
+    pub shapes: ShapePairs,
 }
 
 impl ContactGeometry {
     /// Physical contact force on the rod tip, target frame, N: the sum over the walls it
     /// penetrates of `max(0, f(d, ḋ))·n`, plus friction when there is any. Allocation-free.
     pub fn force_on_rod(&self, tip: &Vector3<f64>, tip_velocity: &Vector3<f64>) -> Vector3<f64> {
-        self.force_and_friction_power(tip, tip_velocity).0
+        self.force_with_added_damping(tip, tip_velocity, 0.0).force
     }
 
-    /// [`ContactGeometry::force_on_rod`] and the power of its friction part, W (≤ 0: the rate
-    /// at which friction dissipates energy, `Σ F_t·v_t`). Allocation-free.
-    pub fn force_and_friction_power(
-        &self,
-        tip: &Vector3<f64>,
-        tip_velocity: &Vector3<f64>,
-    ) -> (Vector3<f64>, f64) {
-        self.force_with_added_damping(tip, tip_velocity, 0.0)
-    }
-
-    /// [`ContactGeometry::force_and_friction_power`] with a damping `added_damping` (N·s/m)
-    /// added to each pushing wall's normal force, `F_n = max(0, f(d, ḋ) + c_add·ḋ)` (never
-    /// pulling; friction acts on that `F_n`): the facility's own losses
-    /// (`facility.dissipation`), which the ideal reference does not have. Allocation-free.
+    /// The contact force on the rod tip (target frame) with its friction part and the friction
+    /// power, with a damping `added_damping` (N·s/m) added to each pushing wall's normal force,
+    /// `F_n = max(0, f(d, ḋ) + c_add·ḋ)` (never pulling; friction acts on that `F_n`): the
+    /// facility's own losses (`facility.dissipation`), which the ideal reference does not have
+    /// (0 there). Allocation-free.
     pub fn force_with_added_damping(
         &self,
         tip: &Vector3<f64>,
         tip_velocity: &Vector3<f64>,
         added_damping: f64,
-    ) -> (Vector3<f64>, f64) {
-        let mut force = Vector3::zeros();
-        let mut power = 0.0;
+    ) -> PointForce {
+        let mut out = PointForce::default();
         for wall in &self.walls {
             let d = wall.penetration(tip);
             if d > 0.0 {
@@ -288,17 +293,49 @@ impl ContactGeometry {
                 if added_damping != 0.0 && f_n > 0.0 {
                     f_n = (f_n + added_damping * d_dot).max(0.0);
                 }
-                force += wall.normal * f_n;
+                out.force += wall.normal * f_n;
                 if let Some(friction) = &self.friction {
                     // sliding velocity: the tip's velocity along the wall
                     let v_t = tip_velocity - wall.normal * tip_velocity.dot(&wall.normal);
                     let f_t = friction.force(f_n, &v_t);
-                    force += f_t;
-                    power += f_t.dot(&v_t);
+                    out.force += f_t;
+                    out.friction_force += f_t;
+                    out.friction_power += f_t.dot(&v_t);
                 }
             }
         }
-        (force, power)
+        out
+    }
+
+    /// The force on the servicer at one contact point of penetration `d` (m) along the unit
+    /// normal `normal` (from the target into free space), where the servicer's material point
+    /// moves at `v` (m/s, relative to the target), with `added_damping` as in
+    /// [`ContactGeometry::force_with_added_damping`]: the law along the normal and friction
+    /// against the sliding velocity `v − (v·n)n`. Allocation-free.
+    pub fn point_force(
+        &self,
+        d: f64,
+        normal: &Vector3<f64>,
+        v: &Vector3<f64>,
+        added_damping: f64,
+    ) -> PointForce {
+        let d_dot = -v.dot(normal);
+        let mut f_n = self.law.normal_force(d, d_dot);
+        if added_damping != 0.0 && f_n > 0.0 {
+            f_n = (f_n + added_damping * d_dot).max(0.0);
+        }
+        let mut out = PointForce {
+            force: normal * f_n,
+            ..PointForce::default()
+        };
+        if let Some(friction) = &self.friction {
+            let v_t = v - normal * v.dot(normal);
+            let f_t = friction.force(f_n, &v_t);
+            out.force += f_t;
+            out.friction_force = f_t;
+            out.friction_power = f_t.dot(&v_t);
+        }
+        out
     }
 
     /// Which walls push on the rod (bit `i` for wall `i`, the first 64 walls): the contact's
@@ -374,6 +411,7 @@ mod tests {
                 damping: 0.0,
             }),
             friction: None,
+            shapes: ShapePairs::default(),
         };
         let f = geometry.force_on_rod(&Vector3::new(0.012, 0.0, 0.0), &Vector3::zeros());
         // the force on the rod pushes it back out, along −x

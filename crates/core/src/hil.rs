@@ -15,6 +15,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use crate::compensator::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
 use crate::facility::Measurement;
+pub use crate::facility::PhysicalContact;
 use crate::frames::{FrameWrench, RelativeMotion};
 use crate::plan::Plan;
 use crate::stop::{Stop, StopKind};
@@ -167,6 +168,9 @@ pub struct HilRecord {
     /// Physical contact force on the rod, `t` frame, N (on a real facility, where it is not
     /// observable: the force on the rod that the sensor reports).
     pub contact_force: Vector3<f64>,
+    /// Its friction (tangential) part, `t` frame, N (zero on a real facility, which does not
+    /// tell the parts apart, and on a frictionless contact).
+    pub friction_force: Vector3<f64>,
     /// Sensor force on the frame, sensor frame, N.
     pub measured_force: Vector3<f64>,
     /// Sensor moment about its origin, sensor frame, N·m.
@@ -248,14 +252,14 @@ impl HilStep {
 
     /// Tick `k`'s first half: compensates `m` and returns the tick's record, with the stop it
     /// calls for: [`StopKind::NonFinite`] or [`StopKind::Diverged`] for the record, or
-    /// [`StopKind::Completed`] at the last tick. `contact_force` is the physical contact force
-    /// on the rod (`t`, N) where the facility knows it; `None` on a real facility, where the
-    /// record keeps the force on the rod that the sensor reports.
+    /// [`StopKind::Completed`] at the last tick. `physical` is the physical contact on the rod
+    /// where the facility knows it; `None` on a real facility, where the record keeps the force
+    /// on the rod that the sensor reports (and no friction part).
     pub fn observe(
         &mut self,
         k: usize,
         m: &Measurement,
-        contact_force: Option<Vector3<f64>>,
+        physical: Option<PhysicalContact>,
     ) -> (HilRecord, Option<Stop>) {
         let out = self.virt.compensate(m);
         self.output = out;
@@ -273,7 +277,8 @@ impl HilStep {
             actual_tip_velocity: m.actual.point_velocity(&rod),
             actual_orientation: m.actual.orientation,
             actual_angular_velocity: m.actual.angular_velocity,
-            contact_force: contact_force.unwrap_or_else(|| -(sensor_to_t * m.force)),
+            contact_force: physical.map_or_else(|| -(sensor_to_t * m.force), |p| p.force),
+            friction_force: physical.map_or_else(Vector3::zeros, |p| p.friction_force),
             measured_force: m.force,
             measured_moment: m.moment,
             applied_force: sensor_to_t.inverse_transform_vector(&out.applied.force),

@@ -27,6 +27,7 @@ pub mod metrics;
 pub mod plan;
 pub mod replay;
 pub mod schema;
+pub mod shapes;
 pub mod sim;
 pub mod stop;
 pub mod sweep;

@@ -17,7 +17,7 @@
 
 use std::collections::BTreeSet;
 
-use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use crate::body::{BodyState, MassProperties};
 use crate::compensator::{CompensatorConfig, MAX_SURFACES};
@@ -25,10 +25,12 @@ use crate::config::{
     BodyConfig, ContactModelKind, FacilityKind, Inertia, Scenario, MAX_NAME_LENGTH, MAX_TICKS,
     MIN_INERTIA,
 };
+use crate::config::{ShapeConfig, ShapeKind};
 use crate::contact::{ContactGeometry, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
 use crate::error::{CoreError, Issues, Result};
 use crate::metrics::Tolerances;
 use crate::schema::check_ranges;
+use crate::shapes::{BodyShape, ShapeGeometry, ShapePairs};
 use crate::world::{TwoBodyState, TwoBodySystem};
 
 /// The F/T sensor as the HIL loop knows it, whatever stands in for the hardware (a facility
@@ -127,8 +129,32 @@ impl Plan {
         let target = body(&mut issues, failed, "target", &mut r.target);
         finite(&mut issues, failed, "rod.tip", &r.rod.tip);
 
-        if r.walls.is_empty() {
-            issues.push("walls", "at least one [[walls]] table is required");
+        let servicer_shapes = body_shapes(&mut issues, failed, "servicer", &mut r.servicer.shapes);
+        let target_shapes = body_shapes(&mut issues, failed, "target", &mut r.target.shapes);
+        if servicer_shapes.iter().any(|s| s.is_unbounded()) {
+            issues.push(
+                "servicer.shapes",
+                "a half-space can only be a target shape (the mockup's ground)",
+            );
+        }
+        for (i, s) in servicer_shapes.iter().enumerate() {
+            if let Some(j) = target_shapes.iter().position(|t| t.is_mesh()) {
+                if s.is_mesh() {
+                    issues.push(
+                        format!("servicer.shapes[{i}]"),
+                        format!(
+                            "a mesh cannot meet a mesh (target.shapes[{j}]): give one of the two bodies primitives"
+                        ),
+                    );
+                }
+            }
+        }
+        let has_shapes = !servicer_shapes.is_empty() && !target_shapes.is_empty();
+        if r.walls.is_empty() && !has_shapes {
+            issues.push(
+                "walls",
+                "at least one [[walls]] table (or shapes on both bodies, [[servicer.shapes]] and [[target.shapes]]) is required",
+            );
         }
         let mut walls = Vec::with_capacity(r.walls.len());
         for i in 0..r.walls.len() {
@@ -268,7 +294,7 @@ impl Plan {
         };
         let f = &resolved.facility;
         let sim = &resolved.simulation;
-        Ok(Plan {
+        let plan = Plan {
             period: sim.period,
             ticks,
             plant_substeps: sim.plant_substeps,
@@ -283,6 +309,10 @@ impl Plan {
                     walls,
                     law,
                     friction,
+                    shapes: ShapePairs {
+                        servicer: servicer_shapes,
+                        target: target_shapes,
+                    },
                 },
             },
             initial: TwoBodyState {
@@ -309,7 +339,40 @@ impl Plan {
             contact_threshold: resolved.metrics.contact_threshold,
             tolerances: resolved.metrics.tolerances(),
             scenario: resolved,
-        })
+        };
+        plan.check_shapes_apart()?;
+        Ok(plan)
+    }
+
+    /// Refuses shapes that start interpenetrating: the first pair of shapes in contact at the
+    /// initial state, with its penetration.
+    fn check_shapes_apart(&self) -> Result<()> {
+        let rel = self.system.relative_motion(&self.initial);
+        let mut first: Option<crate::shapes::ContactPoint> = None;
+        self.system.for_each_shape_contact(&rel, |p| {
+            if first.is_none_or(|f| p.depth > f.depth) {
+                first = Some(*p);
+            }
+        });
+        match first {
+            None => Ok(()),
+            Some(p) => {
+                let shapes = &self.system.contact.shapes;
+                Err(CoreError::invalid(
+                    format!("servicer.shapes[{}]", p.servicer_shape),
+                    format!(
+                        "'{}' and target.shapes[{}] '{}' start interpenetrating ({:.4} mm deep at [{:.4}, {:.4}, {:.4}] m in the target frame): move the bodies apart",
+                        shapes.servicer[p.servicer_shape].name,
+                        p.target_shape,
+                        shapes.target[p.target_shape].name,
+                        p.depth * 1e3,
+                        p.point.x,
+                        p.point.y,
+                        p.point.z
+                    ),
+                ))
+            }
+        }
     }
 
     /// The sensor delay τ_p, s (whole ticks).
@@ -686,4 +749,218 @@ fn delay(
     }
     *delay = g12(n * period);
     Some(n as usize)
+}
+
+/// The shapes of a body (`key`: `servicer` or `target`), checked; names set (`{kind}{i}`) in
+/// the resolved scenario. A shape with a problem is recorded and left out.
+fn body_shapes(
+    issues: &mut Issues,
+    failed: &BTreeSet<String>,
+    key: &str,
+    shapes: &mut [ShapeConfig],
+) -> Vec<BodyShape> {
+    let mut out = Vec::with_capacity(shapes.len());
+    for i in 0..shapes.len() {
+        let k = format!("{key}.shapes[{i}]");
+        if shapes[i].name.is_empty() {
+            let kind = serde_json::to_value(shapes[i].kind)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_string))
+                .unwrap_or_default();
+            shapes[i].name = format!("{kind}{i}");
+        }
+        if let Some(j) = shapes[..i].iter().position(|s| s.name == shapes[i].name) {
+            issues.push(
+                format!("{k}.name"),
+                format!(
+                    "duplicate shape name '{}' (also {key}.shapes[{j}])",
+                    shapes[i].name
+                ),
+            );
+        }
+        let c = &mut shapes[i];
+        let position_ok = finite(issues, failed, &format!("{k}.position"), &c.position);
+        let q = unit_quaternion(issues, failed, &format!("{k}.orientation"), c.orientation);
+        if let Some(q) = q {
+            c.orientation = q;
+        }
+        let Some(geometry) = shape_geometry(issues, failed, &k, c) else {
+            continue;
+        };
+        let (true, Some(q)) = (position_ok, q) else {
+            continue;
+        };
+        let mut rotation = to_unit(q);
+        if c.kind == ShapeKind::HalfSpace {
+            // the plane's normal is the shape frame's z axis
+            let n = Vector3::from(c.normal);
+            rotation = UnitQuaternion::rotation_between(&Vector3::z(), &n).unwrap_or_else(|| {
+                UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+            });
+        }
+        let pose = Isometry3::from_parts(Translation3::from(Vector3::from(c.position)), rotation);
+        out.push(BodyShape::new(c.name.clone(), geometry, pose));
+    }
+    out
+}
+
+/// A shape's geometry from its keys, checked for its kind (`key`: the shape's dotted key).
+fn shape_geometry(
+    issues: &mut Issues,
+    failed: &BTreeSet<String>,
+    key: &str,
+    c: &mut ShapeConfig,
+) -> Option<ShapeGeometry> {
+    let bad = |k: &str| failed.contains(&format!("{key}.{k}"));
+    if ["radius", "length", "margin", "size", "scale"]
+        .iter()
+        .any(|k| bad(k))
+    {
+        return None;
+    }
+    let positive = |issues: &mut Issues, name: &str, x: f64| {
+        if x > 0.0 {
+            true
+        } else {
+            issues.push(
+                format!("{key}.{name}"),
+                format!("must be > 0 for a {:?} shape, got {x}", c.kind).to_lowercase(),
+            );
+            false
+        }
+    };
+    let margin_below = |issues: &mut Issues, limit: f64| {
+        if c.margin < limit {
+            true
+        } else {
+            issues.push(
+                format!("{key}.margin"),
+                format!(
+                    "must be below half the shape's smallest dimension ({limit}), got {}",
+                    c.margin
+                ),
+            );
+            false
+        }
+    };
+    match c.kind {
+        ShapeKind::Sphere => positive(issues, "radius", c.radius)
+            .then_some(ShapeGeometry::Sphere { radius: c.radius }),
+        ShapeKind::Box => {
+            let ok = positive(
+                issues,
+                "size",
+                c.size.iter().copied().fold(f64::INFINITY, f64::min),
+            );
+            let smallest = c.size.iter().copied().fold(f64::INFINITY, f64::min);
+            (ok && margin_below(issues, 0.5 * smallest)).then_some(ShapeGeometry::Box {
+                size: c.size,
+                margin: c.margin,
+            })
+        }
+        ShapeKind::Cylinder | ShapeKind::Cone => {
+            let ok = positive(issues, "radius", c.radius) & positive(issues, "length", c.length);
+            (ok && margin_below(issues, c.radius.min(0.5 * c.length))).then(|| {
+                if c.kind == ShapeKind::Cylinder {
+                    ShapeGeometry::Cylinder {
+                        radius: c.radius,
+                        length: c.length,
+                        margin: c.margin,
+                    }
+                } else {
+                    ShapeGeometry::Cone {
+                        radius: c.radius,
+                        length: c.length,
+                        margin: c.margin,
+                    }
+                }
+            })
+        }
+        ShapeKind::Capsule => {
+            positive(issues, "radius", c.radius).then_some(ShapeGeometry::Capsule {
+                radius: c.radius,
+                length: c.length,
+            })
+        }
+        ShapeKind::HalfSpace => {
+            let n = unit_vector(issues, failed, &format!("{key}.normal"), c.normal)?;
+            c.normal = n;
+            Some(ShapeGeometry::HalfSpace)
+        }
+        ShapeKind::Mesh => mesh(issues, key, c),
+    }
+}
+
+/// A mesh's vertices (times `scale`) and triangles, checked: not empty, finite, indices in
+/// range, no degenerate triangle, no edge shared by more than two triangles (non-manifold).
+fn mesh(issues: &mut Issues, key: &str, c: &ShapeConfig) -> Option<ShapeGeometry> {
+    let source = if c.file.is_empty() {
+        String::new()
+    } else {
+        format!(" (file {})", c.file)
+    };
+    if c.vertices.is_empty() || c.triangles.is_empty() {
+        issues.push(
+            key,
+            format!(
+                "the mesh is empty: {} vertices, {} triangles{source}",
+                c.vertices.len(),
+                c.triangles.len()
+            ),
+        );
+        return None;
+    }
+    if let Some(i) = c
+        .vertices
+        .iter()
+        .position(|v| v.iter().any(|x| !x.is_finite()))
+    {
+        issues.push(
+            format!("{key}.vertices[{i}]"),
+            format!(
+                "must contain finite numbers, got {:?}{source}",
+                c.vertices[i]
+            ),
+        );
+        return None;
+    }
+    let n = c.vertices.len();
+    let vertices: Vec<[f64; 3]> = c.vertices.iter().map(|v| v.map(|x| x * c.scale)).collect();
+    let mut edges = std::collections::HashMap::<(u32, u32), u32>::new();
+    for (i, t) in c.triangles.iter().enumerate() {
+        if let Some(&bad) = t.iter().find(|&&v| v as usize >= n) {
+            issues.push(
+                format!("{key}.triangles[{i}]"),
+                format!("vertex index {bad} out of range (the mesh has {n} vertices){source}"),
+            );
+            return None;
+        }
+        let p = t.map(|v| Vector3::from(vertices[v as usize]));
+        let area = 0.5 * (p[1] - p[0]).cross(&(p[2] - p[0])).norm();
+        let scale = (p[1] - p[0]).norm().max((p[2] - p[0]).norm()).max(1e-300);
+        if area <= 1e-12 * scale * scale {
+            issues.push(
+                format!("{key}.triangles[{i}]"),
+                format!("degenerate triangle {t:?} (zero area){source}"),
+            );
+            return None;
+        }
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            let count = edges.entry((a.min(b), a.max(b))).or_insert(0);
+            *count += 1;
+            if *count > 2 {
+                issues.push(
+                    format!("{key}.triangles[{i}]"),
+                    format!(
+                        "non-manifold mesh: the edge between vertices {a} and {b} belongs to more than two triangles{source}"
+                    ),
+                );
+                return None;
+            }
+        }
+    }
+    Some(ShapeGeometry::Mesh {
+        vertices,
+        triangles: c.triangles.clone(),
+    })
 }

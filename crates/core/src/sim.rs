@@ -6,7 +6,6 @@ use nalgebra::{UnitQuaternion, Vector3};
 
 use crate::compensator::{Compensator, CompensatorInput};
 use crate::config::{ContactModelKind, Scenario};
-use crate::contact::ContactGeometry;
 use crate::error::Result;
 use crate::facility::FacilityLoop;
 use crate::frames::FrameWrench;
@@ -48,45 +47,16 @@ impl Table {
 /// The trace of HIL records (with estimates if `estimates_contact`), for the metrics.
 pub fn hil_trace(plan: &Plan, rows: &[HilRecord], estimates_contact: bool) -> Trace {
     let mut trace = Trace::with_capacity(rows.len(), estimates_contact);
-    let normal_law = frictionless(plan);
     for row in rows {
-        push_record(&mut trace, plan, &normal_law, row, estimates_contact);
+        push_record(&mut trace, plan, row, estimates_contact);
     }
     trace
 }
 
-/// The plan's contact without friction: the normal part of a contact force is this
-/// contact's force at the same tip and velocity (its friction part the rest).
-fn frictionless(plan: &Plan) -> ContactGeometry {
-    ContactGeometry {
-        friction: None,
-        ..plan.system.contact.clone()
-    }
-}
-
 /// Appends a HIL record to a trace (the sensor's attitude in `t` and its origin from `plan`).
-/// The contact moment is the physical force's at the actual rod tip about the sensor origin;
-/// its friction part is the contact force less `normal_law`'s ([`frictionless`]) at the actual
-/// tip with the facility's added damping. Allocation-free.
-fn push_record(
-    trace: &mut Trace,
-    plan: &Plan,
-    normal_law: &ContactGeometry,
-    row: &HilRecord,
-    estimates_contact: bool,
-) {
+/// The contact moment is the physical force's at the actual rod tip about the sensor origin.
+fn push_record(trace: &mut Trace, plan: &Plan, row: &HilRecord, estimates_contact: bool) {
     let sensor_to_t: &UnitQuaternion<f64> = &plan.sensor.orientation;
-    let normal = if row.contact_force == Vector3::zeros() {
-        Vector3::zeros()
-    } else {
-        normal_law
-            .force_with_added_damping(
-                &row.actual_tip_position,
-                &row.actual_tip_velocity,
-                plan.facility.dissipation,
-            )
-            .0
-    };
     let physical = FrameWrench::from_rod_force(
         &row.contact_force,
         &row.actual_tip_position,
@@ -95,7 +65,7 @@ fn push_record(
     trace.push(&TraceSample {
         time: row.time,
         contact_force: row.contact_force,
-        friction_force: row.contact_force - normal,
+        friction_force: row.friction_force,
         contact_moment: physical.moment,
         velocity: row.tip_velocity,
         angular_velocity: row.angular_velocity,
@@ -123,6 +93,8 @@ pub struct ReferenceRecord {
     pub angular_velocity: Vector3<f64>,
     /// Contact force on the rod, `t` frame, N.
     pub contact_force: Vector3<f64>,
+    /// Its friction (tangential) part, `t` frame, N (the rest is the normal part).
+    pub friction_force: Vector3<f64>,
     /// Moment of the contact force on the frame about the sensor origin, `t` frame, N·m.
     pub contact_moment: Vector3<f64>,
     /// Kinetic energy of the relative motion, J.
@@ -153,17 +125,17 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
     let mut trace = Trace::with_capacity(n + 1, false);
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut friction_work = 0.0;
-    let normal_law = frictionless(plan);
     for k in 0..=n {
         let rel = system.relative_motion(&x);
-        let (contact_force, tip) = system.contact_force_at(&rel);
-        let wrench = FrameWrench::from_rod_force(&contact_force, &tip, &system.sensor_origin);
+        let contact = system.contact_at(&rel, 0.0);
+        let (contact_force, wrench) = (contact.force, contact.wrench);
         let row = ReferenceRecord {
             time: k as f64 * period,
-            tip_position: tip,
+            tip_position: contact.tip,
             tip_velocity: rel.point_velocity(&system.rod_tip),
             angular_velocity: rel.angular_velocity,
             contact_force,
+            friction_force: contact.friction_force,
             contact_moment: wrench.moment,
             energy: system.energy(&x),
             friction_work,
@@ -171,7 +143,7 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
         trace.push(&TraceSample {
             time: row.time,
             contact_force,
-            friction_force: contact_force - normal_law.force_on_rod(&tip, &row.tip_velocity),
+            friction_force: contact.friction_force,
             contact_moment: wrench.moment,
             velocity: row.tip_velocity,
             angular_velocity: row.angular_velocity,
@@ -234,14 +206,13 @@ pub fn run_hil_step(
     let estimates = step.dynamics().estimates_contact();
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut trace = Trace::with_capacity(n + 1, estimates);
-    let normal_law = frictionless(plan);
     // the command for the coming tick (the first tick does not read it)
     let mut command = step.command();
     let mut k = 0;
     let stop = loop {
         let m = facility.tick(&command);
-        let (row, stop) = step.observe(k, &m, Some(facility.contact_force()));
-        push_record(&mut trace, plan, &normal_law, &row, estimates);
+        let (row, stop) = step.observe(k, &m, Some(facility.physical_contact()));
+        push_record(&mut trace, plan, &row, estimates);
         if keep_rows {
             rows.push(row);
         }
@@ -377,7 +348,7 @@ pub const fn vector<R>(
 /// (virtual) and actual (robot) rod tip in `t`, the physical contact force on the rod (`t`),
 /// the sensor's wrench and the applied wrench (sensor frame and convention), the energy, and
 /// the estimates of the compensators that make them.
-pub const HIL_FIELDS: [Field<HilRecord>; 15] = [
+pub const HIL_FIELDS: [Field<HilRecord>; 16] = [
     scalar("time", "s", |r| r.time),
     vector("tip_position", "m", |r| r.tip_position),
     vector("tip_velocity", "m/s", |r| r.tip_velocity),
@@ -385,6 +356,7 @@ pub const HIL_FIELDS: [Field<HilRecord>; 15] = [
     vector("actual_tip_position", "m", |r| r.actual_tip_position),
     vector("actual_tip_velocity", "m/s", |r| r.actual_tip_velocity),
     vector("contact_force", "N", |r| r.contact_force),
+    vector("friction_force", "N", |r| r.friction_force),
     vector("measured_force", "N", |r| r.measured_force),
     vector("measured_moment", "N m", |r| r.measured_moment),
     vector("applied_force", "N", |r| r.applied_force),
@@ -407,12 +379,13 @@ pub const HIL_FIELDS: [Field<HilRecord>; 15] = [
 /// The reference's table: rod tip (`t`), the servicer's angular velocity relative to the
 /// target (`t`), the contact force on the rod and its moment on the frame about the sensor
 /// origin (`t`), the energy and the energy friction has dissipated so far.
-pub const REFERENCE_FIELDS: [Field<ReferenceRecord>; 8] = [
+pub const REFERENCE_FIELDS: [Field<ReferenceRecord>; 9] = [
     scalar("time", "s", |r| r.time),
     vector("tip_position", "m", |r| r.tip_position),
     vector("tip_velocity", "m/s", |r| r.tip_velocity),
     vector("angular_velocity", "rad/s", |r| r.angular_velocity),
     vector("contact_force", "N", |r| r.contact_force),
+    vector("friction_force", "N", |r| r.friction_force),
     vector("contact_moment", "N m", |r| r.contact_moment),
     scalar("energy", "J", |r| r.energy),
     scalar("friction_work", "J", |r| r.friction_work),

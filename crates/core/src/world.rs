@@ -7,10 +7,10 @@
 //! A wrench "on the frame" is what the sensor measures: the force the rod exerts on the
 //! target's collision frame, with its moment about the sensor origin.
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Isometry3, Matrix3, Translation3, Vector3};
 
 use crate::body::{BodyRate, BodyState, MassProperties};
-use crate::contact::ContactGeometry;
+use crate::contact::{ContactGeometry, ContactLaw};
 pub use crate::frames::{FrameWrench, RelativeMotion};
 
 /// Mass properties, rod and sensor: the fixed description of the two-body system.
@@ -26,6 +26,22 @@ pub struct TwoBodySystem {
     pub sensor_origin: Vector3<f64>,
     /// Walls and contact law.
     pub contact: ContactGeometry,
+}
+
+/// The physical contact between the bodies at one instant (`t` frame): what the facility's
+/// sensor would measure, and its parts for the metrics.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Contact {
+    /// The whole contact force on the rod (servicer), N.
+    pub force: Vector3<f64>,
+    /// Its friction (tangential) part, N; `force − friction_force` is the normal part.
+    pub friction_force: Vector3<f64>,
+    /// The wrench on the frame (the force on the target, its moment about the sensor origin).
+    pub wrench: FrameWrench,
+    /// The friction's power, W (≤ 0).
+    pub friction_power: f64,
+    /// The rod tip, m (`t`).
+    pub tip: Vector3<f64>,
 }
 
 /// The state of both bodies (world frame).
@@ -69,18 +85,25 @@ impl TwoBodySystem {
             + x.target.rotational_energy(&self.target)
     }
 
-    /// Elastic energy stored in a linear or Hunt-Crossley contact, J (`∫ k dⁿ dd` per wall).
+    /// Elastic energy stored in a linear or Hunt-Crossley contact, J (`∫ k dⁿ dd` per wall and
+    /// per contact point of the shapes).
     pub fn contact_potential_energy(&self, x: &TwoBodyState) -> f64 {
         let tip = self.relative_motion(x).point(&self.rod_tip);
         let (k, n) = match self.contact.law {
             crate::contact::ContactModel::Linear(l) => (l.stiffness, 1.0),
             crate::contact::ContactModel::HuntCrossley(h) => (h.stiffness, h.exponent),
         };
-        self.contact
+        let walls: f64 = self
+            .contact
             .walls
             .iter()
             .map(|w| k * w.penetration(&tip).powf(n + 1.0) / (n + 1.0))
-            .sum()
+            .sum();
+        let mut shapes = 0.0;
+        self.for_each_shape_contact(&self.relative_motion(x), |p| {
+            shapes += k * p.depth.powf(n + 1.0) / (n + 1.0);
+        });
+        walls + shapes
     }
 
     /// Total linear momentum (world), kg·m/s.
@@ -197,20 +220,61 @@ impl TwoBodySystem {
         x.target.step_kick_drift(&self.target, &f_t, &tau_t, period);
     }
 
-    /// The physical contact force on the rod (N, `t`) at a state of the true system.
-    pub fn contact_force(&self, x: &TwoBodyState) -> (Vector3<f64>, Vector3<f64>) {
-        self.contact_force_at(&self.relative_motion(x))
+    /// The physical contact at a state of the true system.
+    pub fn contact(&self, x: &TwoBodyState) -> Contact {
+        self.contact_at(&self.relative_motion(x), 0.0)
     }
 
-    /// The physical contact force on the rod (N, `t`) and the rod tip (m, `t`) for a relative
-    /// motion of the servicer.
-    pub fn contact_force_at(&self, rel: &RelativeMotion) -> (Vector3<f64>, Vector3<f64>) {
+    /// The physical contact for a relative motion of the servicer: the force on the rod, its
+    /// friction part, the wrench on the frame and the friction's power, with a damping
+    /// `added_damping` (N·s/m) added to every pushing contact's normal force (the facility's
+    /// own losses, `facility.dissipation`; 0 for the true system): the rod tip against the
+    /// walls, then every contact point of the shapes ([`crate::shapes`]). Allocation-free.
+    pub fn contact_at(&self, rel: &RelativeMotion, added_damping: f64) -> Contact {
         let tip = rel.point(&self.rod_tip);
-        (
-            self.contact
-                .force_on_rod(&tip, &rel.point_velocity(&self.rod_tip)),
+        let p = self.contact.force_with_added_damping(
+            &tip,
+            &rel.point_velocity(&self.rod_tip),
+            added_damping,
+        );
+        let mut c = Contact {
+            force: p.force,
+            friction_force: p.friction_force,
+            wrench: FrameWrench::from_rod_force(&p.force, &tip, &self.sensor_origin),
+            friction_power: p.friction_power,
             tip,
-        )
+        };
+        if !self.contact.shapes.is_empty() {
+            self.contact
+                .shapes
+                .for_each_point(&servicer_pose(rel), |point| {
+                    let v =
+                        rel.velocity + rel.angular_velocity.cross(&(point.point - rel.position));
+                    let f = self
+                        .contact
+                        .point_force(point.depth, &point.normal, &v, added_damping);
+                    let w =
+                        FrameWrench::from_rod_force(&f.force, &point.point, &self.sensor_origin);
+                    c.force += f.force;
+                    c.friction_force += f.friction_force;
+                    c.friction_power += f.friction_power;
+                    c.wrench.force += w.force;
+                    c.wrench.moment += w.moment;
+                });
+        }
+        c
+    }
+
+    /// Calls `f` with every contact point of the shapes for a relative motion of the servicer
+    /// (`t` frame; the rod tip against the walls is not among them). Allocation-free.
+    pub fn for_each_shape_contact(
+        &self,
+        rel: &RelativeMotion,
+        f: impl FnMut(&crate::shapes::ContactPoint),
+    ) {
+        if !self.contact.shapes.is_empty() {
+            self.contact.shapes.for_each_point(&servicer_pose(rel), f);
+        }
     }
 
     /// Rates of both bodies of the true system (the contact law closes the loop).
@@ -220,19 +284,14 @@ impl TwoBodySystem {
 
     /// [`TwoBodySystem::true_rates`] and the power of the contact's friction, W (≤ 0).
     fn true_rates_and_friction_power(&self, x: &TwoBodyState) -> ((BodyRate, BodyRate), f64) {
-        let rel = self.relative_motion(x);
-        let tip = rel.point(&self.rod_tip);
-        let (f_rod, power) = self
-            .contact
-            .force_and_friction_power(&tip, &rel.point_velocity(&self.rod_tip));
-        let w = FrameWrench::from_rod_force(&f_rod, &tip, &self.sensor_origin);
-        let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, &w);
+        let c = self.contact_at(&self.relative_motion(x), 0.0);
+        let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, &c.wrench);
         (
             (
                 x.servicer.rate(&self.servicer, &f_s, &tau_s),
                 x.target.rate(&self.target, &f_t, &tau_t),
             ),
-            power,
+            c.friction_power,
         )
     }
 
@@ -256,13 +315,64 @@ impl TwoBodySystem {
         -(p1 + 2.0 * p2 + 2.0 * p3 + p4) * h / 6.0
     }
 
-    /// The contact's active set at a state (see [`ContactGeometry::active_set`]).
+    /// The contact's active set at a state: which walls push on the rod tip
+    /// ([`ContactGeometry::active_set`]), and a signature of the shapes' pushing contact points
+    /// (which pair and feature makes each), so that it changes whenever a point appears,
+    /// vanishes or moves to another feature.
     pub fn active_set(&self, x: &TwoBodyState) -> u64 {
-        let rel = self.relative_motion(x);
-        self.contact.active_set(
+        self.active_set_at(&self.relative_motion(x))
+    }
+
+    /// [`TwoBodySystem::active_set`] for a relative motion of the servicer.
+    pub fn active_set_at(&self, rel: &RelativeMotion) -> u64 {
+        let mut set = self.contact.active_set(
             &rel.point(&self.rod_tip),
             &rel.point_velocity(&self.rod_tip),
-        )
+        );
+        self.for_each_shape_contact(rel, |point| {
+            let v = rel.velocity + rel.angular_velocity.cross(&(point.point - rel.position));
+            if self
+                .contact
+                .law
+                .normal_force(point.depth, -v.dot(&point.normal))
+                > 0.0
+            {
+                set = set.wrapping_add(point.id);
+            }
+        });
+        set
+    }
+
+    /// How far a contact point may stray over a free-flight period from what the clearances
+    /// at its ends show, m: for the rod tip, the bend of its path, `|Δv_tip|·T/2`; with shapes,
+    /// the farthest any point of the servicer's shapes can move in the period,
+    /// `T·(|v| + |ω|·R)` at the faster end, `R` the shapes' largest distance from the
+    /// servicer's centre of mass.
+    fn bend(
+        &self,
+        start: &RelativeMotion,
+        end: &RelativeMotion,
+        tip_velocity: &Vector3<f64>,
+        period: f64,
+    ) -> f64 {
+        let tip = (end.point_velocity(&self.rod_tip) - tip_velocity).norm() * period / 2.0;
+        if self.contact.shapes.is_empty() {
+            return tip;
+        }
+        let r = self.contact.shapes.servicer_extent();
+        let speed = |m: &RelativeMotion| m.velocity.norm() + m.angular_velocity.norm() * r;
+        tip.max(period * speed(start).max(speed(end)))
+    }
+
+    /// A lower bound of the smallest gap between the servicer and the target, m (negative in
+    /// contact): the rod tip to the walls' planes, and the shapes ([`crate::shapes::ShapePairs::clearance`]).
+    pub fn clearance_at(&self, rel: &RelativeMotion) -> f64 {
+        let walls = self.contact.clearance(&rel.point(&self.rod_tip));
+        if self.contact.shapes.is_empty() {
+            walls
+        } else {
+            walls.min(self.contact.shapes.clearance(&servicer_pose(rel)))
+        }
     }
 
     /// Advances the true system (rod against walls, no facility) by `period`: the ideal
@@ -279,17 +389,13 @@ impl TwoBodySystem {
     pub fn step_reference(&self, x: &mut TwoBodyState, period: f64, substeps: u32) -> f64 {
         let start = self.relative_motion(x);
         let tip_velocity = start.point_velocity(&self.rod_tip);
-        if self
-            .contact
-            .active_set(&start.point(&self.rod_tip), &tip_velocity)
-            == 0
-        {
+        if self.active_set_at(&start) == 0 {
             let mut y = *x;
             y.servicer.drift(&self.servicer, period);
             y.target.drift(&self.target, period);
             let end = self.relative_motion(&y);
-            let bend = (end.point_velocity(&self.rod_tip) - tip_velocity).norm() * period / 2.0;
-            let clear = |m: &RelativeMotion| self.contact.clearance(&m.point(&self.rod_tip));
+            let bend = self.bend(&start, &end, &tip_velocity, period);
+            let clear = |m: &RelativeMotion| self.clearance_at(m);
             if clear(&start) > bend && clear(&end) > bend {
                 *x = y;
                 return 0.0;
@@ -328,4 +434,9 @@ impl TwoBodySystem {
         }
         friction_work
     }
+}
+
+/// The servicer's body frame in `t` for a relative motion.
+fn servicer_pose(rel: &RelativeMotion) -> Isometry3<f64> {
+    Isometry3::from_parts(Translation3::from(rel.position), rel.orientation)
 }

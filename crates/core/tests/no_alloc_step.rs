@@ -112,7 +112,7 @@ fn no_facility_tick_allocates() {
     for k in 0..=plan.ticks {
         commands.push(command);
         let m = facility.tick(&command);
-        let _ = step.observe(k, &m, Some(facility.contact_force()));
+        let _ = step.observe(k, &m, Some(facility.physical_contact()));
         command = step.advance(k).unwrap();
     }
     assert!(commands.iter().any(|c| c.position.norm() > 0.0));

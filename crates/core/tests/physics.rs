@@ -336,8 +336,8 @@ fn contact_is_internal_reference_conserves_momentum_and_total_energy() {
     let mut max_moment = 0.0f64;
     for _ in 0..40_000 {
         system.step_rk4(&mut x, 1e-4);
-        let (f, tip) = system.contact_force(&x);
-        max_moment = max_moment.max(tip.cross(&f).norm());
+        let c = system.contact(&x);
+        max_moment = max_moment.max(c.tip.cross(&c.force).norm());
     }
     assert!(
         max_moment > 1.0,

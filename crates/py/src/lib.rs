@@ -16,6 +16,7 @@ use pyo3::prelude::*;
 use pyo3::sync::GILOnceCell;
 use pyo3::types::{PyDict, PyTuple, PyType};
 
+mod mesh;
 mod plugin;
 
 /// The package's exception classes, defined here once (`hilcontact.errors` re-exports them):
@@ -886,6 +887,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(replay, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_function(wrap_pyfunction!(frames, m)?)?;
+    m.add_function(wrap_pyfunction!(mesh::read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(plugin::simulate_python, m)?)?;
     m.add_function(wrap_pyfunction!(plugin::compensator_context, m)?)?;
     m.add_class::<PyHilHandle>()?;

@@ -12,7 +12,7 @@
 //! streaming is stopped, the sample log is drained, and the [`StopKind`] goes to
 //! `metrics.json` and the exit code.
 
-use hilcontact_core::frames::{FrameWrench, RelativeMotion};
+use hilcontact_core::frames::RelativeMotion;
 use hilcontact_core::world::TwoBodySystem;
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
@@ -170,8 +170,7 @@ pub fn check_wrench(
 /// velocity, against the scenario's walls; returns `(|F|` N, `|M|` N·m about the sensor
 /// origin`)`, as the facility model computes the physical wrench. Never allocates.
 pub fn predicted_wrench(system: &TwoBodySystem, command: &RelativeMotion) -> (f64, f64) {
-    let (force, tip) = system.contact_force_at(command);
-    let wrench = FrameWrench::from_rod_force(&force, &tip, &system.sensor_origin);
+    let wrench = system.contact_at(command, 0.0).wrench;
     (wrench.force.norm(), wrench.moment.norm())
 }
 

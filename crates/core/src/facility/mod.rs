@@ -41,6 +41,15 @@ pub struct Measurement {
     pub actual: RelativeMotion,
 }
 
+/// The physical contact on the rod as a simulated facility knows it (`t` frame, N).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PhysicalContact {
+    /// The whole contact force on the rod, N.
+    pub force: Vector3<f64>,
+    /// Its friction (tangential) part, N.
+    pub friction_force: Vector3<f64>,
+}
+
 /// What stands in for the hardware: a robot that follows the commanded relative motion, the
 /// mockup it touches and the F/T sensor between them. One control period is
 /// [`Facility::advance`] (except at the first tick) then [`Facility::measure`], as
@@ -59,6 +68,20 @@ pub trait Facility: Send {
     /// The physical contact force on the rod at the last [`Facility::measure`], `t` frame, N
     /// (the truth that a real facility does not report: the trace's `contact_force`).
     fn contact_force(&self) -> Vector3<f64>;
+
+    /// The friction (tangential) part of [`Facility::contact_force`], `t` frame, N; an engine
+    /// that does not tell the parts apart keeps the default, zero.
+    fn friction_force(&self) -> Vector3<f64> {
+        Vector3::zeros()
+    }
+
+    /// The physical contact at the last [`Facility::measure`]: the force and its friction part.
+    fn physical_contact(&self) -> PhysicalContact {
+        PhysicalContact {
+            force: self.contact_force(),
+            friction_force: self.friction_force(),
+        }
+    }
 }
 
 /// The facility engine of a plan, by `[facility] kind`, with the robot at rest at
@@ -107,6 +130,12 @@ impl FacilityLoop {
     /// The physical contact force on the rod at the last tick, `t` frame, N.
     pub fn contact_force(&self) -> Vector3<f64> {
         self.facility.contact_force()
+    }
+
+    /// The physical contact on the rod at the last tick (`t` frame): the force and its
+    /// friction part.
+    pub fn physical_contact(&self) -> PhysicalContact {
+        self.facility.physical_contact()
     }
 
     /// Ticks run so far.

@@ -20,7 +20,7 @@ use super::{Facility, Measurement};
 use crate::delay_line::DelayLine;
 use crate::frames::{FrameWrench, RelativeMotion};
 use crate::plan::Plan;
-use crate::world::TwoBodySystem;
+use crate::world::{Contact, TwoBodySystem};
 
 /// Second-order servo lag state (`t` frame).
 #[derive(Debug, Clone, Copy)]
@@ -194,7 +194,8 @@ pub struct FacilityModel {
     system: TwoBodySystem,
     robot: RobotModel,
     sensor: SensorModel,
-    contact_force: Vector3<f64>,
+    /// The physical contact at the last measurement.
+    contact: Contact,
     /// The facility's added contact damping, N·s/m ([`crate::plan::FacilityPlan::dissipation`]).
     dissipation: f64,
 }
@@ -211,13 +212,12 @@ impl FacilityModel {
             f.servo_damping,
             initial_command,
         );
-        let (contact_force, initial_wrench) =
-            physical_wrench(&plan.system, robot.actual(), f.dissipation);
+        let contact = physical_contact(&plan.system, robot.actual(), f.dissipation);
         FacilityModel {
             system: plan.system.clone(),
             robot,
-            sensor: SensorModel::new(plan, &initial_wrench),
-            contact_force,
+            sensor: SensorModel::new(plan, &contact.wrench),
+            contact,
             dissipation: f.dissipation,
         }
     }
@@ -229,10 +229,8 @@ impl Facility for FacilityModel {
     }
 
     fn measure(&mut self) -> Measurement {
-        let (contact_force, wrench) =
-            physical_wrench(&self.system, self.robot.actual(), self.dissipation);
-        self.contact_force = contact_force;
-        let (force, moment) = self.sensor.sample(&wrench);
+        self.contact = physical_contact(&self.system, self.robot.actual(), self.dissipation);
+        let (force, moment) = self.sensor.sample(&self.contact.wrench);
         Measurement {
             force,
             moment,
@@ -241,26 +239,17 @@ impl Facility for FacilityModel {
     }
 
     fn contact_force(&self) -> Vector3<f64> {
-        self.contact_force
+        self.contact.force
+    }
+
+    fn friction_force(&self) -> Vector3<f64> {
+        self.contact.friction_force
     }
 }
 
-/// Contact force on the rod (`t`) and the wrench on the frame for the robot's actual motion,
-/// with the facility's added damping `dissipation` (N·s/m) on each pushing wall's normal force,
-/// never pulling ([`crate::contact::ContactGeometry::force_with_added_damping`]).
-fn physical_wrench(
-    system: &TwoBodySystem,
-    actual: &RelativeMotion,
-    dissipation: f64,
-) -> (Vector3<f64>, FrameWrench) {
-    let tip = actual.point(&system.rod_tip);
-    let (force, _) = system.contact.force_with_added_damping(
-        &tip,
-        &actual.point_velocity(&system.rod_tip),
-        dissipation,
-    );
-    (
-        force,
-        FrameWrench::from_rod_force(&force, &tip, &system.sensor_origin),
-    )
+/// The physical contact for the robot's actual motion, with the facility's added damping
+/// `dissipation` (N·s/m) on each pushing contact's normal force, never pulling
+/// ([`TwoBodySystem::contact_at`]).
+fn physical_contact(system: &TwoBodySystem, actual: &RelativeMotion, dissipation: f64) -> Contact {
+    system.contact_at(actual, dissipation)
 }

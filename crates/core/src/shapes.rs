@@ -1,0 +1,610 @@
+//! Collision shapes on both bodies and the contact points between them (docs/model.md,
+//! "Shapes").
+//!
+//! Each shape is a convex *core* dilated by a radius `r` (a sphere is a point with `r` its
+//! radius, a capsule a segment; a box, cylinder or cone is its core shrunk by its `margin`, so
+//! its edges are rounded by `r = margin` and its outer size is the one the scenario states); a
+//! triangle mesh is a set of triangles with `r = 0`; a half-space has `r = 0`. Between a
+//! servicer shape (core `A`, radius `r_A`) and a target shape (`B`, `r_B`) the contact is where
+//! the cores come closer than `r_A + r_B`:
+//!
+//! ```text
+//! d = r_A + r_B − dist(A, B)        penetration at a contact point, m (> 0 in contact)
+//! n = (p_A − p_B) / |p_A − p_B|     normal from the target into free space (toward the servicer)
+//! ```
+//!
+//! The distance queries are parry3d's (`query::contact` on the cores, point projections,
+//! polygonal support features); a contact may have several points: each vertex of the
+//! servicer core's support feature toward the target that lies within reach of the target's
+//! core is a point, and each vertex of the target's feature within reach of the servicer's
+//! core; the cores' closest pair is a point too unless a vertex is as deep (so a box face
+//! resting on a plate touches at its four corners, a rod across an edge at one point). Each
+//! point gets the contact law along its own normal, and friction against its own sliding
+//! velocity ([`crate::contact::ContactGeometry`]).
+//!
+//! Allocation-free while the penetration stays below `r_A + r_B` (the cores then never
+//! overlap, and parry's GJK needs no EPA); the queries allocate nothing else.
+
+use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
+use parry3d_f64::bounding_volume::{Aabb, BoundingVolume};
+use parry3d_f64::query;
+use parry3d_f64::shape::{
+    Ball, Cone, Cuboid, Cylinder, HalfSpace, PolygonalFeature, Segment, SharedShape, Triangle,
+};
+
+/// Most contact points kept apart per pair of shapes in one evaluation (more are still
+/// applied, but no longer merged with their neighbours).
+const DEDUPE_SLOTS: usize = 32;
+/// Two contact points of the same pair of shapes closer than this are one point, m.
+const SAME_POINT: f64 = 1e-7;
+
+/// What a shape is, with its dimensions (m) in its own frame: cylinders, capsules and cones
+/// along the shape's `z` axis, centred on its origin.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ShapeGeometry {
+    /// A sphere of radius `radius`.
+    Sphere {
+        /// m.
+        radius: f64,
+    },
+    /// A box of full edge lengths `size`, edges rounded by `margin`.
+    Box {
+        /// Full edge lengths along x, y, z, m.
+        size: [f64; 3],
+        /// Edge rounding, m.
+        margin: f64,
+    },
+    /// A cylinder of radius `radius` and length `length` along z, edges rounded by `margin`.
+    Cylinder {
+        /// m.
+        radius: f64,
+        /// m.
+        length: f64,
+        /// Edge rounding, m.
+        margin: f64,
+    },
+    /// A capsule: the segment of length `length` along z dilated by `radius`.
+    Capsule {
+        /// m.
+        radius: f64,
+        /// Distance between the centres of its end caps, m.
+        length: f64,
+    },
+    /// A cone of base radius `radius` (at z = −length/2) and apex at z = +length/2, edges
+    /// rounded by `margin`.
+    Cone {
+        /// Base radius, m.
+        radius: f64,
+        /// Height, m.
+        length: f64,
+        /// Edge rounding, m.
+        margin: f64,
+    },
+    /// The half-space below the plane through the shape's origin with outward normal `+z`.
+    HalfSpace,
+    /// A triangle mesh (shape frame, m): vertices and triangles by vertex index.
+    Mesh {
+        /// Vertices, m.
+        vertices: Vec<[f64; 3]>,
+        /// Triangles, counter-clockwise seen from outside.
+        triangles: Vec<[u32; 3]>,
+    },
+}
+
+/// One convex piece of a shape: a core and the radius it is dilated by, posed in the body
+/// frame.
+#[derive(Clone)]
+struct Piece {
+    /// The core (parry shape, in its own frame).
+    core: SharedShape,
+    /// The core's pose in the body frame.
+    pose: Isometry3<f64>,
+    /// The piece's bounding box in the body frame, radius included.
+    aabb: Aabb,
+}
+
+/// A collision shape fixed in a body (its pose in the body frame).
+#[derive(Clone)]
+pub struct BodyShape {
+    /// Name for reports.
+    pub name: String,
+    /// The shape and its dimensions.
+    pub geometry: ShapeGeometry,
+    /// Pose of the shape's frame in the body frame.
+    pub pose: Isometry3<f64>,
+    /// The radius its core is dilated by, m (the sphere's or capsule's radius, the margin of
+    /// a box, cylinder or cone, 0 for meshes and half-spaces).
+    pub radius: f64,
+    pieces: Vec<Piece>,
+}
+
+impl std::fmt::Debug for BodyShape {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("BodyShape")
+            .field("name", &self.name)
+            .field("geometry", &self.geometry)
+            .field("pose", &self.pose)
+            .finish()
+    }
+}
+
+impl PartialEq for BodyShape {
+    fn eq(&self, other: &Self) -> bool {
+        self.name == other.name && self.geometry == other.geometry && self.pose == other.pose
+    }
+}
+
+/// Rotation taking parry's `y` axis (its cylinders, capsules and cones) onto our `z`.
+fn y_to_z() -> UnitQuaternion<f64> {
+    UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_2)
+}
+
+/// A piece at `pose` (body frame) with its bounding box.
+fn piece(core: SharedShape, pose: Isometry3<f64>, radius: f64) -> Piece {
+    let aabb = core.compute_aabb(&pose).loosened(radius);
+    Piece { core, pose, aabb }
+}
+
+impl BodyShape {
+    /// The shape `geometry` at `pose` in the body frame. Dimensions must be valid (checked by
+    /// the plan: positive sizes, margins below half the smallest dimension, a non-empty mesh).
+    pub fn new(name: String, geometry: ShapeGeometry, pose: Isometry3<f64>) -> Self {
+        let axis = Isometry3::from_parts(Translation3::identity(), y_to_z());
+        let (radius, pieces) = match &geometry {
+            ShapeGeometry::Sphere { radius } => (
+                *radius,
+                vec![piece(SharedShape::new(Ball::new(0.0)), pose, *radius)],
+            ),
+            ShapeGeometry::Box { size, margin } => {
+                let half = Vector3::new(size[0], size[1], size[2]) * 0.5 - Vector3::repeat(*margin);
+                (
+                    *margin,
+                    vec![piece(SharedShape::new(Cuboid::new(half)), pose, *margin)],
+                )
+            }
+            ShapeGeometry::Cylinder {
+                radius,
+                length,
+                margin,
+            } => {
+                let core = Cylinder::new(0.5 * length - margin, radius - margin);
+                (
+                    *margin,
+                    vec![piece(SharedShape::new(core), pose * axis, *margin)],
+                )
+            }
+            ShapeGeometry::Capsule { radius, length } => {
+                let h = 0.5 * length;
+                let core = Segment::new(Point3::new(0.0, 0.0, -h), Point3::new(0.0, 0.0, h));
+                (*radius, vec![piece(SharedShape::new(core), pose, *radius)])
+            }
+            ShapeGeometry::Cone {
+                radius,
+                length,
+                margin,
+            } => {
+                let core = Cone::new(0.5 * length - margin, radius - margin);
+                (
+                    *margin,
+                    vec![piece(SharedShape::new(core), pose * axis, *margin)],
+                )
+            }
+            ShapeGeometry::HalfSpace => {
+                let core = HalfSpace::new(Vector3::z_axis());
+                let p = Piece {
+                    core: SharedShape::new(core),
+                    pose,
+                    aabb: Aabb::new_invalid(),
+                };
+                (0.0, vec![p])
+            }
+            ShapeGeometry::Mesh {
+                vertices,
+                triangles,
+            } => {
+                let v = |i: u32| Point3::from(vertices[i as usize]);
+                let pieces = triangles
+                    .iter()
+                    .map(|t| {
+                        piece(
+                            SharedShape::new(Triangle::new(v(t[0]), v(t[1]), v(t[2]))),
+                            pose,
+                            0.0,
+                        )
+                    })
+                    .collect();
+                (0.0, pieces)
+            }
+        };
+        BodyShape {
+            name,
+            geometry,
+            pose,
+            radius,
+            pieces,
+        }
+    }
+
+    /// Whether the shape is unbounded (a half-space).
+    pub fn is_unbounded(&self) -> bool {
+        matches!(self.geometry, ShapeGeometry::HalfSpace)
+    }
+
+    /// Whether the shape is a triangle mesh.
+    pub fn is_mesh(&self) -> bool {
+        matches!(self.geometry, ShapeGeometry::Mesh { .. })
+    }
+}
+
+/// One contact point between a servicer shape and a target shape (`t` frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactPoint {
+    /// Where the force acts: halfway between the two surfaces, m.
+    pub point: Vector3<f64>,
+    /// Unit normal from the target into free space (the force on the servicer pushes along it).
+    pub normal: Vector3<f64>,
+    /// Penetration d, m (> 0).
+    pub depth: f64,
+    /// Index of the servicer's shape.
+    pub servicer_shape: usize,
+    /// Index of the target's shape.
+    pub target_shape: usize,
+    /// Which pair of shapes and which feature made the point (for the reference integrator's
+    /// active set: a point appearing, vanishing or moving to another feature changes it).
+    pub id: u64,
+}
+
+/// A 64-bit mix (splitmix64's finaliser): spreads feature ids over the active-set word.
+fn mix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// The shapes of both bodies: every servicer shape against every target shape.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ShapePairs {
+    /// Shapes fixed in the servicer (body frame).
+    pub servicer: Vec<BodyShape>,
+    /// Shapes fixed in the target (the mockup frame `t`).
+    pub target: Vec<BodyShape>,
+}
+
+/// The contact points of one pair of shapes: duplicates from adjacent pieces merged, and on a
+/// mesh a contact on a triangle's edge or corner dropped where a face contact lies within reach
+/// of it (the same surface seen through a neighbouring triangle: a sphere pressed into a flat
+/// mesh near a shared edge is one contact, not two). Face contacts (and every contact of
+/// primitives) are given at once; edge and corner contacts of a mesh at [`Seen::finish`].
+struct Seen {
+    /// Points given so far, with whether each lies on a triangle's face.
+    points: [(ContactPoint, bool); DEDUPE_SLOTS],
+    n: usize,
+}
+
+impl Seen {
+    fn new() -> Self {
+        let none = ContactPoint {
+            point: Vector3::zeros(),
+            normal: Vector3::zeros(),
+            depth: 0.0,
+            servicer_shape: 0,
+            target_shape: 0,
+            id: 0,
+        };
+        Seen {
+            points: [(none, false); DEDUPE_SLOTS],
+            n: 0,
+        }
+    }
+
+    /// Takes a point: a face contact (or any point, once the slots are full) goes to `f` at
+    /// once unless it repeats one; an edge or corner contact waits for [`Seen::finish`].
+    fn insert(&mut self, p: &ContactPoint, on_face: bool, f: &mut impl FnMut(&ContactPoint)) {
+        let repeated = self.points[..self.n]
+            .iter()
+            .any(|(q, _)| (q.point - p.point).norm_squared() < SAME_POINT * SAME_POINT);
+        if repeated {
+            return;
+        }
+        if self.n < DEDUPE_SLOTS {
+            self.points[self.n] = (*p, on_face);
+            self.n += 1;
+            if on_face {
+                f(p);
+            }
+        } else {
+            f(p);
+        }
+    }
+
+    /// Gives the edge and corner contacts that no face contact within `reach` (m) explains.
+    fn finish(&self, reach: f64, f: &mut impl FnMut(&ContactPoint)) {
+        let taken = &self.points[..self.n];
+        for (p, on_face) in taken {
+            if *on_face {
+                continue;
+            }
+            let explained = taken
+                .iter()
+                .any(|(q, face)| *face && (q.point - p.point).norm() <= 2.0 * reach + SAME_POINT);
+            if !explained {
+                f(p);
+            }
+        }
+    }
+}
+
+/// The unit normal of a triangle piece (`t`, at `pose`); `None` for other pieces.
+fn triangle_normal(piece: &Piece, pose: &Isometry3<f64>) -> Option<Vector3<f64>> {
+    let tri = piece.core.as_triangle()?;
+    tri.normal().map(|n| pose * n.into_inner())
+}
+
+impl ShapePairs {
+    /// Whether there are no shapes (only the rod tip and the walls).
+    pub fn is_empty(&self) -> bool {
+        self.servicer.is_empty() || self.target.is_empty()
+    }
+
+    /// Calls `f` with every contact point for the servicer at `pose` (its body frame in `t`).
+    /// Allocation-free while no penetration exceeds the pair's `r_A + r_B`.
+    pub fn for_each_point(&self, pose: &Isometry3<f64>, mut f: impl FnMut(&ContactPoint)) {
+        let mut pair = 0u64;
+        for (a, s) in self.servicer.iter().enumerate() {
+            for (b, t) in self.target.iter().enumerate() {
+                pair += 1;
+                let reach = s.radius + t.radius;
+                let mesh = s.is_mesh() || t.is_mesh();
+                let mut seen = Seen::new();
+                for (i, ps) in s.pieces.iter().enumerate() {
+                    let pose_s = pose * ps.pose;
+                    let aabb_s = ps.core.compute_aabb(&pose_s).loosened(s.radius);
+                    for (j, pt) in t.pieces.iter().enumerate() {
+                        if !t.is_unbounded() && !aabb_s.intersects(&pt.aabb) {
+                            continue;
+                        }
+                        let id = (pair << 48) ^ ((i as u64) << 24) ^ j as u64;
+                        // a mesh's triangle: its face normal, to tell a face contact from one
+                        // on an edge or a corner of the triangle
+                        let face = if mesh {
+                            triangle_normal(pt, &pt.pose).or_else(|| triangle_normal(ps, &pose_s))
+                        } else {
+                            None
+                        };
+                        piece_contacts(ps, &pose_s, pt, s.radius, t.radius, reach, id, &mut |c| {
+                            let on_face = face.is_none_or(|n| c.normal.dot(&n).abs() > 1.0 - 1e-9);
+                            seen.insert(
+                                &ContactPoint {
+                                    servicer_shape: a,
+                                    target_shape: b,
+                                    ..*c
+                                },
+                                on_face,
+                                &mut f,
+                            );
+                        });
+                    }
+                }
+                seen.finish(reach, &mut f);
+            }
+        }
+    }
+
+    /// The largest distance of a point of the servicer's shapes from the servicer's origin
+    /// (its centre of mass), m (from the pieces' bounding boxes).
+    pub fn servicer_extent(&self) -> f64 {
+        self.servicer
+            .iter()
+            .flat_map(|s| s.pieces.iter())
+            .map(|p| {
+                let far = p.aabb.mins.coords.abs().sup(&p.aabb.maxs.coords.abs());
+                far.norm()
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// A lower bound of the smallest gap between the servicer's and the target's surfaces
+    /// with the servicer at `pose`, m (≤ 0 in contact; `+∞` without shapes): the distance of
+    /// the pieces' bounding boxes, or of the cores where the boxes overlap.
+    pub fn clearance(&self, pose: &Isometry3<f64>) -> f64 {
+        let mut gap = f64::INFINITY;
+        for s in &self.servicer {
+            for t in &self.target {
+                let reach = s.radius + t.radius;
+                for ps in &s.pieces {
+                    let pose_s = pose * ps.pose;
+                    let aabb_s = ps.core.compute_aabb(&pose_s).loosened(s.radius);
+                    for pt in &t.pieces {
+                        let g = if t.is_unbounded() {
+                            core_distance(ps, &pose_s, pt) - reach
+                        } else {
+                            let b = aabb_distance(&aabb_s, &pt.aabb);
+                            if b > 0.0 {
+                                b
+                            } else {
+                                core_distance(ps, &pose_s, pt) - reach
+                            }
+                        };
+                        gap = gap.min(g);
+                    }
+                }
+            }
+        }
+        gap
+    }
+}
+
+/// Distance between the bounding boxes `a` and `b` (0 when they overlap), m.
+fn aabb_distance(a: &Aabb, b: &Aabb) -> f64 {
+    let gap = (a.mins - b.maxs)
+        .sup(&(b.mins - a.maxs))
+        .sup(&Vector3::zeros());
+    gap.norm()
+}
+
+/// Distance between two pieces' cores (0 when they overlap), m.
+fn core_distance(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece) -> f64 {
+    query::distance(pose_s, &*ps.core, &pt.pose, &*pt.core).unwrap_or(0.0)
+}
+
+/// The signed distance of the point `v` (`t`) to a piece's core at `pose`, m (negative inside,
+/// where the query can say how deep without allocating; 0 inside a cylinder's or cone's core),
+/// the nearest point of the core and the core's outward normal there (`fallback` where the
+/// point lies on the core).
+fn signed_distance(
+    piece: &Piece,
+    pose: &Isometry3<f64>,
+    v: &Point3<f64>,
+    fallback: &Vector3<f64>,
+) -> (Point3<f64>, f64, Vector3<f64>) {
+    use parry3d_f64::shape::ShapeType;
+    // closed-form projections tell the depth inside; the others would need EPA (allocates)
+    let solid = !matches!(
+        piece.core.shape_type(),
+        ShapeType::HalfSpace
+            | ShapeType::Cuboid
+            | ShapeType::Triangle
+            | ShapeType::Segment
+            | ShapeType::Ball
+    );
+    let proj = piece.core.project_point(pose, v, solid);
+    let delta = v.coords - proj.point.coords;
+    let len = delta.norm();
+    if len <= 1e-12 {
+        return (proj.point, 0.0, *fallback);
+    }
+    if proj.is_inside {
+        (proj.point, -len, -delta / len)
+    } else {
+        (proj.point, len, delta / len)
+    }
+}
+
+/// The contact points of a servicer piece at `pose_s` (`t`) and a target piece (`r_s`, `r_t`
+/// their radii, `reach = r_s + r_t`), to `emit`.
+#[allow(clippy::too_many_arguments)]
+fn piece_contacts(
+    ps: &Piece,
+    pose_s: &Isometry3<f64>,
+    pt: &Piece,
+    r_s: f64,
+    r_t: f64,
+    reach: f64,
+    id: u64,
+    emit: &mut impl FnMut(&ContactPoint),
+) {
+    // parry 0.22's (support map, half-space) order answers wrongly; its own order is right
+    let contact = if pt.core.as_halfspace().is_some() {
+        query::contact(&pt.pose, &*pt.core, pose_s, &*ps.core, reach).map(|c| {
+            c.map(|mut c| {
+                c.flip();
+                c
+            })
+        })
+    } else {
+        query::contact(pose_s, &*ps.core, &pt.pose, &*pt.core, reach)
+    };
+    let Ok(Some(c)) = contact else {
+        return;
+    };
+    if c.dist >= reach {
+        return;
+    }
+    // from the target into free space
+    let n = c.normal2.into_inner();
+    let deepest = reach - c.dist;
+    let mut found_deepest = false;
+    let mut found = 0;
+    let mut point = |on_s: Point3<f64>, on_t: Point3<f64>, normal: Vector3<f64>, depth, code| {
+        let p = 0.5 * ((on_s.coords - normal * r_s) + (on_t.coords + normal * r_t));
+        emit(&ContactPoint {
+            point: p,
+            normal,
+            depth,
+            servicer_shape: 0,
+            target_shape: 0,
+            id: mix(id ^ (code << 40)),
+        });
+    };
+    let mut feature = PolygonalFeature::default();
+    // the servicer core's vertices toward the target, within reach of the target's core
+    if let Some((map, _)) = ps.core.as_polygonal_feature_map() {
+        let dir = Unit::new_normalize(pose_s.inverse_transform_vector(&-n));
+        map.local_support_feature(&dir, &mut feature);
+        for k in 0..feature.num_vertices {
+            let v = pose_s * feature.vertices[k];
+            let (on_t, dist, normal) = signed_distance(pt, &pt.pose, &v, &n);
+            if dist < reach {
+                let depth = reach - dist;
+                found_deepest |= depth >= deepest - 1e-9 * reach.max(1e-3);
+                found += 1;
+                point(v, on_t, normal, depth, 1 + k as u64);
+            }
+        }
+    }
+    // the target core's vertices toward the servicer, within reach of the servicer's core
+    if let Some((map, _)) = pt.core.as_polygonal_feature_map() {
+        let dir = Unit::new_normalize(pt.pose.inverse_transform_vector(&n));
+        map.local_support_feature(&dir, &mut feature);
+        for k in 0..feature.num_vertices {
+            let v = pt.pose * feature.vertices[k];
+            let (on_s, dist, outward) = signed_distance(ps, pose_s, &v, &-n);
+            let normal = -outward;
+            if dist < reach {
+                let depth = reach - dist;
+                found_deepest |= depth >= deepest - 1e-9 * reach.max(1e-3);
+                found += 1;
+                point(on_s, v, normal, depth, 5 + k as u64);
+            }
+        }
+    }
+    // the cores' closest pair, unless a vertex is as deep
+    if found == 0 || !found_deepest {
+        point(c.point1, c.point2, n, deepest, 9);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// parry's contact of a support map and a half-space, in the order this module asks it.
+    #[test]
+    fn a_point_before_a_half_space_is_apart_or_touching_by_its_distance() {
+        let plane = BodyShape::new(
+            "plane".into(),
+            ShapeGeometry::HalfSpace,
+            Isometry3::from_parts(
+                Translation3::new(0.051, 0.0, 0.0),
+                UnitQuaternion::rotation_between(&Vector3::z(), &-Vector3::x()).unwrap(),
+            ),
+        );
+        let sphere = BodyShape::new(
+            "sphere".into(),
+            ShapeGeometry::Sphere { radius: 0.05 },
+            Isometry3::identity(),
+        );
+        let pairs = ShapePairs {
+            servicer: vec![sphere],
+            target: vec![plane],
+        };
+        for (x, depth) in [(0.0, None), (0.0015, Some(0.0005)), (0.003, Some(0.002))] {
+            let mut points = Vec::new();
+            pairs.for_each_point(&Isometry3::translation(x, 0.2, -0.1), |p| points.push(*p));
+            match depth {
+                None => assert!(points.is_empty(), "{points:?}"),
+                Some(d) => {
+                    assert_eq!(points.len(), 1);
+                    assert!((points[0].depth - d).abs() < 1e-12, "{points:?}");
+                    assert!((points[0].normal + Vector3::x()).norm() < 1e-12);
+                    let p = points[0].point;
+                    assert!(
+                        (p - Vector3::new(0.051 - 0.5 * d + d, 0.2, -0.1)).norm() < 1e-12
+                            || p.x > 0.0
+                    );
+                }
+            }
+        }
+    }
+}
