@@ -220,7 +220,7 @@ def test_markdown_report():
     assert "worst \\|CoV − 1\\|" in summary  # pipes escaped inside the table
     header = next(line for line in summary.splitlines() if line.startswith("| compensator"))
     for row in rows:  # every row has as many cells as the header
-        assert row.count("|") == header.count("|") - header.count("\\|") == 11  # 10 columns
+        assert row.count("|") == header.count("|") - header.count("\\|") == 13  # 12 columns
     detail = text[detail_at:]
     assert len([line for line in detail.splitlines() if line.startswith("| `")]) == len(comparison.table)
     assert "| `none` | 1 | 3.000 | 1.200 | 120.0 | 25.00 |" in detail

@@ -20,7 +20,8 @@ from hilcontact.cli import cli
 from hilcontact.output import MARKER
 from hilcontact.plots import MAX_POINTS, moves_in_1d, thin
 from hilcontact.run import (
-    OPTIONAL_TIMESERIES_COLUMNS, PLOT_FILES, PLOT_FILES_6DOF, REFERENCE_COLUMNS, TIMESERIES_COLUMNS,
+    OPTIONAL_TIMESERIES_COLUMNS, PLOT_FILES, PLOT_FILES_6DOF, PLOT_FILES_EPISODES, REFERENCE_COLUMNS,
+    TIMESERIES_COLUMNS,
 )
 
 DATA_FILES = {"timeseries.parquet", "reference.parquet", "metrics.json", "scenario.toml", MARKER}
@@ -113,6 +114,13 @@ def test_collision_table(fake_run):
         "complete", "start", "end", "peak_force", "rebound_speed", "cov", "cof", "velocity_error",
         "angular_velocity_error", "impulse_ratio", "angular_impulse_ratio", "reference",
         "reference_peak_force", "reference_rebound_speed",
+        # the contact episode's
+        "normal_impulse", "tangential_impulse", "peak_moment",
+        "rebound_velocity_x", "rebound_velocity_y", "rebound_velocity_z",
+        "rebound_angular_velocity_x", "rebound_angular_velocity_y", "rebound_angular_velocity_z",
+        "direction_error", "normal_impulse_error", "tangential_impulse_error", "peak_moment_ratio",
+        "reference_normal_impulse", "reference_tangential_impulse", "reference_peak_moment",
+        "reference_rebound_velocity_x", "reference_rebound_velocity_y", "reference_rebound_velocity_z",
     ]
     assert table.loc[1, "cov"] == 1.25 and table.loc[1, "reference_rebound_speed"] == 0.02
     assert table.loc[1, "reference"] == 1 and table.loc[1, "velocity_error"] == 0.25
@@ -424,7 +432,8 @@ def test_thin_keeps_samples_and_peaks():
 def test_synthetic_6dof_run_gets_the_figures(tmp_path):
     run = synthetic_run(spin=2e-3)
     figures = run.plot()
-    assert list(figures) == ["contact_velocity", "contact_force", "energy", "contact_rotation", "tip_tracking"]
+    assert list(figures) == ["contact_velocity", "contact_force", "energy", "contact_rotation", "tip_tracking",
+                             "contact_points", "contact_normal_tangential"]
     ax_w, ax_m = figures["contact_rotation"].axes
     assert "paper-table1" in ax_w.get_title() and "10 ms" in ax_w.get_title()
     assert ax_w.get_ylabel() == "angular velocity (mrad/s)" and ax_m.get_ylabel() == "moment (N\u00b7m)"
@@ -433,7 +442,7 @@ def test_synthetic_6dof_run_gets_the_figures(tmp_path):
     assert np.allclose(omega["\u03c9z HIL"].get_ydata(), 2.0) and omega["\u03c9z ideal reference"].get_linestyle() == "--"
     assert len(ax_w.patches) == len(ax_m.patches) == 2  # collisions shaded
     run.save(tmp_path / "six")
-    assert {p.name for p in (tmp_path / "six").iterdir()} == DATA_FILES | PLOTS | SIX_DOF_PLOTS
+    assert {p.name for p in (tmp_path / "six").iterdir()} == DATA_FILES | PLOTS | SIX_DOF_PLOTS | set(PLOT_FILES_EPISODES)
     long = synthetic_run(spin=2e-3)  # a long run is drawn thinned
     t = np.arange(20_001) * 1e-3
     long.timeseries = pd.DataFrame({c: np.interp(t, long.timeseries["time"], long.timeseries[c]) for c in long.timeseries})
@@ -458,7 +467,8 @@ def test_oblique_6dof_rotation_figure(oblique_run):
     run = oblique_run
     assert not moves_in_1d(run) and len(run.timeseries) <= MAX_POINTS  # drawn whole
     figures = run.plot()
-    assert list(figures) == ["contact_velocity", "contact_force", "energy", "contact_rotation", "tip_tracking"]
+    assert list(figures) == ["contact_velocity", "contact_force", "energy", "contact_rotation", "tip_tracking",
+                             "contact_points", "contact_normal_tangential"]
     ax_w, ax_m = figures["contact_rotation"].axes
     assert "oblique-6dof" in ax_w.get_title()
     ts, ref = run.timeseries, run.reference
@@ -524,6 +534,6 @@ def test_oblique_6dof_tip_tracking_shows_the_delay(oblique_run, tmp_path):
     assert crossing(actual) - crossing(commanded) == pytest.approx(0.010, abs=2e-3)
     assert crossing(actual) == pytest.approx(first["start"], abs=2e-3)
     out = run.save(tmp_path / "oblique")
-    assert {p.name for p in out.iterdir()} == DATA_FILES | PLOTS | SIX_DOF_PLOTS
+    assert {p.name for p in out.iterdir()} == DATA_FILES | PLOTS | SIX_DOF_PLOTS | set(PLOT_FILES_EPISODES)
     for name in SIX_DOF_PLOTS:
         assert (out / name).read_bytes()[:8] == PNG_MAGIC

@@ -14,6 +14,12 @@ def simulate(scenario_json: str, outputs: str | None = None) -> dict[str, Any]:
     Returns ``{"timeseries": {column: float64 array}, "reference": {column: float64 array},
     "metrics": str}`` where ``metrics`` is JSON text (the core's ``Metrics``; every field is
     described in docs/model.md, "Metrics"). The columns and their units: :func:`table_columns`.
+    Each of ``metrics["collisions"]`` (and ``"reference_collisions"``) is a contact episode:
+    ``normal_impulse``, ``tangential_impulse`` (N s), ``peak_moment`` (N m, about the sensor
+    origin), ``rebound_velocity`` and ``rebound_angular_velocity`` (``[x, y, z]``, m/s, rad/s,
+    ``t``), and for a compared HIL collision ``direction_error`` (degrees),
+    ``normal_impulse_error``, ``tangential_impulse_error`` (fractions) and
+    ``peak_moment_ratio`` (``hilcontact.Run.collision_table`` puts them in a DataFrame).
 
     ``outputs``: JSON of the outputs to also write the run to, each under its key with a
     real-time run's options for it (``{"mcap": {"path": ..., "overwrite": false}}``); the

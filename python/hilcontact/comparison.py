@@ -64,14 +64,26 @@ COMPARISON_FIGURES = (
     "compare_velocity_error",
 )
 
+#: Per-collision columns of :attr:`Comparison.table`: ``(column, metrics.json key, scale)``
+#: (the collision's value times the scale; docs/model.md "Metrics").
+PER_COLLISION_COLUMNS: tuple[tuple[str, str, float], ...] = (
+    ("cov", "cov", 1.0),
+    ("cof", "cof", 1.0),
+    ("peak_force_N", "peak_force", 1.0),
+    ("rebound_speed_mm_s", "rebound_speed", 1e3),
+    ("velocity_error_pct", "velocity_error", 100.0),
+    ("direction_error_deg", "direction_error", 1.0),
+    ("tangential_impulse_error_pct", "tangential_impulse_error", 100.0),
+    ("normal_impulse_error_pct", "normal_impulse_error", 100.0),
+    ("tangential_impulse_Ns", "tangential_impulse", 1.0),
+    ("normal_impulse_Ns", "normal_impulse", 1.0),
+)
+
 #: Columns of :attr:`Comparison.table` (and of ``comparison.csv``).
 TABLE_COLUMNS = [
     "compensator",
     "collision",
-    "cov",
-    "cof",
-    "peak_force_N",
-    "rebound_speed_mm_s",
+    *[column for column, _, _ in PER_COLLISION_COLUMNS],
     "status",
     "worst_cov_error",
     "worst_cof",
@@ -92,6 +104,8 @@ SUMMARY_COLUMNS = [
     "stiffness_error_pct",
     "damping_error_Ns_mm",
     "worst_velocity_error_pct",
+    "worst_direction_error_deg",
+    "worst_tangential_impulse_error_pct",
     "lost_collisions",
     "extra_collisions",
     "rank",
@@ -177,11 +191,14 @@ RANKING_RULE = (
     "Compensators that ran to the end come first, those that diverged or stopped last (the "
     "later the stop, the better). Among those that ran to the end: first the ones faithful "
     "from an earlier collision (every collision from it on within the scenario's [metrics] "
-    "tolerances: |CoV − 1|, CoF, rebound velocity error; judged from `judge_from`; none lost "
+    "tolerances: |CoV − 1|, CoF, rebound velocity error, tangential impulse error; judged from `judge_from`; none lost "
     "or extra beyond those allowed; at least one compared collision from it on), then the ones "
     "never faithful; ties go to the smaller worst margin, the largest of |CoV − 1| / "
-    "cov_tolerance, CoF / max_cof and velocity error / max_velocity_error over the collisions "
-    "judged (from the faithful one on, or all of them)."
+    "cov_tolerance, CoF / max_cof, velocity error / max_velocity_error and tangential impulse "
+    "error / max_tangential_impulse_error over the collisions judged (from the faithful one on, "
+    "or all of them). The rebound direction error needs no tolerance of its own: a direction "
+    "off by θ ≤ 90° has a velocity error ≥ sin θ, so max_velocity_error 0.05 bounds it to "
+    "2.87°."
 )
 
 
@@ -282,6 +299,8 @@ class Comparison:
             "stiffness_error_pct": _nan(identification.get("stiffness_error")) * 100.0,
             "damping_error_Ns_mm": _nan(identification.get("damping_error")) * 1e-3,
             "worst_velocity_error_pct": _nan(summary.get("worst_velocity_error")) * 100.0,
+            "worst_direction_error_deg": _nan(summary.get("worst_direction_error")),
+            "worst_tangential_impulse_error_pct": _nan(summary.get("worst_tangential_impulse_error")) * 100.0,
             "lost_collisions": len(run.metrics.get("lost_collisions") or []),
             "extra_collisions": len(run.metrics.get("extra_collisions") or []),
         }
@@ -339,7 +358,8 @@ class Comparison:
         diverged_at (s, NaN if ok), collisions (count), cov (list, one per collision),
         mean_cov, worst_cov_error (largest |CoV - 1|), worst_cof (the CoF farthest from 1),
         stiffness_error_pct (%), damping_error_Ns_mm (N s/mm), worst_velocity_error_pct (%),
-        lost_collisions and extra_collisions (counts); then from :attr:`ranking`: rank (1:
+        worst_direction_error_deg (the largest rebound direction error, degrees),
+        worst_tangential_impulse_error_pct (%), lost_collisions and extra_collisions (counts); then from :attr:`ranking`: rank (1:
         best), verdict (``faithful``, ``faithful from collision 3``, ``unfaithful``,
         ``diverged at 1.234 s``) and violation (the worst tolerance broken: collision,
         metric, value > limit; empty if none). NaN where the run has no such value."""
@@ -355,23 +375,24 @@ class Comparison:
     @property
     def table(self) -> pd.DataFrame:
         """One row per compensator and collision (a compensator without collisions gets one
-        row with an empty collision number): compensator, collision, cov, cof, peak_force_N,
-        rebound_speed_mm_s and the compensator's summary values (status, worst_cov_error,
-        worst_cof, mean_cov, stiffness_error_pct, damping_error_Ns_mm)."""
+        row with an empty collision number): compensator, collision, the collision's values of
+        :data:`PER_COLLISION_COLUMNS` (cov, cof, peak_force_N, rebound_speed_mm_s,
+        velocity_error_pct, direction_error_deg, tangential_impulse_error_pct,
+        normal_impulse_error_pct, tangential_impulse_Ns, normal_impulse_Ns) and the
+        compensator's summary values (status, worst_cov_error, worst_cof, mean_cov,
+        stiffness_error_pct, damping_error_Ns_mm)."""
         rows = []
+        first_per_run = 2 + len(PER_COLLISION_COLUMNS)
         for kind, run in self.runs.items():
             stats = self._stats(run)
-            per_run = {key: stats[key] for key in TABLE_COLUMNS[6:]}
+            per_run = {key: stats[key] for key in TABLE_COLUMNS[first_per_run:]}
             collisions = run.metrics.get("collisions") or [{}]
             for collision in collisions:
                 rows.append(
                     {
                         "compensator": kind,
                         "collision": collision.get("index"),
-                        "cov": _nan(collision.get("cov")),
-                        "cof": _nan(collision.get("cof")),
-                        "peak_force_N": _nan(collision.get("peak_force")),
-                        "rebound_speed_mm_s": _nan(collision.get("rebound_speed")) * 1e3,
+                        **{column: _nan(collision.get(key)) * scale for column, key, scale in PER_COLLISION_COLUMNS},
                         **per_run,
                     }
                 )
@@ -409,14 +430,15 @@ class Comparison:
                 for s in self.ranking
             ],
             "",
-            "Worst margin: the largest value / limit of |CoV − 1|, CoF and velocity error over the "
-            "collisions judged (1 = at a tolerance). " + RANKING_RULE,
+            "Worst margin: the largest value / limit of |CoV − 1|, CoF, velocity error and tangential "
+            "impulse error over the collisions judged (1 = at a tolerance). " + RANKING_RULE,
             "",
             "## Summary",
             "",
             "| compensator | status | CoV per collision | mean CoV | worst \\|CoV − 1\\| | worst CoF "
-            "| worst velocity error (%) | lost, extra | k error (%) | c error (N·s/mm) |",
-            "|---|---|---|--:|--:|--:|--:|--:|--:|--:|",
+            "| worst velocity error (%) | worst direction error (°) | worst J_t error (%) "
+            "| lost, extra | k error (%) | c error (N·s/mm) |",
+            "|---|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
         ]
         for kind, row in self.summary.iterrows():
             status = str(row["status"])
@@ -427,6 +449,8 @@ class Comparison:
                 f"| `{kind}` | {status} | {covs} | {_cell(row['mean_cov'], '.3f')} "
                 f"| {_cell(row['worst_cov_error'], '.3f')} | {_cell(row['worst_cof'], '.3f')} "
                 f"| {_cell(row['worst_velocity_error_pct'], '.2f')} "
+                f"| {_cell(row['worst_direction_error_deg'], '.2f')} "
+                f"| {_cell(row['worst_tangential_impulse_error_pct'], '.2f')} "
                 f"| {row['lost_collisions']}, {row['extra_collisions']} "
                 f"| {_cell(row['stiffness_error_pct'], '.3g')} | {_cell(row['damping_error_Ns_mm'], '.3g')} |"
             )
@@ -434,14 +458,18 @@ class Comparison:
             "",
             "## Per collision",
             "",
-            "| compensator | # | CoV | CoF | peak force (N) | rebound speed (mm/s) |",
-            "|---|--:|--:|--:|--:|--:|",
+            "| compensator | # | CoV | CoF | peak force (N) | rebound speed (mm/s) | velocity error (%) "
+            "| direction error (°) | J_t error (%) | J_n error (%) | J_t (N·s) | J_n (N·s) |",
+            "|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
         ]
         for _, row in self.table.iterrows():
             number = "-" if pd.isna(row["collision"]) else str(int(row["collision"]))
             lines.append(
                 f"| `{row['compensator']}` | {number} | {_cell(row['cov'], '.3f')} | {_cell(row['cof'], '.3f')} "
-                f"| {_cell(row['peak_force_N'], '.1f')} | {_cell(row['rebound_speed_mm_s'], '.2f')} |"
+                f"| {_cell(row['peak_force_N'], '.1f')} | {_cell(row['rebound_speed_mm_s'], '.2f')} "
+                f"| {_cell(row['velocity_error_pct'], '.2f')} | {_cell(row['direction_error_deg'], '.2f')} "
+                f"| {_cell(row['tangential_impulse_error_pct'], '.2f')} | {_cell(row['normal_impulse_error_pct'], '.2f')} "
+                f"| {_cell(row['tangential_impulse_Ns'], '.4g')} | {_cell(row['normal_impulse_Ns'], '.4g')} |"
             )
         figures = list(figures)
         if figures:

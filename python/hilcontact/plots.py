@@ -18,6 +18,15 @@ moves off one line) also get:
   (mm): commanded (virtual) vs actual (robot), over the run and zoomed on the first
   collision, where the robot's delay shows.
 
+Runs with a contact episode whose motion is not 1-D or whose contact has friction
+(:func:`shows_episodes`) also get:
+
+- contact_points: where the hardware touched, per episode: the rod tip while in contact (HIL:
+  the actual, robot tip; reference: the ideal tip) in three orthogonal projections of the
+  ``t`` frame (mm), over the walls' outlines (each wall cut at the contact points' mean depth).
+- contact_normal_tangential: the normal part ``|F − F_t|`` of the physical contact force above
+  its tangential (friction) part ``|F_t|`` (N), HIL solid vs reference dashed.
+
 Comparison figures (several compensators on one scenario, one panel each, shared axes):
 compare_velocity, compare_force, compare_energy, compare_identification (the compensators
 that identify the contact), compare_cov_cof (grouped bars, like the paper's Fig. 8d) and, when
@@ -46,7 +55,7 @@ from .registry import COMPENSATORS
 if TYPE_CHECKING:
     from .scenario import Scenario
 
-__all__ = ["RunData", "comparison_figures", "make_figures", "moves_in_1d"]
+__all__ = ["RunData", "comparison_figures", "make_figures", "moves_in_1d", "shows_episodes"]
 
 
 class RunData(Protocol):
@@ -467,10 +476,218 @@ def tracking_figure(run: RunData) -> Figure:
     return figure
 
 
+def _friction_parts(frame: pd.DataFrame) -> np.ndarray | None:
+    """The tangential (friction) part of the contact force, rows of (x, y, z), N; None when the
+    table has no ``friction_force`` columns."""
+    return _vectors(frame, "friction_force")
+
+
+def tangential_force(run: RunData, frame: pd.DataFrame, tip_column: str) -> np.ndarray | None:
+    """The tangential (friction) part of ``frame``'s contact force, rows of (x, y, z), N: its
+    ``friction_force`` columns, or without them the force less its projection on the normals
+    of the walls the tip (``tip_column``) is inside of (exact on one wall; in a corner a
+    wall's friction along another wall's normal counts as normal). None without the force."""
+    recorded = _friction_parts(frame)
+    force = _vectors(frame, "contact_force")
+    if recorded is not None or force is None:
+        return recorded
+    tip = _vectors(frame, tip_column)
+    if tip is None or not len(tip):
+        return np.zeros_like(force)
+    frames = _frames(run, points=[tip])
+    normals = np.asarray(frames["normals"])  # walls x 3
+    inside = np.asarray(frames["distances"][0]) < 0.0  # walls x rows
+    tangential = force.copy()
+    for pattern in {tuple(column) for column in inside.T if column.any()}:
+        rows = (inside.T == np.asarray(pattern)).all(axis=1)
+        basis = normals[np.asarray(pattern)].T  # 3 x active walls
+        coefficients, *_ = np.linalg.lstsq(basis, force[rows].T, rcond=None)
+        tangential[rows] = force[rows] - (basis @ coefficients).T
+    tangential[~inside.any(axis=0)] = 0.0
+    return tangential
+
+
+def has_friction(run: RunData) -> bool:
+    """Whether the run's contact has friction: a friction coefficient in the scenario, or a
+    non-zero friction force in the reference."""
+    friction = getattr(getattr(run.scenario, "contact", None), "friction", None)
+    coefficients = [getattr(friction, name, 0.0) or 0.0 for name in ("kinetic", "static",
+                                                                      "kinetic_coefficient", "static_coefficient")]
+    parts = _friction_parts(run.reference)
+    return any(c > 0 for c in coefficients) or (parts is not None and _peak(parts.ravel()) > 0.0)
+
+
+def shows_episodes(run: RunData) -> bool:
+    """Whether a run gets the episode figures (contact_points, contact_normal_tangential): it
+    has a HIL or reference collision, and its motion is not 1-D or its contact has friction."""
+    collided = bool(run.metrics.get("collisions") or run.metrics.get("reference_collisions"))
+    return collided and (not moves_in_1d(run) or has_friction(run))
+
+
+def _episode_samples(time: np.ndarray, collisions: list[dict[str, Any]]) -> list[tuple[int, np.ndarray]]:
+    """(collision number, mask of the samples in it) per collision with a start."""
+    out = []
+    end_of_run = float(time[-1]) if time.size else 0.0
+    for c in collisions:
+        start = c.get("start")
+        if start is None:
+            continue
+        end = c.get("end")
+        end = end_of_run if end is None else float(end)
+        out.append((int(c.get("index", len(out) + 1)), (time >= float(start)) & (time <= end)))
+    return out
+
+
+#: The projections of the contact points figure: (horizontal, vertical, dropped) axes of `t`.
+_PROJECTIONS = ((0, 1, 2), (0, 2, 1), (1, 2, 0))
+
+
+def contact_points_figure(run: RunData) -> Figure:
+    """Where the hardware touched, per episode: the rod tip while in contact (HIL: the actual,
+    robot tip, dots in the episode's colour; reference: the ideal tip, crosses in the colour of
+    the HIL episode matched to it, grey when lost), in the x–y, x–z and y–z projections of
+    ``t`` (mm), over the walls' outlines (each wall's plane cut at the contact points' mean
+    depth along the dropped axis)."""
+    figure = Figure(figsize=(13.0, 4.8))
+    FigureCanvasAgg(figure)
+    axes = [figure.add_subplot(1, 3, i + 1) for i in range(3)]
+    _margins(figure, left=0.75, right=2.3, top=0.95, bottom=0.55, wspace=0.35)
+    ts, ref = run.timeseries, run.reference
+    hil_tip, ref_tip = _vectors(ts, "actual_tip_position"), _vectors(ref, "tip_position")
+    hil_eps = _episode_samples(ts["time"].to_numpy(), run.metrics.get("collisions") or [])
+    ref_eps = _episode_samples(ref["time"].to_numpy(), run.metrics.get("reference_collisions") or [])
+    partner = {c.get("reference"): c.get("index") for c in run.metrics.get("collisions") or []
+               if c.get("reference") is not None}
+    colours = [f"C{i}" for i in range(10)]
+    drawn: list[np.ndarray] = []
+    for a, b, _ in _PROJECTIONS:
+        ax = axes[_PROJECTIONS.index((a, b, _))]
+        if hil_tip is not None:
+            for number, mask in hil_eps:
+                points = hil_tip[mask] * 1e3
+                if points.size:
+                    ax.plot(points[:, a], points[:, b], ".", ms=3, color=colours[(number - 1) % 10],
+                            label=f"HIL #{number} (robot tip)" if a == 0 and b == 1 else None)
+                    drawn.append(points)
+        if ref_tip is not None:
+            for number, mask in ref_eps:
+                points = ref_tip[mask] * 1e3
+                if points.size:
+                    hil = partner.get(number)
+                    colour = "0.5" if hil is None else colours[(int(hil) - 1) % 10]
+                    label = f"reference #{number}" + (" (lost)" if hil is None else "")
+                    ax.plot(points[:, a], points[:, b], "x", ms=4, mew=0.8, color=colour,
+                            label=label if a == 0 and b == 1 else None)
+                    drawn.append(points)
+    names = "xyz"
+    if drawn:
+        every = np.vstack(drawn)
+        every = every[np.isfinite(every).all(axis=1)]
+    else:
+        every = np.zeros((0, 3))
+    depths = _wall_depths(run, every)
+    for ax, (a, b, c) in zip(axes, _PROJECTIONS):
+        # the same scale on both axes (a square panel), the points in the middle
+        lo, hi = (every.min(axis=0), every.max(axis=0)) if len(every) else (np.zeros(3), np.zeros(3))
+        half = 0.5 * max(hi[a] - lo[a], hi[b] - lo[b]) * 1.4 + 2.0
+        mid_a, mid_b = 0.5 * (lo[a] + hi[a]), 0.5 * (lo[b] + hi[b])
+        ax.set_xlim(mid_a - half, mid_a + half)
+        ax.set_ylim(mid_b - half, mid_b + half)
+        ax.set_aspect("equal", adjustable="box")
+        _draw_walls(ax, run, a, b, c, depths, first=(a, b) == (0, 1))
+        ax.set_xlabel(f"{names[a]} (mm)")
+        ax.set_ylabel(f"{names[b]} (mm)")
+        ax.set_title(f"{names[a]}–{names[b]} projection", fontsize=10)
+        ax.grid(True, alpha=0.4)
+    figure.suptitle(f"Where the hardware touched: rod tip in contact, per episode (t frame; each wall cut "
+                    f"through its contact points)\n{_header(run)}", fontsize=11)
+    handles, labels = axes[0].get_legend_handles_labels()
+    if handles:
+        axes[2].legend(handles, labels, loc="upper left", bbox_to_anchor=(1.03, 1.0), fontsize=8, frameon=False)
+    return figure
+
+
+_WALL_STYLES = ("-", "--", "-.", ":")
+
+
+def _walls(run: RunData) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """(name, point in mm, unit normal) of each of the scenario's walls."""
+    out = []
+    for i, wall in enumerate(getattr(run.scenario, "walls", None) or []):
+        normal = np.asarray(wall.normal, dtype=np.float64)
+        norm = float(np.linalg.norm(normal))
+        if norm > 0.0:
+            name = getattr(wall, "name", None) or f"walls[{i}]"
+            out.append((name, np.asarray(wall.point, dtype=np.float64) * 1e3, normal / norm))
+    return out
+
+
+def _wall_depths(run: RunData, points: np.ndarray) -> list[np.ndarray]:
+    """Per wall, the point (mm) its outlines are cut through: the mean of the contact points
+    nearest to it (of all of them when none is), else the wall's own point."""
+    walls = _walls(run)
+    if not len(points) or not walls:
+        return [point for _, point, _ in walls]
+    distance = np.abs(np.stack([(points - point) @ n for _, point, n in walls]))  # walls x points
+    nearest = distance.argmin(axis=0)
+    return [points[nearest == i].mean(axis=0) if (nearest == i).any() else points.mean(axis=0)
+            for i in range(len(walls))]
+
+
+def _draw_walls(ax: Axes, run: RunData, a: int, b: int, c: int, depths: list[np.ndarray], first: bool) -> None:
+    """Each wall's outline in the a–b projection: its plane cut at ``c`` = its depth (the
+    ``c`` of ``depths``, mm); a wall parallel to the projection is not drawn."""
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    for i, ((name, point, n), depth) in enumerate(zip(_walls(run), depths)):
+        rest = n[c] * (depth[c] - point[c])
+        if abs(n[b]) >= abs(n[a]) and abs(n[b]) > 1e-9:
+            xs = np.array([x0, x1])
+            ys = point[b] - (n[a] * (xs - point[a]) + rest) / n[b]
+        elif abs(n[a]) > 1e-9:
+            ys = np.array([y0, y1])
+            xs = point[a] - (n[b] * (ys - point[b]) + rest) / n[a]
+        else:
+            continue
+        ax.plot(xs, ys, color="0.3", lw=1.2, ls=_WALL_STYLES[i % len(_WALL_STYLES)], zorder=0,
+                label=f"wall '{name}'" if first else None)
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+
+
+def normal_tangential_figure(run: RunData) -> Figure:
+    """The normal part ``|F − F_t|`` of the physical contact force (top) and its tangential,
+    friction part ``|F_t|`` (bottom), N, HIL solid vs reference dashed, collisions shaded."""
+    figure, (ax_n, ax_t) = _figure(rows=2)
+    ax_t.sharex(ax_n)
+    for frame, label, style in ((run.timeseries, "HIL", {"color": "tab:blue", "lw": 1.4}),
+                                (run.reference, "ideal reference", {"color": "black", "lw": 1.2, "ls": "--"})):
+        force = _vectors(frame, "contact_force")
+        if force is None:
+            continue
+        tip_column = "actual_tip_position" if frame is run.timeseries else "tip_position"
+        tangential = tangential_force(run, frame, tip_column)
+        if tangential is None:
+            tangential = np.zeros_like(force)
+        time = frame["time"].to_numpy()
+        _plot(ax_n, time, np.linalg.norm(force - tangential, axis=1), label=f"|F_n| {label}", **style)
+        _plot(ax_t, time, np.linalg.norm(tangential, axis=1), label=f"|F_t| {label}", **style)
+    for ax in (ax_n, ax_t):
+        _shade_collisions(ax, run)
+        _mark_divergence(ax, run)
+    _finish(ax_n, "Contact force: normal part |F − F_t|", run, "normal force (N)")
+    _finish(ax_t, "Tangential (friction) part |F_t|", run, "tangential force (N)")
+    ax_t.set_title(ax_t.get_title().split("\n")[0], fontsize=11)
+    ax_n.set_xlabel("")
+    ax_n.tick_params(axis="x", labelbottom=False)
+    return figure
+
+
 def make_figures(run: RunData) -> dict[str, Figure]:
     """All figures of a run, by file stem: contact_velocity, contact_force, energy, then
-    identification (when the compensator estimates the contact) and, when the motion is not
-    1-D, contact_rotation and tip_tracking."""
+    identification (when the compensator estimates the contact), contact_rotation and
+    tip_tracking when the motion is not 1-D, and contact_points and
+    contact_normal_tangential when :func:`shows_episodes`."""
     figures = {
         "contact_velocity": velocity_figure(run),
         "contact_force": force_figure(run),
@@ -481,6 +698,9 @@ def make_figures(run: RunData) -> dict[str, Figure]:
     if not moves_in_1d(run):
         figures["contact_rotation"] = rotation_figure(run)
         figures["tip_tracking"] = tracking_figure(run)
+    if shows_episodes(run):
+        figures["contact_points"] = contact_points_figure(run)
+        figures["contact_normal_tangential"] = normal_tangential_figure(run)
     return figures
 
 
@@ -874,10 +1094,12 @@ def _collision_bars(
 
 
 def _bars_figure(
-    runs: Mapping[str, RunData], rows: list[tuple[str, str, float | None, float, tuple[float, ...]]], title: str
+    runs: Mapping[str, RunData], rows: list[tuple[str, str, float | None, float, tuple[float, ...]]], title: str,
+    height: float = 7.0,
 ) -> Figure:
-    """One axis of grouped bars per ``(key, label, line, scale, tolerances)``, collisions across."""
-    figure = Figure(figsize=(11.0, 7.0))
+    """One axis of grouped bars per ``(key, label, line, scale, tolerances)``, collisions across;
+    ``height`` in inches."""
+    figure = Figure(figsize=(11.0, height))
     FigureCanvasAgg(figure)
     axes = figure.subplots(len(rows), 1, sharex=True, squeeze=False)[:, 0]
     _margins(figure, left=0.8, right=1.9, top=_top_margin(2) - _PANEL_TITLE, bottom=0.55, hspace=0.08)
@@ -909,18 +1131,26 @@ def compare_cov_cof_figure(runs: Mapping[str, RunData]) -> Figure:
 
 def compare_velocity_error_figure(runs: Mapping[str, RunData]) -> Figure:
     """Grouped bars of the rebound velocity error and angular velocity error per collision
-    (%), one colour per compensator; a dashed line at the scenario's velocity tolerance."""
+    (%), one colour per compensator; a dashed line at the scenario's velocity tolerance. With
+    friction (:func:`has_friction`) also the rebound direction error (degrees) and the
+    tangential impulse error (%, dashed: its tolerance)."""
     run = next(iter(runs.values()))
     tolerance = 100.0 * float(run.scenario.metrics.max_velocity_error)
-    return _bars_figure(
-        runs,
-        [
-            ("velocity_error", "velocity error (%)", tolerance, 100.0, ()),
-            ("angular_velocity_error", "angular velocity error (%)", None, 100.0, ()),
-        ],
-        "Rebound velocity errors per collision: |v − v_ref|/|v_ref|, |ω − ω_ref|/|ω_ref| "
-        f"(0 = ideal; dashed: tolerance {tolerance:g} %)",
-    )
+    rows: list[tuple[str, str, float | None, float, tuple[float, ...]]] = [
+        ("velocity_error", "velocity error (%)", tolerance, 100.0, ()),
+        ("angular_velocity_error", "angular velocity error (%)", None, 100.0, ()),
+    ]
+    title = ("Rebound velocity errors per collision: |v − v_ref|/|v_ref|, |ω − ω_ref|/|ω_ref| "
+             f"(0 = ideal; dashed: tolerance {tolerance:g} %)")
+    if any(has_friction(r) for r in runs.values()):
+        impulse = 100.0 * float(run.scenario.metrics.max_tangential_impulse_error)
+        rows += [
+            ("direction_error", "direction error (°)", None, 1.0, ()),
+            ("tangential_impulse_error", "J_t error (%)", impulse, 100.0, ()),
+        ]
+        title = ("Rebound velocity, angular velocity and direction errors, tangential impulse error per "
+                 f"collision (0 = ideal; dashed: tolerances {tolerance:g} %, {impulse:g} %)")
+    return _bars_figure(runs, rows, title, height=3.5 * len(rows))
 
 
 def compare_measured_applied_figure(runs: Mapping[str, RunData]) -> Figure | None:

@@ -23,7 +23,8 @@ if TYPE_CHECKING:
 
 __all__ = [
     "COLUMN_UNITS",
-    "OPTIONAL_TIMESERIES_COLUMNS", "REFERENCE_COLUMNS", "TIMESERIES_COLUMNS", "Run", "RunInterrupted", "simulate"]
+    "OPTIONAL_TIMESERIES_COLUMNS", "PLOT_FILES_EPISODES", "REFERENCE_COLUMNS", "TIMESERIES_COLUMNS", "Run",
+    "RunInterrupted", "simulate"]
 
 
 def _table_columns() -> dict[str, list[tuple[str, str, str]]]:
@@ -60,6 +61,11 @@ PLOT_FILES = ("contact_velocity.png", "contact_force.png", "energy.png")
 #: Plot files that :meth:`Run.save` adds for a run whose motion is not 1-D (the reference
 #: rotates or its rod tip leaves a line: :func:`hilcontact.plots.moves_in_1d`).
 PLOT_FILES_6DOF = ("contact_rotation.png", "tip_tracking.png")
+#: Plot files of the contact episodes that :meth:`Run.save` adds for a run with a collision
+#: whose motion is not 1-D or whose contact has friction
+#: (:func:`hilcontact.plots.shows_episodes`): where the hardware touched, and the normal and
+#: tangential contact force.
+PLOT_FILES_EPISODES = ("contact_points.png", "contact_normal_tangential.png")
 
 
 def _frame(columns: dict[str, Any], order: list[str]) -> pd.DataFrame:
@@ -99,17 +105,33 @@ class Run:
         return str(self.metrics.get("compensator") or self.scenario.compensator.kind)
 
     def collision_table(self) -> pd.DataFrame:
-        """One row per HIL collision (index: collision number, from 1), with the ideal
-        reference's collision it is matched to (see docs/model.md, "Metrics"): start, end
-        (s), complete, peak_force (N), rebound_speed (m/s), cov, cof, velocity_error,
-        angular_velocity_error (fractions), impulse_ratio, angular_impulse_ratio, reference
-        (the matched reference collision's number, NaN if none), reference_peak_force (N),
-        reference_rebound_speed (m/s)."""
+        """The contact episodes: one row per HIL collision (index: collision number, from 1),
+        with the ideal reference's collision it is matched to (see docs/model.md, "Metrics"):
+        complete, start, end (s), peak_force (N), rebound_speed (m/s), cov, cof,
+        velocity_error, angular_velocity_error (fractions), impulse_ratio,
+        angular_impulse_ratio, reference (the matched reference collision's number, NaN if
+        none), reference_peak_force (N), reference_rebound_speed (m/s); then the episode's
+        contact: normal_impulse, tangential_impulse (N s), peak_moment (N m, about the sensor
+        origin), rebound_velocity_x/_y/_z (m/s, `t`), rebound_angular_velocity_x/_y/_z
+        (rad/s, `t`), direction_error (degrees), normal_impulse_error,
+        tangential_impulse_error (fractions), peak_moment_ratio, reference_normal_impulse,
+        reference_tangential_impulse (N s), reference_peak_moment (N m),
+        reference_rebound_velocity_x/_y/_z (m/s). NaN where there is no value."""
         reference = {c.get("index"): c for c in self.metrics.get("reference_collisions") or []}
         numbers = [
             "start", "end", "peak_force", "rebound_speed", "cov", "cof", "velocity_error",
             "angular_velocity_error", "impulse_ratio", "angular_impulse_ratio",
         ]
+        episode = ["normal_impulse", "tangential_impulse", "peak_moment"]
+        vectors = ["rebound_velocity", "rebound_angular_velocity"]
+        errors = ["direction_error", "normal_impulse_error", "tangential_impulse_error", "peak_moment_ratio"]
+        from_reference = ["normal_impulse", "tangential_impulse", "peak_moment"]
+        axes = ("x", "y", "z")
+
+        def spread(name: str, value: Any) -> dict[str, Any]:
+            value = value if isinstance(value, (list, tuple)) and len(value) == 3 else (None,) * 3
+            return {f"{name}_{axis}": v for axis, v in zip(axes, value)}
+
         rows = []
         for collision in self.metrics.get("collisions") or []:
             ref = reference.get(collision.get("reference"), {})
@@ -118,8 +140,21 @@ class Run:
             row["reference"] = collision.get("reference")
             row["reference_peak_force"] = ref.get("peak_force")
             row["reference_rebound_speed"] = ref.get("rebound_speed")
+            row.update({key: collision.get(key) for key in episode})
+            for name in vectors:
+                row.update(spread(name, collision.get(name)))
+            row.update({key: collision.get(key) for key in errors})
+            row.update({f"reference_{key}": ref.get(key) for key in from_reference})
+            row.update(spread("reference_rebound_velocity", ref.get("rebound_velocity")))
             rows.append(row)
-        floats = [*numbers, "reference", "reference_peak_force", "reference_rebound_speed"]
+        floats = [
+            *numbers, "reference", "reference_peak_force", "reference_rebound_speed",
+            *episode,
+            *[f"{name}_{axis}" for name in vectors for axis in axes],
+            *errors,
+            *[f"reference_{key}" for key in from_reference],
+            *[f"reference_rebound_velocity_{axis}" for axis in axes],
+        ]
         columns = ["collision", "complete", *floats]
         table = pd.DataFrame(rows, columns=columns)
         table[floats] = table[floats].astype(np.float64)
@@ -150,8 +185,10 @@ class Run:
     def plot(self, directory: str | os.PathLike[str] | None = None) -> dict[str, Figure]:
         """Make the figures (name -> matplotlib Figure); save them as ``<name>.png`` in
         ``directory`` if given. Names: contact_velocity, contact_force, energy,
-        identification when the compensator estimates the contact stiffness or damping, and
-        contact_rotation and tip_tracking when the motion is not 1-D."""
+        identification when the compensator estimates the contact stiffness or damping,
+        contact_rotation and tip_tracking when the motion is not 1-D, and contact_points and
+        contact_normal_tangential (:data:`PLOT_FILES_EPISODES`) for a run with a collision
+        whose motion is not 1-D or whose contact has friction."""
         from .plots import make_figures, save_figures
 
         figures = make_figures(self)

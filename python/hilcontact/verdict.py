@@ -22,15 +22,16 @@ class Violation:
     metric, its value and the limit of the scenario's ``[metrics]``."""
 
     collision: int | None
-    metric: str  # "|CoV − 1|", "CoF", "velocity error (%)", "lost collisions", "extra collisions"
+    metric: str  # "|CoV − 1|", "CoF", "velocity error (%)", "tangential impulse error (%)",
+    # "lost collisions", "extra collisions"
     value: float
     limit: float
 
     def __str__(self) -> str:
         if self.collision is None:
             return f"{self.metric} {self.value:g} > {self.limit:g}"
-        if self.metric == "velocity error (%)":
-            return f"collision {self.collision}: velocity error {self.value:.2f} % > {self.limit:g} %"
+        if self.metric.endswith(" (%)"):
+            return f"collision {self.collision}: {self.metric[:-4]} {self.value:.2f} % > {self.limit:g} %"
         return f"collision {self.collision}: {self.metric} {self.value:.3f} > {self.limit:g}"
 
 
@@ -53,14 +54,18 @@ def _judge(run: Run) -> tuple[int | None, float, list[Violation]]:
         cov_error = abs(float(c["cov"]) - 1.0)
         cof = float(c["cof"]) if _finite(c.get("cof")) else 0.0
         v_error = float(c["velocity_error"]) if _finite(c.get("velocity_error")) else 0.0
+        jt_error = float(c["tangential_impulse_error"]) if _finite(c.get("tangential_impulse_error")) else 0.0
+        jt_limit = float(tol.max_tangential_impulse_error)
         margins[n] = max(_ratio(cov_error, tol.cov_tolerance), _ratio(cof, tol.max_cof),
-                         _ratio(v_error, tol.max_velocity_error))
+                         _ratio(v_error, tol.max_velocity_error), _ratio(jt_error, jt_limit))
         if cov_error > tol.cov_tolerance:
             violations.append(Violation(n, "|CoV − 1|", cov_error, tol.cov_tolerance))
         if cof > tol.max_cof:
             violations.append(Violation(n, "CoF", cof, tol.max_cof))
         if v_error > tol.max_velocity_error:
             violations.append(Violation(n, "velocity error (%)", 100.0 * v_error, 100.0 * tol.max_velocity_error))
+        if jt_error > jt_limit:
+            violations.append(Violation(n, "tangential impulse error (%)", 100.0 * jt_error, 100.0 * jt_limit))
     counted = True
     for key, limit, name in (("lost_collisions", tol.max_lost_collisions, "lost collisions"),
                              ("extra_collisions", tol.max_extra_collisions, "extra collisions")):

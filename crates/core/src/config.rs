@@ -425,6 +425,11 @@ pub struct MetricsConfig {
     #[serde(default = "default_max_velocity_error")]
     #[schemars(range(min = 0.0, max = 1e6))]
     pub max_velocity_error: f64,
+    /// Largest tangential impulse error `|J_t − J_t,ref| / max(|J_t,ref|, 0.01 |J_n,ref|)` of a
+    /// faithful collision (fraction, 0 to 1e6; docs/model.md "Metrics").
+    #[serde(default = "default_max_tangential_impulse_error")]
+    #[schemars(range(min = 0.0, max = 1e6))]
+    pub max_tangential_impulse_error: f64,
     /// How many reference collisions a faithful run may lose (integer, 0 to 1e6).
     #[serde(default)]
     #[schemars(range(max = 1000000))]
@@ -458,6 +463,9 @@ fn default_max_cof() -> f64 {
 fn default_max_velocity_error() -> f64 {
     Tolerances::default().velocity_error
 }
+fn default_max_tangential_impulse_error() -> f64 {
+    Tolerances::default().tangential_impulse_error
+}
 
 impl MetricsConfig {
     /// The tolerances of the verdict.
@@ -466,6 +474,7 @@ impl MetricsConfig {
             cov: self.cov_tolerance,
             cof: self.max_cof,
             velocity_error: self.max_velocity_error,
+            tangential_impulse_error: self.max_tangential_impulse_error,
             lost_collisions: self.max_lost_collisions as usize,
             extra_collisions: self.max_extra_collisions as usize,
             judge_from: self.judge_from as usize,
@@ -480,6 +489,7 @@ impl Default for MetricsConfig {
             cov_tolerance: default_cov_tolerance(),
             max_cof: default_max_cof(),
             max_velocity_error: default_max_velocity_error(),
+            max_tangential_impulse_error: default_max_tangential_impulse_error(),
             max_lost_collisions: 0,
             max_extra_collisions: 0,
             judge_from: default_judge_from(),

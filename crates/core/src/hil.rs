@@ -181,6 +181,9 @@ pub struct HilRecord {
     /// Its friction (tangential) part, `t` frame, N (zero on a real facility, which does not
     /// tell the parts apart, and on a frictionless contact).
     pub friction_force: Vector3<f64>,
+    /// The physical contact's moment on the frame about the sensor origin, `t`, N·m (on a real
+    /// facility, where it is not observable: the sensor's moment).
+    pub contact_moment: Vector3<f64>,
     /// Sensor force on the frame, sensor frame, N.
     pub measured_force: Vector3<f64>,
     /// Sensor moment about its origin, sensor frame, N·m.
@@ -295,6 +298,18 @@ impl HilStep {
             actual_angular_velocity: m.actual.angular_velocity,
             contact_force: physical.map_or_else(|| -(sensor_to_t * m.force), |p| p.force),
             friction_force: physical.map_or_else(Vector3::zeros, |p| p.friction_force),
+            contact_moment: match physical {
+                Some(PhysicalContact {
+                    moment: Some(moment),
+                    ..
+                }) => moment,
+                Some(p) => {
+                    let tip = m.actual.point(&rod);
+                    FrameWrench::from_rod_force(&p.force, &tip, &self.virt.system().sensor_origin)
+                        .moment
+                }
+                None => sensor_to_t * m.moment,
+            },
             measured_force: m.force,
             measured_moment: m.moment,
             applied_force: sensor_to_t.inverse_transform_vector(&out.applied.force),

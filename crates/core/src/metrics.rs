@@ -27,9 +27,17 @@
 //!   - `impulse_ratio = |∫F dt| / |∫F_ref dt|` and `angular_impulse_ratio = |∫M dt| /
 //!     |∫M_ref dt|`, the wrench the virtual dynamics felt (on the frame, moment about the
 //!     sensor origin), from the collision's start to its rebound sample.
+//! - **Contact episode**: a collision is an episode that may press several points. Each
+//!   collision reports the normal and tangential impulse of the physical contact force
+//!   (`J_n = ∫(F − F_t) dt`, `J_t = ∫F_t dt`, `F_t` its friction part; trapezoids from the
+//!   sample before its start to its end), its peak moment about the sensor origin and its
+//!   rebound velocity and angular velocity vectors. A matched pair adds the rebound direction
+//!   error (degrees), the normal impulse error `|J_n − J_n,ref| / |J_n,ref|`, the tangential
+//!   impulse error `|J_t − J_t,ref| / max(|J_t,ref|, 0.01 |J_n,ref|)`
+//!   ([`TANGENTIAL_IMPULSE_FLOOR`]: 0, not NaN, without friction) and the peak moment ratio.
 //! - **Verdict**: a run that ran to its end is `unfaithful` when any matched collision breaks
 //!   the tolerances ([`Tolerances`], `[metrics]` in the scenario: `|CoV − 1|`, CoF, velocity
-//!   error) or more collisions are lost or extra than allowed; else `ok`.
+//!   error, tangential impulse error) or more collisions are lost or extra than allowed; else `ok`.
 //! - Identification error: mean of `|k̂/k − 1|` and of `|ĉ − c|` over contact samples after
 //!   the first collision.
 //! - Energy: kinetic energy of the virtual relative motion; a run whose energy passes a bound
@@ -50,9 +58,11 @@ pub struct Trace {
     pub force: Vec<f64>,
     /// The physical contact force on the rod, `t` frame, N.
     pub contact_force: Vec<Vector3<f64>>,
-    /// Its friction (tangential) part, `t` frame, N (`contact_force − friction_force` is the
-    /// normal part; zero without friction and on a real facility).
+    /// Its tangential (friction) part, `t` frame, N (the normal part is `contact_force −
+    /// friction_force`).
     pub friction_force: Vec<Vector3<f64>>,
+    /// Moment of the physical contact force on the frame about the sensor origin, `t`, N·m.
+    pub contact_moment: Vec<Vector3<f64>>,
     /// Velocity of the (virtual) rod tip relative to the target, `t` frame, m/s.
     pub velocity: Vec<Vector3<f64>>,
     /// Angular velocity of the (virtual) servicer relative to the target, `t` frame, rad/s.
@@ -78,8 +88,10 @@ pub struct TraceSample {
     pub time: f64,
     /// Physical contact force on the rod, `t`, N.
     pub contact_force: Vector3<f64>,
-    /// Its friction (tangential) part, `t`, N.
+    /// Its tangential (friction) part, `t`, N.
     pub friction_force: Vector3<f64>,
+    /// Moment of the physical contact force on the frame about the sensor origin, `t`, N·m.
+    pub contact_moment: Vector3<f64>,
     /// Rod tip velocity relative to the target, `t`, m/s.
     pub velocity: Vector3<f64>,
     /// Servicer angular velocity relative to the target, `t`, rad/s.
@@ -99,6 +111,7 @@ impl Trace {
             force: Vec::with_capacity(n),
             contact_force: Vec::with_capacity(n),
             friction_force: Vec::with_capacity(n),
+            contact_moment: Vec::with_capacity(n),
             velocity: Vec::with_capacity(n),
             angular_velocity: Vec::with_capacity(n),
             wrench_force: Vec::with_capacity(n),
@@ -116,6 +129,7 @@ impl Trace {
         self.force.push(s.contact_force.norm());
         self.contact_force.push(s.contact_force);
         self.friction_force.push(s.friction_force);
+        self.contact_moment.push(s.contact_moment);
         self.velocity.push(s.velocity);
         self.angular_velocity.push(s.angular_velocity);
         self.wrench_force.push(s.wrench.force);
@@ -226,10 +240,26 @@ pub struct Collision {
     /// Rebound speed, m/s, in the middle of the free flight that follows (none for an
     /// incomplete collision).
     pub rebound_speed: Option<f64>,
+    /// Normal impulse `|J_n| = |∫ (F − F_t) dt|` of the physical contact force over the
+    /// episode, N·s (trapezoidal, from the sample before its start to its end).
+    pub normal_impulse: f64,
+    /// Tangential (friction) impulse `|J_t| = |∫ F_t dt|` over the episode, N·s (0 without
+    /// friction).
+    pub tangential_impulse: f64,
+    /// Peak moment of the physical contact force on the frame about the sensor origin, N·m.
+    pub peak_moment: f64,
+    /// Rebound velocity of the rod tip relative to the target, `t`, m/s, at the sample of
+    /// `rebound_speed` (none for an incomplete collision).
+    pub rebound_velocity: Option<[f64; 3]>,
+    /// Angular velocity of the servicer relative to the target at the same sample, `t`,
+    /// rad/s (none for an incomplete collision).
+    pub rebound_angular_velocity: Option<[f64; 3]>,
 }
 
 impl Collision {
     fn of(trace: &Trace, j: usize, s: &Span) -> Self {
+        let (j_n, j_t) = impulses(trace, s);
+        let rebound = (s.end + s.next) / 2;
         Collision {
             index: j + 1,
             start: trace.time[s.start],
@@ -239,11 +269,47 @@ impl Collision {
                 .cloned()
                 .fold(0.0, f64::max),
             complete: s.complete,
-            rebound_speed: s
-                .complete
-                .then(|| trace.velocity[(s.end + s.next) / 2].norm()),
+            rebound_speed: s.complete.then(|| trace.velocity[rebound].norm()),
+            normal_impulse: j_n.norm(),
+            tangential_impulse: j_t.norm(),
+            peak_moment: peak_norm(&trace.contact_moment[s.start..=s.end]),
+            rebound_velocity: s.complete.then(|| trace.velocity[rebound].into()),
+            rebound_angular_velocity: s.complete.then(|| trace.angular_velocity[rebound].into()),
         }
     }
+}
+
+/// The largest norm of `v` (0 if empty).
+fn peak_norm(v: &[Vector3<f64>]) -> f64 {
+    v.iter().map(|x| x.norm()).fold(0.0, f64::max)
+}
+
+/// `∫ v dt` over a collision, trapezoidal, from the sample before its start (below the
+/// threshold, or the first sample) to its end (the first sample below).
+fn episode_integral(trace: &Trace, v: &[Vector3<f64>], s: &Span) -> Vector3<f64> {
+    (s.start.saturating_sub(1)..s.end)
+        .map(|i| (v[i] + v[i + 1]) * (0.5 * (trace.time[i + 1] - trace.time[i])))
+        .sum()
+}
+
+/// Normal and tangential (friction) impulse vectors of the physical contact force over a
+/// collision, `t`, N·s: `J_n = ∫ (F − F_t) dt`, `J_t = ∫ F_t dt`.
+fn impulses(trace: &Trace, s: &Span) -> (Vector3<f64>, Vector3<f64>) {
+    let total = episode_integral(trace, &trace.contact_force, s);
+    let tangential = episode_integral(trace, &trace.friction_force, s);
+    (total - tangential, tangential)
+}
+
+/// The floor of the tangential impulse error's denominator, as a fraction of the reference's
+/// normal impulse: `|J_t − J_t,ref| / max(|J_t,ref|, TANGENTIAL_IMPULSE_FLOOR · |J_n,ref|)`.
+/// A frictionless contact (both `J_t` zero) has error 0, never NaN; one with a friction
+/// coefficient below 0.01 is judged against this floor, a tangential impulse of 1 % of the
+/// normal one.
+pub const TANGENTIAL_IMPULSE_FLOOR: f64 = 0.01;
+
+/// The angle between two vectors, degrees (none if either is shorter than 1e-12).
+fn angle_deg(a: &Vector3<f64>, b: &Vector3<f64>) -> Option<f64> {
+    (a.norm() >= 1e-12 && b.norm() >= 1e-12).then(|| a.cross(b).norm().atan2(a.dot(b)).to_degrees())
 }
 
 /// Finds the collisions of a trace (see the module doc).
@@ -278,6 +344,18 @@ pub struct ComparedCollision {
     pub impulse_ratio: Option<f64>,
     /// |∫M dt| / |∫M_ref dt| (moments about the sensor origin).
     pub angular_impulse_ratio: Option<f64>,
+    /// Rebound direction error: the angle between `v` and `v_ref` at the rebound sample,
+    /// degrees (none when either is zero).
+    pub direction_error: Option<f64>,
+    /// Normal impulse error `|J_n − J_n,ref| / |J_n,ref|` of the physical contact force
+    /// (impulse vectors; fraction).
+    pub normal_impulse_error: Option<f64>,
+    /// Tangential impulse error `|J_t − J_t,ref| / max(|J_t,ref|, 0.01 |J_n,ref|)` (impulse
+    /// vectors, [`TANGENTIAL_IMPULSE_FLOOR`]; fraction; 0 for two frictionless contacts).
+    pub tangential_impulse_error: Option<f64>,
+    /// Peak moment of the physical contact about the sensor origin / the reference's (none
+    /// when the reference's lever arm is below 1 µm).
+    pub peak_moment_ratio: Option<f64>,
 }
 
 /// When a run is faithful (`[metrics]` in the scenario; docs/model.md "Metrics").
@@ -289,6 +367,10 @@ pub struct Tolerances {
     pub cof: f64,
     /// Largest rebound velocity error `|v − v_ref| / |v_ref|` (fraction).
     pub velocity_error: f64,
+    /// Largest tangential impulse error `|J_t − J_t,ref| / max(|J_t,ref|, 0.01 |J_n,ref|)`
+    /// (fraction).
+    #[serde(default = "default_tangential_impulse_error")]
+    pub tangential_impulse_error: f64,
     /// How many reference collisions may be lost.
     pub lost_collisions: usize,
     /// How many HIL collisions may have no reference collision.
@@ -303,11 +385,16 @@ impl Default for Tolerances {
             cov: 0.05,
             cof: 1.2,
             velocity_error: 0.05,
+            tangential_impulse_error: default_tangential_impulse_error(),
             lost_collisions: 0,
             extra_collisions: 0,
             judge_from: 1,
         }
     }
+}
+
+fn default_tangential_impulse_error() -> f64 {
+    0.10
 }
 
 /// The collisions of a HIL run against the reference's, and the verdict on them.
@@ -362,6 +449,10 @@ pub fn compare(
                 angular_velocity_error: None,
                 impulse_ratio: None,
                 angular_impulse_ratio: None,
+                direction_error: None,
+                normal_impulse_error: None,
+                tangential_impulse_error: None,
+                peak_moment_ratio: None,
             };
             let Some(i) = partner[j] else { return c };
             let r = &rs[i];
@@ -403,6 +494,20 @@ pub fn compare(
             c.cof = ratio(peak(hil, h), peak(reference, r));
             c.impulse_ratio = ratio(j_h.norm(), j_r.norm());
             c.angular_impulse_ratio = ratio(m_h.norm(), m_r.norm());
+            c.direction_error = angle_deg(&v, &v_ref);
+            let ((jn_h, jt_h), (jn_r, jt_r)) = (impulses(hil, h), impulses(reference, r));
+            c.normal_impulse_error = ratio((jn_h - jn_r).norm(), jn_r.norm());
+            c.tangential_impulse_error = ratio(
+                (jt_h - jt_r).norm(),
+                jt_r.norm().max(TANGENTIAL_IMPULSE_FLOOR * jn_r.norm()),
+            );
+            let (m_peak, m_peak_ref) = (
+                peak_norm(&hil.contact_moment[h.start..=h.end]),
+                peak_norm(&reference.contact_moment[r.start..=r.end]),
+            );
+            c.peak_moment_ratio = (m_peak_ref > 1e-6 * peak(reference, r))
+                .then(|| m_peak / m_peak_ref)
+                .filter(|x| x.is_finite());
             c
         })
         .collect();
@@ -531,6 +636,15 @@ fn verdict(
                 tol.velocity_error
             ));
         }
+        if let Some(e) = c
+            .tangential_impulse_error
+            .filter(|v| *v > tol.tangential_impulse_error)
+        {
+            out.push(format!(
+                "collision {n}: tangential impulse error {e:.3} > {}",
+                tol.tangential_impulse_error
+            ));
+        }
     }
     if lost.len() > tol.lost_collisions {
         out.push(format!(
@@ -654,6 +768,14 @@ pub struct Summary {
     pub worst_impulse_ratio: f64,
     /// The angular impulse ratio farthest from 1 (NaN if none).
     pub worst_angular_impulse_ratio: f64,
+    /// The largest rebound direction error, degrees (NaN if none).
+    pub worst_direction_error: f64,
+    /// The largest normal impulse error (fraction, NaN if none).
+    pub worst_normal_impulse_error: f64,
+    /// The largest tangential impulse error (fraction, NaN if none).
+    pub worst_tangential_impulse_error: f64,
+    /// The peak moment ratio farthest from 1 (NaN if none).
+    pub worst_peak_moment_ratio: f64,
 }
 
 impl Summary {
@@ -675,6 +797,10 @@ impl Summary {
             worst_angular_velocity_error: pick(|c| c.angular_velocity_error, 0.0).1,
             worst_impulse_ratio: pick(|c| c.impulse_ratio, 1.0).1,
             worst_angular_impulse_ratio: pick(|c| c.angular_impulse_ratio, 1.0).1,
+            worst_direction_error: pick(|c| c.direction_error, 0.0).1,
+            worst_normal_impulse_error: pick(|c| c.normal_impulse_error, 0.0).1,
+            worst_tangential_impulse_error: pick(|c| c.tangential_impulse_error, 0.0).1,
+            worst_peak_moment_ratio: pick(|c| c.peak_moment_ratio, 1.0).1,
         }
     }
 }
@@ -767,6 +893,7 @@ mod tests {
                 time: i as f64 * 0.1,
                 contact_force: Vector3::new(-f, 0.0, 0.0),
                 friction_force: Vector3::zeros(),
+                contact_moment: Vector3::new(0.0, 0.0, 0.1 * f),
                 velocity: *v,
                 angular_velocity: Vector3::new(0.0, 0.0, 0.01),
                 wrench: FrameWrench {
@@ -979,6 +1106,94 @@ mod tests {
         );
     }
 
+    /// `trace` with a friction part: the contact force on the rod is `(−f, μf, 0)`, its
+    /// normal part `(−f, 0, 0)` and its friction part `(0, μf, 0)` (a sliding contact).
+    fn sliding(force: &[f64], velocity: &[Vector3<f64>], mu: f64) -> Trace {
+        let mut t = trace(force, velocity);
+        for (i, &f) in force.iter().enumerate() {
+            t.friction_force[i] = Vector3::new(0.0, mu * f, 0.0);
+            t.contact_force[i] += t.friction_force[i];
+            t.force[i] = t.contact_force[i].norm();
+        }
+        t
+    }
+
+    #[test]
+    fn in_sliding_the_tangential_impulse_is_mu_times_the_normal_one() {
+        let v = velocities(60, 20, Vector3::new(-0.9, 0.1, 0.0));
+        for mu in [0.0, 0.1, 0.2, 0.3] {
+            let c = &collisions(&sliding(&pulses(60, &[(10, 20, 5.0)]), &v, mu), 0.5)[0];
+            // trapezoids from sample 9 (0 N) to 20 (0 N): 10 samples of 5 N, 0.1 s apart
+            assert!(
+                (c.normal_impulse - 5.0).abs() < 1e-12,
+                "{}",
+                c.normal_impulse
+            );
+            assert!((c.tangential_impulse - mu * 5.0).abs() < 1e-12);
+            assert!((c.peak_moment - 0.5).abs() < 1e-12);
+            assert_eq!(c.rebound_velocity, Some([-0.9, 0.1, 0.0]));
+            assert_eq!(c.rebound_angular_velocity, Some([0.0, 0.0, 0.01]));
+        }
+    }
+
+    #[test]
+    fn frictionless_contacts_have_a_tangential_impulse_error_of_zero_not_nan() {
+        let v = velocities(60, 20, Vector3::new(-0.9, 0.1, 0.0));
+        let r = trace(&pulses(60, &[(10, 20, 100.0)]), &v);
+        let h = trace(&pulses(60, &[(10, 20, 120.0)]), &v);
+        let c = compare(&h, &r, 0.5, &tol(), 0.0, 0.0);
+        let x = &c.collisions[0];
+        assert_eq!(x.tangential_impulse_error, Some(0.0));
+        assert!((x.normal_impulse_error.unwrap() - 0.2).abs() < 1e-12);
+        assert!((x.peak_moment_ratio.unwrap() - 1.2).abs() < 1e-12);
+        assert_eq!(x.direction_error, Some(0.0));
+        let s = Summary::of(&c.collisions);
+        assert_eq!(s.worst_tangential_impulse_error, 0.0);
+        assert!((s.worst_normal_impulse_error - 0.2).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_tangential_impulse_off_by_more_than_its_tolerance_is_unfaithful() {
+        let v = velocities(60, 20, Vector3::new(-0.9, 0.1, 0.0));
+        let pulse = pulses(60, &[(10, 20, 100.0)]);
+        let r = sliding(&pulse, &v, 0.2);
+        // 20 % more friction, the same normal impulse and rebound
+        let c = compare(&sliding(&pulse, &v, 0.24), &r, 0.5, &tol(), 0.0, 0.0);
+        let x = &c.collisions[0];
+        assert!((x.tangential_impulse_error.unwrap() - 0.2).abs() < 1e-9);
+        assert!(x.normal_impulse_error.unwrap() < 1e-12);
+        assert_eq!(c.violations.len(), 1, "{:?}", c.violations);
+        assert!(c.violations[0].contains("tangential impulse error 0.200 > 0.1"));
+        // 8 % more is within the default 10 %
+        let close = compare(&sliding(&pulse, &v, 0.216), &r, 0.5, &tol(), 0.0, 0.0);
+        assert!(close.violations.is_empty(), "{:?}", close.violations);
+        // the error is a vector's: friction of the right size in the opposite direction
+        let opposite = compare(&sliding(&pulse, &v, -0.2), &r, 0.5, &tol(), 0.0, 0.0);
+        assert!((opposite.collisions[0].tangential_impulse_error.unwrap() - 2.0).abs() < 1e-9);
+        // below the floor (μ < 0.01) the error is measured against 1 % of the normal impulse
+        let tiny = sliding(&pulse, &v, 0.001);
+        let c = compare(&sliding(&pulse, &v, 0.003), &tiny, 0.5, &tol(), 0.0, 0.0);
+        assert!((c.collisions[0].tangential_impulse_error.unwrap() - 0.2).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_rebound_direction_error_is_the_angle_between_the_rebounds() {
+        let pulse = pulses(60, &[(10, 20, 5.0)]);
+        let r = trace(&pulse, &velocities(60, 20, Vector3::new(-0.6, 0.8, 0.0)));
+        for (after, angle) in [
+            (Vector3::new(0.6, 0.8, 0.0), 0.28f64.acos().to_degrees()),
+            (Vector3::new(-1.2, 1.6, 0.0), 0.0),
+            (Vector3::new(0.6, -0.8, 0.0), 180.0),
+            (Vector3::new(0.0, 0.0, 0.3), 90.0),
+        ] {
+            let h = trace(&pulse, &velocities(60, 20, after));
+            let e = compare(&h, &r, 0.5, &tol(), 0.0, 0.0).collisions[0]
+                .direction_error
+                .unwrap();
+            assert!((e - angle).abs() < 1e-9, "{after:?}: {e} vs {angle}");
+        }
+    }
+
     #[test]
     fn summary_takes_the_values_farthest_from_one() {
         let mk = |cov: Option<f64>, cof: Option<f64>, ve: Option<f64>| ComparedCollision {
@@ -989,6 +1204,11 @@ mod tests {
                 peak_force: 1.0,
                 complete: true,
                 rebound_speed: None,
+                normal_impulse: 1.0,
+                tangential_impulse: 0.0,
+                peak_moment: 0.0,
+                rebound_velocity: None,
+                rebound_angular_velocity: None,
             },
             reference: Some(1),
             rebound_time: None,
@@ -998,6 +1218,10 @@ mod tests {
             angular_velocity_error: None,
             impulse_ratio: cof,
             angular_impulse_ratio: None,
+            direction_error: None,
+            normal_impulse_error: None,
+            tangential_impulse_error: None,
+            peak_moment_ratio: None,
         };
         let s = Summary::of(&[
             mk(Some(1.02), Some(1.1), Some(0.03)),

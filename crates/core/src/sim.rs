@@ -49,24 +49,21 @@ impl Table {
 /// The trace of HIL records (with estimates if `estimates_contact`), for the metrics.
 pub fn hil_trace(plan: &Plan, rows: &[HilRecord], estimates_contact: bool) -> Trace {
     let mut trace = Trace::with_capacity(rows.len(), estimates_contact);
-    let q = plan.sensor.orientation;
     for row in rows {
-        push_record(&mut trace, row, &q, estimates_contact);
+        push_record(&mut trace, plan, row, estimates_contact);
     }
     trace
 }
 
-/// Appends a HIL record to a trace; `sensor_to_t`: the sensor's attitude in `t`.
-fn push_record(
-    trace: &mut Trace,
-    row: &HilRecord,
-    sensor_to_t: &UnitQuaternion<f64>,
-    estimates_contact: bool,
-) {
+/// Appends a HIL record to a trace (the sensor's attitude in `t` and its origin from `plan`).
+/// The contact moment is the physical force's at the actual rod tip about the sensor origin.
+fn push_record(trace: &mut Trace, plan: &Plan, row: &HilRecord, estimates_contact: bool) {
+    let sensor_to_t: &UnitQuaternion<f64> = &plan.sensor.orientation;
     trace.push(&TraceSample {
         time: row.time,
         contact_force: row.contact_force,
         friction_force: row.friction_force,
+        contact_moment: row.contact_moment,
         velocity: row.tip_velocity,
         angular_velocity: row.angular_velocity,
         wrench: FrameWrench {
@@ -144,6 +141,7 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
             time: row.time,
             contact_force,
             friction_force: contact.friction_force,
+            contact_moment: wrench.moment,
             velocity: row.tip_velocity,
             angular_velocity: row.angular_velocity,
             wrench,
@@ -223,7 +221,7 @@ pub fn run_hil_step_until(
         let m = facility.tick(&command);
         let (row, stop) = step.observe(k, &m, Some(facility.physical_contact()));
         let time = row.time;
-        push_record(&mut trace, &row, &plan.sensor.orientation, estimates);
+        push_record(&mut trace, plan, &row, estimates);
         if keep_rows {
             rows.push(row);
         }

@@ -464,4 +464,3 @@ fn the_hil_loop_without_delay_reproduces_the_reference_on_shapes() {
     let (trace, _) = run_reference(&s.resolve().unwrap(), false);
     assert!(trace.friction_work > 0.0, "friction worked");
 }
-

@@ -190,7 +190,8 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
 
     Writes a run folder per compensator (data; its figures with --run-figures, or later with
     `hilcontact plot DIR/<compensator>`), comparison.md and comparison.csv (CoV, CoF, peak
-    force, rebound speed per collision; status and identification errors per compensator)
+    force, rebound speed, rebound velocity and direction errors, normal and tangential
+    impulses and their errors per collision; status and identification errors per compensator)
     and the compare_*.png figures. With --delays, one such folder per delay (DIR/10ms/, …).
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn

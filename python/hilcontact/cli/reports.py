@@ -51,6 +51,10 @@ def _report(console: Console, result: Run, folder: Path) -> None:
         )
     if table.row_count:
         console.print(table)
+        from ..plots import shows_episodes
+
+        if shows_episodes(result):  # not for a 1-D frictionless run: nothing but J_n to add
+            console.print(_episode_table(result))
         if not result.collision_table()["complete"].all():
             console.print("*: still under way at the end of the run (no rebound, not compared)")
     else:
@@ -59,7 +63,7 @@ def _report(console: Console, result: Run, folder: Path) -> None:
         console.print("status: [green]ok[/green]")
     elif result.status == "unfaithful":
         violations = result.metrics.get("violations") or []
-        console.print("[bold yellow]status: unfaithful[/bold yellow] (tolerances in the scenario's [metrics])")
+        console.print("[bold yellow]status: unfaithful[/bold yellow] (tolerances in the scenario's \\[metrics])")
         for line in violations:
             console.print(f"  [yellow]{escape(str(line))}[/yellow]", soft_wrap=True)
     else:
@@ -71,6 +75,28 @@ def _report(console: Console, result: Run, folder: Path) -> None:
         )
     files = ", ".join(sorted(p.name for p in folder.iterdir()))
     console.print(f"saved to {escape(str(folder))}/ ({escape(files)})", soft_wrap=True)
+
+
+def _episode_table(result: Run) -> Table:
+    """The contact of each episode (the collision table's episode columns, docs/model.md
+    "Metrics"): normal and tangential impulse, their errors, the rebound direction and
+    angular velocity errors, the peak moment about the sensor origin."""
+    table = Table(title="contact episodes (errors against the ideal reference)", pad_edge=False)
+    for header in ("#", "J_n\n(N·s)", "J_t\n(N·s)", "J_n err\n(%)", "J_t err\n(%)", "dir err\n(°)",
+                   "ω err\n(%)", "peak M\n(N·m)"):
+        table.add_column(header, justify="right", no_wrap=True)
+    for number, row in result.collision_table().iterrows():
+        table.add_row(
+            str(number) if row["complete"] else f"{number}*",
+            _number(row["normal_impulse"], ".4g"),
+            _number(row["tangential_impulse"], ".4g"),
+            _number(row["normal_impulse_error"], ".2f", 1e2),
+            _number(row["tangential_impulse_error"], ".2f", 1e2),
+            _number(row["direction_error"], ".2f"),
+            _number(row["angular_velocity_error"], ".1f", 1e2),
+            _number(row["peak_moment"], ".3g"),
+        )
+    return table
 
 
 def _report_mcap(console: Console, recorded: dict[str, Any] | None) -> None:
@@ -106,7 +132,7 @@ def _report_comparison(console: Console, result: Comparison, folder: Path) -> No
     table.add_column("status", min_width=10)
     # two CoVs a line, wrapped between numbers only
     table.add_column("CoV of\n#1, #2 …", min_width=max(longest, 4), max_width=max(2 * longest + 1, 9))
-    for header in ("worst\nCoF", "v err\n%", "k err\n%", "c err\nN·s/mm"):
+    for header in ("worst\nCoF", "v err\n%", "dir\nerr °", "J_t\nerr %", "k err\n%", "c err\nN·s/mm"):
         table.add_column(header, justify="right", no_wrap=True)
     standings = {standing.kind: standing for standing in result.ranking}
     for kind, row in summary.iterrows():
@@ -127,12 +153,15 @@ def _report_comparison(console: Console, result: Comparison, folder: Path) -> No
             " ".join(covs[kind]) or "-",
             _number(row["worst_cof"], ".3f"),
             _number(row["worst_velocity_error_pct"], ".1f"),
+            _number(row["worst_direction_error_deg"], ".1f"),
+            _number(row["worst_tangential_impulse_error_pct"], ".1f"),
             _number(row["stiffness_error_pct"], ".3g"),
             _number(row["damping_error_Ns_mm"], ".3g"),
         )
     console.print(table)
     console.print(
-        "CoV, CoF: rebound speed and peak force / ideal reference (1 is perfect); "
+        "CoV, CoF: rebound speed and peak force / ideal reference (1 is perfect); v err, dir err: "
+        "rebound velocity vector and direction errors; J_t err: tangential impulse error; "
         "ranked below (docs/choosing.md); mean CoV and worst |CoV-1| in comparison.md",
         soft_wrap=True,
     )

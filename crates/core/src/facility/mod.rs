@@ -51,6 +51,9 @@ pub struct PhysicalContact {
     pub force: Vector3<f64>,
     /// Its friction (tangential) part, N.
     pub friction_force: Vector3<f64>,
+    /// The contact's moment on the frame about the sensor origin, `t`, N·m, where the engine
+    /// knows it (the shapes' points spread it); `None`: the force's at the rod tip.
+    pub moment: Option<Vector3<f64>>,
 }
 
 /// What stands in for the hardware: a robot that follows the commanded relative motion, the
@@ -83,6 +86,7 @@ pub trait Facility: Send {
         PhysicalContact {
             force: self.contact_force(),
             friction_force: self.friction_force(),
+            moment: None,
         }
     }
 }

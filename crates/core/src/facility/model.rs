@@ -245,6 +245,14 @@ impl Facility for FacilityModel {
     fn friction_force(&self) -> Vector3<f64> {
         self.contact.friction_force
     }
+
+    fn physical_contact(&self) -> super::PhysicalContact {
+        super::PhysicalContact {
+            force: self.contact.force,
+            friction_force: self.contact.friction_force,
+            moment: Some(self.contact.wrench.moment),
+        }
+    }
 }
 
 /// The physical contact for the robot's actual motion, with the facility's added damping
