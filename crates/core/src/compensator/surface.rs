@@ -44,6 +44,9 @@ pub const LEAN_SIGMAS: f64 = 5.0;
 /// Fewest samples for a lean to count (a noisy contact's first samples can fit a spurious
 /// lean with a small stated error).
 pub const LEAN_SAMPLES: usize = 40;
+/// Fewest samples sliding across the mean force (faster than [`SLIDE_SPEED`]) for a lean to
+/// count: friction leans the force only while the tip slides.
+pub const LEAN_SLIDING: usize = 10;
 /// Fewest samples before a contact's own normal is fitted.
 pub const MIN_FIT_SAMPLES: usize = 20;
 /// Largest standard error of a fitted normal for the compensators to use it, rad (0.5°).
@@ -79,6 +82,8 @@ pub struct SurfaceFit {
     normal_std: f64,
     /// Σ F_n·(F_t·ŝ) and Σ F_n² over the sliding samples, with the normal of their tick.
     friction_sums: (f64, f64),
+    /// Samples whose robot tip moved across the mean force faster than [`SLIDE_SPEED`].
+    sliding: usize,
 }
 
 impl Default for SurfaceFit {
@@ -91,6 +96,7 @@ impl Default for SurfaceFit {
             normal: Vector3::zeros(),
             normal_std: f64::INFINITY,
             friction_sums: (0.0, 0.0),
+            sliding: 0,
         }
     }
 }
@@ -131,6 +137,10 @@ impl SurfaceFit {
         self.moments.ger(1.0, &z, &z, 1.0);
         self.samples += 1;
         self.force_sum += force;
+        let mean = self.mean_direction();
+        if (velocity - mean * velocity.dot(&mean)).norm() > SLIDE_SPEED {
+            self.sliding += 1;
+        }
     }
 
     /// Adds a sample to the friction sums with normal `normal` (into the wall): if the tip
@@ -164,27 +174,45 @@ impl SurfaceFit {
     }
 
     /// The least-squares residual (N²) of the normal law along the trial normal `n`, and the
-    /// variance of `F·n` about its mean (N²).
+    /// variance of `F·n` about its mean (N², summed over the samples). Computed from the
+    /// centred moments with the regressors scaled to unit variance (the raw moments' constant
+    /// column made the residual, a millionth of the force's variance, rounding noise).
     pub fn residual(&self, n: &Vector3<f64>) -> (f64, f64) {
-        // G_ij = a_iᵀ M a_j, a_0: F·n, a_1: q·n, a_2: v·n, a_3: 1
+        let count = self.samples as f64;
+        if self.samples < 4 {
+            return (0.0, 0.0);
+        }
         let block = |i: usize, j: usize| -> f64 {
             let m: Matrix3<f64> = self.moments.fixed_view::<3, 3>(3 * i, 3 * j).into_owned();
             n.dot(&(m * n))
         };
-        let with_one = |i: usize| -> f64 {
+        let sum = |i: usize| -> f64 {
             let m: Vector3<f64> = self.moments.fixed_view::<3, 1>(3 * i, 9).into_owned();
             n.dot(&m)
         };
-        let g00 = block(0, 0);
-        let g = Vector3::new(block(0, 1), block(0, 2), with_one(0));
-        let (g11, g12, g22) = (block(1, 1), block(1, 2), block(2, 2));
-        let (g13, g23, g33) = (with_one(1), with_one(2), self.moments[(9, 9)]);
-        let gr = Matrix3::new(g11, g12, g13, g12, g22, g23, g13, g23, g33);
-        let variance = g00 - g[2] * g[2] / g33.max(1.0);
-        let explained = gr
-            .try_inverse()
-            .map_or(g[2] * g[2] / g33.max(1.0), |inv| g.dot(&(inv * g)));
-        ((g00 - explained).max(0.0), variance.max(0.0))
+        // centred sums of products of y = F·n, x1 = q·n, x2 = v·n
+        let (sy, s1, s2) = (sum(0), sum(1), sum(2));
+        let c = |a: f64, sa: f64, sb: f64| a - sa * sb / count;
+        let cyy = c(block(0, 0), sy, sy).max(0.0);
+        let cy1 = c(block(0, 1), sy, s1);
+        let cy2 = c(block(0, 2), sy, s2);
+        let c11 = c(block(1, 1), s1, s1).max(0.0);
+        let c12 = c(block(1, 2), s1, s2);
+        let c22 = c(block(2, 2), s2, s2).max(0.0);
+        if c11 <= 0.0 || c22 <= 0.0 {
+            return (cyy, cyy);
+        }
+        // scaled: r_i = c_yi/√c_ii, correlation ρ = c12/√(c11 c22)
+        let (d1, d2) = (c11.sqrt(), c22.sqrt());
+        let (r1, r2) = (cy1 / d1, cy2 / d2);
+        let rho = (c12 / (d1 * d2)).clamp(-1.0, 1.0);
+        let det = 1.0 - rho * rho;
+        let explained = if det > 1e-12 {
+            (r1 * r1 - 2.0 * rho * r1 * r2 + r2 * r2) / det
+        } else {
+            r1 * r1
+        };
+        ((cyy - explained).max(0.0), cyy)
     }
 
     /// Relative residual of the trial normal (0 to 1).
@@ -329,7 +357,8 @@ impl SurfaceFit {
     /// (residual larger by [`LEAN_SIGMAS`]² times the residual per degree of freedom): friction
     /// at work.
     pub fn leans(&self) -> bool {
-        if !self.is_determined() || self.samples < LEAN_SAMPLES {
+        // friction needs sliding: without it a lean is the noise's
+        if !self.is_determined() || self.samples < LEAN_SAMPLES || self.sliding < LEAN_SLIDING {
             return false;
         }
         let mean = self.mean_direction();
