@@ -533,7 +533,7 @@ def identify(recording: Recording, forgetting: float | None = OFFLINE_FORGETTING
     """Per tick (time, in_contact, stiffness/damping estimate and std) and per collision
     (index, start, end, samples, updates, stiffness, stiffness_std (N/m), damping,
     damping_std (N s/m), normal_x.. (unit, ``t``), normal_std_deg, point_x.. (m, ``t``),
-    offset_std (m), peak_force (N))."""
+    offset_std (m), peak_force (N), frictional, friction (μ̂), friction_std, sliding_samples)."""
     scenario = identification_scenario(recording.scenario, forgetting)
     fresh = _fresh_rows(recording)
     if fresh is None:
@@ -573,6 +573,9 @@ def identify(recording: Recording, forgetting: float | None = OFFLINE_FORGETTING
         row.update({f"point_{a}": c["point"][i] for i, a in enumerate(_AXES)})
         row["offset_std"] = c["offset_std"]
         row["peak_force"] = c["peak_force"]
+        for k in ("frictional", "friction", "friction_std", "sliding_samples"):
+            if k in c:
+                row[k] = c[k]
         rows.append(row)
     return ticks, pd.DataFrame(rows)
 

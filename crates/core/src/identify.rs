@@ -30,6 +30,7 @@
 
 use nalgebra::{Matrix2, UnitQuaternion, Vector2, Vector3};
 
+use crate::compensator::surface::{SurfaceFit, SLIDE_SPEED};
 use crate::compensator::{
     CompensatorConfig, CompensatorContext, ContactEstimator, DelayMode, ModelParams,
 };
@@ -178,6 +179,18 @@ pub struct CollisionIdentification {
     pub offset_std: f64,
     /// Peak measured force magnitude, N.
     pub peak_force: f64,
+    /// Whether the surface is frictional: its fitted normal leans from the mean force by more
+    /// than `atan FRICTION_MIN` ([`crate::compensator::surface`]). Then `normal` is the fitted
+    /// one, and `stiffness`, `damping` the least squares of the normal law along it over the
+    /// collision's samples (the filter's first updates, before the normal was known, lean).
+    pub frictional: bool,
+    /// Identified friction coefficient μ̂ (0 when frictionless or nothing slid): the least
+    /// squares of `F_t·ŝ = μ·F_n` over the samples sliding faster than `SLIDE_SPEED`.
+    pub friction: f64,
+    /// Its standard error.
+    pub friction_std: f64,
+    /// Number of sliding samples μ̂ rests on.
+    pub sliding_samples: usize,
 }
 
 /// What [`identify`] gives: per tick and per collision.
@@ -231,39 +244,19 @@ pub fn identify(
     let mut updates: Vec<u32> = Vec::new();
     // each collision's filter updates (tick, update), to state the uncertainty
     let mut logs: Vec<Vec<(usize, Update)>> = Vec::new();
-    let sample = |k: usize| -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
-        // the front end's identification sample at tick k (ContactEstimator::step)
-        let f = |k: usize| recording.input(k, sensor_to_t).measured.force;
-        let j = k.saturating_sub(lag);
-        let (p, v) = (
-            &recording.actual_tip_position,
-            &recording.actual_tip_velocity,
-        );
-        let force = match params.delay_mode {
-            DelayMode::Align => f(k),
-            DelayMode::Lead => {
-                f(k) + (f(k) - f(k.saturating_sub(1))) * (context.sensor_delay() / context.period)
-            }
-        };
-        (
-            force,
-            Vector3::new(p[0][j], p[1][j], p[2][j]),
-            Vector3::new(v[0][j], v[1][j], v[2][j]),
-        )
-    };
+    // each collision's surface fit at its last contact tick
+    let mut fits: Vec<SurfaceFit> = Vec::new();
     let mut previous = false;
     for k in 0..n {
         let before = estimator.filter.t;
         let view = estimator.step(&recording.input(k, sensor_to_t));
         if estimator.filter.t != before && k > 0 {
-            if let Some(log) = logs.last_mut() {
-                let ((f1, p1, v1), (f0, p0, v0)) = (sample(k), sample(k - 1));
-                let e = f1.normalize();
+            if let (Some(log), Some((h, z))) = (logs.last_mut(), estimator.last_update()) {
                 log.push((
                     k,
                     Update {
-                        h: Vector2::new((p1 - p0).dot(&e), (v1 - v0).dot(&e)),
-                        z: (f1 - f0).dot(&e),
+                        h,
+                        z,
                         gain: estimator.filter.k,
                     },
                 ));
@@ -274,12 +267,16 @@ pub fn identify(
             estimator.filter.reset();
             spans.push((k, k));
             updates.push(0);
+            fits.push(SurfaceFit::default());
             logs.push(Vec::new());
         }
         if view.in_contact {
             if let (Some(span), Some(u)) = (spans.last_mut(), updates.last_mut()) {
                 span.1 = k;
                 *u = estimator.filter.t;
+            }
+            if let Some(fit) = fits.last_mut() {
+                *fit = *estimator.surface().0;
             }
         }
         previous = view.in_contact;
@@ -337,13 +334,32 @@ pub fn identify(
             };
             let count = (last - first + 1) as f64;
             let total: Vector3<f64> = (first..=last).map(force).sum();
-            let e = total.normalize();
+            let fit = &fits[i];
+            let frictional = fit.leans();
+            let (stiffness, damping, sk, sc) = match (frictional, fit.law(&fit.normal().0)) {
+                (true, Some(((k, c), (sk, sc)))) => (k, c, sk, sc),
+                _ => (stiffness, damping, sk, sc),
+            };
+            let e = if frictional {
+                fit.normal().0
+            } else {
+                total.normalize()
+            };
+            let (friction, friction_std, sliding_samples) = if frictional {
+                friction_fit(&e, (first..=last).map(|k| (force(k), kinematics(k).1)))
+            } else {
+                (0.0, 0.0, 0)
+            };
             let peak_force = (first..=last).map(|k| force(k).norm()).fold(0.0, f64::max);
             // angles of the samples' force to ē
             let angle2: f64 = (first..=last)
                 .map(|k| force(k).normalize().dot(&e).clamp(-1.0, 1.0).acos().powi(2))
                 .sum();
-            let normal_std = (angle2 / count).sqrt() / count.sqrt();
+            let normal_std = if frictional {
+                fit.normal().1
+            } else {
+                (angle2 / count).sqrt() / count.sqrt()
+            };
             // the plane's offset along ē from each sample
             let offset_of = |k: usize| {
                 let (p, v) = kinematics(k);
@@ -379,6 +395,10 @@ pub fn identify(
                 point: p_first - e * (p_first.dot(&e) - offset),
                 offset_std,
                 peak_force,
+                frictional,
+                friction,
+                friction_std,
+                sliding_samples,
             }
         })
         .collect();
@@ -398,6 +418,35 @@ pub fn identify(
         collisions,
         updates: made,
     })
+}
+
+/// The friction coefficient of a collision's samples `(F, v)` (force on the frame N, robot tip
+/// velocity m/s) against the normal `n` (into the wall): least squares of `F_t·ŝ = μ·F_n` over
+/// the samples that slide faster than [`SLIDE_SPEED`] and push; returns μ̂, its standard error
+/// (from the residuals) and the number of sliding samples.
+pub fn friction_fit(
+    n: &Vector3<f64>,
+    samples: impl Iterator<Item = (Vector3<f64>, Vector3<f64>)>,
+) -> (f64, f64, usize) {
+    let pairs: Vec<(f64, f64)> = samples
+        .filter_map(|(f, v)| {
+            let f_n = f.dot(n);
+            let v_t = v - n * v.dot(n);
+            let speed = v_t.norm();
+            (f_n > 0.0 && speed > SLIDE_SPEED).then(|| (f_n, (f - n * f_n).dot(&(v_t / speed))))
+        })
+        .collect();
+    let den: f64 = pairs.iter().map(|(f_n, _)| f_n * f_n).sum();
+    if pairs.len() < 2 || den <= 0.0 {
+        return (0.0, f64::INFINITY, pairs.len());
+    }
+    let mu = pairs.iter().map(|(f_n, f_t)| f_n * f_t).sum::<f64>() / den;
+    let residual: f64 = pairs
+        .iter()
+        .map(|(f_n, f_t)| (f_t - mu * f_n).powi(2))
+        .sum();
+    let sigma2 = residual / (pairs.len() - 1) as f64;
+    (mu.max(0.0), (sigma2 / den).sqrt(), pairs.len())
 }
 
 /// [`identify`] with a plan's identification parameters ([`model_params`]), context and

@@ -129,3 +129,32 @@ fn no_facility_tick_allocates() {
     assert_eq!(COUNT.with(Cell::get), 0, "allocated while ticking");
     assert!(contact > 0.0, "the run touches a wall");
 }
+
+#[test]
+fn no_compensator_step_allocates_on_a_frictional_oblique_contact() {
+    // oblique-6dof with friction and noise: the surface fit, the friction sums and the
+    // friction booked by the energy observers all run
+    let mut s = common::preset("oblique-6dof");
+    s.contact.friction.kinetic_coefficient = 0.2;
+    s.facility.sensor_noise = 0.2;
+    s.facility.sensor_delay = 0.005;
+    s.compensator = CompensatorConfig::from_kind("pida").unwrap();
+    let plan = s.resolve().unwrap();
+    let inputs = compensator_inputs(&plan);
+    let context = compensator_context(&plan);
+    for info in REGISTRY {
+        let mut compensator = (info.default)().build(&context);
+        COUNT.with(|c| c.set(0));
+        ARMED.with(|a| a.set(true));
+        for input in &inputs {
+            std::hint::black_box(compensator.step(input));
+        }
+        ARMED.with(|a| a.set(false));
+        assert_eq!(
+            COUNT.with(Cell::get),
+            0,
+            "{}: allocated while stepping a frictional contact",
+            info.kind
+        );
+    }
+}

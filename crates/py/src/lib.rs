@@ -771,7 +771,8 @@ fn replay<'py>(
 /// and attitude). Returns `{"timeseries": {column: ndarray}, "collisions": [dict]}`, each
 /// collision with index, start, end (s), samples, updates, stiffness, stiffness_std (N/m),
 /// damping, damping_std (N s/m), normal (unit, `t`), normal_std (rad), point (`t`, m),
-/// offset_std (m), peak_force (N).
+/// offset_std (m), peak_force (N), frictional (bool), friction (μ̂), friction_std,
+/// sliding_samples.
 #[pyfunction]
 fn identify<'py>(
     py: Python<'py>,
@@ -796,6 +797,9 @@ fn identify<'py>(
                 "normal": [c.normal.x, c.normal.y, c.normal.z], "normal_std": c.normal_std,
                 "point": [c.point.x, c.point.y, c.point.z], "offset_std": c.offset_std,
                 "peak_force": c.peak_force,
+                "frictional": c.frictional, "friction": c.friction,
+                "friction_std": if c.friction_std.is_finite() { c.friction_std } else { f64::NAN },
+                "sliding_samples": c.sliding_samples,
             })
         })
         .collect::<Vec<_>>();

@@ -257,17 +257,22 @@ def _cell_grid(console: Console, cells: Any, delays: list[float], criterion: str
 
 def _report_identification(console: Console, log: str, collisions: Any) -> None:
     """`hilcontact identify`'s table: per collision, stiffness (N/mm) and damping (N s/mm) with
-    their uncertainty, the wall's normal (± deg) and point (mm, ± mm)."""
+    their uncertainty, the wall's normal (± deg) and point (mm, ± mm), and the friction
+    coefficient μ (± its standard error; '-' on a frictionless surface)."""
     table = Table(title=f"{log}: {len(collisions)} collision(s)")
-    for name in ("#", "start s", "k N/mm", "c N·s/mm", "normal", "±deg", "point mm", "±mm"):
+    for name in ("#", "start s", "k N/mm", "c N·s/mm", "normal", "±deg", "point mm", "±mm", "μ"):
         table.add_column(name, justify="right")
     for _, c in collisions.iterrows():
+        frictional = bool(c.get("frictional", False))
+        mu = (f"{c['friction']:.3f} ± {c['friction_std']:.3f}"
+              if frictional and c.get("sliding_samples", 0) >= 2 else ("slid too little" if frictional else "-"))
         table.add_row(
             str(int(c["index"])), f"{c['start']:.3f}",
             f"{c['stiffness'] / 1e3:.3f} ± {c['stiffness_std'] / 1e3:.3f}",
             f"{c['damping'] / 1e3:.4f} ± {c['damping_std'] / 1e3:.4f}",
             f"({c['normal_x']:.4f}, {c['normal_y']:.4f}, {c['normal_z']:.4f})", f"{c['normal_std_deg']:.3g}",
             f"({c['point_x'] * 1e3:.2f}, {c['point_y'] * 1e3:.2f}, {c['point_z'] * 1e3:.2f})", f"{c['offset_std'] * 1e3:.3g}",
+            mu,
         )
     console.print(table)
 

@@ -25,6 +25,7 @@ use nalgebra::{Matrix2, Vector2, Vector3};
 use super::akf::SageHusaFilter;
 use super::detect::ContactDetector;
 use super::params::{DelayMode, ModelParams};
+use super::surface::{SurfaceFit, MIN_FIT_SAMPLES};
 use super::{CompensatorContext, CompensatorInput};
 use crate::delay_line::DelayLine;
 
@@ -44,7 +45,34 @@ pub struct ContactView {
     pub stiffness: f64,
     /// Identified damping ĉ, N·s/m.
     pub damping: f64,
+    /// Contact normal (into the wall, unit): the identified one on a frictional surface
+    /// ([`super::surface`]), else `direction`.
+    pub normal: Vector3<f64>,
+    /// Whether the surface is frictional (its identified normal leans from the force): the
+    /// compensators then work along `normal` and scale the whole force (friction follows the
+    /// normal force).
+    pub frictional: bool,
+    /// Identified friction coefficient μ̂ (0 on a frictionless surface or before a sliding
+    /// sample).
+    pub friction: f64,
 }
+
+/// A surface met before: its identified normal and friction, for the next contact's first
+/// ticks (before the contact's own fit is determined).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct KnownSurface {
+    /// Normal (into the wall, unit); zero: an empty slot.
+    pub normal: Vector3<f64>,
+    /// Whether it is frictional.
+    pub frictional: bool,
+    /// Friction coefficient μ̂.
+    pub friction: f64,
+    /// `Σ F_n²` of the sliding samples μ̂ rests on, N².
+    pub weight: f64,
+}
+
+/// How many surfaces the estimator remembers.
+pub const KNOWN_SURFACES: usize = 4;
 
 /// The robot kinematics and measured force of one identification sample.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -82,6 +110,14 @@ pub struct ContactEstimator {
     previous_sample: Option<Sample>,
     /// The adaptive Kalman filter.
     pub filter: SageHusaFilter,
+    /// The current contact's surface fit (normal, friction).
+    fit: SurfaceFit,
+    /// Surfaces met before.
+    surfaces: [KnownSurface; KNOWN_SURFACES],
+    /// The surface of the current contact (as the compensators use it).
+    surface: KnownSurface,
+    /// The last filter update's row `H` and measurement `Z`.
+    last_update: Option<(Vector2<f64>, f64)>,
 }
 
 impl ContactEstimator {
@@ -118,7 +154,89 @@ impl ContactEstimator {
             held: 0,
             previous_sample: None,
             filter,
+            fit: SurfaceFit::default(),
+            surfaces: [KnownSurface::default(); KNOWN_SURFACES],
+            surface: KnownSurface::default(),
+            last_update: None,
         }
+    }
+
+    /// The current (or last) contact's surface: its normal fit ([`SurfaceFit`]) and the
+    /// surface the compensators use (normal, friction).
+    pub fn surface(&self) -> (&SurfaceFit, &KnownSurface) {
+        (&self.fit, &self.surface)
+    }
+
+    /// The surfaces remembered.
+    pub fn known_surfaces(&self) -> &[KnownSurface; KNOWN_SURFACES] {
+        &self.surfaces
+    }
+
+    /// The row `H = [Δd, Δḋ]` and measurement `Z = ΔF` of the last filter update (along the
+    /// normal in use).
+    pub fn last_update(&self) -> Option<(Vector2<f64>, f64)> {
+        self.last_update
+    }
+
+    /// A contact starts: the remembered surface its first force points into (within the
+    /// friction cone and 15°), else none.
+    fn start_contact(&mut self, force: &Vector3<f64>) {
+        self.fit.reset();
+        let e = force.normalize();
+        self.surface = self
+            .surfaces
+            .iter()
+            .filter(|s| s.normal != Vector3::zeros())
+            .filter(|s| {
+                let cone = s.friction.atan() + 15f64.to_radians();
+                s.normal.dot(&e) >= cone.cos()
+            })
+            .max_by(|a, b| a.normal.dot(&e).total_cmp(&b.normal.dot(&e)))
+            .copied()
+            .unwrap_or_default();
+    }
+
+    /// A contact sample: the fit, and the surface in use once the fit is determined.
+    fn contact_sample(&mut self, sample: &Sample) {
+        self.fit
+            .add(&sample.force, &sample.position, &sample.velocity);
+        if self.fit.samples() >= MIN_FIT_SAMPLES {
+            self.fit.fit(2);
+            if self.fit.is_determined() {
+                self.surface.frictional = self.fit.leans();
+                self.surface.normal = self.fit.normal().0;
+            }
+        }
+        if self.surface.frictional {
+            self.fit
+                .add_friction(&sample.force, &sample.velocity, &self.surface.normal);
+            let (mu, weight) = self.fit.friction();
+            if weight > 0.0 {
+                self.surface.friction = mu;
+                self.surface.weight = weight;
+            }
+        }
+    }
+
+    /// A contact ended: its surface is remembered (merged with the one it matches).
+    fn end_contact(&mut self) {
+        if !self.fit.is_determined() {
+            return;
+        }
+        let s = self.surface;
+        let slot = self
+            .surfaces
+            .iter()
+            .position(|k| {
+                k.normal != Vector3::zeros() && k.normal.dot(&s.normal) > 10f64.to_radians().cos()
+            })
+            .or_else(|| {
+                self.surfaces
+                    .iter()
+                    .position(|k| k.normal == Vector3::zeros())
+            })
+            .unwrap_or(KNOWN_SURFACES - 1);
+        self.surfaces[slot] = s;
     }
 
     /// Forgets everything but the parameters.
@@ -131,6 +249,10 @@ impl ContactEstimator {
         self.previous_sample = None;
         self.detector.reset();
         self.filter.reset();
+        self.fit.reset();
+        self.surfaces = [KnownSurface::default(); KNOWN_SURFACES];
+        self.surface = KnownSurface::default();
+        self.last_update = None;
     }
 
     /// One tick: delay compensation, identification, contact direction. Allocation-free.
@@ -178,22 +300,37 @@ impl ContactEstimator {
                     velocity,
                     in_contact: self.detector.update(&force),
                 };
+                let was_in_contact = self.previous_sample.is_some_and(|s| s.in_contact);
+                match (was_in_contact, sample.in_contact) {
+                    (false, true) => self.start_contact(&sample.force),
+                    (true, false) => self.end_contact(),
+                    _ => {}
+                }
+                if sample.in_contact {
+                    self.contact_sample(&sample);
+                }
                 if let (true, Some(prev)) = (
                     sample.in_contact,
                     self.previous_sample.filter(|s| s.in_contact),
                 ) {
-                    // (7) e = F/|F|; (8)-(10) increments along e. An increment over a gap of
-                    // g ticks (records held between) is weighted 1/g (h and z scaled by
-                    // 1/√g): the record's own time is known to a tick only, so that the fit
-                    // over many gaps telescopes as over every tick (g = 1: unchanged)
-                    let e = sample.force.normalize();
+                    // (7) e = F/|F|, or the identified normal of a frictional surface;
+                    // (8)-(10) increments along it. An increment over a gap of g ticks
+                    // (records held between) is weighted 1/g (h and z scaled by 1/√g): the
+                    // record's own time is known to a tick only, so that the fit over many
+                    // gaps telescopes as over every tick (g = 1: unchanged)
+                    let e = if self.surface.frictional {
+                        self.surface.normal
+                    } else {
+                        sample.force.normalize()
+                    };
                     let w = (gap as f64).sqrt().recip();
                     let h = Vector2::new(
                         (sample.position - prev.position).dot(&e),
                         (sample.velocity - prev.velocity).dot(&e),
                     ) * w;
-                    self.filter
-                        .update(&h, (sample.force - prev.force).dot(&e) * w);
+                    let z = (sample.force - prev.force).dot(&e) * w;
+                    self.filter.update(&h, z);
+                    self.last_update = Some((h, z));
                 }
                 self.previous_sample = Some(sample);
                 sample
@@ -203,6 +340,25 @@ impl ContactEstimator {
 
         let (force, moment) = match self.mode {
             DelayMode::Lead => (sample.force, lead(m_mea, self.previous_measured.1)),
+            DelayMode::Align if sample.in_contact && self.surface.frictional => {
+                // along the identified normal; the friction follows the normal force, so the
+                // whole force is scaled
+                let n = self.surface.normal;
+                let (p_then, v_then) = self.kinematics.delayed(self.delay_ticks);
+                let increment =
+                    stiffness * (p_act - p_then).dot(&n) + damping * (v_act - v_then).dot(&n);
+                let f_n = f_mea.dot(&n);
+                let f_act = if f_n > 0.0 {
+                    f_mea * ((f_n + increment).max(0.0) / f_n)
+                } else {
+                    f_mea
+                };
+                let s = &self.sensor_origin;
+                (
+                    f_act,
+                    m_mea + (p_act - s).cross(&f_act) - (p_then - s).cross(&f_mea),
+                )
+            }
             DelayMode::Align if sample.in_contact => {
                 // predict the present force from the model and the robot's motion since
                 let e = f_mea.normalize();
@@ -221,17 +377,30 @@ impl ContactEstimator {
         };
         // F_act against the detector's present level (without noise, the fixed threshold)
         let in_contact = sample.in_contact && force.norm() > self.detector.off_threshold();
+        let direction = if in_contact {
+            force.normalize()
+        } else {
+            Vector3::zeros()
+        };
+        let frictional = in_contact && self.surface.frictional;
         ContactView {
             in_contact,
-            direction: if in_contact {
-                force.normalize()
-            } else {
-                Vector3::zeros()
-            },
+            direction,
             force,
             moment,
             stiffness,
             damping,
+            normal: if frictional {
+                self.surface.normal
+            } else {
+                direction
+            },
+            frictional,
+            friction: if frictional {
+                self.surface.friction
+            } else {
+                0.0
+            },
         }
     }
 }

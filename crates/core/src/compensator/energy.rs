@@ -92,6 +92,15 @@ impl ExchangeWindow {
         self.open
     }
 
+    /// Restates the open window's energy (J) and its peak so far (J), after the exchange was
+    /// re-observed ([`EnergyObserver::rebook`]).
+    pub fn restate(&mut self, energy: f64, peak: f64) {
+        if self.open {
+            self.energy = energy;
+            self.peak = peak;
+        }
+    }
+
     /// One tick: `work` (J) over the step that ends now (by the force held since the last
     /// tick: zero if the window was closed, since nothing was applied), and whether this tick
     /// is in the exchange (in contact, or its force above the quiet level). Returns whether the
@@ -124,6 +133,8 @@ struct Tick {
     force: Vector3<f64>,
     direction: Vector3<f64>,
     damping: f64,
+    /// Identified friction coefficient μ̂ (0: frictionless; `direction` is then the normal).
+    friction: f64,
     velocity: Vector3<f64>,
     alpha_force: Vector3<f64>,
 }
@@ -137,13 +148,52 @@ pub struct EnergyObserver {
     previous: Option<Tick>,
     /// The exchange window (`work`).
     window: ExchangeWindow,
+    /// The open window's ticks and the velocity that closed each one's step (capacity
+    /// [`HISTORY`], allocated once: a window longer than that is not re-observed).
+    history: Vec<(Tick, Vector3<f64>)>,
+    /// The window's energy when it opened (the carried deficit), J.
+    opening: f64,
+    /// Whether the open window's friction was booked ([`EnergyObserver::rebook`]).
+    booked: bool,
 }
+
+/// Ticks of an exchange the observer keeps to re-observe it (2 s at 1 kHz).
+pub const HISTORY: usize = 2048;
 
 /// Damping force `ĉ·(v·e)·e` of the identified contact, N. A negative estimate (noise can
 /// produce one) counts as zero here: it would let the observer credit energy the contact never
 /// gives, and the controller would then allow the energy to grow.
 fn damping_force(damping: f64, velocity: &Vector3<f64>, direction: &Vector3<f64>) -> Vector3<f64> {
     direction * (damping.max(0.0) * velocity.dot(direction))
+}
+
+/// Speed below which the booked friction fades (regularised like the Coulomb law), m/s.
+pub const FRICTION_SPEED: f64 = 1e-3;
+
+/// The friction a contact of coefficient `friction` should exert on the frame, N:
+/// `μ̂·F_n·v_t/√(|v_t|² + v_ε²)` with `F_n = max(F·n, 0)` and `v_t` the tangential part of
+/// the virtual tip's velocity (the frame feels friction along the rod's sliding). Its power
+/// `μ̂·F_n·|v_t|²/√(…) ≥ 0` is the energy the contact dissipates by friction: booked as real.
+pub fn friction_force(
+    friction: f64,
+    force: &Vector3<f64>,
+    velocity: &Vector3<f64>,
+    normal: &Vector3<f64>,
+) -> Vector3<f64> {
+    let f_n = force.dot(normal).max(0.0);
+    let v_t = velocity - normal * velocity.dot(normal);
+    let speed2 = v_t.norm_squared();
+    v_t * (friction.max(0.0) * f_n / (speed2 + FRICTION_SPEED * FRICTION_SPEED).sqrt())
+}
+
+/// The elastic force of a tick: its force less the booked damping and friction, N.
+fn elastic_force(t: &Tick) -> Vector3<f64> {
+    let f = t.force - damping_force(t.damping, &t.velocity, &t.direction);
+    if t.friction > 0.0 {
+        f - friction_force(t.friction, &t.force, &t.velocity, &t.direction)
+    } else {
+        f
+    }
 }
 
 impl EnergyObserver {
@@ -155,7 +205,50 @@ impl EnergyObserver {
             energy: 0.0,
             previous: None,
             window: ExchangeWindow::default(),
+            history: Vec::with_capacity(HISTORY),
+            opening: 0.0,
+            booked: false,
         }
+    }
+
+    /// Whether the open window's friction is already booked.
+    pub fn is_booked(&self) -> bool {
+        self.booked
+    }
+
+    /// Re-observes the open window with the surface identified during it: the friction
+    /// coefficient `friction` and normal `normal` (into the wall) are booked at every tick
+    /// of the window so far (before the contact's normal was determined the friction could
+    /// not be told from the elastic force, and its dissipation hid the delay's energy). The
+    /// window's energy is summed again from its opening; the controller's forces stay as they
+    /// were. Once per window; allocation-free.
+    pub fn rebook(&mut self, friction: f64, normal: &Vector3<f64>) {
+        if self.booked || self.mode != ObserverMode::Work || !self.window.is_open() {
+            return;
+        }
+        self.booked = true;
+        if self.history.len() >= HISTORY {
+            return; // too long to re-observe: booked from now on only
+        }
+        let book = |t: &mut Tick| {
+            if t.force != Vector3::zeros() {
+                t.friction = friction;
+                t.direction = *normal;
+            }
+        };
+        let (mut energy, mut peak) = (self.opening, 0.0f64);
+        for (tick, next) in self.history.iter_mut() {
+            book(tick);
+            energy += 0.5
+                * self.period
+                * (elastic_force(tick) + tick.alpha_force).dot(&(tick.velocity + *next));
+            peak = peak.max(energy);
+        }
+        if let Some(p) = self.previous.as_mut() {
+            book(p);
+        }
+        self.window.restate(energy, peak);
+        self.energy = energy;
     }
 
     /// Forgets the contact, and the deficit carried from the ones before.
@@ -163,6 +256,9 @@ impl EnergyObserver {
         self.energy = 0.0;
         self.previous = None;
         self.window.reset();
+        self.history.clear();
+        self.opening = 0.0;
+        self.booked = false;
     }
 
     /// The deficit carried into the next exchange (J, ≤ 0; always 0 with `paper`).
@@ -176,8 +272,11 @@ impl EnergyObserver {
     }
 
     /// One tick with the compensated force (N), whether the tick is in contact and whether its
-    /// force is above the quiet level (`active`), the contact direction (zero out of contact:
-    /// then the force's own direction), identified damping (N·s/m) and desired velocity (m/s).
+    /// force is above the quiet level (`active`), the contact direction (the normal; zero out
+    /// of contact: then the force's own direction), identified damping (N·s/m), identified
+    /// friction coefficient μ̂ (0: frictionless) and desired velocity (m/s). The damping force
+    /// `ĉ·(v·n)·n` and the friction force [`friction_force`] are booked as real: the elastic
+    /// force is the rest.
     /// Returns the elastic force F_ek of this tick (N), zero outside the window, and whether
     /// the window is open (with `paper`: whether the tick is in contact).
     pub fn step(
@@ -187,9 +286,10 @@ impl EnergyObserver {
         force: &Vector3<f64>,
         direction: &Vector3<f64>,
         damping: f64,
+        friction: f64,
         velocity: &Vector3<f64>,
     ) -> (Vector3<f64>, bool) {
-        let elastic = |t: &Tick| t.force - damping_force(t.damping, &t.velocity, &t.direction);
+        let elastic = elastic_force;
         if self.mode == ObserverMode::Paper {
             if !in_contact {
                 self.energy = 0.0;
@@ -200,6 +300,7 @@ impl EnergyObserver {
                 force: *force,
                 direction: *direction,
                 damping,
+                friction,
                 velocity: *velocity,
                 alpha_force: Vector3::zeros(),
             };
@@ -228,6 +329,7 @@ impl EnergyObserver {
             force: *force,
             direction,
             damping,
+            friction,
             velocity: *velocity,
             alpha_force: Vector3::zeros(),
         };
@@ -236,7 +338,18 @@ impl EnergyObserver {
         let work = self.previous.map_or(0.0, |p| {
             0.5 * self.period * (elastic(&p) + p.alpha_force).dot(&(p.velocity + velocity))
         });
+        let was_open = self.window.is_open();
+        if let (true, Some(p)) = (was_open, self.previous) {
+            if self.history.len() < HISTORY {
+                self.history.push((p, *velocity));
+            }
+        }
         let open = self.window.step(work, in_contact || active);
+        if open && !was_open {
+            self.history.clear();
+            self.opening = self.window.energy();
+            self.booked = false;
+        }
         self.energy = self.window.energy();
         if open {
             self.previous = Some(current);
@@ -246,6 +359,7 @@ impl EnergyObserver {
             self.previous = Some(Tick {
                 force: Vector3::zeros(),
                 damping: 0.0,
+                friction: 0.0,
                 ..current
             });
             (Vector3::zeros(), false)
@@ -353,11 +467,15 @@ impl EnergyController {
 /// dissipation of the virtual contact, and booking it would let the controller remove energy
 /// the contact never took.
 fn virtual_damping(view: &ContactView, input: &CompensatorInput) -> f64 {
-    let magnitude = view.force.norm();
-    if view.damping <= 0.0 || view.stiffness <= 0.0 || magnitude == 0.0 {
+    let (e, magnitude) = if view.frictional {
+        (view.normal, view.force.dot(&view.normal))
+    } else {
+        let magnitude = view.force.norm();
+        (view.force / magnitude, magnitude)
+    };
+    if view.damping <= 0.0 || view.stiffness <= 0.0 || magnitude <= 0.0 {
         return view.damping;
     }
-    let e = view.force / magnitude;
     let actual = (magnitude - view.damping * input.tip_velocity_actual.dot(&e)) / view.stiffness;
     let desired = actual + (input.tip_position_desired - input.tip_position_actual).dot(&e);
     if desired > 0.0 {
@@ -469,13 +587,22 @@ impl DampingAmendment {
         } else {
             view.damping
         };
-        let (f_ek, open) =
-            self.observer
-                .step(view.in_contact, active, force, &view.direction, damping, &v);
+        if view.frictional && view.friction > 0.0 && !self.observer.is_booked() {
+            self.observer.rebook(view.friction, &view.normal);
+        }
+        let (f_ek, open) = self.observer.step(
+            view.in_contact,
+            active,
+            force,
+            &view.normal,
+            damping,
+            view.friction,
+            &v,
+        );
         let f_alpha = if open {
             // after the contact (the window's tail) the force's own direction
             let direction = if view.in_contact || force.norm() == 0.0 {
-                view.direction
+                view.normal
             } else {
                 force.normalize()
             };
@@ -511,7 +638,7 @@ mod tests {
             let (mut peak, mut worst) = (0.0f64, 0.0f64);
             loop {
                 let force = e * (k * x).max(0.0); // on the frame
-                obs.step(true, true, &force, &e, 0.0, &(e * v));
+                obs.step(true, true, &force, &e, 0.0, 0.0, &(e * v));
                 if mode == ObserverMode::Work {
                     worst = worst.max((obs.energy() - (ke0 - 0.5 * m * v * v)).abs());
                 }
@@ -582,9 +709,9 @@ mod tests {
         for (mode, expected) in [(ObserverMode::Work, true), (ObserverMode::Paper, false)] {
             let mut obs = EnergyObserver::new(1e-3, mode);
             // a force of 1 N, below the 3 N threshold (not in contact) but above the noise
-            let (_, open) = obs.step(false, true, &(e * 1.0), &Vector3::zeros(), 0.0, &v);
+            let (_, open) = obs.step(false, true, &(e * 1.0), &Vector3::zeros(), 0.0, 0.0, &v);
             assert_eq!(open, expected, "{mode:?}");
-            let (_, open) = obs.step(true, true, &(e * 5.0), &e, 0.0, &v);
+            let (_, open) = obs.step(true, true, &(e * 5.0), &e, 0.0, 0.0, &v);
             assert!(open);
             // the 1 N held over the first step is in the energy with `work` only
             let first = 1e-3 * 1.0 * 0.02;
@@ -592,7 +719,15 @@ mod tests {
                 assert!((obs.energy() - first).abs() < 1e-15, "{}", obs.energy());
             }
             assert!(obs.applies());
-            obs.step(false, false, &Vector3::zeros(), &Vector3::zeros(), 0.0, &v);
+            obs.step(
+                false,
+                false,
+                &Vector3::zeros(),
+                &Vector3::zeros(),
+                0.0,
+                0.0,
+                &v,
+            );
             assert_eq!(obs.applies(), mode == ObserverMode::Paper);
         }
     }

@@ -8,6 +8,13 @@
 //! F_comp = F_act + F_err, never pulling       (22)
 //! M_comp = M_act + (p_des − p_act) × F_comp + (p_act − p_s) × F_err   (27), (28)
 //! ```
+//! On a frictional surface ([`ContactView::frictional`]) the increments are taken along the
+//! identified normal n̂ instead of e, and the whole force is scaled (Coulomb friction follows
+//! the normal force, in the direction of the robot's sliding):
+//! ```text
+//! F_n    = F_act·n̂
+//! F_comp = F_act·max(0, F_n + k̂·Δp·n̂ + ĉ·Δv·n̂)/F_n
+//! ```
 
 use nalgebra::Vector3;
 
@@ -38,6 +45,9 @@ pub fn compensate_force(
             error: Vector3::zeros(),
         };
     }
+    if view.frictional {
+        return compensate_frictional(view, input, sensor_origin);
+    }
     let e = view.direction;
     let dp = input.tip_position_desired - input.tip_position_actual;
     let dp_err = dp.dot(&e); // (23)
@@ -47,6 +57,33 @@ pub fn compensate_force(
     let error = force - view.force;
     let moment =
         view.moment + dp.cross(&force) + (input.tip_position_actual - sensor_origin).cross(&error); // (27), (28)
+    CompensatedWrench {
+        force,
+        moment,
+        error,
+    }
+}
+
+/// [`compensate_force`] on a frictional surface: along the identified normal, the whole force
+/// scaled.
+fn compensate_frictional(
+    view: &ContactView,
+    input: &CompensatorInput,
+    sensor_origin: &Vector3<f64>,
+) -> CompensatedWrench {
+    let n = view.normal;
+    let dp = input.tip_position_desired - input.tip_position_actual;
+    let dv = input.tip_velocity_desired - input.tip_velocity_actual;
+    let f_n = view.force.dot(&n);
+    let force = if f_n > 0.0 {
+        let along = f_n + view.stiffness * dp.dot(&n) + view.damping * dv.dot(&n);
+        view.force * (along.max(0.0) / f_n)
+    } else {
+        view.force
+    };
+    let error = force - view.force;
+    let moment =
+        view.moment + dp.cross(&force) + (input.tip_position_actual - sensor_origin).cross(&error);
     CompensatedWrench {
         force,
         moment,

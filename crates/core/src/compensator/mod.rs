@@ -15,6 +15,7 @@ mod none;
 mod params;
 mod pic;
 mod pida;
+pub mod surface;
 mod tdpa;
 
 pub use akf::SageHusaFilter;

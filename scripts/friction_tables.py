@@ -1,0 +1,194 @@
+#!/usr/bin/env python3
+"""The "friction and corners" tables of docs/compensators/*.md, measured by running them.
+
+For each scene (oblique-6dof with μ = 0.1 and 0.3, a corner: the rod tip driven into the
+edge of two walls, and random oblique frictional scenes from a fixed seed) and each
+compensator, at 10 and 20 ms robot delay with 0.2 N sensor noise and 5 ms sensor delay, one
+row: the reference collisions lost and the extra ones, the worst rebound velocity error and
+CoF (from metrics.json), the worst tangential impulse error (computed here: the wrench the
+virtual dynamics felt, integrated over the collision, its part across the contacted wall's
+normal, against the reference's), the worst excess of the energy after a collision over the
+reference's (%), the worst gain of energy over a collision (after it against before it, %:
+positive breaks passivity), and the run's status.
+
+    python scripts/friction_tables.py                 # print every table
+    python scripts/friction_tables.py --kind pida     # one compensator
+    python scripts/friction_tables.py --write         # update the pages' tables
+
+A page's table is the region between ``<!-- friction-tables: KIND -->`` and
+``<!-- /friction-tables -->`` of docs/compensators/KIND.md.
+
+Every run is deterministic (fixed seeds).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import hilcontact as hc
+
+#: The facility of the tables: 0.2 N noise, 5 ms sensor delay.
+FACILITY = {"facility.sensor_noise": 0.2, "facility.sensor_delay": 0.005}
+DELAYS = (0.01, 0.02)
+KINDS = ("none", "pic", "dac", "pida", "tdpa-impedance", "tdpa-admittance")
+
+
+def _oblique(mu: float) -> dict[str, Any]:
+    raw = hc.load_scenario("oblique-6dof").to_dict()
+    raw["contact"]["friction"] = {"kinetic": mu}
+    return raw
+
+
+def _corner(mu: float) -> dict[str, Any]:
+    """The rod tip driven into an inside corner: two walls 30° either side of −x meeting in an
+    edge along z straight ahead of the tip; the servicer drifts towards +y, so the tip slides
+    along one wall into the edge and presses both."""
+    raw = _oblique(mu)
+    c, s = math.cos(math.radians(30.0)), math.sin(math.radians(30.0))
+    raw["walls"] = [
+        {"name": "corner-a", "point": [0.010, 0.10, 0.05], "normal": [-c, -s, 0.0]},
+        {"name": "corner-b", "point": [0.010, 0.10, 0.05], "normal": [-c, s, 0.0]},
+        {"name": "rear", "point": [-0.010, 0.0, 0.0], "normal": [1.0, 0.0, 0.0]},
+    ]
+    raw["servicer"]["velocity"] = [0.02, 0.004, 0.0]
+    raw["servicer"]["angular_velocity"] = [0.0, 0.0, 0.0]
+    raw["simulation"]["duration"] = 4.0
+    return raw
+
+
+def _random(seed: int, count: int) -> list[tuple[str, dict[str, Any]]]:
+    rng = np.random.default_rng(seed)
+    scenes = []
+    for i in range(count):
+        mu = float(rng.uniform(0.1, 0.3))
+        yaw, pitch = np.radians(rng.uniform(15.0, 35.0)), np.radians(rng.uniform(-10.0, 10.0))
+        raw = _oblique(mu)
+        raw["walls"][0]["normal"] = [-math.cos(yaw) * math.cos(pitch), -math.sin(yaw), math.sin(pitch)]
+        raw["servicer"]["mass"] = float(rng.uniform(200.0, 400.0))
+        raw["servicer"]["velocity"] = [float(rng.uniform(0.015, 0.03)), 0.003, -0.001]
+        scenes.append((f"random {i + 1} (μ {mu:.2f}, {math.degrees(yaw):.0f}°)", raw))
+    return scenes
+
+
+def scenes() -> list[tuple[str, dict[str, Any]]]:
+    """(label, raw scenario) of every scene."""
+    return [
+        ("oblique-6dof μ 0.1", _oblique(0.1)),
+        ("oblique-6dof μ 0.3", _oblique(0.3)),
+        ("corner μ 0.2", _corner(0.2)),
+        *_random(22, 3),
+    ]
+
+
+def _vec(frame: Any, name: str, rows: Any) -> np.ndarray:
+    return np.stack([frame[f"{name}_{a}"].to_numpy()[rows] for a in "xyz"], axis=1)
+
+
+def measure(raw: dict[str, Any], kind: str, delay: float) -> dict[str, Any]:
+    """One run's row (see the module doc)."""
+    scenario = hc.load_scenario(raw, {**FACILITY, "facility.robot_delay": delay, "compensator.kind": kind})
+    run = hc.simulate(scenario)
+    m = run.metrics
+    ts, ref = run.timeseries, run.reference
+    normals = [np.asarray(w["normal"], dtype=float) / np.linalg.norm(w["normal"]) for w in raw["walls"]]
+    references = {c["index"]: c for c in m.get("reference_collisions") or []}
+    t_h, t_r = ts["time"].to_numpy(), ref["time"].to_numpy()
+    dt = float(raw["simulation"]["period"])
+    tangential, energy, gain = [], [], []
+    for c in m.get("collisions") or []:
+        r = references.get(c.get("reference"))
+        if r is None or not c.get("complete"):
+            continue
+        rows_h = (t_h >= c["start"] - 0.005) & (t_h <= c["end"] + 0.005)
+        rows_r = (t_r >= r["start"] - 0.005) & (t_r <= r["end"] + 0.005)
+        # the wrench the virtual dynamics felt (on the frame) and the reference's on the rod
+        j_h = -_vec(ts, "applied_force", rows_h).sum(axis=0) * dt
+        j_r = _vec(ref, "contact_force", rows_r).sum(axis=0) * (t_r[1] - t_r[0])
+        n = max(normals, key=lambda n: abs(float(j_r @ n)))
+        t_hil, t_ref = j_h - (j_h @ n) * n, j_r - (j_r @ n) * n
+        if np.linalg.norm(t_ref) > 1e-3 * np.linalg.norm(j_r):
+            tangential.append(float(np.linalg.norm(t_hil - t_ref) / np.linalg.norm(t_ref)))
+        if c.get("rebound_time") is not None:
+            after = c["rebound_time"]
+            e_h = float(np.interp(after, t_h, ts["energy"].to_numpy()))
+            # the reference's energy in the free flight after its collision
+            nxt = min((x["start"] for x in references.values() if x["start"] > r["end"]), default=t_r[-1])
+            e_r = float(np.interp(0.5 * (r["end"] + nxt), t_r, ref["energy"].to_numpy()))
+            energy.append((e_h - e_r) / e_r)
+            # passivity: the energy after the exchange against the energy before it
+            e_before = float(np.interp(c["start"] - 0.01, t_h, ts["energy"].to_numpy()))
+            gain.append((e_h - e_before) / e_before)
+    s = m.get("summary") or {}
+    return {
+        "status": m.get("status"),
+        "lost": len(m.get("lost_collisions") or []),
+        "extra": len(m.get("extra_collisions") or []),
+        "velocity_error": s.get("worst_velocity_error"),
+        "cof": s.get("worst_cof"),
+        "tangential": max(tangential) if tangential else float("nan"),
+        "energy": max(energy) if energy else float("nan"),
+        "gain": max(gain) if gain else float("nan"),
+    }
+
+
+def _pct(x: Any) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{100 * x:.1f}"
+
+
+def _num(x: Any) -> str:
+    return "-" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.3f}"
+
+
+HEADER = ("| scene | delay | lost/extra | v err % | CoF | tangential J err % | energy excess % "
+          "| energy gain % | status |")
+
+
+def table(kind: str) -> list[str]:
+    """The Markdown table of one compensator."""
+    lines = [HEADER, "|---|---|---|---|---|---|---|---|---|"]
+    for label, raw in scenes():
+        for delay in DELAYS:
+            row = measure(raw, kind, delay)
+            lines.append(
+                f"| {label} | {delay * 1e3:.0f} ms | {row['lost']}/{row['extra']} | {_pct(row['velocity_error'])} | "
+                f"{_num(row['cof'])} | {_pct(row['tangential'])} | {_pct(row['energy'])} | {_pct(row['gain'])} | "
+                f"{row['status']} |"
+            )
+    return lines
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def write(kind: str, lines: list[str]) -> None:
+    """Replaces the table region of docs/compensators/KIND.md."""
+    page = ROOT / "docs" / "compensators" / f"{kind}.md"
+    text = page.read_text()
+    pattern = re.compile(rf"(<!-- friction-tables: {re.escape(kind)} -->\n).*?(<!-- /friction-tables -->)", re.S)
+    if not pattern.search(text):
+        raise SystemExit(f"{page}: no friction-tables region for {kind}")
+    page.write_text(pattern.sub(lambda m: m.group(1) + "\n".join(lines) + "\n" + m.group(2), text))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--kind", action="append", choices=KINDS, help="compensator(s) (default: all)")
+    parser.add_argument("--write", action="store_true", help="update the docs pages")
+    args = parser.parse_args()
+    for kind in args.kind or KINDS:
+        lines = table(kind)
+        print(f"### {kind}")
+        print("\n".join(lines))
+        print(flush=True)
+        if args.write:
+            write(kind, lines)
+
+
+if __name__ == "__main__":
+    main()
