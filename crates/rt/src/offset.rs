@@ -80,7 +80,7 @@ impl OffsetOptions {
     /// [`OffsetMode::Measure`]): the rod is not free at start.
     pub fn check_start(&self, plan: &Plan) -> Result<()> {
         if self.mode == OffsetMode::Measure
-            && plan.system.contact_force(&plan.initial).0.norm() > 0.0
+            && plan.nominal.contact_force(&plan.initial).0.norm() > 0.0
         {
             return Err(RtError::option(
                 "offset.mode",
