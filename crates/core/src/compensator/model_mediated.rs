@@ -146,6 +146,14 @@ pub struct ModelMediated {
     /// The surfaces and shared law a run starts with (priors, calibration).
     initial_surfaces: [Option<Surface>; MAX_SURFACES],
     initial_law: Option<ContactModel>,
+    /// Whether a calibration gave the initial model.
+    calibrated: bool,
+    /// With a calibration: ticks a modelled contact stays open after the virtual tip left the
+    /// model (the calibrated robot delay, the sensor delay and two ticks), so that the robot,
+    /// that much behind, reaches the surface before the contact is judged; 0 without.
+    hold_ticks: usize,
+    /// Ticks since the virtual tip was last inside the model, in this contact.
+    since_model: usize,
 }
 
 impl ModelMediated {
@@ -177,6 +185,16 @@ impl ModelMediated {
             previous: None,
             initial_surfaces: surfaces,
             initial_law,
+            calibrated: initial_law.is_some(),
+            hold_ticks: match p.calibration.check() {
+                Ok(c) if !p.calibration.is_empty() => {
+                    (c.robot_delay / context.period).round() as usize
+                        + context.sensor_delay_ticks
+                        + 2
+                }
+                _ => 0,
+            },
+            since_model: 0,
         }
     }
 
@@ -213,6 +231,19 @@ impl ModelMediated {
         (force, deepest.map(|(i, _)| i))
     }
 
+    /// Whether the robot's tip is inside a calibrated surface's band of uncertainty
+    /// ([`CALIBRATION_TRUST_SIGMAS`] standard deviations plus [`CALIBRATION_FLOOR`] outside its
+    /// plane): a rendered contact does not end (nor is it taken for a phantom) while the robot,
+    /// its reported position noisy, may still be reaching the surface.
+    fn near_calibrated(&self, tip: &Vector3<f64>) -> bool {
+        self.surfaces.iter().flatten().any(|s| {
+            s.calibrated.is_some_and(|c| {
+                let band = CALIBRATION_TRUST_SIGMAS * c.sigma_at(tip) + CALIBRATION_FLOOR;
+                s.wall.signed_distance(tip) < band
+            })
+        })
+    }
+
     /// The surface that explains a measured force (frame convention) at the robot's tip:
     /// normal within `match_angle` of the force's reaction, tip within `gap_tolerance`.
     fn explaining_surface(&self, force: &Vector3<f64>, tip: &Vector3<f64>) -> Option<usize> {
@@ -245,7 +276,17 @@ impl ModelMediated {
                 self.pending[i] = None;
             }
         } else if self.samples.len() >= self.params.min_samples as usize {
-            if let Some(fit) = fit_contact(&self.samples, &self.force_sum, self.params.law) {
+            // with a calibration, `auto` fits the calibrated law's form (measured at leisure)
+            let form = match (self.params.law, self.initial_law) {
+                (LawForm::Auto, Some(ContactModel::Linear(_))) if self.calibrated => {
+                    LawForm::Linear
+                }
+                (LawForm::Auto, Some(ContactModel::HuntCrossley(_))) if self.calibrated => {
+                    LawForm::HuntCrossley
+                }
+                (form, _) => form,
+            };
+            if let Some(fit) = fit_contact(&self.samples, &self.force_sum, form) {
                 let n = self.samples.len() as f64;
                 let centre = self
                     .samples
@@ -735,9 +776,16 @@ impl Compensator for ModelMediated {
                     None => Mode::Fallback,
                 }
             };
-        } else if self.mode != Mode::Free && !physical && !model_des && !model_then {
+        } else if self.mode != Mode::Free
+            && !physical
+            && !model_des
+            && !model_then
+            && !self.near_calibrated(&p_then)
+            && self.since_model >= self.hold_ticks
+        {
             self.end_contact();
         }
+        self.since_model = if model_des { 0 } else { self.since_model + 1 };
         if self.mode == Mode::Model
             && physical
             && !model_then
@@ -844,6 +892,7 @@ impl Compensator for ModelMediated {
         self.rendered = None;
         self.residual_energy = 0.0;
         self.previous = None;
+        self.since_model = 0;
     }
 
     fn estimates_contact(&self) -> bool {

@@ -92,7 +92,7 @@ impl Default for CalibrateOptions {
             dwell_frequency: 8.0,
             dwell_cycles: 8,
             dwell_amplitude: 0.4,
-            workspace: 0.1,
+            workspace: 0.3,
         }
     }
 }

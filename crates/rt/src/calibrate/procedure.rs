@@ -6,8 +6,8 @@
 //!    space along the direction farthest from every wall's normal; the sensor's bias and noise
 //!    are measured there, and the robot's delay and servo lag from command against feedback
 //!    ([`fit_robot_response`]).
-//! 2. For each wall of the scenario, a grid of probes around the point of the wall nearest the
-//!    start tip: move to a point outside the wall (the nominal plane plus `standoff` for the
+//! 2. For each wall of the scenario, a grid of probes around the point where the scenario's
+//!    ideal run first touches it (the point nearest the start tip if it never does): move to a point outside the wall (the nominal plane plus `standoff` for the
 //!    first probe, the plane predicted by the probes so far plus `margin` for the others),
 //!    approach along the normal at a speed whose overshoot over the loop's delay stays below a
 //!    quarter of `press_force`, press to `press_force`, dwell and oscillate outwards from the
@@ -83,6 +83,10 @@ pub struct Procedure {
     orientation: UnitQuaternion<f64>,
     start_tip: Vector3<f64>,
     walls: Vec<(String, Wall)>,
+    /// Where each wall is probed: the point of its nominal plane where the nominal run first
+    /// touches it (the ideal reference of the scenario as stated), else the point nearest the
+    /// start tip.
+    centres: Vec<Vector3<f64>>,
     law: ContactModel,
     form: FitForm,
     force_limit: f64,
@@ -174,6 +178,21 @@ impl Procedure {
             .iter()
             .map(|(_, w)| w.signed_distance(&start_tip))
             .fold(f64::INFINITY, f64::min);
+        // where the run will touch each wall: the nominal reference's first contact with it
+        let mut nominal_plan = plan.clone();
+        nominal_plan.system = plan.nominal.clone();
+        let (_, reference) = hilcontact_core::sim::run_reference(&nominal_plan, true);
+        let centres = walls
+            .iter()
+            .map(|(_, w)| {
+                let touch = reference
+                    .iter()
+                    .map(|r| r.tip_position)
+                    .find(|p| w.penetration(p) > 0.0)
+                    .unwrap_or(start_tip);
+                touch - w.normal * w.signed_distance(&touch)
+            })
+            .collect();
         let mut procedure = Procedure {
             options: options.clone(),
             period: plan.period,
@@ -183,6 +202,7 @@ impl Procedure {
             orientation: start.orientation,
             start_tip,
             walls,
+            centres,
             law: nominal.contact.law,
             form: match nominal.contact.law {
                 ContactModel::Linear(_) => FitForm::Linear,
@@ -243,11 +263,11 @@ impl Procedure {
         Ok(procedure)
     }
 
-    /// The probe points of wall `i`, on its nominal plane, around the point nearest the start
-    /// tip.
+    /// The probe points of wall `i`, on its nominal plane, around its centre (where the run
+    /// first touches it).
     fn grid_of(&self, i: usize) -> Vec<Vector3<f64>> {
         let w = &self.walls[i].1;
-        let centre = self.start_tip - w.normal * w.signed_distance(&self.start_tip);
+        let centre = self.centres[i];
         let u = w
             .normal
             .cross(&if w.normal.x.abs() < 0.9 {
