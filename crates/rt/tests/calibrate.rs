@@ -43,6 +43,16 @@ fn check_against_truth(s: &Scenario, file: &CalibrationFile) {
             .clamp(-1.0, 1.0)
             .acos()
             .to_degrees();
+        println!(
+            "{} at {} s, wall {}: plane {:+.4} mm (σ {:.4}), normal {:.3}° (σ {:.3})",
+            s.name,
+            plan.robot_delay(),
+            w.name,
+            offset * 1e3,
+            w.offset_sigma * 1e3,
+            angle,
+            w.angle_sigma
+        );
         assert!(
             offset.abs() <= 2e-5,
             "{}: plane off by {} mm",
@@ -56,6 +66,18 @@ fn check_against_truth(s: &Scenario, file: &CalibrationFile) {
         hilcontact_core::contact::ContactModel::Linear(l) => (l.stiffness, l.damping),
         hilcontact_core::contact::ContactModel::HuntCrossley(h) => (h.stiffness, h.damping),
     };
+    println!(
+        "{} at {} s: k {:+.2} % (σ {:.2} %), c {:.1} ± {:.1} N·s/m (truth {c}), delay {:.2} ms (truth {} ms), {:.1} s",
+        s.name,
+        plan.robot_delay(),
+        (file.law.stiffness / k - 1.0) * 100.0,
+        file.law.stiffness_sigma / k * 100.0,
+        file.law.damping,
+        file.law.damping_sigma,
+        file.robot.delay * 1e3,
+        plan.robot_delay() * 1e3,
+        file.measured.duration
+    );
     assert!(
         (file.law.stiffness / k - 1.0).abs() <= 0.02,
         "k {} vs {k}",
