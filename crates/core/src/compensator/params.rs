@@ -177,7 +177,6 @@ pub struct ModelMediatedParams {
     /// `--calibration FILE`): its walls and law are rendered from the very first contact, trusted
     /// as far as their uncertainties say; a contact that contradicts them corrects them. Without
     /// walls (the default): none.
-    #[serde(skip_serializing_if = "crate::calibration::CalibrationFile::is_empty")]
     pub calibration: crate::calibration::CalibrationFile,
     /// Largest angle between a contact's force and a surface's normal for the contact to
     /// belong to that surface, degrees (> 0, <= 90).
