@@ -263,46 +263,34 @@ pub struct FacilityConfig {
     /// the default: mounted as the scenario says). The facility and the ideal reference use
     /// the mounted geometry; compensators, the safety's predicted wrench and `calibrate` know
     /// only the scenario's.
-    #[serde(default, skip_serializing_if = "is_zero3")]
+    #[serde(default)]
     #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1.0))]
     pub mount_offset: [f64; 3],
     /// The hardware's mounting rotation against its nominal pose, a rotation vector in degrees
     /// (axis × angle, `t` frame, about the centre of the walls' points, applied before
     /// `mount_offset`; zeros,
     /// the default: none; each component |x| ≤ 90).
-    #[serde(default, skip_serializing_if = "is_zero3")]
+    #[serde(default)]
     #[schemars(extend("x-value" = "vec3", "x-magnitude" = 90.0))]
     pub mount_rotation: [f64; 3],
     /// The robot's repeatability, m (standard deviation, 0 to 0.01; 0, the default: exact):
     /// where the robot actually goes wanders from where it believes it is by a slowly varying
     /// error of this size (per axis, correlation time 1 s) that it does not report, and the
     /// position it reports carries white noise of this size (per axis).
-    #[serde(default, skip_serializing_if = "is_zero")]
+    #[serde(default)]
     #[schemars(range(min = 0.0, max = 0.01))]
     pub robot_repeatability: f64,
     /// The real contact's stiffness against the scenario's `contact.stiffness`, a factor (> 0,
     /// <= 100; 1, the default: as stated). The facility and the ideal reference use
     /// `stiffness_error × contact.stiffness`; compensators know only the scenario's value.
-    #[serde(default = "unit_factor", skip_serializing_if = "is_one")]
+    #[serde(default = "unit_factor")]
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 100.0))]
     pub stiffness_error: f64,
     /// The real contact's damping against the scenario's `contact.damping`, a factor (0 to 100;
     /// 1, the default: as stated), like `stiffness_error`.
-    #[serde(default = "unit_factor", skip_serializing_if = "is_one")]
+    #[serde(default = "unit_factor")]
     #[schemars(range(min = 0.0, max = 100.0))]
     pub damping_error: f64,
-}
-
-fn is_zero3(v: &[f64; 3]) -> bool {
-    v.iter().all(|&x| x == 0.0)
-}
-
-fn is_zero(x: &f64) -> bool {
-    *x == 0.0
-}
-
-fn is_one(x: &f64) -> bool {
-    *x == 1.0
 }
 
 fn unit_factor() -> f64 {
