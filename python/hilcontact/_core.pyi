@@ -210,6 +210,23 @@ def identify(scenario_json: str, columns: dict[str, Any]) -> dict[str, Any]:
     offset_std (m), peak_force). Raises like :func:`replay`."""
 
 
+def calibrate_simulated(
+    scenario_json: str,
+    options_json: str,
+    force_limit: float,
+    measured_at: str,
+    on_progress: Any | None = None,
+) -> dict[str, Any]:
+    """``hilcontact calibrate --simulate``: the calibration procedure against the scenario's
+    simulated facility (its true hardware). ``on_progress(line)`` gets each progress line.
+    Returns ``{"calibration": dict | None, "error": str | None, "progress": [str], "duration":
+    s, "peak_force": N, "final_force": N}``. Raises ``RealtimeOptionError`` for bad options or a
+    refused procedure (nothing moved), ``ScenarioError`` for a bad scenario."""
+
+def calibration_schema() -> str:
+    """The JSON Schema of the calibration file and of the procedure's options:
+    ``{"file": ..., "options": ...}``."""
+
 def frames(scenario_json: str, sensor_vectors: Any | None = None, points: list[Any] = ...) -> dict[str, Any]:
     """The frame maths of a run's figures, from the core's resolved scenario:
     ``{"in_t": ndarray | None, "normals": ndarray, "distances": [ndarray]}``: ``sensor_vectors``

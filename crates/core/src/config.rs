@@ -370,10 +370,47 @@ pub struct FacilityConfig {
     #[serde(default = "default_mujoco_timestep")]
     #[schemars(range(min = 1e-7, max = 1e-2))]
     pub mujoco_timestep: f64,
+    /// The hardware mounted off its nominal pose: offset of the target's contact geometry
+    /// against the scenario's `[[walls]]`, m (`t` frame; applied after `mount_rotation`; zeros,
+    /// the default: mounted as the scenario says). The facility and the ideal reference use
+    /// the mounted geometry; compensators, the safety's predicted wrench and `calibrate` know
+    /// only the scenario's.
+    #[serde(default)]
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1.0))]
+    pub mount_offset: [f64; 3],
+    /// The hardware's mounting rotation against its nominal pose, a rotation vector in degrees
+    /// (axis × angle, `t` frame, about the centre of the walls' points, applied before
+    /// `mount_offset`; zeros,
+    /// the default: none; each component |x| ≤ 90).
+    #[serde(default)]
+    #[schemars(extend("x-value" = "vec3", "x-magnitude" = 90.0))]
+    pub mount_rotation: [f64; 3],
+    /// The robot's repeatability, m (standard deviation, 0 to 0.01; 0, the default: exact):
+    /// where the robot actually goes wanders from where it believes it is by a slowly varying
+    /// error of this size (per axis, correlation time 1 s) that it does not report, and the
+    /// position it reports carries white noise of this size (per axis).
+    #[serde(default)]
+    #[schemars(range(min = 0.0, max = 0.01))]
+    pub robot_repeatability: f64,
+    /// The real contact's stiffness against the scenario's `contact.stiffness`, a factor (> 0,
+    /// <= 100; 1, the default: as stated). The facility and the ideal reference use
+    /// `stiffness_error × contact.stiffness`; compensators know only the scenario's value.
+    #[serde(default = "unit_factor")]
+    #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 100.0))]
+    pub stiffness_error: f64,
+    /// The real contact's damping against the scenario's `contact.damping`, a factor (0 to 100;
+    /// 1, the default: as stated), like `stiffness_error`.
+    #[serde(default = "unit_factor")]
+    #[schemars(range(min = 0.0, max = 100.0))]
+    pub damping_error: f64,
 }
 
 fn default_mujoco_timestep() -> f64 {
     1e-4
+}
+
+fn unit_factor() -> f64 {
+    1.0
 }
 
 fn default_servo_damping() -> f64 {
@@ -399,6 +436,11 @@ impl Default for FacilityConfig {
             kind: FacilityKind::Model,
             mujoco_model: String::new(),
             mujoco_timestep: default_mujoco_timestep(),
+            mount_offset: [0.0; 3],
+            mount_rotation: [0.0; 3],
+            robot_repeatability: 0.0,
+            stiffness_error: 1.0,
+            damping_error: 1.0,
         }
     }
 }

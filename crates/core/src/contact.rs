@@ -365,6 +365,28 @@ impl ContactGeometry {
             .map(|w| (tip - w.point).dot(&w.normal))
             .fold(f64::INFINITY, f64::min)
     }
+
+    /// The same geometry mounted at `pose` (`t` frame): each wall's point `p ↦ R·p + t` and
+    /// normal `n ↦ R·n`, the law and friction unchanged. The hardware as a facility has it
+    /// when it is mounted off its nominal pose (`facility.mount_offset`,
+    /// `facility.mount_rotation`).
+    pub fn mounted(&self, pose: &nalgebra::Isometry3<f64>) -> ContactGeometry {
+        ContactGeometry {
+            walls: self
+                .walls
+                .iter()
+                .map(|w| Wall {
+                    point: pose.transform_point(&w.point.into()).coords,
+                    normal: pose.rotation * w.normal,
+                })
+                .collect(),
+            shapes: ShapePairs {
+                servicer: self.shapes.servicer.clone(),
+                target: self.shapes.target.iter().map(|t| t.moved(pose)).collect(),
+            },
+            ..self.clone()
+        }
+    }
 }
 
 #[cfg(test)]

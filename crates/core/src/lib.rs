@@ -14,6 +14,7 @@
 //! time is `tick × period`.
 
 pub mod body;
+pub mod calibration;
 pub mod compensator;
 pub mod config;
 pub mod contact;

@@ -70,6 +70,9 @@ pub struct FacilityPlan {
     pub torque_resolution: f64,
     /// Seed of the sensor-noise generator.
     pub seed: u64,
+    /// The robot's repeatability, m (standard deviation of its position error and of the
+    /// noise on the position it reports; 0 = exact).
+    pub robot_repeatability: f64,
 }
 
 /// A validated scenario: everything a run needs, in the types the physics uses.
@@ -88,8 +91,15 @@ pub struct Plan {
     pub reference_substeps: u32,
     /// A run is diverged once its energy exceeds this many times its bound's base (> 1).
     pub divergence_energy_ratio: f64,
-    /// Mass properties, rod, sensor origin, walls and contact law.
+    /// Mass properties, rod, sensor origin, walls and contact law of the *hardware* as it
+    /// really is: the scenario's walls mounted at `facility.mount_offset` and
+    /// `facility.mount_rotation`, its law scaled by `facility.stiffness_error` and
+    /// `facility.damping_error`. The facility model and the ideal reference use it; with the
+    /// default facility keys it is [`Plan::nominal`].
     pub system: TwoBodySystem,
+    /// The same system as the scenario states it (`[[walls]]`, `[contact]`): what the
+    /// compensators, the safety's predicted wrench and `calibrate` know.
+    pub nominal: TwoBodySystem,
     /// The initial state of both satellites (world frame).
     pub initial: TwoBodyState,
     /// The F/T sensor's attitude and delay, as the loop knows them.
@@ -202,6 +212,13 @@ impl Plan {
                     ),
                 );
             }
+            if !p.calibration.is_empty() {
+                if let Err(problems) = p.calibration.check() {
+                    for (key, message) in problems {
+                        issues.push(format!("compensator.calibration.{key}"), message);
+                    }
+                }
+            }
             for (i, wall) in p.prior_walls.iter_mut().enumerate() {
                 if wall.name.is_empty() {
                     wall.name = format!("prior{i}");
@@ -279,6 +296,18 @@ impl Plan {
         if let Some(q) = sensor_orientation {
             f.sensor_orientation = q;
         }
+        finite(
+            &mut issues,
+            failed,
+            "facility.mount_offset",
+            &f.mount_offset,
+        );
+        finite(
+            &mut issues,
+            failed,
+            "facility.mount_rotation",
+            &f.mount_rotation,
+        );
 
         issues.finish()?;
         // every check passed, so every part is there
@@ -294,27 +323,33 @@ impl Plan {
         };
         let f = &resolved.facility;
         let sim = &resolved.simulation;
+        let nominal = TwoBodySystem {
+            servicer: servicer.0,
+            target: target.0,
+            rod_tip: Vector3::from(resolved.rod.tip),
+            sensor_origin: Vector3::from(f.sensor_position),
+            contact: ContactGeometry {
+                walls,
+                law,
+                friction,
+                shapes: ShapePairs {
+                    servicer: servicer_shapes,
+                    target: target_shapes,
+                },
+            },
+        };
+        let system = TwoBodySystem {
+            contact: mounted_hardware(&nominal.contact, f),
+            ..nominal.clone()
+        };
         let plan = Plan {
             period: sim.period,
             ticks,
             plant_substeps: sim.plant_substeps,
             reference_substeps: sim.reference_substeps,
             divergence_energy_ratio: sim.divergence_energy_ratio,
-            system: TwoBodySystem {
-                servicer: servicer.0,
-                target: target.0,
-                rod_tip: Vector3::from(resolved.rod.tip),
-                sensor_origin: Vector3::from(f.sensor_position),
-                contact: ContactGeometry {
-                    walls,
-                    law,
-                    friction,
-                    shapes: ShapePairs {
-                        servicer: servicer_shapes,
-                        target: target_shapes,
-                    },
-                },
-            },
+            system,
+            nominal,
             initial: TwoBodyState {
                 servicer: servicer.1,
                 target: target.1,
@@ -334,6 +369,7 @@ impl Plan {
                 force_resolution: f.force_resolution,
                 torque_resolution: f.torque_resolution,
                 seed: f.seed,
+                robot_repeatability: f.robot_repeatability,
             },
             compensator: resolved.compensator.clone(),
             contact_threshold: resolved.metrics.contact_threshold,
@@ -419,6 +455,58 @@ impl Scenario {
     pub fn resolve(&self) -> Result<Plan> {
         Plan::resolve(self)
     }
+}
+
+/// The hardware's contact geometry as the facility has it: the scenario's `nominal` geometry
+/// mounted at [`mount_pose`], its law's stiffness and damping scaled by
+/// `facility.stiffness_error` and `facility.damping_error`. The default keys give `nominal`
+/// itself, bit for bit.
+pub fn mounted_hardware(
+    nominal: &ContactGeometry,
+    f: &crate::config::FacilityConfig,
+) -> ContactGeometry {
+    let mut hardware = if f.mount_offset == [0.0; 3] && f.mount_rotation == [0.0; 3] {
+        nominal.clone()
+    } else {
+        let pose = mount_pose(nominal, f);
+        nominal.mounted(&pose)
+    };
+    let (ks, cs) = (f.stiffness_error, f.damping_error);
+    if ks != 1.0 || cs != 1.0 {
+        hardware.law = match hardware.law {
+            ContactModel::Linear(l) => ContactModel::Linear(LinearSpringDamper {
+                stiffness: l.stiffness * ks,
+                damping: l.damping * cs,
+            }),
+            ContactModel::HuntCrossley(h) => ContactModel::HuntCrossley(HuntCrossley {
+                stiffness: h.stiffness * ks,
+                damping: h.damping * cs,
+                exponent: h.exponent,
+            }),
+        };
+    }
+    hardware
+}
+
+/// The hardware's mounting against its nominal pose (`t` frame): the rotation
+/// `facility.mount_rotation` (a rotation vector, degrees) about the centre of the walls'
+/// points (the mockup), then the offset `facility.mount_offset` (m).
+pub fn mount_pose(
+    nominal: &ContactGeometry,
+    f: &crate::config::FacilityConfig,
+) -> nalgebra::Isometry3<f64> {
+    let n = nominal.walls.len().max(1) as f64;
+    let centre = nominal
+        .walls
+        .iter()
+        .fold(Vector3::zeros(), |c, w| c + w.point / n);
+    let rotation = nalgebra::UnitQuaternion::from_scaled_axis(
+        Vector3::from(f.mount_rotation).map(f64::to_radians),
+    );
+    nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::from(centre + Vector3::from(f.mount_offset) - rotation * centre),
+        rotation,
+    )
 }
 
 /// `x` with 12 significant digits, as the scenario files and messages show numbers

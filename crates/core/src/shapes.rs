@@ -308,6 +308,12 @@ impl BodyShape {
         }
     }
 
+    /// The shape moved by `pose` (its body's frame): at `pose · self.pose` (a target's
+    /// hardware mounted off its nominal pose).
+    pub fn moved(&self, pose: &Isometry3<f64>) -> BodyShape {
+        BodyShape::new(self.name.clone(), self.geometry.clone(), pose * self.pose)
+    }
+
     /// Whether the shape is unbounded (a half-space).
     pub fn is_unbounded(&self) -> bool {
         matches!(self.geometry, ShapeGeometry::HalfSpace)

@@ -905,6 +905,52 @@ fn keep_freed_memory() {
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
 fn keep_freed_memory() {}
 
+/// `hilcontact calibrate --simulate`: the calibration procedure against the scenario's
+/// simulated facility (hilcontact_rt::calibrate::simulate). `options_json` holds the
+/// procedure's options (`CalibrateOptions`); `force_limit` the run's force limit, N;
+/// `on_progress(line)` gets each progress line as it comes. Returns `{"calibration": dict or
+/// None, "error": str or None, "progress": [str], "duration": s, "peak_force": N,
+/// "final_force": N}`.
+#[pyfunction]
+#[pyo3(signature = (scenario_json, options_json, force_limit, measured_at, on_progress=None))]
+fn calibrate_simulated<'py>(
+    py: Python<'py>,
+    scenario_json: &str,
+    options_json: &str,
+    force_limit: f64,
+    measured_at: &str,
+    on_progress: Option<Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let plan = parse_scenario(py, scenario_json)?;
+    let options: hilcontact_rt::calibrate::CalibrateOptions = parse_options(py, options_json)?;
+    let outcome =
+        hilcontact_rt::calibrate::simulate(&plan, &options, force_limit, measured_at, |line| {
+            if let Some(callback) = &on_progress {
+                // best effort: a failing callback does not stop the procedure
+                let _ = callback.call1((line,));
+            }
+        })
+        .map_err(|message| raise(py, |c| &c.option, message))?;
+    json_to_py(
+        py,
+        &serde_json::json!({
+            "calibration": outcome.file,
+            "error": outcome.error,
+            "progress": outcome.progress,
+            "duration": outcome.duration,
+            "peak_force": outcome.peak_force,
+            "final_force": outcome.final_force,
+        }),
+    )
+}
+
+/// The JSON Schema of the calibration file and of the procedure's options:
+/// `{"file": ..., "options": ...}`.
+#[pyfunction]
+fn calibration_schema() -> PyResult<String> {
+    Ok(hilcontact_rt::calibrate::schema().to_string())
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     keep_freed_memory();
@@ -927,6 +973,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(identify, m)?)?;
     m.add_function(wrap_pyfunction!(frames, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::read_mesh, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate_simulated, m)?)?;
+    m.add_function(wrap_pyfunction!(calibration_schema, m)?)?;
     m.add_function(wrap_pyfunction!(plugin::simulate_python, m)?)?;
     m.add_function(wrap_pyfunction!(plugin::compensator_context, m)?)?;
     m.add_function(wrap_pyfunction!(facility::simulate_facility, m)?)?;

@@ -26,6 +26,7 @@
 
 #![warn(missing_docs)]
 
+pub mod calibrate;
 pub mod check;
 pub mod clock;
 pub mod counters;

@@ -79,7 +79,8 @@ impl OffsetOptions {
     /// Refuses to measure the offset of a scenario that starts in contact (mode
     /// [`OffsetMode::Measure`]): the rod is not free at start.
     pub fn check_start(&self, plan: &Plan) -> Result<()> {
-        if self.mode == OffsetMode::Measure && plan.system.contact(&plan.initial).force.norm() > 0.0
+        if self.mode == OffsetMode::Measure
+            && plan.nominal.contact(&plan.initial).force.norm() > 0.0
         {
             return Err(RtError::option(
                 "offset.mode",

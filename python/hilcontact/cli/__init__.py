@@ -18,6 +18,7 @@
                    --robot-option KEY=VALUE --force-limit N --rt-priority 80 --cpu N ...] [--out DIR] [--mcap FILE]
     hilcontact check SCENARIO --sensor HOST [the options of hil] [--duration 1] [--out DIR]
     hilcontact demo-rt [SCENARIO] [--compensator pida] [--rt-priority 80 --no-lock-memory --cpu N] [--out DIR] [--mcap FILE]
+    hilcontact calibrate SCENARIO --out cal.toml --simulate [--set KEY=VALUE ...] [--option KEY=VALUE ...]
     hilcontact layout > hil.json
     hilcontact --version
 
@@ -49,6 +50,7 @@ from collections.abc import Sequence
 
 from . import batch, live, realtime_commands  # noqa: F401  (each registers its commands on the group)
 from . import bench  # noqa: F401  (registers benchmark)
+from . import calibrate  # noqa: F401  (registers calibrate)
 from .options import cli, parse_set_options
 
 __all__ = ["cli", "main", "parse_set_options"]

@@ -17,6 +17,7 @@ from ..output import OutputError, check_output_folder, note_written
 from ..run import Run, RunInterrupted, simulate
 from ..scenario import load_scenario, presets
 from .live import live_flags, live_settings
+from .calibrate import CALIBRATION_OPTION, with_calibration
 from .options import (
     _FORCE_HELP,
     _LIMIT_OPTIONS,
@@ -58,15 +59,17 @@ def _compensators_option(help: str) -> Any:
 @click.option("--step-limit", type=POSITIVE, default=None, metavar="S",
               help="Longest time one step of a Python compensator may take, s [default: 0.5].")
 @_with(live_flags(replay=True))
+@CALIBRATION_OPTION
 def run(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool,
         max_memory: float, max_time: float, live: str | None, live_control: bool, live_remote: bool,
-        live_wait: float, speed: float, entry: str | None = None, step_limit: float | None = None) -> None:
+        live_wait: float, speed: float, entry: str | None = None, step_limit: float | None = None,
+        calibration: str | None = None) -> None:
     """Simulate SCENARIO (a preset name or a TOML file) and save the results. With --live, the
     finished run is replayed to a Foxglove live view at --speed times real time (as a
     real-time run is shown), then saved."""
     _stop_on_sigterm()
     with _errors():
-        resolved = load_scenario(scenario, parse_set_options(sets))
+        resolved = load_scenario(scenario, with_calibration(parse_set_options(sets), calibration))
         check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / resolved.name, force)
         mcap_path = _mcap_file(mcap, folder, force)
@@ -182,9 +185,10 @@ def plot(folder: Path, force: bool) -> None:
 @_with(_LIMIT_OPTIONS)
 @click.option("--compensator", "entries", multiple=True, metavar="FILE.py:CLASS",
               help="Also compare a compensator written in Python (path/to/file.py:ClassName); repeatable.")
+@CALIBRATION_OPTION
 def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool,
                     run_figures: bool, force: bool, delays: str | None, max_memory: float, max_time: float,
-                    entries: tuple[str, ...] = ()) -> None:
+                    entries: tuple[str, ...] = (), calibration: str | None = None) -> None:
     """Simulate SCENARIO once per compensator and compare them: a ranking, a recommendation,
     and for each compensator that is not faithful the tolerance it broke (docs/choosing.md).
 
@@ -198,10 +202,11 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
 
     _stop_on_sigterm()
     if delays is not None:
-        _compare_over_delays(scenario, sets, kinds, out, no_plots, run_figures, force, delays, max_memory, max_time)
+        _compare_over_delays(scenario, sets, kinds, out, no_plots, run_figures, force, delays, max_memory, max_time,
+                             calibration)
         return
     with _errors():
-        overrides = parse_set_options(sets)
+        overrides = with_calibration(parse_set_options(sets), calibration)
         scenarios = comparison_scenarios(scenario, kinds, overrides)  # validate all before running
         if entries:
             from ..plugin import with_python_compensators
@@ -231,14 +236,15 @@ def compare_command(scenario: str, sets: tuple[str, ...], kinds: str, out: str |
 
 
 def _compare_over_delays(scenario: str, sets: tuple[str, ...], kinds: str, out: str | None, no_plots: bool,
-                         run_figures: bool, force: bool, delays: str, max_memory: float, max_time: float) -> None:
+                         run_figures: bool, force: bool, delays: str, max_memory: float, max_time: float,
+                         calibration: str | None = None) -> None:
     """`compare --delays`: the comparison at each robot delay, saved and reported per delay."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from ..comparison import delay_label, delay_scenarios, parse_delays, run_over_delays
 
     with _errors():
-        overrides = parse_set_options(sets)
+        overrides = with_calibration(parse_set_options(sets), calibration)
         per_delay = delay_scenarios(scenario, parse_delays(delays), kinds, overrides)  # validate all first
         total = sum(len(per) for per in per_delay.values())
         first = next(iter(next(iter(per_delay.values())).values()))
@@ -288,6 +294,7 @@ def _compare_over_delays(scenario: str, sets: tuple[str, ...], kinds: str, out: 
 @_with(_LIMIT_OPTIONS)
 @click.option("--compensator", "entries", multiple=True, metavar="FILE.py:CLASS",
               help="Also sweep a compensator written in Python (one run at a time per process; --dask spreads them); repeatable.")
+@CALIBRATION_OPTION
 def sweep_command(
     scenario: str,
     grids: tuple[str, ...],
@@ -301,6 +308,7 @@ def sweep_command(
     max_memory: float,
     max_time: float,
     entries: tuple[str, ...] = (),
+    calibration: str | None = None,
 ) -> None:
     """Run SCENARIO at every point of the grid, with every compensator and seed.
 
@@ -322,7 +330,7 @@ def sweep_command(
     _stop_on_sigterm()
     with _errors():
         check_run_arguments(out, resume, dask, None, None, 5.0)
-        overrides = parse_set_options(sets)
+        overrides = with_calibration(parse_set_options(sets), calibration)
         # validate before anything runs
         plan = plan_sweep(scenario, list(grids), kinds, seeds, overrides, limits=Limits(max_memory, max_time),
                           threads=threads, python=list(entries))

@@ -18,6 +18,7 @@ from rich.markup import escape
 from ..errors import HilContactError, ScenarioError
 from ..limits import Limits, check_run
 from ..scenario import load_scenario
+from .calibrate import CALIBRATION_OPTION, with_calibration
 from .options import (
     _SET_HELP,
     NON_NEGATIVE,
@@ -223,6 +224,7 @@ def _run_realtime(resolved: Any, options: dict[str, Any], folder: Path, no_plots
 @_with(_link_flags("runtime", _RUNTIME_FLAGS))
 @_with(_run_output_options("runs/<scenario name>-rt"))
 @_with(live_flags())
+@CALIBRATION_OPTION
 def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots: bool, mcap: str | None, force: bool,
                 max_memory: float, max_time: float, live: str | None, live_control: bool, live_remote: bool,
                 live_wait: float, **kw: Any) -> None:
@@ -242,7 +244,8 @@ def hil_command(scenario: str, sets: tuple[str, ...], out: str | None, no_plots:
       hilcontact hil paper-table1 --set compensator.kind=pida --sensor 127.0.0.1 --http-port 8080 --egm-port 6510 --out runs/rt1
     """
     with _errors():
-        resolved = load_scenario(scenario, parse_set_options(sets))
+        calibration = kw.pop("calibration", None)
+        resolved = load_scenario(scenario, with_calibration(parse_set_options(sets), calibration))
         check_run(resolved, Limits(max_memory, max_time))
         folder = _out_folder(out, Path("runs") / f"{resolved.name}-rt", force)
         mcap_path = _mcap_file(mcap, folder, force)

@@ -37,9 +37,20 @@ use super::pida::Pida;
 use super::{
     Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
 };
+use crate::calibration::CalibratedSurface;
 use crate::contact::{ContactLaw, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
 use crate::delay_line::DelayLine;
 use crate::frames::FrameWrench;
+
+/// A calibrated surface is contradicted by a contact whose plane lies farther from it than
+/// this many of its standard deviations (plus [`CALIBRATION_FLOOR`]) at the contact.
+pub const CALIBRATION_TRUST_SIGMAS: f64 = 4.0;
+/// The online fit's own accuracy, m: a contact's plane within this (and the calibration's
+/// uncertainty) of a calibrated surface agrees with it.
+pub const CALIBRATION_FLOOR: f64 = 5e-5;
+/// A contact's stiffness more than this share (plus the calibration's relative uncertainty
+/// times [`CALIBRATION_TRUST_SIGMAS`]) away from a calibrated law's contradicts it.
+pub const CALIBRATION_STIFFNESS_TOLERANCE: f64 = 0.1;
 
 /// Most surfaces the compensator models.
 pub const MAX_SURFACES: usize = 8;
@@ -58,8 +69,11 @@ pub struct Surface {
     pub wall: Wall,
     /// Its own identified law; `None` for a prior not touched yet (it uses the shared law).
     pub law: Option<ContactModel>,
-    /// Contact samples behind the estimate (0 for a prior).
+    /// Contact samples behind the estimate (0 for a prior or a calibrated surface).
     pub weight: f64,
+    /// The calibration behind it and its uncertainty (`compensator.calibration`), until a
+    /// contact contradicts it.
+    pub calibrated: Option<CalibratedSurface>,
 }
 
 /// One identification sample: a measured force and the robot kinematics that produced it.
@@ -129,12 +143,23 @@ pub struct ModelMediated {
     residual_energy: f64,
     /// Residual plus damping force held over the last step, and the velocity then.
     previous: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// The surfaces and shared law a run starts with (priors, calibration).
+    initial_surfaces: [Option<Surface>; MAX_SURFACES],
+    initial_law: Option<ContactModel>,
+    /// Whether a calibration gave the initial model.
+    calibrated: bool,
+    /// With a calibration: ticks a modelled contact stays open after the virtual tip left the
+    /// model (the calibrated robot delay, the sensor delay and two ticks), so that the robot,
+    /// that much behind, reaches the surface before the contact is judged; 0 without.
+    hold_ticks: usize,
+    /// Ticks since the virtual tip was last inside the model, in this contact.
+    since_model: usize,
 }
 
 impl ModelMediated {
     /// A model-mediated compensator (allocates its samples' buffer once).
     pub fn new(p: &ModelMediatedParams, context: &CompensatorContext) -> Self {
-        let surfaces = prior_surfaces(p);
+        let (surfaces, initial_law) = initial_model(p);
         ModelMediated {
             params: p.clone(),
             fallback: Pida::new(&p.fallback, context),
@@ -148,7 +173,7 @@ impl ModelMediated {
             ),
             started: false,
             surfaces,
-            shared_law: None,
+            shared_law: initial_law,
             pending: [None; MAX_SURFACES],
             pending_law: None,
             samples: Vec::with_capacity(p.max_samples as usize),
@@ -158,6 +183,18 @@ impl ModelMediated {
             rendered: None,
             residual_energy: 0.0,
             previous: None,
+            initial_surfaces: surfaces,
+            initial_law,
+            calibrated: initial_law.is_some(),
+            hold_ticks: match p.calibration.check() {
+                Ok(c) if !p.calibration.is_empty() => {
+                    (c.robot_delay / context.period).round() as usize
+                        + context.sensor_delay_ticks
+                        + 2
+                }
+                _ => 0,
+            },
+            since_model: 0,
         }
     }
 
@@ -194,6 +231,19 @@ impl ModelMediated {
         (force, deepest.map(|(i, _)| i))
     }
 
+    /// Whether the robot's tip is inside a calibrated surface's band of uncertainty
+    /// ([`CALIBRATION_TRUST_SIGMAS`] standard deviations plus [`CALIBRATION_FLOOR`] outside its
+    /// plane): a rendered contact does not end (nor is it taken for a phantom) while the robot,
+    /// its reported position noisy, may still be reaching the surface.
+    fn near_calibrated(&self, tip: &Vector3<f64>) -> bool {
+        self.surfaces.iter().flatten().any(|s| {
+            s.calibrated.is_some_and(|c| {
+                let band = CALIBRATION_TRUST_SIGMAS * c.sigma_at(tip) + CALIBRATION_FLOOR;
+                s.wall.signed_distance(tip) < band
+            })
+        })
+    }
+
     /// The surface that explains a measured force (frame convention) at the robot's tip:
     /// normal within `match_angle` of the force's reaction, tip within `gap_tolerance`.
     fn explaining_surface(&self, force: &Vector3<f64>, tip: &Vector3<f64>) -> Option<usize> {
@@ -226,8 +276,23 @@ impl ModelMediated {
                 self.pending[i] = None;
             }
         } else if self.samples.len() >= self.params.min_samples as usize {
-            if let Some(fit) = fit_contact(&self.samples, &self.force_sum, self.params.law) {
-                self.merge(fit);
+            // with a calibration, `auto` fits the calibrated law's form (measured at leisure)
+            let form = match (self.params.law, self.initial_law) {
+                (LawForm::Auto, Some(ContactModel::Linear(_))) if self.calibrated => {
+                    LawForm::Linear
+                }
+                (LawForm::Auto, Some(ContactModel::HuntCrossley(_))) if self.calibrated => {
+                    LawForm::HuntCrossley
+                }
+                (form, _) => form,
+            };
+            if let Some(fit) = fit_contact(&self.samples, &self.force_sum, form) {
+                let n = self.samples.len() as f64;
+                let centre = self
+                    .samples
+                    .iter()
+                    .fold(Vector3::zeros(), |c, x| c + x.position / n);
+                self.merge(fit, &centre);
             }
         }
         self.samples.clear();
@@ -241,7 +306,7 @@ impl ModelMediated {
 
     /// Merges a contact's fit into the surface it belongs to (or a new one): queued, adopted
     /// once the virtual tip is outside it.
-    fn merge(&mut self, fit: Fit) {
+    fn merge(&mut self, fit: Fit, centre: &Vector3<f64>) {
         self.pending_law = Some(fit.law);
         let cos_max = self.params.match_angle.to_radians().cos();
         let matched = (0..MAX_SURFACES)
@@ -252,6 +317,15 @@ impl ModelMediated {
             .filter(|(_, _, cos)| *cos >= cos_max)
             .max_by(|a, b| a.2.total_cmp(&b.2));
         let new_weight = fit.samples as f64;
+        if let Some((_, old, _)) = matched {
+            if let Some(calibrated) = old.calibrated {
+                if agrees(&calibrated, old.law.or(self.shared_law), &fit, centre) {
+                    // the calibration, measured at leisure, knows better than one contact
+                    return;
+                }
+                // contradicted: corrected by this contact below, as a prior is
+            }
+        }
         if let (Some((i, old, _)), false) = (matched, self.params.correct_priors) {
             if old.weight == 0.0 {
                 // a prior kept as given: only its law is learned
@@ -281,6 +355,7 @@ impl ModelMediated {
                         (None, b) => b,
                     }),
                     weight: total,
+                    calibrated: None,
                 }
             }
             // a prior (weight 0) is replaced by the first fit
@@ -288,6 +363,7 @@ impl ModelMediated {
                 wall: fit.wall,
                 law: Some(fit.law),
                 weight: new_weight,
+                calibrated: None,
             },
         };
         let slot = matched.map(|(i, _, _)| i).or_else(|| {
@@ -353,6 +429,68 @@ impl ModelMediated {
     }
 }
 
+/// Whether a contact's fit agrees with a calibrated surface: its plane within
+/// [`CALIBRATION_TRUST_SIGMAS`] standard deviations plus [`CALIBRATION_FLOOR`] of the
+/// calibrated one at the contact (`centre`, m), and its stiffness (a law of the same form)
+/// within [`CALIBRATION_STIFFNESS_TOLERANCE`] plus the calibration's own uncertainty.
+fn agrees(
+    calibrated: &CalibratedSurface,
+    law: Option<ContactModel>,
+    fit: &Fit,
+    centre: &Vector3<f64>,
+) -> bool {
+    // the fitted plane's point nearest the contact, against the calibrated plane
+    let on_fit = centre - fit.wall.normal * fit.wall.signed_distance(centre);
+    let offset = calibrated.wall.signed_distance(&on_fit);
+    let tolerance = CALIBRATION_TRUST_SIGMAS * calibrated.sigma_at(centre) + CALIBRATION_FLOOR;
+    let stiffness = |l: &ContactModel| match l {
+        ContactModel::Linear(l) => (l.stiffness, 1.0),
+        ContactModel::HuntCrossley(h) => (h.stiffness, h.exponent),
+    };
+    let law_agrees = match law {
+        Some(l) => {
+            let ((k_cal, n_cal), (k_fit, n_fit)) = (stiffness(&l), stiffness(&fit.law));
+            // laws of different forms are compared at the contact's scale only by the plane
+            (n_cal - n_fit).abs() > 0.25
+                || (k_fit / k_cal - 1.0).abs()
+                    <= CALIBRATION_STIFFNESS_TOLERANCE
+                        + CALIBRATION_TRUST_SIGMAS * calibrated.stiffness_relative_sigma
+        }
+        None => true,
+    };
+    offset.abs() <= tolerance && law_agrees
+}
+
+/// The surfaces and the shared law a run starts with: the calibration's walls with its law,
+/// then the prior walls (without a law of their own); the shared law is the calibration's.
+fn initial_model(
+    p: &ModelMediatedParams,
+) -> ([Option<Surface>; MAX_SURFACES], Option<ContactModel>) {
+    let mut surfaces = prior_surfaces(p);
+    let Ok(calibration) = p.calibration.check() else {
+        return (surfaces, None);
+    };
+    // the calibration first: priors beyond the free slots give way
+    let mut calibrated = [None; MAX_SURFACES];
+    for (slot, c) in calibrated.iter_mut().zip(&calibration.surfaces) {
+        *slot = Some(Surface {
+            wall: c.wall,
+            law: Some(calibration.law),
+            weight: 0.0,
+            calibrated: Some(*c),
+        });
+    }
+    let priors = surfaces.iter().flatten().copied().collect::<Vec<_>>();
+    surfaces = calibrated;
+    let free: Vec<usize> = (0..MAX_SURFACES)
+        .filter(|&i| surfaces[i].is_none())
+        .collect();
+    for (i, prior) in free.into_iter().zip(priors) {
+        surfaces[i] = Some(prior);
+    }
+    (surfaces, Some(calibration.law))
+}
+
 /// The prior walls as surfaces without a law of their own (the plan has checked them; a
 /// zero normal, which it refuses, is skipped).
 fn prior_surfaces(p: &ModelMediatedParams) -> [Option<Surface>; MAX_SURFACES] {
@@ -367,6 +505,7 @@ fn prior_surfaces(p: &ModelMediatedParams) -> [Option<Surface>; MAX_SURFACES] {
                 },
                 law: None,
                 weight: 0.0,
+                calibrated: None,
             });
         }
     }
@@ -637,9 +776,16 @@ impl Compensator for ModelMediated {
                     None => Mode::Fallback,
                 }
             };
-        } else if self.mode != Mode::Free && !physical && !model_des && !model_then {
+        } else if self.mode != Mode::Free
+            && !physical
+            && !model_des
+            && !model_then
+            && !self.near_calibrated(&p_then)
+            && self.since_model >= self.hold_ticks
+        {
             self.end_contact();
         }
+        self.since_model = if model_des { 0 } else { self.since_model + 1 };
         if self.mode == Mode::Model
             && physical
             && !model_then
@@ -735,8 +881,8 @@ impl Compensator for ModelMediated {
         self.detector.reset();
         self.kinematics.fill((Vector3::zeros(), Vector3::zeros()));
         self.started = false;
-        self.surfaces = prior_surfaces(&self.params);
-        self.shared_law = None;
+        self.surfaces = self.initial_surfaces;
+        self.shared_law = self.initial_law;
         self.pending = [None; MAX_SURFACES];
         self.pending_law = None;
         self.samples.clear();
@@ -746,6 +892,7 @@ impl Compensator for ModelMediated {
         self.rendered = None;
         self.residual_energy = 0.0;
         self.previous = None;
+        self.since_model = 0;
     }
 
     fn estimates_contact(&self) -> bool {

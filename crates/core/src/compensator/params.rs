@@ -173,6 +173,11 @@ pub struct ModelMediatedParams {
     /// Whether contacts correct the prior walls' geometry (true), or the priors are rendered as
     /// given (false; the law is identified all the same, and surfaces without a prior learned).
     pub correct_priors: bool,
+    /// A calibration of the hardware (`hilcontact calibrate`, the calibration file's tables;
+    /// `--calibration FILE`): its walls and law are rendered from the very first contact, trusted
+    /// as far as their uncertainties say; a contact that contradicts them corrects them. Without
+    /// walls (the default): none.
+    pub calibration: crate::calibration::CalibrationFile,
     /// Largest angle between a contact's force and a surface's normal for the contact to
     /// belong to that surface, degrees (> 0, <= 90).
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 90.0))]
@@ -214,6 +219,7 @@ impl Default for ModelMediatedParams {
             law: LawForm::Auto,
             prior_walls: Vec::new(),
             correct_priors: true,
+            calibration: crate::calibration::CalibrationFile::default(),
             match_angle: 30.0,
             gap_tolerance: 1e-3,
             min_samples: 20,

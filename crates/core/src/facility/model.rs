@@ -4,6 +4,10 @@
 //! - Robot: the actual relative pose follows the commanded one with a pure delay `τ_r`
 //!   (commands are interpolated linearly between control ticks, attitude by slerp) and an
 //!   optional second-order servo lag `ω_n² / (s² + 2ζω_n s + ω_n²)`, integrated at the plant rate.
+//! - Repeatability (`facility.robot_repeatability`, σ): where the robot actually goes wanders
+//!   from where it believes it is by an Ornstein-Uhlenbeck error of standard deviation σ per
+//!   axis (correlation time [`REPEATABILITY_CORRELATION_TIME`]), which it does not report; the
+//!   position it reports carries white noise σ per axis (its velocity is reported as tracked).
 //! - Contact: the law of [`crate::contact`] between the actual rod tip and the walls.
 //! - Sensor: the wrench on the frame from `τ_p` earlier, in the sensor frame, with Gaussian
 //!   noise and optional quantisation, from a seeded generator (reproducible runs).
@@ -31,7 +35,29 @@ struct ServoLag {
     zeta: f64,
 }
 
-/// The robot: pure delay plus optional servo lag on the commanded relative motion.
+/// Correlation time of the robot's repeatability error, s: the error where the robot goes
+/// is nearly constant over a probe's press and independent from one probe to the next.
+pub const REPEATABILITY_CORRELATION_TIME: f64 = 1.0;
+
+/// The robot's repeatability: its position error and the noise on what it reports.
+#[derive(Debug, Clone)]
+struct Repeatability {
+    /// σ, m.
+    sigma: f64,
+    /// The current error of where the robot goes, m (`t`).
+    error: Vector3<f64>,
+    rng: Pcg64Mcg,
+}
+
+impl Repeatability {
+    fn gaussian(&mut self) -> Vector3<f64> {
+        let rng = &mut self.rng;
+        Vector3::from_fn(|_, _| <StandardNormal as Distribution<f64>>::sample(&StandardNormal, rng))
+    }
+}
+
+/// The robot: pure delay plus optional servo lag on the commanded relative motion, and its
+/// repeatability ([`RobotModel::with_repeatability`]).
 #[derive(Debug, Clone)]
 pub struct RobotModel {
     delay_ticks: usize,
@@ -39,7 +65,13 @@ pub struct RobotModel {
     substeps: u32,
     commands: DelayLine<RelativeMotion>,
     servo: Option<ServoLag>,
+    /// The servo's output (the command followed, without the repeatability error).
+    tracked: RelativeMotion,
+    /// Where the robot is: `tracked` plus the repeatability error.
     actual: RelativeMotion,
+    /// What the robot reports: `tracked` (not the repeatability error) plus the reporting noise.
+    reported: RelativeMotion,
+    repeatability: Option<Repeatability>,
 }
 
 /// Relative motion at rest at a pose.
@@ -71,13 +103,58 @@ impl RobotModel {
             substeps,
             commands: DelayLine::new(delay_ticks + 1, at_rest(initial)),
             servo,
+            tracked: at_rest(initial),
             actual: at_rest(initial),
+            reported: at_rest(initial),
+            repeatability: None,
         }
     }
 
-    /// The robot's actual relative motion now.
+    /// The same robot with a repeatability of `sigma` (m, standard deviation per axis; 0:
+    /// exact) from a generator seeded with `seed`: the error where it goes starts at 0.
+    pub fn with_repeatability(mut self, sigma: f64, seed: u64) -> Self {
+        self.repeatability = (sigma > 0.0).then(|| Repeatability {
+            sigma,
+            error: Vector3::zeros(),
+            rng: Pcg64Mcg::seed_from_u64(seed),
+        });
+        self
+    }
+
+    /// The robot's actual relative motion now (where it really is).
     pub fn actual(&self) -> &RelativeMotion {
         &self.actual
+    }
+
+    /// The relative motion the robot reports now: where its servo took it (its actual motion
+    /// without the repeatability error, which it cannot see), plus the noise on the reported
+    /// position when it has a repeatability.
+    pub fn reported(&self) -> &RelativeMotion {
+        &self.reported
+    }
+
+    /// Moves the repeatability error one period on and sets `actual` and `reported`.
+    fn wander(&mut self) {
+        let Some(r) = &mut self.repeatability else {
+            self.actual = self.tracked;
+            self.reported = self.tracked;
+            return;
+        };
+        // Ornstein-Uhlenbeck, exact discretisation: stationary standard deviation σ
+        let a = (-self.period / REPEATABILITY_CORRELATION_TIME).exp();
+        let step = r.sigma * (1.0 - a * a).sqrt();
+        let kick = r.gaussian();
+        r.error = r.error * a + kick * step;
+        let noise = r.gaussian() * r.sigma;
+        self.actual = RelativeMotion {
+            position: self.tracked.position + r.error,
+            ..self.tracked
+        };
+        // the robot believes it is where its servo took it: the error is not reported
+        self.reported = RelativeMotion {
+            position: self.tracked.position + noise,
+            ..self.tracked
+        };
     }
 
     /// Advances one control period after the command for the coming tick was issued.
@@ -92,7 +169,7 @@ impl RobotModel {
         let segment_angular_velocity = a.orientation * segment_rotation.scaled_axis() / t;
         match self.servo {
             None => {
-                self.actual = RelativeMotion {
+                self.tracked = RelativeMotion {
                     position: b.position,
                     orientation: b.orientation,
                     velocity: segment_velocity,
@@ -101,7 +178,7 @@ impl RobotModel {
             }
             Some(servo) => {
                 let h = t / self.substeps as f64;
-                let x = &mut self.actual;
+                let x = &mut self.tracked;
                 for i in 1..=self.substeps {
                     let s = i as f64 / self.substeps as f64;
                     let u_position = a.position.lerp(&b.position, s);
@@ -119,6 +196,7 @@ impl RobotModel {
                 }
             }
         }
+        self.wander();
     }
 }
 
@@ -188,6 +266,10 @@ impl SensorModel {
     }
 }
 
+/// Mixed into `facility.seed` for the repeatability's generator (its own stream, apart from
+/// the sensor noise's).
+const REPEATABILITY_SEED: u64 = 0x7E9E_A7AB_1117_0001;
+
 /// Robot, contact and sensor together: the simulated facility.
 #[derive(Debug, Clone)]
 pub struct FacilityModel {
@@ -211,7 +293,8 @@ impl FacilityModel {
             f.servo_frequency,
             f.servo_damping,
             initial_command,
-        );
+        )
+        .with_repeatability(f.robot_repeatability, f.seed ^ REPEATABILITY_SEED);
         let contact = physical_contact(&plan.system, robot.actual(), f.dissipation);
         FacilityModel {
             system: plan.system.clone(),
@@ -234,7 +317,7 @@ impl Facility for FacilityModel {
         Measurement {
             force,
             moment,
-            actual: *self.robot.actual(),
+            actual: *self.robot.reported(),
         }
     }
 

@@ -121,7 +121,7 @@ impl HilHandle {
             period,
             period_ns: (period * 1e9).round() as u64,
             ticks,
-            system: plan.system.clone(),
+            system: plan.nominal.clone(),
             steps,
             last_step: 0,
             units: UnitsCheck::new(&o.limits),

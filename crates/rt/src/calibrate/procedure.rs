@@ -1,0 +1,798 @@
+//! The calibration procedure as a tick-by-tick state machine: what to command next from what
+//! was measured. It names no device and no clock: [`super::simulate`] steps it against the
+//! facility model, a real-time loop against the device links.
+//!
+//! 1. **Settle** at the start pose, then **excite**: a three-sine motion of the rod tip in free
+//!    space along the direction farthest from every wall's normal; the sensor's bias and noise
+//!    are measured there, and the robot's delay and servo lag from command against feedback
+//!    ([`fit_robot_response`]).
+//! 2. For each wall of the scenario, a grid of probes around the point where the scenario's
+//!    ideal run first touches it (the point nearest the start tip if it never does): move to a point outside the wall (the nominal plane plus `standoff` for the
+//!    first probe, the plane predicted by the probes so far plus `margin` for the others),
+//!    approach along the normal at a speed whose overshoot over the loop's delay stays below a
+//!    quarter of `press_force`, press to `press_force`, dwell and oscillate outwards from the
+//!    pressed point (`dwell_cycles` at `dwell_frequency`: fast against the robot's slow
+//!    repeatability drift, so that stiffness and damping are observable), retreat. The law and
+//!    each probe's contact point are fitted from the samples of the dwell and oscillation. A wall not touched within `search_depth` beyond its
+//!    nominal plane stops the procedure with a message naming it.
+//! 3. Each wall's probes are fitted ([`fit_surface`]); then the next wall.
+//!
+//! Every command stays within `workspace` of the start tip; a measured force above
+//! `abort_force` (or a failed fit) ends the procedure: the tip retreats out of contact along the
+//! current wall's normal, then holds.
+
+use nalgebra::{UnitQuaternion, Vector3};
+
+use hilcontact_core::calibration::{
+    fit_plane, fit_robot_response, fit_surface, smooth, FitForm, ProbeSample, RobotResponse,
+    SurfaceFit,
+};
+use hilcontact_core::contact::{ContactModel, Wall};
+use hilcontact_core::facility::Measurement;
+use hilcontact_core::frames::RelativeMotion;
+use hilcontact_core::Plan;
+
+use super::options::CalibrateOptions;
+
+/// Seconds at rest before the excitation.
+const SETTLE: f64 = 0.3;
+/// Half-width of the quadratic smoothing of the reported positions, ticks.
+const SMOOTHING: usize = 12;
+
+/// What one tick of the procedure asks.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Step {
+    /// Command this relative motion (`t` frame) for the next tick.
+    Command(RelativeMotion),
+    /// The procedure is over (finished or stopped): hold the last command.
+    Done,
+}
+
+/// A progress event, surface by surface.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Progress {
+    /// The robot's response was measured.
+    Robot(RobotResponse),
+    /// A wall was fitted: its index, name, fit, and the time spent on it (s).
+    Wall(usize, String, SurfaceFit, f64),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Phase {
+    Settle,
+    Excite,
+    /// Moving in a straight line to `target` at `speed`, then `then`.
+    Move,
+    Approach,
+    Press,
+    Dwell,
+    Retreat,
+    /// Backing out after a stop, then done.
+    Abort,
+    Done,
+}
+
+/// The procedure's state.
+pub struct Procedure {
+    options: CalibrateOptions,
+    period: f64,
+    sensor_delay_ticks: usize,
+    /// Sensor to `t`.
+    sensor_orientation: UnitQuaternion<f64>,
+    rod: Vector3<f64>,
+    orientation: UnitQuaternion<f64>,
+    start_tip: Vector3<f64>,
+    walls: Vec<(String, Wall)>,
+    /// Where each wall is probed: the point of its nominal plane where the nominal run first
+    /// touches it (the ideal reference of the scenario as stated), else the point nearest the
+    /// start tip.
+    centres: Vec<Vector3<f64>>,
+    law: ContactModel,
+    form: FitForm,
+    force_limit: f64,
+    phase: Phase,
+    tick: u64,
+    phase_start: u64,
+    /// The commanded tip now.
+    tip: Vector3<f64>,
+    /// Where a move goes and how fast, m and m/s; what follows.
+    move_target: Vector3<f64>,
+    move_speed: f64,
+    after_move: Phase,
+    excite_direction: Vector3<f64>,
+    commanded: Vec<Vector3<f64>>,
+    reported: Vec<Vector3<f64>>,
+    free_forces: Vec<Vector3<f64>>,
+    bias: Vector3<f64>,
+    noise: f64,
+    robot: Option<RobotResponse>,
+    approach_speed: f64,
+    detect_force: f64,
+    /// The current wall and probe.
+    wall: usize,
+    probe: usize,
+    grid: Vec<Vector3<f64>>,
+    probes: Vec<Vec<ProbeSample>>,
+    /// Each probe's samples that the law fit uses: from the robot's arrival at the pressed
+    /// point (a loop delay after the dwell starts) to its leaving (a loop delay after the
+    /// retreat starts), sample indices.
+    windows: Vec<(usize, usize)>,
+    recording: bool,
+    poses: Vec<(Vector3<f64>, Vector3<f64>)>,
+    forces: Vec<Vector3<f64>>,
+    contact_points: Vec<Vector3<f64>>,
+    /// A second leg after the current move: to this point, then approach.
+    pending_leg: Option<Vector3<f64>>,
+    /// The commanded tip when the contact was detected.
+    detect_tip: Vector3<f64>,
+    dwell_centre: Vector3<f64>,
+    wall_started: u64,
+    /// The fitted walls.
+    pub fits: Vec<SurfaceFit>,
+    events: Vec<Progress>,
+    error: Option<String>,
+}
+
+impl Procedure {
+    /// The procedure for a plan's nominal hardware, starting from the plan's initial pose;
+    /// `force_limit` is the run's force limit (N). Refuses, before anything is commanded, a
+    /// plan whose probes would leave the workspace or whose walls the start tip is inside.
+    pub fn new(plan: &Plan, options: &CalibrateOptions, force_limit: f64) -> Result<Self, String> {
+        options.validate(force_limit)?;
+        let nominal = &plan.nominal;
+        let start = nominal.relative_motion(&plan.initial);
+        let start_tip = start.point(&nominal.rod_tip);
+        let walls: Vec<(String, Wall)> = plan
+            .scenario
+            .walls
+            .iter()
+            .map(|w| w.name.clone())
+            .zip(nominal.contact.walls.iter().copied())
+            .collect();
+        for (name, w) in &walls {
+            let clearance = w.signed_distance(&start_tip);
+            if clearance <= options.standoff {
+                return Err(format!(
+                    "the rod tip starts {:.3} mm from wall '{name}', within the standoff {:.3} mm: move the start pose out",
+                    clearance * 1e3,
+                    options.standoff * 1e3
+                ));
+            }
+        }
+        // the excitation: along the direction farthest from every normal
+        let candidates = [Vector3::x(), Vector3::y(), Vector3::z()];
+        let excite_direction = candidates
+            .iter()
+            .copied()
+            .min_by(|a, b| {
+                let worst = |d: &Vector3<f64>| {
+                    walls
+                        .iter()
+                        .map(|(_, w)| d.dot(&w.normal).abs())
+                        .fold(0.0, f64::max)
+                };
+                worst(a).total_cmp(&worst(b))
+            })
+            .unwrap_or(Vector3::x());
+        let clearance = walls
+            .iter()
+            .map(|(_, w)| w.signed_distance(&start_tip))
+            .fold(f64::INFINITY, f64::min);
+        // where the run will touch each wall: the nominal reference's first contact with it
+        let mut nominal_plan = plan.clone();
+        nominal_plan.system = plan.nominal.clone();
+        let (_, reference) = hilcontact_core::sim::run_reference(&nominal_plan, true);
+        let centres = walls
+            .iter()
+            .map(|(_, w)| {
+                let touch = reference
+                    .iter()
+                    .map(|r| r.tip_position)
+                    .find(|p| w.penetration(p) > 0.0)
+                    .unwrap_or(start_tip);
+                touch - w.normal * w.signed_distance(&touch)
+            })
+            .collect();
+        let mut procedure = Procedure {
+            options: options.clone(),
+            period: plan.period,
+            sensor_delay_ticks: plan.sensor.delay_ticks,
+            sensor_orientation: plan.sensor.orientation,
+            rod: nominal.rod_tip,
+            orientation: start.orientation,
+            start_tip,
+            walls,
+            centres,
+            law: nominal.contact.law,
+            form: match nominal.contact.law {
+                ContactModel::Linear(_) => FitForm::Linear,
+                ContactModel::HuntCrossley(_) => FitForm::HuntCrossley,
+            },
+            force_limit,
+            phase: Phase::Settle,
+            tick: 0,
+            phase_start: 0,
+            tip: start_tip,
+            move_target: start_tip,
+            move_speed: options.move_speed,
+            after_move: Phase::Done,
+            excite_direction,
+            commanded: Vec::new(),
+            reported: Vec::new(),
+            free_forces: Vec::new(),
+            bias: Vector3::zeros(),
+            noise: 0.0,
+            robot: None,
+            approach_speed: options.max_approach_speed,
+            detect_force: 1.0,
+            wall: 0,
+            probe: 0,
+            grid: Vec::new(),
+            probes: Vec::new(),
+            windows: Vec::new(),
+            recording: false,
+            poses: Vec::new(),
+            forces: Vec::new(),
+            contact_points: Vec::new(),
+            pending_leg: None,
+            detect_tip: start_tip,
+            dwell_centre: start_tip,
+            wall_started: 0,
+            fits: Vec::new(),
+            events: Vec::new(),
+            error: None,
+        };
+        // the excitation's amplitude stays well inside the free space
+        procedure.options.excitation_amplitude =
+            options.excitation_amplitude.min(0.3 * clearance.max(0.0));
+        for i in 0..procedure.walls.len() {
+            for p in procedure.grid_of(i) {
+                for q in [p, p + procedure.walls[i].1.normal * options.standoff] {
+                    if (q - start_tip).norm() > options.workspace {
+                        return Err(format!(
+                            "wall '{}': a probe at {:?} m is {:.1} mm from the start tip, outside the workspace ({:.1} mm): lower the option probe_spacing or raise workspace",
+                            procedure.walls[i].0,
+                            q.as_slice(),
+                            (q - start_tip).norm() * 1e3,
+                            options.workspace * 1e3
+                        ));
+                    }
+                }
+            }
+        }
+        Ok(procedure)
+    }
+
+    /// The probe points of wall `i`, on its nominal plane, around its centre (where the run
+    /// first touches it).
+    fn grid_of(&self, i: usize) -> Vec<Vector3<f64>> {
+        let w = &self.walls[i].1;
+        let centre = self.centres[i];
+        let u = w
+            .normal
+            .cross(&if w.normal.x.abs() < 0.9 {
+                Vector3::x()
+            } else {
+                Vector3::y()
+            })
+            .normalize();
+        let v = w.normal.cross(&u);
+        let side = self.options.points_per_side as i32;
+        let half = (side - 1) as f64 / 2.0;
+        let mut grid = vec![centre];
+        for a in 0..side {
+            for b in 0..side {
+                let (x, y) = (a as f64 - half, b as f64 - half);
+                if x == 0.0 && y == 0.0 {
+                    continue;
+                }
+                grid.push(centre + (u * x + v * y) * self.options.probe_spacing);
+            }
+        }
+        grid
+    }
+
+    /// The command of a tip position, at rest in attitude, moving at `velocity`.
+    fn command(&self, tip: Vector3<f64>, velocity: Vector3<f64>) -> RelativeMotion {
+        RelativeMotion {
+            position: tip - self.orientation * self.rod,
+            orientation: self.orientation,
+            velocity,
+            angular_velocity: Vector3::zeros(),
+        }
+    }
+
+    /// The events since the last call (progress, surface by surface).
+    pub fn take_events(&mut self) -> Vec<Progress> {
+        std::mem::take(&mut self.events)
+    }
+
+    /// Why the procedure stopped, if it did not finish.
+    pub fn error(&self) -> Option<&str> {
+        self.error.as_deref()
+    }
+
+    /// The robot's response measured.
+    pub fn robot(&self) -> Option<RobotResponse> {
+        self.robot
+    }
+
+    /// Where the procedure is: its phase, wall and probe (for messages).
+    pub fn whereabouts(&self) -> String {
+        format!(
+            "{:?}, wall {} probe {}, tip {:?}, first contact {:?}, last force {:?} N",
+            self.phase,
+            self.wall + 1,
+            self.probe + 1,
+            self.tip.as_slice(),
+            self.detect_tip.as_slice(),
+            self.forces.last().map(|f| [f.x, f.y, f.z])
+        )
+    }
+
+    /// The wall names, in the scenario's order.
+    pub fn wall_names(&self) -> Vec<String> {
+        self.walls.iter().map(|(n, _)| n.clone()).collect()
+    }
+
+    /// The measured sensor noise (N, std per axis) and the detection force used (N).
+    pub fn noise(&self) -> (f64, f64) {
+        (self.noise, self.detect_force)
+    }
+
+    /// Probes per wall: the grid and its centre.
+    pub fn probes_per_wall(&self) -> u32 {
+        self.grid_of(0).len() as u32
+    }
+
+    /// The form of the law fitted.
+    pub fn form(&self) -> FitForm {
+        self.form
+    }
+
+    fn elapsed(&self) -> f64 {
+        (self.tick - self.phase_start) as f64 * self.period
+    }
+
+    fn enter(&mut self, phase: Phase) {
+        self.phase = phase;
+        self.phase_start = self.tick;
+    }
+
+    fn move_to(&mut self, target: Vector3<f64>, speed: f64, then: Phase) {
+        self.move_target = target;
+        self.move_speed = speed;
+        self.after_move = then;
+        self.enter(Phase::Move);
+    }
+
+    /// Stops: backs out of contact along the current wall's normal, then holds.
+    fn abort(&mut self, message: String) {
+        if self.error.is_none() {
+            self.error = Some(message);
+        }
+        let normal = self
+            .walls
+            .get(self.wall)
+            .map_or(Vector3::zeros(), |w| w.1.normal);
+        self.move_target = self.tip + normal * self.options.retreat_distance;
+        self.move_speed = self.options.move_speed;
+        self.enter(Phase::Abort);
+    }
+
+    /// One tick: the measurement of this tick in, the next command out.
+    pub fn step(&mut self, m: &Measurement) -> Step {
+        let force = -(self.sensor_orientation * m.force) - self.bias; // on the rod, t
+        let tip = m.actual.point(&self.rod);
+        let tip_velocity = m.actual.point_velocity(&self.rod);
+        self.poses.push((tip, tip_velocity));
+        self.forces.push(force);
+        self.tick += 1;
+        // the safety line: the measured force
+        if force.norm() > self.options.abort_force(self.force_limit)
+            && !matches!(self.phase, Phase::Abort | Phase::Done)
+        {
+            self.abort(format!(
+                "the measured force {:.1} N passed the calibration's bound {:.1} N",
+                force.norm(),
+                self.options.abort_force(self.force_limit)
+            ));
+        }
+        let velocity = self.advance(force);
+        if (self.tip - self.start_tip).norm() > self.options.workspace
+            && !matches!(self.phase, Phase::Abort | Phase::Done)
+        {
+            self.abort("a command left the workspace".into());
+        }
+        match self.phase {
+            Phase::Done => Step::Done,
+            _ => Step::Command(self.command(self.tip, velocity)),
+        }
+    }
+
+    /// Moves the procedure one tick on; returns the commanded tip velocity.
+    fn advance(&mut self, force: Vector3<f64>) -> Vector3<f64> {
+        let t = self.period;
+        match self.phase {
+            Phase::Settle => {
+                if self.elapsed() >= SETTLE {
+                    self.enter(Phase::Excite);
+                }
+                Vector3::zeros()
+            }
+            Phase::Excite => {
+                let s = self.elapsed();
+                let a = self.options.excitation_amplitude;
+                let two_pi = 2.0 * std::f64::consts::PI;
+                // three sines, faded in and out over 0.5 s
+                let fade = (s / 0.5)
+                    .min((self.options.excitation_duration - s) / 0.5)
+                    .clamp(0.0, 1.0);
+                let (x, v) = [(0.7, 1.0), (2.3, 0.35), (5.1, 0.15)].iter().fold(
+                    (0.0, 0.0),
+                    |(x, v), &(hz, share)| {
+                        (
+                            x + share * (two_pi * hz * s).sin(),
+                            v + share * two_pi * hz * (two_pi * hz * s).cos(),
+                        )
+                    },
+                );
+                self.tip = self.start_tip + self.excite_direction * (a * fade * x);
+                self.commanded.push(self.tip);
+                self.reported.push(self.poses[self.poses.len() - 1].0);
+                self.free_forces.push(force);
+                if s >= self.options.excitation_duration {
+                    self.finish_excitation();
+                }
+                self.excite_direction * (a * fade * v)
+            }
+            Phase::Move | Phase::Abort => {
+                let to = self.move_target - self.tip;
+                let step = self.move_speed * t;
+                if to.norm() <= step {
+                    self.tip = self.move_target;
+                    if self.phase == Phase::Abort {
+                        // hold until the robot, a delay behind, is out of contact
+                        if self.elapsed() > self.hold_time() && force.norm() < self.detect_force {
+                            self.enter(Phase::Done);
+                        }
+                        return Vector3::zeros();
+                    }
+                    if let Some(leg) = self.pending_leg.take() {
+                        self.move_to(leg, self.options.move_speed, Phase::Approach);
+                        return Vector3::zeros();
+                    }
+                    let next = self.after_move;
+                    self.enter(next);
+                    if next == Phase::Approach {
+                        self.recording = true;
+                        self.probes.push(Vec::new());
+                        self.windows.push((usize::MAX, usize::MAX));
+                    }
+                    Vector3::zeros()
+                } else {
+                    let v = to.normalize() * self.move_speed;
+                    self.tip += v * t;
+                    v
+                }
+            }
+            Phase::Approach | Phase::Press => {
+                let wall = self.walls[self.wall].1;
+                self.record();
+                let f = force.dot(&wall.normal);
+                if self.phase == Phase::Approach && f > self.detect_force {
+                    self.detect_tip = self.tip;
+                    self.enter(Phase::Press);
+                }
+                if self.phase == Phase::Press && f >= self.options.press_force(self.force_limit) {
+                    self.dwell_centre = self.tip;
+                    self.mark_window(0);
+                    self.enter(Phase::Dwell);
+                    return Vector3::zeros();
+                }
+                // beyond the nominal plane by more than the search depth: not found
+                let depth = -wall.signed_distance(&self.tip);
+                if self.phase == Phase::Approach && depth > self.options.search_depth {
+                    let name = self.walls[self.wall].0.clone();
+                    self.abort(format!(
+                        "wall '{name}' was not found where the scenario says: no contact within {:.2} mm beyond its nominal plane (probe {} of {}); check the scenario's [[walls]] against the hardware, or raise the option search_depth",
+                        self.options.search_depth * 1e3,
+                        self.probe + 1,
+                        self.grid.len()
+                    ));
+                    return Vector3::zeros();
+                }
+                if self.phase == Phase::Press
+                    && (self.detect_tip - self.tip).dot(&wall.normal) > self.options.probe_depth
+                {
+                    let name = self.walls[self.wall].0.clone();
+                    self.abort(format!(
+                        "wall '{name}': pressed {:.2} mm past the first contact without reaching {:.1} N (probe {}): the contact is softer than the scenario says, or raise the option probe_depth",
+                        self.options.probe_depth * 1e3,
+                        self.options.press_force(self.force_limit),
+                        self.probe + 1
+                    ));
+                    return Vector3::zeros();
+                }
+                let v = -wall.normal * self.approach_speed;
+                self.tip += v * t;
+                v
+            }
+            Phase::Dwell => {
+                self.record();
+                let wall = self.walls[self.wall].1;
+                let oscillate = self.options.dwell_cycles > 0;
+                let s = self.elapsed();
+                let hold = self.hold_time();
+                let (hz, cycles) = (
+                    self.options.dwell_frequency,
+                    self.options.dwell_cycles as f64,
+                );
+                let length = if oscillate { hold + cycles / hz } else { hold };
+                if s >= length {
+                    self.tip = self.dwell_centre;
+                    self.mark_window(1);
+                    self.enter(Phase::Retreat);
+                    return Vector3::zeros();
+                }
+                if oscillate && s > hold {
+                    // out and back in, never deeper than the pressed point
+                    let two_pi = 2.0 * std::f64::consts::PI;
+                    let a = self.options.dwell_amplitude * self.press_depth();
+                    let phase = two_pi * hz * (s - hold);
+                    self.tip = self.dwell_centre + wall.normal * (a * (1.0 - phase.cos()));
+                    wall.normal * (a * two_pi * hz * phase.sin())
+                } else {
+                    self.tip = self.dwell_centre;
+                    Vector3::zeros()
+                }
+            }
+            Phase::Retreat => {
+                self.record();
+                let wall = self.walls[self.wall].1;
+                // out past the first contact (commanded a loop delay early) and the margin, at
+                // the moves' speed; further, slowly, while a force remains
+                let span = self.approach_speed * self.hold_time() + self.options.margin;
+                let out = (self.tip - self.detect_tip).dot(&wall.normal);
+                // out far enough, to a tenth of a micrometre (the last step lands on the span
+                // up to rounding)
+                let far = out >= span - 1e-7;
+                let f = force.dot(&wall.normal);
+                let settled = self.elapsed()
+                    > self.hold_time() + self.options.margin / self.options.move_speed;
+                let v = if !far {
+                    wall.normal * self.options.move_speed.min((span - out) / t)
+                } else if f >= self.detect_force && settled {
+                    wall.normal * self.approach_speed
+                } else {
+                    Vector3::zeros()
+                };
+                if (self.tip - self.dwell_centre).dot(&wall.normal) > self.options.retreat_distance
+                {
+                    let name = self.walls[self.wall].0.clone();
+                    self.abort(format!(
+                        "wall '{name}': still in contact {:.1} mm out from the pressed point (probe {})",
+                        self.options.retreat_distance * 1e3,
+                        self.probe + 1
+                    ));
+                    return Vector3::zeros();
+                }
+                self.tip += v * t;
+                // out of contact for a loop delay: the probe is over
+                if f < self.detect_force && settled && far {
+                    self.finish_probe();
+                }
+                v
+            }
+            Phase::Done => Vector3::zeros(),
+        }
+    }
+
+    /// The loop's delay from a command to its force: robot delay (and servo lag), sensor
+    /// delay, and two ticks.
+    fn hold_time(&self) -> f64 {
+        let robot = self.robot.map_or(0.0, |r| {
+            r.delay
+                + if r.servo_frequency > 0.0 {
+                    2.0 * r.servo_damping / (2.0 * std::f64::consts::PI * r.servo_frequency)
+                } else {
+                    0.0
+                }
+        });
+        robot + (self.sensor_delay_ticks as f64 + 2.0) * self.period + 0.05
+    }
+
+    /// The nominal law's penetration at the press force, m.
+    fn press_depth(&self) -> f64 {
+        let f = self.options.press_force(self.force_limit);
+        match self.law {
+            ContactModel::Linear(l) => f / l.stiffness,
+            ContactModel::HuntCrossley(h) => (f / h.stiffness).powf(1.0 / h.exponent),
+        }
+    }
+
+    /// Marks the start (`end = 0`) or the end (`1`) of the current probe's fit window: the
+    /// sample a loop delay from now.
+    fn mark_window(&mut self, end: usize) {
+        let delay = (self.hold_time() / self.period).round() as usize;
+        let n = self.probes.last().map_or(0, Vec::len);
+        if let Some(w) = self.windows.last_mut() {
+            if end == 0 {
+                w.0 = n + delay;
+            } else {
+                w.1 = n + delay;
+            }
+        }
+    }
+
+    /// Records this tick's sample: the force with the pose `τ_p` earlier.
+    fn record(&mut self) {
+        if !self.recording {
+            return;
+        }
+        let n = self.poses.len();
+        if n <= self.sensor_delay_ticks {
+            return;
+        }
+        let (position, velocity) = self.poses[n - 1 - self.sensor_delay_ticks];
+        let force = self.forces[n - 1];
+        if let Some(p) = self.probes.last_mut() {
+            p.push(ProbeSample {
+                position,
+                velocity,
+                force,
+            });
+        }
+    }
+
+    fn finish_excitation(&mut self) {
+        let n = self.free_forces.len() as f64;
+        let mean = self.free_forces.iter().fold(Vector3::zeros(), |a, f| a + f) / n;
+        let var = self
+            .free_forces
+            .iter()
+            .map(|f| (f - mean).norm_squared())
+            .sum::<f64>()
+            / (3.0 * n);
+        self.bias = mean;
+        self.noise = var.sqrt();
+        self.detect_force = self.options.detect_force.max(6.0 * self.noise);
+        match fit_robot_response(
+            &self.commanded,
+            &self.reported,
+            self.period,
+            self.options.max_delay,
+        ) {
+            Some(r) => {
+                self.robot = Some(r);
+                self.events.push(Progress::Robot(r));
+            }
+            None => {
+                self.abort("the robot did not follow the excitation: no delay could be fitted (is the robot feedback live?)".into());
+                return;
+            }
+        }
+        // approach speed: the force overshoot over the loop's delay at most a quarter of the
+        // press force under the nominal law
+        let press = self.options.press_force(self.force_limit);
+        let stiffness = press / self.press_depth();
+        self.approach_speed = self
+            .options
+            .max_approach_speed
+            .min(0.25 * press / (stiffness * self.hold_time()));
+        self.start_wall(0);
+    }
+
+    fn start_wall(&mut self, i: usize) {
+        if i >= self.walls.len() {
+            self.move_to(self.start_tip, self.options.move_speed, Phase::Done);
+            return;
+        }
+        self.wall = i;
+        self.probe = 0;
+        self.grid = self.grid_of(i);
+        self.probes.clear();
+        self.windows.clear();
+        self.contact_points.clear();
+        self.wall_started = self.tick;
+        // two legs: the start tip, then the first probe's start
+        self.move_to(self.start_tip, self.options.move_speed, Phase::Approach);
+        self.pending_leg = Some(self.probe_start(0));
+    }
+
+    /// Where probe `j` of the current wall starts: outside the nominal plane by `standoff`
+    /// (the first), outside the plane the probes so far predict by `margin` (the others).
+    fn probe_start(&self, j: usize) -> Vector3<f64> {
+        let wall = self.walls[self.wall].1;
+        let g = self.grid[j];
+        if self.contact_points.is_empty() {
+            return g + wall.normal * self.options.standoff;
+        }
+        let sigmas = vec![1e-5; self.contact_points.len()];
+        let plane = fit_plane(&self.contact_points, &sigmas, &wall.normal);
+        let h = plane.normal.dot(&(g - plane.point)) / plane.normal.dot(&wall.normal).max(0.5);
+        // g moved along the nominal normal to the predicted plane, then out by the margin
+        g - wall.normal * h + wall.normal * self.options.margin
+    }
+
+    fn finish_probe(&mut self) {
+        // the contact point of this probe from its samples (for the next probes' starts)
+        let wall = self.walls[self.wall].1;
+        self.recording = false;
+        if let Some(samples) = self.probes.last() {
+            let pressed: Vec<&ProbeSample> = samples
+                .iter()
+                .filter(|s| s.force.dot(&wall.normal) > self.detect_force)
+                .collect();
+            if let Some(first) = pressed.first() {
+                // corrected for the force at detection through the nominal law
+                let f = first.force.dot(&wall.normal);
+                let d = self.law_depth(f);
+                self.contact_points.push(first.position + wall.normal * d);
+            }
+        }
+        self.probe += 1;
+        if self.probe < self.grid.len() {
+            let start = self.probe_start(self.probe);
+            // out along the normal, then across
+            let out = self.tip.max_by_normal(&wall.normal, &start);
+            self.move_to(out, self.options.move_speed, Phase::Move);
+            self.pending_leg = Some(start);
+            return;
+        }
+        self.fit_wall();
+    }
+
+    fn law_depth(&self, f: f64) -> f64 {
+        match self.law {
+            ContactModel::Linear(l) => f / l.stiffness,
+            ContactModel::HuntCrossley(h) => (f / h.stiffness).powf(1.0 / h.exponent),
+        }
+    }
+
+    fn fit_wall(&mut self) {
+        let (name, wall) = self.walls[self.wall].clone();
+        // the reported positions' white noise averaged down, probe by probe; the fit takes the
+        // samples of each probe's window (the robot at the pressed point and oscillating)
+        let probes: Vec<Vec<ProbeSample>> = self
+            .probes
+            .iter()
+            .zip(&self.windows)
+            .map(|(p, &(from, to))| {
+                let positions: Vec<_> = p.iter().map(|s| s.position).collect();
+                let smoothed = smooth(&positions, SMOOTHING);
+                let (from, to) = (from.min(p.len()), to.min(p.len()));
+                p[from..to]
+                    .iter()
+                    .zip(&smoothed[from..to])
+                    .map(|(s, &position)| ProbeSample { position, ..*s })
+                    .collect()
+            })
+            .collect();
+        match fit_surface(&probes, &wall.normal, self.form, self.detect_force) {
+            Ok(fit) => {
+                let spent = (self.tick - self.wall_started) as f64 * self.period;
+                self.events
+                    .push(Progress::Wall(self.wall, name, fit.clone(), spent));
+                self.fits.push(fit);
+                let next = self.wall + 1;
+                self.start_wall(next);
+            }
+            Err(e) => self.abort(format!(
+                "wall '{name}': the probes could not be fitted: {e}"
+            )),
+        }
+    }
+}
+
+/// The farther-out of two points along a normal, at the first's place.
+trait MaxByNormal {
+    fn max_by_normal(&self, normal: &Vector3<f64>, other: &Vector3<f64>) -> Vector3<f64>;
+}
+
+impl MaxByNormal for Vector3<f64> {
+    fn max_by_normal(&self, normal: &Vector3<f64>, other: &Vector3<f64>) -> Vector3<f64> {
+        let lift = (other - self).dot(normal).max(0.0);
+        self + normal * lift
+    }
+}
