@@ -474,6 +474,15 @@ DEFAULTS = {
         "residual_gain": 0.0,
         "force_ratio_max": 2.0,
         "fallback": MODEL_DEFAULTS,
+        # no calibration: no walls (the table is listed, as every parameter is)
+        "calibration": {
+            "measured": {"scenario": "", "at": "", "facility": "", "version": "", "probes_per_wall": 0,
+                         "press_force": 0.0, "duration": 0.0},
+            "walls": [],
+            "law": {"model": "linear", "stiffness": 1.0, "damping": 0.0, "exponent": 1.0, "stiffness_sigma": 0.0,
+                    "damping_sigma": 0.0, "exponent_sigma": 0.0},
+            "robot": {"delay": 0.0, "delay_sigma": 0.0, "servo_frequency": 0.0, "servo_damping": 0.0, "sensor_delay": 0.0},
+        },
     },
 }
 
