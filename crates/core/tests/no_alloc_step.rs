@@ -158,3 +158,62 @@ fn no_compensator_step_allocates_on_a_frictional_oblique_contact() {
         );
     }
 }
+
+#[test]
+fn contacts_of_shapes_allocate_nothing_in_the_facility_nor_the_reference() {
+    // the shape presets: a cylinder rod against four boxes (an edge, a corner), a capsule
+    // against a triangle mesh (the mesh from the preset's OBJ file, read here as the loader
+    // would); the facility's ticks and the reference's steps of whole runs, armed
+    for name in ["rod-in-frame", "probe-drogue"] {
+        let mut s = common::preset(name);
+        if name == "probe-drogue" {
+            let path = format!(
+                "{}/../../python/hilcontact/scenarios/probe-drogue-cone.obj",
+                env!("CARGO_MANIFEST_DIR")
+            );
+            let text = std::fs::read_to_string(&path).expect("the drogue's OBJ");
+            let shape = &mut s.target.shapes[0];
+            for line in text.lines() {
+                let mut words = line.split_whitespace();
+                match words.next() {
+                    Some("v") => {
+                        let v: Vec<f64> = words.map(|w| w.parse().unwrap()).collect();
+                        shape.vertices.push([v[0], v[1], v[2]]);
+                    }
+                    Some("f") => {
+                        let f: Vec<u32> = words.map(|w| w.parse::<u32>().unwrap() - 1).collect();
+                        shape.triangles.push([f[0], f[1], f[2]]);
+                    }
+                    _ => {}
+                }
+            }
+        }
+        s.facility.robot_delay = 0.0;
+        let plan = s.resolve().unwrap_or_else(|e| panic!("{name}: {e}"));
+        let mut step = HilStep::new(&plan, f64::INFINITY);
+        let mut facility = FacilityLoop::new(&plan);
+        let mut commands = Vec::with_capacity(plan.ticks + 1);
+        let mut command = step.command();
+        for k in 0..=plan.ticks {
+            commands.push(command);
+            let m = facility.tick(&command);
+            let _ = step.observe(k, &m, Some(facility.physical_contact()));
+            command = step.advance(k).unwrap();
+        }
+        let mut facility = FacilityLoop::new(&plan);
+        let mut contact = 0.0_f64;
+        let mut x = plan.initial;
+        COUNT.with(|c| c.set(0));
+        ARMED.with(|a| a.set(true));
+        for command in &commands {
+            let m = facility.tick(command);
+            contact = contact.max(facility.contact_force().norm());
+            std::hint::black_box(m);
+            plan.system
+                .step_reference(&mut x, plan.period, plan.reference_substeps);
+        }
+        ARMED.with(|a| a.set(false));
+        assert_eq!(COUNT.with(Cell::get), 0, "{name}: allocated while ticking");
+        assert!(contact > 0.0, "{name}: the run touches");
+    }
+}
