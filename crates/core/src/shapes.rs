@@ -590,27 +590,30 @@ fn near_plane(
 }
 
 /// Whether the cores of `ps` (at `pose_s`) and `pt` are more than `gap` (m) apart along one of
-/// the six axes of their own frames (each core's extent along an axis from its support points;
-/// a cheap separating-axis test before a distance query). `false` says nothing.
+/// the three axes of the target piece's frame: the target's extent from its own bounding box,
+/// the servicer's from its support points (a cheap separating-axis test before a distance
+/// query). `false` says nothing.
 fn separated(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece, gap: f64) -> bool {
-    let (Some(a), Some(b)) = (ps.core.as_support_map(), pt.core.as_support_map()) else {
+    let Some(map) = ps.core.as_support_map() else {
         return false;
     };
-    let extent = |map: &dyn parry3d_f64::shape::SupportMap,
-                  pose: &Isometry3<f64>,
-                  axis: &Unit<Vector3<f64>>| {
-        let hi = map.support_point(pose, axis).coords.dot(axis);
-        let lo = map.support_point(pose, &-*axis).coords.dot(axis);
-        (lo, hi)
-    };
-    for rotation in [&pt.pose.rotation, &pose_s.rotation] {
-        for axis in [Vector3::x_axis(), Vector3::y_axis(), Vector3::z_axis()] {
-            let axis = Unit::new_unchecked(rotation * axis.into_inner());
-            let (s_lo, s_hi) = extent(a, pose_s, &axis);
-            let (t_lo, t_hi) = extent(b, &pt.pose, &axis);
-            if s_lo - t_hi > gap || t_lo - s_hi > gap {
-                return true;
-            }
+    let local = pt.core.compute_local_aabb();
+    let centre = pt.pose * local.center();
+    let half = local.half_extents();
+    for (i, axis) in [Vector3::x_axis(), Vector3::y_axis(), Vector3::z_axis()]
+        .into_iter()
+        .enumerate()
+    {
+        let axis = Unit::new_unchecked(pt.pose.rotation * axis.into_inner());
+        let c = centre.coords.dot(&axis);
+        let (t_lo, t_hi) = (c - half[i], c + half[i]);
+        let s_hi = map.support_point(pose_s, &axis).coords.dot(&axis);
+        if t_lo - s_hi > gap {
+            return true;
+        }
+        let s_lo = map.support_point(pose_s, &-axis).coords.dot(&axis);
+        if s_lo - t_hi > gap {
+            return true;
         }
     }
     false
