@@ -490,16 +490,21 @@ pub fn mounted_hardware(
 
 /// The hardware's mounting against its nominal pose (`t` frame): the rotation
 /// `facility.mount_rotation` (a rotation vector, degrees) about the centre of the walls'
-/// points (the mockup), then the offset `facility.mount_offset` (m).
+/// points (the mockup; without walls, of the target's shapes' origins), then the offset
+/// `facility.mount_offset` (m).
 pub fn mount_pose(
     nominal: &ContactGeometry,
     f: &crate::config::FacilityConfig,
 ) -> nalgebra::Isometry3<f64> {
-    let n = nominal.walls.len().max(1) as f64;
-    let centre = nominal
-        .walls
-        .iter()
-        .fold(Vector3::zeros(), |c, w| c + w.point / n);
+    // the centre of the walls' points, or without walls of the target's shapes' origins
+    let points: Vec<Vector3<f64>> = if nominal.walls.is_empty() {
+        let shapes = &nominal.shapes.target;
+        shapes.iter().map(|s| s.pose.translation.vector).collect()
+    } else {
+        nominal.walls.iter().map(|w| w.point).collect()
+    };
+    let n = points.len().max(1) as f64;
+    let centre = points.iter().fold(Vector3::zeros(), |c, p| c + p / n);
     let rotation = nalgebra::UnitQuaternion::from_scaled_axis(
         Vector3::from(f.mount_rotation).map(f64::to_radians),
     );

@@ -464,3 +464,24 @@ fn the_hil_loop_without_delay_reproduces_the_reference_on_shapes() {
     let (trace, _) = run_reference(&s.resolve().unwrap(), false);
     assert!(trace.friction_work > 0.0, "friction worked");
 }
+
+#[test]
+fn hardware_mounted_off_nominal_moves_the_target_shapes_for_the_facility_only() {
+    // a plane 1 mm further along its normal on the hardware: the reference (true hardware)
+    // meets it later than the scenario says; the nominal system keeps the stated one
+    let r = 0.05;
+    let sphere = shape(json!({"kind": "sphere", "radius": r}));
+    let mut s = shapes_scene(vec![sphere], vec![plane_at(r + 0.001)], [0.0; 3], 4000.0);
+    s.facility.mount_offset = [0.001, 0.0, 0.0];
+    let plan = s.resolve().unwrap();
+    let mut x = plan.initial;
+    x.servicer.position = Vector3::new(0.0015, 0.0, 0.0);
+    let nominal = plan.nominal.contact(&x);
+    let truth = plan.system.contact(&x);
+    assert!(nominal.force.x < 0.0, "0.5 mm into the stated plane");
+    assert_eq!(
+        truth.force,
+        Vector3::zeros(),
+        "0.5 mm short of the mounted one"
+    );
+}
