@@ -200,7 +200,13 @@ def check_output_folder(directory: str | os.PathLike[str], overwrite: bool = Fal
     Raises :class:`OutputError`."""
     target = resolve_path(directory, f"--out {directory}")
     _checked_at(target)
-    _check_target(directory, target, overwrite)
+    if target.parent.is_dir():
+        # under the swap's lock: another process's swap, between its two renames, would show
+        # one folder's marker and the other's files
+        with _swap_lock(target.parent):
+            _check_target(directory, target, overwrite)
+    else:
+        _check_target(directory, target, overwrite)
     return target
 
 
