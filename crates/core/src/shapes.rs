@@ -25,9 +25,12 @@
 //! Allocation-free while the penetration stays below `r_A + r_B` (the cores then never
 //! overlap, and parry's GJK needs no EPA); the queries allocate nothing else.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use parry3d_f64::bounding_volume::{Aabb, BoundingVolume};
-use parry3d_f64::query;
+use parry3d_f64::query::gjk::{self, CSOPoint, GJKResult, VoronoiSimplex};
+use parry3d_f64::query::{self, Contact};
 use parry3d_f64::shape::{Ball, Cone, Cuboid, Cylinder, HalfSpace, Segment, SharedShape, Triangle};
 
 /// Most contact points kept apart per pair of shapes in one evaluation (more are still
@@ -35,6 +38,57 @@ use parry3d_f64::shape::{Ball, Cone, Cuboid, Cylinder, HalfSpace, Segment, Share
 const DEDUPE_SLOTS: usize = 32;
 /// Two contact points of the same pair of shapes closer than this are one point, m.
 const SAME_POINT: f64 = 1e-7;
+/// Separating axes remembered per target piece: one per servicer piece (by its index among
+/// all the servicer's pieces, modulo this).
+const AXIS_SLOTS: usize = 4;
+
+/// The separating axes last found between a target piece and the servicer's pieces (`t`, unit,
+/// from the servicer toward the target): temporal coherence. A pair that an axis separated
+/// at the last evaluation is usually still separated by it at the next; testing that costs two
+/// support points, against a whole GJK query. Any axis is only *tested* (the gap along it is
+/// a lower bound of the distance), never trusted, so a stale axis, a slot shared by two
+/// servicer pieces, or a write from another thread changes no result, only the cost. Atomic
+/// (relaxed) so that a plan can be shared between threads.
+struct AxisCache([[AtomicU64; 3]; AXIS_SLOTS]);
+
+impl AxisCache {
+    fn new() -> Self {
+        AxisCache(std::array::from_fn(|_| {
+            std::array::from_fn(|_| AtomicU64::new(0))
+        }))
+    }
+
+    /// The axis in `slot`, if any.
+    fn get(&self, slot: usize) -> Option<Unit<Vector3<f64>>> {
+        let s = &self.0[slot % AXIS_SLOTS];
+        let a = Vector3::from_fn(|i, _| f64::from_bits(s[i].load(Ordering::Relaxed)));
+        // (zero before the first query; components written by two threads at once still make
+        // a direction, or are dropped here)
+        Unit::try_new(a, 0.5)
+    }
+
+    /// Remembers the axis `a` (unit, `t`) in `slot`.
+    fn set(&self, slot: usize, a: &Vector3<f64>) {
+        if a.iter().all(|x| x.is_finite()) {
+            let s = &self.0[slot % AXIS_SLOTS];
+            for i in 0..3 {
+                s[i].store(a[i].to_bits(), Ordering::Relaxed);
+            }
+        }
+    }
+}
+
+impl Clone for AxisCache {
+    fn clone(&self) -> Self {
+        let c = AxisCache::new();
+        for (to, from) in c.0.iter().zip(&self.0) {
+            for (t, f) in to.iter().zip(from) {
+                t.store(f.load(Ordering::Relaxed), Ordering::Relaxed);
+            }
+        }
+        c
+    }
+}
 
 /// What a shape is, with its dimensions (m) in its own frame: cylinders, capsules and cones
 /// along the shape's `z` axis, centred on its origin.
@@ -109,6 +163,8 @@ struct Piece {
     /// The diagonal of the core's own bounding box, m (`+∞` for a half-space): of two pieces,
     /// the smaller one's vertices are tested against the larger one's core.
     size: f64,
+    /// On a target piece, the separating axes last found toward the servicer's pieces.
+    axes: AxisCache,
 }
 
 impl Piece {
@@ -221,6 +277,7 @@ fn piece(core: SharedShape, pose: Isometry3<f64>, radius: f64) -> Piece {
         vertices,
         n_vertices,
         size,
+        axes: AxisCache::new(),
     }
 }
 
@@ -278,6 +335,7 @@ impl BodyShape {
                     vertices: [Point3::origin(); 8],
                     n_vertices: 0,
                     size: f64::INFINITY,
+                    axes: AxisCache::new(),
                 };
                 (0.0, vec![p])
             }
@@ -387,6 +445,11 @@ impl Seen {
         }
     }
 
+    /// Forgets the points of the last pair of shapes.
+    fn clear(&mut self) {
+        self.n = 0;
+    }
+
     /// Takes a point: a face contact (or any point, once the slots are full) goes to `f` at
     /// once unless it repeats one; an edge or corner contact waits for [`Seen::finish`].
     fn insert(&mut self, p: &ContactPoint, on_face: bool, f: &mut impl FnMut(&ContactPoint)) {
@@ -434,15 +497,20 @@ impl ShapePairs {
     /// Allocation-free while no penetration exceeds the pair's `r_A + r_B`.
     pub fn for_each_point(&self, pose: &Isometry3<f64>, mut f: impl FnMut(&ContactPoint)) {
         let mut pair = 0u64;
+        let mut seen = Seen::new();
+        // the index of the servicer shape's first piece among all the servicer's pieces
+        let mut first_piece = 0;
         for (a, s) in self.servicer.iter().enumerate() {
+            // a one-piece shape (every primitive): its pose and box once for all target shapes
+            let single = (s.pieces.len() == 1).then(|| placed(&s.pieces[0], s.radius, pose));
             for (b, t) in self.target.iter().enumerate() {
                 pair += 1;
                 let reach = s.radius + t.radius;
                 let mesh = s.is_mesh() || t.is_mesh();
-                let mut seen = Seen::new();
+                seen.clear();
                 for (i, ps) in s.pieces.iter().enumerate() {
-                    let pose_s = pose * ps.pose;
-                    let aabb_s = ps.core.compute_aabb(&pose_s).loosened(s.radius);
+                    let (pose_s, aabb_s) = single.unwrap_or_else(|| placed(ps, s.radius, pose));
+                    let slot = first_piece + i;
                     for (j, pt) in t.pieces.iter().enumerate() {
                         if !t.is_unbounded() && !aabb_s.intersects(&pt.aabb) {
                             continue;
@@ -460,7 +528,16 @@ impl ShapePairs {
                                 continue;
                             }
                         }
-                        if face.is_none() && !t.is_unbounded() && separated(ps, &pose_s, pt, reach)
+                        let remembered = remembered_gap(ps, &pose_s, pt, slot);
+                        if remembered.is_some_and(|g| g > reach) {
+                            continue;
+                        }
+                        // (an axis remembered that no longer separates them is about the
+                        // contact's normal: the target's own axes would not do better)
+                        if face.is_none()
+                            && !t.is_unbounded()
+                            && remembered.is_none()
+                            && separated(ps, &pose_s, pt, reach)
                         {
                             continue;
                         }
@@ -470,6 +547,7 @@ impl ShapePairs {
                             &pose_s,
                             &aabb_s,
                             pt,
+                            slot,
                             s.radius,
                             t.radius,
                             reach,
@@ -492,6 +570,7 @@ impl ShapePairs {
                 }
                 seen.finish(reach, &mut f);
             }
+            first_piece += s.pieces.len();
         }
     }
 
@@ -513,25 +592,38 @@ impl ShapePairs {
     /// the boxes come closer than that. (The reference's free-flight test: no point of the
     /// servicer can move `threshold` in the period.)
     pub fn clear_of(&self, pose: &Isometry3<f64>, threshold: f64) -> bool {
+        let mut first_piece = 0;
         for s in &self.servicer {
+            let single = (s.pieces.len() == 1).then(|| placed(&s.pieces[0], s.radius, pose));
             for t in &self.target {
                 let reach = s.radius + t.radius;
-                for ps in &s.pieces {
-                    let pose_s = pose * ps.pose;
-                    let aabb_s = ps.core.compute_aabb(&pose_s).loosened(s.radius);
+                for (i, ps) in s.pieces.iter().enumerate() {
+                    let (pose_s, aabb_s) = single.unwrap_or_else(|| placed(ps, s.radius, pose));
+                    let slot = first_piece + i;
                     for pt in &t.pieces {
-                        if !t.is_unbounded()
-                            && (aabb_distance(&aabb_s, &pt.aabb) > threshold
-                                || separated(ps, &pose_s, pt, reach + threshold))
+                        if t.is_unbounded() {
+                            if core_distance(ps, &pose_s, pt) - reach <= threshold {
+                                return false;
+                            }
+                            continue;
+                        }
+                        if aabb_distance(&aabb_s, &pt.aabb) > threshold {
+                            continue;
+                        }
+                        let remembered = remembered_gap(ps, &pose_s, pt, slot);
+                        if remembered.is_some_and(|g| g > reach + threshold)
+                            || (remembered.is_none()
+                                && separated(ps, &pose_s, pt, reach + threshold))
                         {
                             continue;
                         }
-                        if core_distance(ps, &pose_s, pt) - reach <= threshold {
+                        if core_distance_noting(ps, &pose_s, pt, slot) - reach <= threshold {
                             return false;
                         }
                     }
                 }
             }
+            first_piece += s.pieces.len();
         }
         true
     }
@@ -565,6 +657,37 @@ impl ShapePairs {
         }
         gap
     }
+}
+
+/// A servicer piece's pose in `t` (its body at `pose`) and its bounding box there, radius
+/// `radius` included.
+fn placed(ps: &Piece, radius: f64, pose: &Isometry3<f64>) -> (Isometry3<f64>, Aabb) {
+    let pose_s = pose * ps.pose;
+    (pose_s, ps.core.compute_aabb(&pose_s).loosened(radius))
+}
+
+/// The gap between the cores of the servicer piece `ps` (at `pose_s`; `slot`, its index among
+/// the servicer's pieces) and the target piece `pt` along the axis remembered for them
+/// ([`AxisCache`]), m: a lower bound of their distance (negative where their projections
+/// overlap); none without a remembered axis. The temporal-coherence cull: the pair is apart by
+/// more than `g` if this is.
+fn remembered_gap(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece, slot: usize) -> Option<f64> {
+    let a = pt.axes.get(slot)?;
+    let ms = ps.core.as_support_map()?;
+    let mt = pt.core.as_support_map()?;
+    // the servicer's farthest point along `a`, the target's nearest
+    let s_hi = ms.support_point(pose_s, &a).coords.dot(&a);
+    let t_lo = mt.support_point(&pt.pose, &-a.into_inner()).coords.dot(&a);
+    Some(t_lo - s_hi)
+}
+
+/// Whether parry answers the pair of cores by GJK (two support maps, neither a ball nor a
+/// half-space), the query whose separating axis [`AxisCache`] keeps.
+fn by_gjk(ps: &Piece, pt: &Piece) -> bool {
+    ps.core.as_ball().is_none()
+        && pt.core.as_ball().is_none()
+        && ps.core.as_support_map().is_some()
+        && pt.core.as_support_map().is_some()
 }
 
 /// Whether the core of `ps` (at `pose_s`) comes within `reach` of the plane of the triangle
@@ -643,6 +766,93 @@ fn core_distance(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece) -> f64 {
     }
 }
 
+/// [`core_distance`], remembering the axis GJK ends on in the target piece's [`AxisCache`]
+/// `slot`: the same computation as parry's `query::distance` for two support maps (same
+/// start, same GJK, same result), its direction kept.
+fn core_distance_noting(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece, slot: usize) -> f64 {
+    // parry's own closed forms for these pairs
+    let closed_form = (ps.core.as_cuboid().is_some() && pt.core.as_cuboid().is_some())
+        || (ps.core.as_segment().is_some() && pt.core.as_segment().is_some());
+    let (true, false, Some(g1), Some(g2)) = (
+        by_gjk(ps, pt),
+        closed_form,
+        ps.core.as_support_map(),
+        pt.core.as_support_map(),
+    ) else {
+        return core_distance(ps, pose_s, pt);
+    };
+    let pos12 = pose_s.inv_mul(&pt.pose);
+    let dir = Unit::try_new(
+        -pos12.translation.vector,
+        parry3d_f64::math::DEFAULT_EPSILON,
+    )
+    .unwrap_or(Vector3::x_axis());
+    let mut simplex = VoronoiSimplex::new();
+    simplex.reset(CSOPoint::from_shapes(&pos12, g1, g2, &dir));
+    match gjk::closest_points(&pos12, g1, g2, f64::MAX, true, &mut simplex) {
+        GJKResult::ClosestPoints(p1, p2, n) => {
+            pt.axes.set(slot, &(pose_s.rotation * n.into_inner()));
+            nalgebra::distance(&p1, &p2)
+        }
+        _ => 0.0,
+    }
+}
+
+/// The contact of two pieces' cores within `reach` (`t`), as parry's `query::contact` gives it
+/// (for two support maps the same computation, with the axis GJK ends on, or the contact's
+/// normal, remembered in the target piece's [`AxisCache`] `slot`).
+fn core_contact(
+    ps: &Piece,
+    pose_s: &Isometry3<f64>,
+    pt: &Piece,
+    slot: usize,
+    reach: f64,
+) -> Option<Contact> {
+    if pt.core.as_halfspace().is_some() {
+        // parry 0.22's (support map, half-space) order answers wrongly; its own order is right
+        let c = query::contact(&pt.pose, &*pt.core, pose_s, &*ps.core, reach);
+        return c.ok().flatten().map(|mut c| {
+            c.flip();
+            c
+        });
+    }
+    let (true, Some(g1), Some(g2)) = (
+        by_gjk(ps, pt),
+        ps.core.as_support_map(),
+        pt.core.as_support_map(),
+    ) else {
+        return query::contact(pose_s, &*ps.core, &pt.pose, &*pt.core, reach)
+            .ok()
+            .flatten();
+    };
+    // `query::contact` → `contact_support_map_support_map`, step by step
+    let pos12 = pose_s.inv_mul(&pt.pose);
+    let result = query::details::contact_support_map_support_map_with_params(
+        &pos12,
+        g1,
+        g2,
+        reach,
+        &mut VoronoiSimplex::new(),
+        None,
+    );
+    match result {
+        GJKResult::ClosestPoints(point1, point2_1, normal1) => {
+            let dist = (point2_1 - point1).dot(&normal1);
+            let point2 = pos12.inverse_transform_point(&point2_1);
+            let normal2 = pos12.inverse_transform_unit_vector(&-normal1);
+            let mut c = Contact::new(point1, point2, normal1, normal2, dist);
+            c.transform_by_mut(pose_s, &pt.pose);
+            pt.axes.set(slot, &c.normal1);
+            Some(c)
+        }
+        GJKResult::NoIntersection(dir) => {
+            pt.axes.set(slot, &(pose_s.rotation * dir.into_inner()));
+            None
+        }
+        GJKResult::Intersection | GJKResult::Proximity(_) => None,
+    }
+}
+
 /// The signed distance of the point `v` (`t`) to a piece's core at `pose`, m (negative inside,
 /// where the query can say how deep without allocating; 0 inside a cylinder's or cone's core),
 /// the nearest point of the core and the core's outward normal there (`fallback` where the
@@ -684,24 +894,14 @@ fn piece_contacts(
     pose_s: &Isometry3<f64>,
     aabb_s: &Aabb,
     pt: &Piece,
+    slot: usize,
     r_s: f64,
     r_t: f64,
     reach: f64,
     id: u64,
     emit: &mut impl FnMut(&ContactPoint),
 ) {
-    // parry 0.22's (support map, half-space) order answers wrongly; its own order is right
-    let contact = if pt.core.as_halfspace().is_some() {
-        query::contact(&pt.pose, &*pt.core, pose_s, &*ps.core, reach).map(|c| {
-            c.map(|mut c| {
-                c.flip();
-                c
-            })
-        })
-    } else {
-        query::contact(pose_s, &*ps.core, &pt.pose, &*pt.core, reach)
-    };
-    let Ok(Some(c)) = contact else {
+    let Some(c) = core_contact(ps, pose_s, pt, slot, reach) else {
         return;
     };
     if c.dist >= reach {

@@ -429,15 +429,18 @@ impl TwoBodySystem {
         let h = period / substeps as f64;
         let mut remaining = period;
         let mut friction_work = 0.0;
+        // the active set at `x` (a step's end is the next step's start: asked once)
+        let mut before = self.active_set(x);
         while remaining > period * 1e-12 {
             let step = h.min(remaining);
-            let before = self.active_set(x);
             let mut y = *x;
             let work = self.step_rk4(&mut y, step);
-            if self.active_set(&y) == before {
+            let after = self.active_set(&y);
+            if after == before {
                 *x = y;
                 friction_work += work;
                 remaining -= step;
+                before = after;
                 continue;
             }
             // the set changes within the step: bisect for the first moment it does
@@ -456,6 +459,7 @@ impl TwoBodySystem {
             friction_work += self.step_rk4(x, lo);
             friction_work += self.step_rk4(x, hi - lo);
             remaining -= hi;
+            before = self.active_set(x);
         }
         friction_work
     }
