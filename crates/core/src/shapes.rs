@@ -926,33 +926,36 @@ fn piece_contacts(
     // the direction and make the force jump; each enters at depth 0; one side only, so that a
     // contact of two ends is not counted from both)
     let mut deepest_vertex: f64 = 0.0;
-    if ps.size <= pt.size {
+    // the vertices' piece and the piece they are projected onto, with the side the latter is
+    // on (+1: the target, whose outward normal is the contact normal; −1: the servicer)
+    let servicer_vertices = ps.size <= pt.size;
+    let (from, from_pose, onto, onto_pose, onto_box, r_from, side, code) = if servicer_vertices {
         let bounded = pt.core.as_halfspace().is_none();
-        for (k, local) in ps.vertices().iter().enumerate() {
-            let v = pose_s * local;
-            // out of the target piece's reach by its bounding box: no need to project
-            if bounded && aabb_point_distance(&pt.aabb, &v) >= r_s {
-                continue;
-            }
-            let (on_t, dist, normal) = signed_distance(pt, &pt.pose, &v, &n);
-            if dist < reach {
-                let depth = reach - dist;
-                deepest_vertex = deepest_vertex.max(depth);
-                point(v, on_t, normal, depth, 1 + k as u64);
-            }
-        }
+        (
+            ps,
+            pose_s,
+            pt,
+            &pt.pose,
+            bounded.then_some(&pt.aabb),
+            r_s,
+            1.0,
+            1,
+        )
     } else {
-        for (k, local) in pt.vertices().iter().enumerate() {
-            let v = pt.pose * local;
-            if aabb_point_distance(aabb_s, &v) >= r_t {
-                continue;
-            }
-            let (on_s, dist, outward) = signed_distance(ps, pose_s, &v, &-n);
-            if dist < reach {
-                let depth = reach - dist;
-                deepest_vertex = deepest_vertex.max(depth);
-                point(on_s, v, -outward, depth, 17 + k as u64);
-            }
+        (pt, &pt.pose, ps, pose_s, Some(aabb_s), r_t, -1.0, 17)
+    };
+    for (k, local) in from.vertices().iter().enumerate() {
+        let v = from_pose * local;
+        // out of the other piece's reach by its bounding box: no need to project
+        if onto_box.is_some_and(|b| aabb_point_distance(b, &v) >= r_from) {
+            continue;
+        }
+        let (on, dist, outward) = signed_distance(onto, onto_pose, &v, &(n * side));
+        if dist < reach {
+            let depth = reach - dist;
+            deepest_vertex = deepest_vertex.max(depth);
+            let (on_s, on_t) = if servicer_vertices { (v, on) } else { (on, v) };
+            point(on_s, on_t, outward * side, depth, code + k as u64);
         }
     }
     // the cores' closest pair (an edge across an edge, a cylinder's rim between its fixed
