@@ -886,6 +886,65 @@ fn signed_distance(
     }
 }
 
+/// The ends of the side's line of a cylinder's or a cone's core that faces a direction, and
+/// how much they count against the core's fixed rim points (see [`side_line`]).
+struct SideLine {
+    /// The ends (the core's own frame): on both rims of a cylinder, on the base rim of a cone
+    /// (its apex, the line's other end, is a fixed vertex).
+    ends: [Point3<f64>; 2],
+    /// How many ends.
+    n: usize,
+    /// Their weight `w` (0 to 1); the fixed rim points count `1 − w`.
+    weight: f64,
+    /// How many of the core's first fixed vertices are rim points (8 on a cylinder, the 4 of a
+    /// cone's base rim; 0 on other cores).
+    fixed_rim: usize,
+}
+
+/// The side's line of a cylinder's or a cone's core that faces the direction `toward` (the
+/// core's own frame: parry's, axis `y`): a cylinder or a cone lying on a face touches along
+/// that line, and its fixed rim points (four per rim) are off it unless the body happens to
+/// be rolled just so (then the contact would be one point where the distance query puts it
+/// on the line, and the body would turn). The line's ends move with `toward` about the axis,
+/// and are undefined when `toward` is along the axis (standing on an end face, where the
+/// fixed rim points hold the body), so they are weighted: `w = 1` while `toward` is at least
+/// 45° off the axis, falling linearly in `sin` of that angle to 0 at 30°, and the fixed rim
+/// points count `1 − w` (each point's depth is scaled by its weight: every point still enters
+/// at depth 0, and no contact is counted twice).
+fn side_line(core: &SharedShape, toward: &Vector3<f64>) -> SideLine {
+    let mut line = SideLine {
+        ends: [Point3::origin(); 2],
+        n: 0,
+        weight: 0.0,
+        fixed_rim: 0,
+    };
+    let (cylinder, cone) = (core.as_cylinder(), core.as_cone());
+    line.fixed_rim = if cylinder.is_some() {
+        8
+    } else if cone.is_some() {
+        4
+    } else {
+        return line;
+    };
+    let radial = Vector3::new(toward.x, 0.0, toward.z);
+    let (len, norm) = (radial.norm(), toward.norm());
+    if !(len > 1e-12 * norm) {
+        return line;
+    }
+    let (s0, s1) = (0.5, std::f64::consts::FRAC_1_SQRT_2);
+    line.weight = ((len / norm - s0) / (s1 - s0)).clamp(0.0, 1.0);
+    let u = radial / len;
+    if let Some(c) = cylinder {
+        line.ends[0] = Point3::from(u * c.radius + Vector3::y() * c.half_height);
+        line.ends[1] = Point3::from(u * c.radius - Vector3::y() * c.half_height);
+        line.n = 2;
+    } else if let Some(c) = cone {
+        line.ends[0] = Point3::from(u * c.radius - Vector3::y() * c.half_height);
+        line.n = 1;
+    }
+    line
+}
+
 /// The contact points of a servicer piece at `pose_s` (`t`) and a target piece (`r_s`, `r_t`
 /// their radii, `reach = r_s + r_t`), to `emit`.
 #[allow(clippy::too_many_arguments)]
@@ -944,7 +1003,19 @@ fn piece_contacts(
     } else {
         (pt, &pt.pose, ps, pose_s, Some(aabb_s), r_t, -1.0, 17)
     };
-    for (k, local) in from.vertices().iter().enumerate() {
+    // and, on a cylinder's or a cone's core, the ends of its side's line that faces the other
+    // piece, weighted against the fixed rim points ([`side_line`])
+    let toward = from_pose.rotation.inverse_transform_vector(&(n * -side));
+    let line = side_line(&from.core, &toward);
+    let fixed = from.vertices().iter().enumerate().map(|(k, p)| {
+        let rim = k < line.fixed_rim;
+        (p, if rim { 1.0 - line.weight } else { 1.0 })
+    });
+    let moving = line.ends[..line.n].iter().map(|p| (p, line.weight));
+    for (k, (local, weight)) in fixed.chain(moving).enumerate() {
+        if weight <= 0.0 {
+            continue;
+        }
         let v = from_pose * local;
         // out of the other piece's reach by its bounding box: no need to project
         if onto_box.is_some_and(|b| aabb_point_distance(b, &v) >= r_from) {
@@ -952,7 +1023,7 @@ fn piece_contacts(
         }
         let (on, dist, outward) = signed_distance(onto, onto_pose, &v, &(n * side));
         if dist < reach {
-            let depth = reach - dist;
+            let depth = weight * (reach - dist);
             deepest_vertex = deepest_vertex.max(depth);
             let (on_s, on_t) = if servicer_vertices { (v, on) } else { (on, v) };
             point(on_s, on_t, outward * side, depth, code + k as u64);
