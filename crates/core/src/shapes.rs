@@ -13,14 +13,19 @@
 //! n = (p_A − p_B) / |p_A − p_B|     normal from the target into free space (toward the servicer)
 //! ```
 //!
-//! The distance queries are parry3d's (`query::contact` on the cores, point projections,
-//! polygonal support features); a contact may have several points: each vertex of the
-//! servicer core's support feature toward the target that lies within reach of the target's
-//! core is a point, and each vertex of the target's feature within reach of the servicer's
-//! core; the cores' closest pair is a point too unless a vertex is as deep (so a box face
-//! resting on a plate touches at its four corners, a rod across an edge at one point). Each
-//! point gets the contact law along its own normal, and friction against its own sliding
-//! velocity ([`crate::contact::ContactGeometry`]).
+//! The distance queries are parry3d's (`query::contact` and `query::distance` on the cores,
+//! point projections, support points); a contact may have several points: each fixed vertex
+//! of the smaller piece's core (a box's corners, a segment's ends, a cylinder's or a cone's rim
+//! points, a triangle's corners) within reach of the larger one's core is a point; the cores'
+//! closest pair is a point too, for the depth beyond the deepest vertex's (so a box face
+//! resting on a plate touches at its four corners, a rod across an edge at one point); a
+//! cylinder's or a cone's side lying on a face touches at the two ends of its line
+//! (`side_line`). Each point gets the contact law along its own normal, and friction against
+//! its own sliding velocity ([`crate::contact::ContactGeometry`]).
+//!
+//! Cost: bounding boxes, a triangle's plane, the separating axis remembered from the last
+//! evaluation (`AxisCache`, temporal coherence: tested, never trusted, so the results do not
+//! depend on it), the target piece's own axes, and only then parry's query.
 //!
 //! Allocation-free while the penetration stays below `r_A + r_B` (the cores then never
 //! overlap, and parry's GJK needs no EPA); the queries allocate nothing else.
