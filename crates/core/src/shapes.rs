@@ -933,7 +933,7 @@ fn side_line(core: &SharedShape, toward: &Vector3<f64>) -> SideLine {
     };
     let radial = Vector3::new(toward.x, 0.0, toward.z);
     let (len, norm) = (radial.norm(), toward.norm());
-    if !(len > 1e-12 * norm) {
+    if !len.is_finite() || len <= 1e-12 * norm {
         return line;
     }
     let (s0, s1) = (0.5, std::f64::consts::FRAC_1_SQRT_2);
