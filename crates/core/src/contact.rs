@@ -347,7 +347,11 @@ impl ContactGeometry {
 
     /// The friction between servicer shape `servicer_shape` and target shape `target_shape`:
     /// their material pair's, or `friction` when no pair names them.
-    pub fn friction_between(&self, servicer_shape: usize, target_shape: usize) -> Option<&Friction> {
+    pub fn friction_between(
+        &self,
+        servicer_shape: usize,
+        target_shape: usize,
+    ) -> Option<&Friction> {
         if self.shape_friction.is_empty() {
             return self.friction.as_ref();
         }

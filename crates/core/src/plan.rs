@@ -27,8 +27,7 @@ use crate::config::{
 };
 use crate::config::{ShapeConfig, ShapeKind};
 use crate::contact::{
-    ContactGeometry, ContactModel, Friction, FrictionConfig, HuntCrossley, LinearSpringDamper,
-    Wall,
+    ContactGeometry, ContactModel, Friction, FrictionConfig, HuntCrossley, LinearSpringDamper, Wall,
 };
 use crate::error::{CoreError, Issues, Result};
 use crate::metrics::Tolerances;
@@ -891,7 +890,10 @@ fn material_pairs(
         let key = format!("contact.friction.pairs[{i}]");
         for m in &pair.materials {
             if m.trim().is_empty() {
-                issues.push(format!("{key}.materials"), "a material name must not be empty");
+                issues.push(
+                    format!("{key}.materials"),
+                    "a material name must not be empty",
+                );
             } else if !used.contains(m.as_str()) {
                 let known: Vec<&str> = used.iter().copied().collect();
                 issues.push(

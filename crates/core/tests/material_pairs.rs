@@ -34,7 +34,9 @@ const V_T: f64 = 0.05;
 fn sliding_sphere(material: &str, pairs: Vec<MaterialPairFriction>) -> Scenario {
     let mut s = preset("paper-table1");
     s.walls.clear();
-    s.servicer.shapes = vec![shape(json!({"kind": "sphere", "radius": R, "material": material}))];
+    s.servicer.shapes = vec![shape(
+        json!({"kind": "sphere", "radius": R, "material": material}),
+    )];
     s.target.shapes = vec![shape(json!({
         "kind": "half-space", "position": [R + 0.001, 0.0, 0.0], "normal": [-1.0, 0.0, 0.0],
         "material": "rubber"
@@ -74,7 +76,11 @@ fn a_listed_pair_slides_with_its_own_coefficient_and_others_with_the_tables() {
     let v0 = end_velocity(&sliding_sphere("steel", frictionless));
     let e = -v0.x / V_N;
     assert!(e > 0.8 && e < 1.0, "restitution {e}");
-    assert!((v0.y - V_T).abs() < 1e-9, "a frictionless pair took {}", V_T - v0.y);
+    assert!(
+        (v0.y - V_T).abs() < 1e-9,
+        "a frictionless pair took {}",
+        V_T - v0.y
+    );
     for (mu, order) in [(0.3, false), (0.45, true)] {
         let p = if order {
             pair("rubber", "steel", mu, mu)
@@ -124,8 +130,10 @@ fn the_pair_table_is_laid_out_servicer_by_target() {
     let mut s = sliding_sphere("steel", Vec::new());
     s.servicer.shapes = vec![
         shape(json!({"kind": "sphere", "radius": 0.01, "material": "steel"})),
-        shape(json!({"kind": "sphere", "radius": 0.01, "position": [0.0, 0.5, 0.0],
-                     "material": "aluminium"})),
+        shape(
+            json!({"kind": "sphere", "radius": 0.01, "position": [0.0, 0.5, 0.0],
+                     "material": "aluminium"}),
+        ),
     ];
     s.target.shapes = ["steel", "rubber", "ptfe"]
         .iter()
@@ -146,9 +154,17 @@ fn the_pair_table_is_laid_out_servicer_by_target() {
     let mu = |a, b| c.friction_between(a, b).map(|f| f.kinetic_coefficient);
     let mu_s = |a, b| c.friction_between(a, b).map(|f| f.static_coefficient);
     assert_eq!(mu(0, 0), Some(0.1), "steel-steel: the table's");
-    assert_eq!((mu(0, 1), mu_s(0, 1)), (Some(0.5), Some(0.6)), "steel-rubber");
+    assert_eq!(
+        (mu(0, 1), mu_s(0, 1)),
+        (Some(0.5), Some(0.6)),
+        "steel-rubber"
+    );
     assert_eq!(mu(0, 2), Some(0.1), "steel-ptfe: the table's");
-    assert_eq!((mu(1, 0), mu_s(1, 0)), (Some(0.2), Some(0.2)), "aluminium-steel");
+    assert_eq!(
+        (mu(1, 0), mu_s(1, 0)),
+        (Some(0.2), Some(0.2)),
+        "aluminium-steel"
+    );
     assert_eq!(mu(1, 1), Some(0.1), "aluminium-rubber: the table's");
     assert_eq!(mu(1, 2), None, "aluminium-ptfe: frictionless");
     // the facility's hardware (mounted) keeps the table
@@ -169,7 +185,10 @@ fn bad_pairs_are_refused_naming_the_key() {
     refused(
         sliding_sphere(
             "steel",
-            vec![pair("steel", "rubber", 0.2, 0.2), pair("rubber", "steel", 0.3, 0.3)],
+            vec![
+                pair("steel", "rubber", 0.2, 0.2),
+                pair("rubber", "steel", 0.3, 0.3),
+            ],
         ),
         "contact.friction.pairs[1].materials",
         "twice",
