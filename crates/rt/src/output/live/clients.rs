@@ -27,6 +27,11 @@ pub struct ClientLog {
     pub invalid_messages: AtomicU64,
     /// Connections dropped at the WebSocket handshake (a client that is not one).
     pub failed_handshakes: AtomicU64,
+    /// The SDK's "outbox for client ... full" lines (a client's queue full: its oldest
+    /// messages dropped; the SDK logs this at most once per 30 s for the whole process).
+    pub outbox_full: AtomicU64,
+    /// The addresses of those lines, in order, each once.
+    lossy: Mutex<Vec<String>>,
 }
 
 impl ClientLog {
@@ -40,6 +45,24 @@ impl ClientLog {
             [one] => one.clone(),
             many => format!("one of {}", many.join(", ")),
         }
+    }
+
+    /// The clients whose queue was reported full (addresses, each once).
+    pub fn lossy_clients(&self) -> Vec<String> {
+        self.lossy.lock().map(|l| l.clone()).unwrap_or_default()
+    }
+
+    fn outbox_full(&self, addr: &str) {
+        self.outbox_full.fetch_add(1, Ordering::Relaxed);
+        if let Ok(mut l) = self.lossy.lock() {
+            if !l.iter().any(|a| a == addr) {
+                l.push(addr.to_string());
+            }
+        }
+        self.run.push_event(
+            EventLevel::Warn,
+            format!("live view: client {addr} falls behind: its oldest messages are dropped"),
+        );
     }
 
     fn connected(&self, addr: &str) {
@@ -83,6 +106,8 @@ pub fn watch(run: Arc<RunControl>) -> Arc<ClientLog> {
         connected: Mutex::new(Vec::new()),
         invalid_messages: AtomicU64::new(0),
         failed_handshakes: AtomicU64::new(0),
+        outbox_full: AtomicU64::new(0),
+        lossy: Mutex::new(Vec::new()),
     });
     addresses_known();
     if let Ok(mut logs) = LOGS.lock() {
@@ -99,6 +124,7 @@ enum Line<'a> {
     Unregistered(&'a str),
     Invalid(&'a str),
     Dropped(&'a str),
+    OutboxFull(&'a str),
 }
 
 /// Reads a line of the SDK's log (`foxglove::websocket` 0.30's texts).
@@ -114,6 +140,11 @@ fn parse(message: &str) -> Option<Line<'_>> {
     }
     if let Some(rest) = message.strip_prefix("Dropping client ") {
         return Some(Line::Dropped(address_prefix(rest)));
+    }
+    if let Some(rest) = message.strip_prefix("outbox for client ") {
+        if let Some(addr) = rest.strip_suffix(" full") {
+            return Some(Line::OutboxFull(addr.trim()));
+        }
     }
     None
 }
@@ -173,6 +204,7 @@ impl Subscriber for SdkLog {
                 Line::Dropped(_) => {
                     log.failed_handshakes.fetch_add(1, Ordering::Relaxed);
                 }
+                Line::OutboxFull(addr) => log.outbox_full(addr),
             }
         }
     }
@@ -204,6 +236,11 @@ mod tests {
             parse("Dropping client 10.0.0.2:1000: handshake failed"),
             Some(Line::Dropped("10.0.0.2:1000"))
         );
+        assert_eq!(
+            parse("outbox for client 127.0.0.1:41000 full"),
+            Some(Line::OutboxFull("127.0.0.1:41000"))
+        );
+        assert_eq!(parse("outbox for client 127.0.0.1:41000"), None);
         assert_eq!(parse("Started server on 127.0.0.1:8765"), None);
     }
 }
