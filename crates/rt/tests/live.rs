@@ -409,6 +409,19 @@ fn bad_input_on_the_live_port_changes_nothing() {
         "{}",
         rt["live"]
     );
+    // every refused message counted (the SDK answered each with an error status): the
+    // advertisement and the data of the would-be publisher among them, and the subscriptions
+    // to channels that do not exist (as many as reached the server before it closed the client)
+    assert!(
+        rt["live"]["client_publish_refused"].as_u64().unwrap() >= 1,
+        "{}",
+        rt["live"]
+    );
+    assert!(
+        rt["live"]["refused_input"].as_u64().unwrap() >= 3,
+        "{}",
+        rt["live"]
+    );
 }
 
 #[test]

@@ -104,8 +104,14 @@ pub struct LiveReport {
     pub peak_clients: u64,
     /// Most subscriptions at once (all clients).
     pub peak_subscriptions: u64,
-    /// Client advertisements and messages (refused: clients may not publish).
+    /// Client advertisements and messages on channels (refused: clients may not publish), as
+    /// the listener and the SDK's log see them.
     pub client_publish_refused: u64,
+    /// Client messages the server answered with an error or warning status (unparsable, a
+    /// subscription to a channel that does not exist, publishing, ...), as the SDK logs them;
+    /// 0 when `addresses_known` is false. A call of a service that does not exist is answered
+    /// but not logged by the SDK: not counted.
+    pub refused_input: u64,
     /// Stop calls accepted.
     pub stop_calls: u64,
     /// Mark calls accepted.
@@ -334,7 +340,9 @@ impl LiveSink {
         r.connections = c.connections.load(Ordering::Relaxed);
         r.peak_clients = c.peak_clients.load(Ordering::Relaxed);
         r.peak_subscriptions = c.peak_subscriptions.load(Ordering::Relaxed);
-        r.client_publish_refused = c.client_publish.load(Ordering::Relaxed);
+        r.client_publish_refused = c.client_publish.load(Ordering::Relaxed)
+            + self.clients.publish_refused.load(Ordering::Relaxed);
+        r.refused_input = self.clients.refused_input.load(Ordering::Relaxed);
         r.stop_calls = c.stop_calls.load(Ordering::Relaxed);
         r.mark_calls = c.mark_calls.load(Ordering::Relaxed);
         r.refused_calls = c.refused_calls.load(Ordering::Relaxed);
