@@ -3,6 +3,7 @@ loop's wake-up latency, overruns and the process's peak memory without ``--live`
 viewer that keeps up, with a viewer that stops reading, and with 20 viewers.
 
     python bench/rt_live.py [--duration 10] [--repeats 3] [--configs none,one,stalled,clients20] [--json FILE]
+    python bench/rt_live.py --from-json FILE      # the table again, from a run's --json
 
 Each run is ``hilcontact demo-rt paper-table1`` (emulated facility and HIL loop in one process
 on loopback: 1 kHz, 20 ms robot delay, ``pida``) for ``--duration`` s. Configurations:
@@ -173,17 +174,32 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3, help="runs per configuration [3]")
     parser.add_argument("--configs", default="none,one,stalled,clients20", help=f"comma-separated: {', '.join(CONFIGS)}")
     parser.add_argument("--json", type=Path, default=None, help="write every run's numbers here")
+    parser.add_argument("--from-json", type=Path, default=None, help="print the table of the runs of this --json file")
     args = parser.parse_args()
     names = args.configs.split(",")
     for name in names:
         if name not in CONFIGS:
             raise SystemExit(f"unknown configuration {name!r}: {', '.join(CONFIGS)}")
+    if args.from_json is not None:
+        runs = json.loads(args.from_json.read_text())
+        names = [n for n in names if any(r["config"] == n for r in runs)]
+        loads = [r["load_average"] for r in runs]
+        print(f"{len(runs)} runs from {args.from_json}; load average {min(loads):.1f} to {max(loads):.1f}")
+        table(runs, names)
+        return
     print(f"machine: {platform.platform()}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at start; "
           f"{args.duration:g} s per run", flush=True)
     with tempfile.TemporaryDirectory(prefix="rt-live-") as tmp:
         runs = run_interleaved(names, args.repeats,
                                lambda name, i: run_once(name, args.duration, Path(tmp) / str(i)), line)
     print(f"load average at the end {os.getloadavg()[0]:.2f}")
+    table(runs, names)
+    if args.json is not None:
+        args.json.write_text(json.dumps(runs, indent=1) + "\n")
+
+
+def table(runs: list[dict], names: list[str]) -> None:
+    """The medians per configuration, against ``none``'s."""
     base = [r for r in runs if r["config"] == "none"]
 
     def versus(key: str):
@@ -193,19 +209,23 @@ def main() -> None:
             return f"{100 * (median(rs, key) / max(median(base, key), 1e-9) - 1):+.0f} %"
         return cell
 
+    def stops(rs: list[dict]) -> str:
+        kinds = sorted({r["stop"] for r in rs})
+        return ", ".join(f"{sum(r['stop'] == k for r in rs)} {k}" for k in kinds)
+
     median_table(runs, names, "live view", [
         ("wake-up latency p50", lambda rs: f"{median(rs, 'p50'):.0f} µs"),
         ("p99", lambda rs: f"{median(rs, 'p99'):.0f} µs"),
         ("p99 vs none", versus("p99")),
         ("max", lambda rs: f"{max(r['max'] for r in rs):.0f} µs"),
         ("overruns (per run)", lambda rs: ", ".join(str(r["overruns"]) for r in rs)),
-        ("ticks (per run)", lambda rs: ", ".join(f"{r['ticks']} {r['stop']}" for r in rs)),
+        ("overruns, median", lambda rs: f"{median(rs, 'overruns'):.0f}"),
+        ("vs none", versus("overruns")),
+        ("runs ended", stops),
         ("peak memory", lambda rs: f"{median(rs, 'peak_mb'):.1f} MB"),
-        ("samples dropped", lambda rs: ", ".join(str(r["samples_dropped"]) for r in rs)),
+        ("samples dropped", lambda rs: sum(r["samples_dropped"] for r in rs)),
         ("outbox full reports", lambda rs: ", ".join(str(r["outbox_full_reports"]) for r in rs)),
     ])
-    if args.json is not None:
-        args.json.write_text(json.dumps(runs, indent=1) + "\n")
 
 
 if __name__ == "__main__":

@@ -128,7 +128,13 @@ impl Viewer {
 
     /// Reads until the server closes; calls `stop` (once) when the force channel passes
     /// `stop_at` s of run time.
-    fn read_all(mut self, stop_at: Option<f64>) -> Seen {
+    fn read_all(self, stop_at: Option<f64>) -> Seen {
+        self.read_all_calling(stop_at.map(|at| (at, "/hilcontact/stop", b"{}".to_vec())))
+    }
+
+    /// Reads until the server closes; calls `service` with `payload` (once, call id 7) when
+    /// the force channel passes `at` s of run time.
+    fn read_all_calling(mut self, call: Option<(f64, &str, Vec<u8>)>) -> Seen {
         let mut seen = Seen::default();
         let mut stopped = false;
         loop {
@@ -151,10 +157,10 @@ impl Viewer {
                             .or_default()
                             .push(b[13..].to_vec());
                     }
-                    if let Some(at) = stop_at {
-                        if !stopped && topic == "/hil/measured_wrench" && t as f64 * 1e-9 >= at {
+                    if let Some((at, service, payload)) = &call {
+                        if !stopped && topic == "/hil/measured_wrench" && t as f64 * 1e-9 >= *at {
                             stopped = true;
-                            self.call("/hilcontact/stop", 7, b"{}");
+                            self.call(service, 7, payload);
                         }
                     }
                 }
@@ -526,6 +532,8 @@ fn the_facility_serves_its_truth_and_the_scene_and_its_operator_stop_ends_it() {
     }
     assert_eq!(seen.times["/hil/scene"].len() as u64, ticks.div_ceil(33));
     assert_eq!(seen.times["/tf"].len() as u64, ticks.div_ceil(33));
+    // the server's clock is the facility's time, advertised with each scene
+    assert_eq!(seen.clock, seen.times["/hil/scene"]);
     // the contact force is the facility's own: its peak is the status's
     let peak = seen.payloads["/hil/contact_force"]
         .iter()
@@ -551,4 +559,41 @@ fn the_facility_serves_its_truth_and_the_scene_and_its_operator_stop_ends_it() {
         events.contains("facility stopped by the operator"),
         "{events}"
     );
+}
+
+#[test]
+fn a_mark_is_an_event_of_the_run_its_label_cleaned_and_cut() {
+    // a label with a control character and 300 more characters than the 200 kept
+    let label = format!("pulse 1\n{}", "a".repeat(300));
+    let payload = json!({ "label": label }).to_string().into_bytes();
+    let live = LiveOptions {
+        control: true,
+        ..LiveOptions::default()
+    };
+    let (m, seen, _, _) = run_live(1.0, live, move |port| {
+        let mut v = Viewer::connect(port);
+        v.subscribe_all();
+        v.read_all_calling(Some((0.3, "/hilcontact/mark", payload)))
+    });
+    let rt = &m["realtime"];
+    // a mark changes nothing of the run
+    assert_eq!(rt["stop"]["kind"], "completed", "{rt}");
+    let ticks = rt["ticks"].as_u64().unwrap();
+    assert_eq!(seen.times["/hil/measured_wrench"], tick_times(ticks));
+    assert_eq!(seen.responses, [7]);
+    assert!(seen.failures.is_empty(), "{:?}", seen.failures);
+    assert_eq!(rt["live"]["mark_calls"], 1, "{}", rt["live"]);
+    assert_eq!(rt["live"]["stop_calls"], 0);
+    let kept = format!("pulse 1{}", "a".repeat(193));
+    let events: Vec<String> = seen.payloads["/hil/events"]
+        .iter()
+        .map(|p| String::from_utf8_lossy(p).into_owned())
+        .collect();
+    let mark = events
+        .iter()
+        .find(|e| e.contains("mark from client"))
+        .unwrap_or_else(|| panic!("no mark in {events:?}"));
+    // the text ends with the label as kept: no control character, 200 characters
+    assert!(mark.contains(&format!(": {kept}\0")), "{mark}");
+    assert!(!mark.contains(&format!("{kept}a")), "{mark}");
 }
