@@ -72,6 +72,7 @@ class MujocoContact:
         friction = np.zeros(3)
         moment = np.zeros(3)
         normal = np.zeros(max(m.npair, 1))
+        slide = np.zeros(max(m.npair, 1))
         for i in range(d.ncon):
             c = d.contact[i]
             if c.efc_address < 0:
@@ -89,9 +90,14 @@ class MujocoContact:
             friction += tangential if rod2 else -tangential
             moment += np.cross(c.pos - self._sensor, -f)
             if self._track:
-                normal[self._pair_of(c)] += self._f6[0]
+                pair = self._pair_of(c)
+                normal[pair] += self._f6[0]
+                if c.dim >= 3:
+                    a = c.efc_address
+                    slide[pair] += self._f6[0] * float(np.hypot(d.efc_vel[a + 1], d.efc_vel[a + 2]))
         self.contacts = int(d.ncon)
         self.friction = friction
+        self._speed = np.divide(slide, normal, out=np.zeros_like(slide), where=normal > 0.0)
         return on_rod, moment, normal
 
     def _pair_of(self, contact: Any) -> int:
@@ -113,11 +119,14 @@ class MujocoContact:
         d.qvel[self._dof:self._dof + 3] = velocity
         d.qvel[self._dof + 3:self._dof + 6] = rotation_matrix(q).T @ np.asarray(angular_velocity, dtype=float)
         if self._track:
-            # friction's viscous slope follows the normal force (docs/mujoco.md): a first pass
-            # gives each pair's normal force, the second the forces with that slope
+            # friction's viscous slope follows the normal force and the sliding speed
+            # (docs/mujoco.md): a first pass gives each pair's normal force and sliding speed at
+            # this state, the second the forces with that slope
             self.model.pair_solreffriction[:, 1] = 0.0
             _, _, normal = self._forces()
-            self.model.pair_solreffriction[:, 1] = self.matched.solreffriction_per_newton * normal[: self.model.npair]
+            npair = self.model.npair
+            self.model.pair_solreffriction[:, 1] = (self.matched.solreffriction_per_newton * normal[:npair]
+                                                    * self.matched.sliding_factor(self._speed[:npair]))
         on_rod, moment, _ = self._forces()
         return on_rod, -on_rod, moment
 

@@ -63,6 +63,30 @@ class ContactMatch:
             scenario's law's slope does, ``μ_s·F_n/v_ε`` with ``F_n`` the pair's normal force of
             the step before (set in ``pair_solreffriction`` each step by the simulation);
             False: constant (``friction_damping``), MuJoCo's own regularisation.
+        track_sliding: with ``track_friction``, the viscous coefficient also follows the pair's
+            sliding speed ``s`` of the step before, as the law's secant
+            ``μ(s)·F_n/√(s² + v_ε²)``: MuJoCo's friction is then the scenario's regularised
+            Coulomb law with its Stribeck curve, and its cone (``max(μ_s, μ_k)``) is never
+            reached; False: viscous ``μ_s·F_n/v_ε`` up to the cone ``μ_k·F_n`` (Coulomb beyond).
+        round_edges: a box's or cylinder's ``margin`` (our edge rounding) written as a convex
+            mesh of the rounded surface (MuJoCo collides it as its hull); False: MuJoCo's sharp
+            box and cylinder of the same outer size (a cone is a mesh either way).
+        arc_chords: chords per quarter circle of a rounded edge (the chord lies at most
+            ``margin·(1 − cos(π/(4·arc_chords)))`` inside the rounded surface: 2.4 µm for 2 mm
+            at 16).
+        segments: steps around a cylinder's or cone's axis (the chord lies at most
+            ``radius·(1 − cos(π/segments))`` inside: 0.75 µm for 10 mm at 256).
+        cylinder_primitive: a sharp cylinder (no margin, or ``round_edges`` False) as MuJoCo's
+            own cylinder geom; False: a convex mesh of ``segments`` sides (MuJoCo 4.0's
+            cylinder-box collision returns the same point twice, along the box face's normal:
+            docs/mujoco.md).
+        multiccd: MuJoCo's multi-point convex collision (``<flag multiccd>``, on by default in
+            MuJoCo): a mesh or box against a mesh or box touches at up to 4 points where their
+            faces overlap, the ends of the segment where a hull's facet crosses an edge (two
+            points where ours has one, each a full spring); False: one point per pair of geoms
+            (box against box keeps MuJoCo's own box-box collision, up to 8 points).
+        mesh_thickness: how deep behind its face each triangle of a mesh surface is extruded
+            into a convex prism, m (deeper than any penetration; thinner than what lies behind).
     """
 
     impedance: float = 1e-4
@@ -72,6 +96,13 @@ class ContactMatch:
     impratio: float = 100.0
     friction_damping: float | None = None
     track_friction: bool = True
+    track_sliding: bool = True
+    round_edges: bool = True
+    arc_chords: int = 16
+    segments: int = 256
+    mesh_thickness: float = 0.005
+    cylinder_primitive: bool = False
+    multiccd: bool = False
 
 
 @dataclass(frozen=True)
@@ -89,7 +120,12 @@ class MatchedContact:
         friction_slope: ``μ_s/v_ε``, s/m: with ``track_friction``, the viscous coefficient is
             this times the normal force.
         solreffriction_per_newton: ``pair_solreffriction[1]`` per newton of normal force with
-            ``track_friction`` (negative).
+            ``track_friction`` (negative), at rest (times :meth:`sliding_factor` when sliding).
+        mu_static, mu_kinetic, stick_velocity, stribeck_velocity: the scenario's friction law
+            (``μ_s``, ``μ_k``, ``v_ε`` and ``v_s`` in m/s).
+        track_sliding: the viscous coefficient follows the sliding speed too
+            (:meth:`sliding_factor`); the cone's ``friction`` is then ``max(μ_s, μ_k)``, never
+            reached.
     """
 
     diag: float
@@ -99,6 +135,23 @@ class MatchedContact:
     friction_damping: float
     friction_slope: float = 0.0
     solreffriction_per_newton: float = 0.0
+    mu_static: float = 0.0
+    mu_kinetic: float = 0.0
+    stick_velocity: float = 1e-3
+    stribeck_velocity: float = 5e-3
+    track_sliding: bool = False
+
+    def sliding_factor(self, speed: Any) -> np.ndarray:
+        """The friction's viscous coefficient at sliding speed ``speed`` (m/s) over its value at
+        rest: ``μ(s)·v_ε / (μ_s·√(s² + v_ε²))`` with ``track_sliding`` (the scenario's law's
+        secant: MuJoCo's viscous friction ``c_t·s`` is then the law's force, inside the cone), 1
+        without. ``μ(s)`` is the law's Stribeck curve (docs/model.md, "Friction")."""
+        s = np.asarray(speed, dtype=float)
+        if not self.track_sliding or self.mu_static <= 0.0:
+            return np.ones_like(s)
+        v_eps, v_s = self.stick_velocity, self.stribeck_velocity
+        mu = self.mu_kinetic + (self.mu_static - self.mu_kinetic) * np.exp(-(s / v_s) ** 2)
+        return mu * v_eps / (self.mu_static * np.sqrt(s * s + v_eps * v_eps))
 
 
 def wall_geom_name(index: int, name: str) -> str:
@@ -151,36 +204,221 @@ def _body_xml(name: str, body: Any, geoms: list[str], free: bool) -> str:
     )
 
 
-def _geom(name: str, kind: str, size: Any, pos: Any, quat: Any) -> str:
-    """One geom: ``kind`` a MuJoCo geom type (sphere, box, capsule, cylinder, mesh), ``size`` its
-    MuJoCo size, pose in the body frame. Geoms collide only through the explicit ``<pair>``
-    elements of :func:`_document` (``contype = conaffinity = 0``)."""
+def _geom(name: str, kind: str, size: Any, pos: Any, quat: Any, mesh: str = "") -> str:
+    """One geom: ``kind`` a MuJoCo geom type (sphere, box, capsule, cylinder, plane, mesh: then
+    ``mesh`` names its asset), ``size`` its MuJoCo size, pose in the body frame. Geoms collide
+    only through the explicit ``<pair>`` elements of :func:`_document` (``contype = conaffinity
+    = 0``)."""
+    asset = f' mesh={quoteattr(mesh)}' if mesh else ""
+    size_attr = f' size="{_num(size)}"' if size is not None else ""
     return (
-        f'      <geom name={quoteattr(name)} type="{kind}" size="{_num(size)}" pos="{_num(pos)}" '
+        f'      <geom name={quoteattr(name)} type="{kind}"{asset}{size_attr} pos="{_num(pos)}" '
         f'quat="{_num(quat)}" contype="0" conaffinity="0"/>\n'
     )
 
 
-def _shape_geoms(body: str, shapes: Any) -> list[tuple[str, str]]:
-    """The geoms of a body's ``shapes`` (``[[servicer.shapes]]``, ``[[target.shapes]]``): (name,
-    XML). Box (full sizes → MuJoCo's half sizes), sphere, capsule (``length`` between the cap
-    centres), cylinder (``length`` along z); a shape's ``margin`` (edge rounding) has no MuJoCo
-    equivalent: its edges stay sharp. Cones, half-spaces and meshes are not written yet
-    (ScenarioError naming the shape)."""
+def _mesh_asset(name: str, vertices: np.ndarray) -> str:
+    """A mesh asset of ``vertices`` (m, the geom's frame): MuJoCo collides a mesh geom as the
+    convex hull of its vertices."""
+    return f'    <mesh name={quoteattr(name)} vertex="{_num(vertices)}" inertia="convex"/>\n'
+
+
+def _rounded_box_points(size: Any, margin: float, k: int) -> np.ndarray:
+    """Points on the surface of a box of full sizes ``size`` whose core (shrunk by ``margin``) is
+    dilated by ``margin`` (the core's shape, docs/model.md "Shapes"): each core corner with a
+    ``k × k`` grid of directions over its octant of the sphere (the arcs' chords are at most
+    ``margin·(1 − cos(π/(4k)))`` inside the rounded surface)."""
+    half = 0.5 * np.asarray(size, dtype=float) - margin
+    angles = np.linspace(0.0, 0.5 * math.pi, k + 1)
+    octant = np.array([[math.sin(a) * math.cos(b), math.sin(a) * math.sin(b), math.cos(a)]
+                       for a in angles for b in angles])
+    points = []
+    for sx in (-1.0, 1.0):
+        for sy in (-1.0, 1.0):
+            for sz in (-1.0, 1.0):
+                s = np.array([sx, sy, sz])
+                points.append(s * half + margin * s * octant)
+    return np.unique(np.round(np.concatenate(points), 15), axis=0)
+
+
+def _revolved_points(profile: list[tuple[float, float]], margin: float, segments: int, k: int) -> np.ndarray:
+    """Points on a solid of revolution about z: the convex ``profile`` (ρ, z) corners of its core
+    (counter-clockwise, ρ ≥ 0, the axis closing it) dilated by ``margin`` (each corner an arc of
+    ``k`` chords over its normals' range), turned about z in ``segments`` steps."""
+    poly = [np.array(p, dtype=float) for p in profile]
+    full = poly + [np.array([-p[0], p[1]]) for p in reversed(poly) if p[0] > 0.0]  # the mirrored half
+    # counter-clockwise order of the full (mirrored) polygon
+    centre = np.mean(full, axis=0)
+    full.sort(key=lambda p: math.atan2(p[1] - centre[1], p[0] - centre[0]))
+    n = len(full)
+    outline = []
+    for i, p in enumerate(full):
+        a, b = full[i - 1], full[(i + 1) % n]
+        ea, eb = p - a, b - p
+        na = math.atan2(-ea[0], ea[1])  # outward normals (clockwise turn of the edge)
+        nb = math.atan2(-eb[0], eb[1])
+        while nb < na:
+            nb += 2.0 * math.pi
+        for t in np.linspace(na, nb, k + 1) if margin > 0.0 else [na]:
+            outline.append(p + margin * np.array([math.cos(t), math.sin(t)]))
+    outline = [q for q in outline if q[0] >= -1e-15]
+    turns = np.linspace(0.0, 2.0 * math.pi, segments, endpoint=False)
+    points = [[max(q[0], 0.0) * math.cos(a), max(q[0], 0.0) * math.sin(a), q[1]] for q in outline for a in turns]
+    return np.unique(np.round(np.array(points), 15), axis=0)
+
+
+def _flat_pieces(vertices: np.ndarray, triangles: np.ndarray) -> list[list[int]]:
+    """The triangles of a mesh grouped into flat convex pieces: neighbours (sharing an edge) in
+    one plane whose union is convex (its area is its convex hull's) are one piece, so that a
+    planar quad split into two triangles is one face, as the scenario's law sees it (its edge
+    contacts are dropped where a face of the same mesh is within reach: docs/model.md)."""
+    normals = np.cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
+                       vertices[triangles[:, 2]] - vertices[triangles[:, 0]])
+    areas = 0.5 * np.linalg.norm(normals, axis=1)
+    unit = normals / (2.0 * areas[:, None])
+    scale = float(np.ptp(vertices, axis=0).max()) or 1.0
+    by_edge: dict[tuple[int, int], list[int]] = {}
+    for i, t in enumerate(triangles):
+        for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+            by_edge.setdefault((min(a, b), max(a, b)), []).append(i)
+    groups = [[i] for i in range(len(triangles))]
+    owner = list(range(len(triangles)))
+
+    def convex_union(members: list[int]) -> bool:
+        n = unit[members[0]]
+        points = vertices[np.unique(triangles[members])]
+        if np.abs((points - points[0]) @ n).max() > 1e-7 * scale:
+            return False
+        u = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+        u /= np.linalg.norm(u)
+        w = np.cross(n, u)
+        flat = np.stack([points @ u, points @ w], axis=1)
+        return abs(_hull_area(flat) - areas[members].sum()) <= 1e-6 * areas[members].sum()
+
+    for (a, b), faces in by_edge.items():
+        if len(faces) != 2:
+            continue
+        i, j = owner[faces[0]], owner[faces[1]]
+        if i == j or unit[i] @ unit[j] < 1.0 - 1e-10:
+            continue
+        merged = groups[i] + groups[j]
+        if convex_union(merged):
+            groups[i] = merged
+            for k in groups[j]:
+                owner[k] = i
+            groups[j] = []
+    return [g for g in groups if g]
+
+
+def _hull_area(points: np.ndarray) -> float:
+    """The area of the convex hull of 2-D ``points`` (monotone chain)."""
+    pts = sorted(map(tuple, np.round(points, 15)))
+    if len(pts) < 3:
+        return 0.0
+
+    def cross(o: tuple, a: tuple, b: tuple) -> float:
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    lower: list[tuple] = []
+    upper: list[tuple] = []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
+            lower.pop()
+        lower.append(p)
+    for p in reversed(pts):
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
+            upper.pop()
+        upper.append(p)
+    hull = lower[:-1] + upper[:-1]
+    return 0.5 * abs(sum(hull[k][0] * hull[k - 1][1] - hull[k - 1][0] * hull[k][1] for k in range(len(hull))))
+
+
+def _triangle_prisms(vertices: np.ndarray, triangles: np.ndarray, thickness: float) -> list[np.ndarray]:
+    """Each flat convex piece of a mesh surface (:func:`_flat_pieces`: a triangle, or coplanar
+    neighbours whose union is convex) as a thin convex prism: the piece's vertices and their
+    copies ``thickness`` behind it. The piece is the prism's front face; behind a vertex is along
+    minus the mean of its triangles' normals (area-weighted), so that neighbouring prisms share
+    their side faces (no gap, no overlap along the surface). The front is the side the winding's
+    normal (counter-clockwise) points to."""
+    normals = np.cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
+                       vertices[triangles[:, 2]] - vertices[triangles[:, 0]])  # 2·area·n
+    vertex_normal = np.zeros_like(vertices)
+    for j in range(3):
+        np.add.at(vertex_normal, triangles[:, j], normals)
+    vertex_normal /= np.linalg.norm(vertex_normal, axis=1, keepdims=True)
     out = []
+    for piece in _flat_pieces(vertices, triangles):
+        n = normals[piece[0]] / np.linalg.norm(normals[piece[0]])
+        index = np.unique(triangles[piece])
+        front = vertices[index]
+        behind = vertex_normal[index]
+        # the offset behind each vertex, scaled so that the back face is ``thickness`` behind
+        depth = thickness / np.maximum(behind @ n, 0.2)
+        out.append(np.vstack([front, front - depth[:, None] * behind]))
+    return out
+
+
+def _shape_geoms(body: str, shapes: Any, match: ContactMatch, static: bool) -> tuple[list[tuple[str, str]], list[str]]:
+    """The geoms of a body's ``shapes`` (``[[servicer.shapes]]``, ``[[target.shapes]]``): (name,
+    XML) per geom and the mesh assets they use (docs/mujoco.md, "Shapes in MJCF"):
+
+    - sphere, capsule (``length`` between the cap centres): MuJoCo's own, rounded as ours;
+    - box, cylinder: with a ``margin`` and ``match.round_edges``, a convex mesh of points on the
+      rounded surface (the core dilated by the margin, :func:`_rounded_box_points`,
+      :func:`_revolved_points`); else MuJoCo's sharp box of the stated outer size, and a sharp
+      cylinder as a convex mesh (MuJoCo's own with ``match.cylinder_primitive``);
+    - cone (base at −length/2, apex at +length/2): always a convex mesh (MuJoCo has no cone),
+      rounded as the box;
+    - half-space: a ``plane`` geom when the body is ``static`` (MuJoCo's planes are half-spaces
+      along their +z, only on static bodies), else a large thin box whose +z face is the plane
+      (:attr:`ContactMatch.wall_half_size`, :attr:`ContactMatch.wall_half_thickness`);
+    - mesh (a surface): one convex prism per flat convex piece (a triangle, or coplanar
+      neighbours whose union is convex), ``match.mesh_thickness`` deep behind the face its
+      winding's normal faces (:func:`_triangle_prisms`), named ``<shape>-piece<j>``."""
+    geoms: list[tuple[str, str]] = []
+    assets: list[str] = []
     for i, shape in enumerate(shapes or []):
         kind = str(shape.kind)
         name = f"{body}-shape{i}" + (f"-{shape.name}" if shape.name else "")
-        if kind == "box":
-            size = [0.5 * float(v) for v in shape.size]
-        elif kind == "sphere":
-            size = [float(shape.radius)]
-        elif kind in ("capsule", "cylinder"):
-            size = [float(shape.radius), 0.5 * float(shape.length)]
+        pos, quat = shape.position, shape.orientation
+        margin = float(shape.margin) if match.round_edges else 0.0
+        if kind == "sphere":
+            geoms.append((name, _geom(name, "sphere", [float(shape.radius)], pos, quat)))
+        elif kind == "capsule":
+            geoms.append((name, _geom(name, "capsule", [float(shape.radius), 0.5 * float(shape.length)], pos, quat)))
+        elif kind == "box" and margin <= 0.0:
+            geoms.append((name, _geom(name, "box", [0.5 * float(v) for v in shape.size], pos, quat)))
+        elif kind == "cylinder" and margin <= 0.0 and match.cylinder_primitive:
+            geoms.append((name, _geom(name, "cylinder", [float(shape.radius), 0.5 * float(shape.length)], pos, quat)))
+        elif kind in ("box", "cylinder", "cone"):
+            r, h = float(shape.radius) - margin, 0.5 * float(shape.length) - margin
+            if kind == "box":
+                points = _rounded_box_points(shape.size, margin, match.arc_chords)
+            elif kind == "cylinder":
+                points = _revolved_points([(r, -h), (r, h)], margin, match.segments, match.arc_chords)
+            else:
+                points = _revolved_points([(r, -h), (0.0, h)], margin, match.segments, match.arc_chords)
+            assets.append(_mesh_asset(name, points))
+            geoms.append((name, _geom(name, "mesh", None, pos, quat, mesh=name)))
+        elif kind == "half-space":
+            n = np.asarray(shape.normal, dtype=float)
+            n = n / np.linalg.norm(n)
+            if static:
+                geoms.append((name, _geom(name, "plane", [0, 0, 1], pos, rotation_z_to(n))))
+            else:
+                t = match.wall_half_thickness
+                centre = np.asarray(pos, dtype=float) - t * n
+                geoms.append((name, _geom(name, "box", [match.wall_half_size, match.wall_half_size, t], centre, rotation_z_to(n))))
+        elif kind == "mesh":
+            vertices = np.asarray(shape.vertices, dtype=float) * float(shape.scale)
+            triangles = np.asarray(shape.triangles, dtype=int)
+            for j, prism in enumerate(_triangle_prisms(vertices, triangles, match.mesh_thickness)):
+                piece = f"{name}-piece{j}"
+                assets.append(_mesh_asset(piece, prism))
+                geoms.append((piece, _geom(piece, "mesh", None, pos, quat, mesh=piece)))
         else:
-            raise ScenarioError(f"{body}.shapes[{i}].kind: the MJCF writer has no {kind!r} geom yet (box, sphere, capsule, cylinder)")
-        out.append((name, _geom(name, kind, size, shape.position, shape.orientation)))
-    return out
+            raise ScenarioError(f"{body}.shapes[{i}].kind: the MJCF writer has no {kind!r} geom")
+    return geoms, assets
 
 
 def _match(scenario: Any, match: ContactMatch, diag: float) -> MatchedContact:
@@ -206,11 +444,17 @@ def _match(scenario: Any, match: ContactMatch, diag: float) -> MatchedContact:
     else:
         c_t = 0.0
     slope = mu_s / friction.stick_velocity if mu_s > 0.0 else 0.0
+    sliding = match.track_friction and match.track_sliding and mu_s > 0.0
     return MatchedContact(
         diag=diag,
         solref=(-c.stiffness * scale, -c.damping * scale),
         solreffriction=(0.0, -c_t * scale / match.impratio),
-        friction=mu_k,
+        friction=max(mu_k, mu_s) if sliding else mu_k,
+        mu_static=mu_s,
+        mu_kinetic=mu_k,
+        stick_velocity=float(friction.stick_velocity),
+        stribeck_velocity=float(friction.stribeck_velocity),
+        track_sliding=sliding,
         friction_damping=c_t,
         friction_slope=slope if match.track_friction else 0.0,
         solreffriction_per_newton=-slope * scale / match.impratio if match.track_friction else 0.0,
@@ -241,8 +485,10 @@ def _document(scenario: Any, timestep: float, match: ContactMatch, matched: Matc
         walls.append(_geom(name, "box", [match.wall_half_size, match.wall_half_size, h], centre,
                            rotation_z_to(n)))
         pairs.append(f'    <pair geom1="rod-tip" geom2={quoteattr(name)} {contact}/>\n')
-    servicer_shapes = _shape_geoms("servicer", getattr(scenario.servicer, "shapes", None))
-    target_shapes = _shape_geoms("target", getattr(scenario.target, "shapes", None))
+    servicer_shapes, servicer_assets = _shape_geoms("servicer", getattr(scenario.servicer, "shapes", None), match, False)
+    target_shapes, target_assets = _shape_geoms("target", getattr(scenario.target, "shapes", None), match, fixed_target)
+    assets = servicer_assets + target_assets
+    asset = f"  <asset>\n{''.join(assets)}  </asset>\n" if assets else ""
     walls += [xml for _, xml in target_shapes]
     tip += "".join(xml for _, xml in servicer_shapes)
     for a, _ in servicer_shapes:
@@ -259,7 +505,10 @@ def _document(scenario: Any, timestep: float, match: ContactMatch, matched: Matc
         f'<mujoco model={quoteattr(scenario.name)}>\n'
         '  <compiler angle="radian" autolimits="true"/>\n'
         f'  <option timestep="{timestep!r}" gravity="0 0 0" integrator="Euler" cone="{cone}" '
-        f'impratio="{match.impratio!r}" solver="Newton" tolerance="1e-12" iterations="100"/>\n'
+        f'impratio="{match.impratio!r}" solver="Newton" tolerance="1e-12" iterations="100">\n'
+        f'    <flag multiccd="{"enable" if match.multiccd else "disable"}"/>\n'
+        "  </option>\n"
+        f"{asset}"
         "  <worldbody>\n"
         f"{target}{servicer}"
         "  </worldbody>\n"
