@@ -456,3 +456,4 @@ def test_crosscheck_rod_in_frame(core, name):
     rows = cc.run_case(_case(name))
     _check_shapes(rows)
     assert rows[0]["episodes"] == (1, 1)
+

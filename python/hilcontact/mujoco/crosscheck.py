@@ -100,6 +100,18 @@ _ROUNDED_EDGE = {
     "servicer.shapes": [{**_ROD, "margin": 0.002}],
     "target.shapes": [_bar("front", [0.040, 0.120, 0.020], [0.040, 0.0, 0.0], 0.002)],
 }
+#: rod-in-frame with its front bar of another material (bronze on the steel rod: μ 0.35 from
+#: ``[[contact.friction.pairs]]``), the other bars steel on steel (``[contact.friction]``'s 0.2 /
+#: 0.25): the edge contact and the corner take different coefficients.
+_TWO_MATERIALS = {
+    "servicer.shapes": [{**_ROD, "margin": 0.002, "material": "steel"}],
+    "target.shapes": [{**_bar("front", [0.040, 0.120, 0.020], [0.040, 0.0, 0.0], 0.002), "material": "bronze"},
+                      {**_bar("rear", [0.040, 0.120, 0.020], [-0.040, 0.0, 0.0], 0.002), "material": "steel"},
+                      {**_bar("left", [0.040, 0.040, 0.020], [0.0, 0.040, 0.0], 0.002), "material": "steel"},
+                      {**_bar("right", [0.040, 0.040, 0.020], [0.0, -0.040, 0.0], 0.002), "material": "steel"}],
+    "contact.friction.pairs": [{"materials": ["steel", "bronze"], "kinetic": 0.35}],
+}
+
 #: rod-in-frame with sharp rod and bars (margin 0).
 _SHARP_FRAME = {
     "servicer.shapes": [_ROD],
@@ -146,6 +158,10 @@ CASES: tuple[Case, ...] = (
     Case("rod-in-frame margin 0", "rod-in-frame",
          {"facility.robot_delay": 0.0, "simulation.duration": 1.5, "contact.friction.static": 0.2, **_SHARP_FRAME},
          "the preset with sharp rod and bars on both sides (margin 0), μ_s = μ_k = 0.2"),
+    Case("rod-in-frame two materials", "rod-in-frame",
+         {"facility.robot_delay": 0.0, "simulation.duration": 1.5, **_TWO_MATERIALS},
+         "the preset with a bronze front bar: μ 0.35 on the edge ([[contact.friction.pairs]]), 0.2/0.25 in the corner's "
+         "steel side bar"),
     Case("probe-drogue", "probe-drogue", {"facility.robot_delay": 0.0, "simulation.duration": 3.0},
          "the preset: the capsule probe strikes the drogue mesh (flat prisms in MuJoCo) and slides, "
          "μ_k = 0.2, μ_s = 0.25"),
@@ -231,12 +247,15 @@ def simulate_mujoco(scenario: Any, timestep: float, duration: float,
     f6 = np.zeros(6)
     normal = np.zeros(m.npair)  # each pair's normal force at the last step, N
     slide = np.zeros(m.npair)  # each pair's Σ F_n·s (s the sliding speed) at the last step, N·m/s
-    per_newton = matched.solreffriction_per_newton
+    points = np.zeros(m.npair)  # each pair's pushing points at the last step
+    per_newton = matched.tracks
     for k in range(steps + 1):
         if k > 0:
             if per_newton:
+                # a pair's parameters apply to each of its points: its mean normal force
                 speed = np.divide(slide, normal, out=np.zeros_like(slide), where=normal > 0.0)
-                m.pair_solreffriction[:, 1] = per_newton * normal * matched.sliding_factor(speed)
+                mean = np.divide(normal, points, out=np.zeros_like(normal), where=points > 0)
+                m.pair_solreffriction[:, 1] = matched.pair_solreffriction(mean, speed)
             mj.mj_step(m, d)
         else:
             mj.mj_forward(m, d)
@@ -245,6 +264,7 @@ def simulate_mujoco(scenario: Any, timestep: float, duration: float,
                                                       d.qpos[qt:qt + 7], d.qvel[vt:vt + 6], tip)
         normal[:] = 0.0
         slide[:] = 0.0
+        points[:] = 0.0
         if d.ncon:
             r_t = rotation_matrix(d.qpos[qt + 3:qt + 7])
             for i in range(d.ncon):
@@ -273,6 +293,7 @@ def simulate_mujoco(scenario: Any, timestep: float, duration: float,
                 moment[k] += np.cross(point - sensor, -on_rod)
                 pair = _pair_index(m, c)
                 normal[pair] += f6[0]
+                points[pair] += 1.0
                 if c.dim >= 3:
                     a = c.efc_address
                     slide[pair] += f6[0] * math.hypot(d.efc_vel[a + 1], d.efc_vel[a + 2])
@@ -456,6 +477,7 @@ def crosscheck(scenario: Any, *, timestep: float | None = None, reference_period
             "tangential_impulse_error": _ratio(float(np.linalg.norm(jt_mj - jt_ref)), float(np.linalg.norm(j_ref))),
             "impulse_error": _ratio(float(np.linalg.norm(j_mj - j_ref)), float(np.linalg.norm(j_ref))),
             "episodes": (len(ref_eps), len(mj_eps)),
+            "shapes_slot": n_walls,
         })
     return rows
 
@@ -477,18 +499,20 @@ def table(cases: tuple[Case, ...] = CASES, timesteps: tuple[float, ...] = (1e-4,
     docs/mujoco.md as it is computed."""
     out = []
     if echo:
-        echo("| case | MuJoCo step (s) | episode | walls | rebound velocity error | angular velocity error "
-             "| normal impulse error | tangential impulse error (of \\|J\\|) | angular impulse error | \\|J_t\\| ref (N s) |")
-        echo("|---|---|---|---|---|---|---|---|---|---|")
+        echo("| case | MuJoCo step (s) | episode | episodes ref/MuJoCo | walls | rebound velocity error "
+             "| angular velocity error | normal impulse error | tangential impulse error (of \\|J\\|) "
+             "| impulse vector error | angular impulse error | \\|J_t\\| ref (N s) |")
+        echo("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for case in cases:
         for h in timesteps:
             for row in run_case(case, h, match):
                 row = {"case": case.name, "timestep": h, **row}
                 out.append(row)
                 if echo:
-                    echo(f"| {case.name} | {h:g} | {row['episode']} | {','.join(map(str, row['walls']))} "
-                         f"| {row['velocity_error']:.3%} | {row['angular_velocity_error']:.3%} "
+                    walls = ",".join("shapes" if j == row["shapes_slot"] else str(j) for j in row["walls"])
+                    echo(f"| {case.name} | {h:g} | {row['episode']} | {row['episodes'][0]}/{row['episodes'][1]} "
+                         f"| {walls} | {row['velocity_error']:.3%} | {row['angular_velocity_error']:.3%} "
                          f"| {row['normal_impulse_error']:.3%} | {row['tangential_impulse_error']:.3%} "
-                         f"| {row['angular_impulse_error']:.3%} "
+                         f"| {row['impulse_error']:.3%} | {row['angular_impulse_error']:.3%} "
                          f"| {row['tangential_impulse']:.4g} |")
     return out

@@ -57,7 +57,7 @@ class MujocoContact:
         self.data = mj.MjData(m)
         self._sensor = np.asarray(scenario.facility.sensor_position, dtype=float)
         self._f6 = np.zeros(6)
-        self._track = self.matched is not None and self.matched.solreffriction_per_newton != 0.0
+        self._track = self.matched is not None and self.matched.tracks
         #: MuJoCo contacts at the last call.
         self.contacts = 0
         #: The friction (tangential) part of the force on the rod at the last call, ``t``, N.
@@ -73,6 +73,7 @@ class MujocoContact:
         moment = np.zeros(3)
         normal = np.zeros(max(m.npair, 1))
         slide = np.zeros(max(m.npair, 1))
+        points = np.zeros(max(m.npair, 1))
         for i in range(d.ncon):
             c = d.contact[i]
             if c.efc_address < 0:
@@ -92,13 +93,15 @@ class MujocoContact:
             if self._track:
                 pair = self._pair_of(c)
                 normal[pair] += self._f6[0]
+                points[pair] += 1.0
                 if c.dim >= 3:
                     a = c.efc_address
                     slide[pair] += self._f6[0] * float(np.hypot(d.efc_vel[a + 1], d.efc_vel[a + 2]))
         self.contacts = int(d.ncon)
         self.friction = friction
         self._speed = np.divide(slide, normal, out=np.zeros_like(slide), where=normal > 0.0)
-        return on_rod, moment, normal
+        # a pair's parameters apply to each of its points: its mean normal force per point
+        return on_rod, moment, np.divide(normal, points, out=np.zeros_like(normal), where=points > 0)
 
     def _pair_of(self, contact: Any) -> int:
         m = self.model
@@ -125,8 +128,7 @@ class MujocoContact:
             self.model.pair_solreffriction[:, 1] = 0.0
             _, _, normal = self._forces()
             npair = self.model.npair
-            self.model.pair_solreffriction[:, 1] = (self.matched.solreffriction_per_newton * normal[:npair]
-                                                    * self.matched.sliding_factor(self._speed[:npair]))
+            self.model.pair_solreffriction[:, 1] = self.matched.pair_solreffriction(normal[:npair], self._speed[:npair])
         on_rod, moment, _ = self._forces()
         return on_rod, -on_rod, moment
 

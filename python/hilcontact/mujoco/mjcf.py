@@ -51,9 +51,9 @@ class ContactMatch:
         wall_half_size: half the side of a wall's box, m (a wall is a half-space in the
             scenario; the box must cover every place the tip reaches).
         wall_half_thickness: half the thickness of a wall's box, m.
-        impratio: MuJoCo's ``impratio`` (tangential over normal impedance of the elliptic cone):
-            large, so that a sliding contact keeps its normal force and the friction is clipped
-            to the cone.
+        impratio: MuJoCo's ``impratio`` (tangential over normal impedance of the elliptic cone);
+            None: :attr:`cone_impratio`'s default (1 with ``track_sliding``, else 100: large, so
+            that a contact clipped to the cone keeps its normal force).
         friction_damping: the viscous coefficient of MuJoCo's friction below the cone, N·s/m
             (its sticking) when it is constant (``track_friction`` False); None: ``μ_s·F/v_ε``
             with ``F = v₀·√(k·m_red)``, the peak normal force of a head-on contact at the
@@ -93,10 +93,20 @@ class ContactMatch:
     tip_radius: float = 1e-4
     wall_half_size: float = 20.0
     wall_half_thickness: float = 0.05
-    impratio: float = 100.0
+    impratio: float | None = None
     friction_damping: float | None = None
     track_friction: bool = True
     track_sliding: bool = True
+
+    @property
+    def cone_impratio(self) -> float:
+        """The ``impratio`` written: :attr:`impratio`, or by default 1 when the friction follows
+        the sliding speed (inside the cone, the friction rows' regulariser ``R_n/impratio`` then
+        dominates the coupling ``A`` as the normal row's does: O(d)), 100 when it does not (the
+        cone's projection then moves the friction, not the normal force)."""
+        if self.impratio is not None:
+            return float(self.impratio)
+        return 1.0 if self.track_friction and self.track_sliding else 100.0
     round_edges: bool = True
     arc_chords: int = 16
     segments: int = 256
@@ -126,6 +136,11 @@ class MatchedContact:
         track_sliding: the viscous coefficient follows the sliding speed too
             (:meth:`sliding_factor`); the cone's ``friction`` is then ``max(μ_s, μ_k)``, never
             reached.
+        pair_friction: (μ_k, μ_s) of each ``<pair>`` in the model's order (the walls' pairs,
+            then every servicer geom against every target geom): ``[[contact.friction.pairs]]``
+            for the two shapes' materials, else ``[contact.friction]``'s.
+        friction_gain: ``(1 − d)·Â/impratio`` with ``track_friction`` (0 without): ``b'_t``
+            per N·s/m of the friction's viscous coefficient.
     """
 
     diag: float
@@ -140,18 +155,37 @@ class MatchedContact:
     stick_velocity: float = 1e-3
     stribeck_velocity: float = 5e-3
     track_sliding: bool = False
+    pair_friction: tuple[tuple[float, float], ...] = ()
+    friction_gain: float = 0.0
 
-    def sliding_factor(self, speed: Any) -> np.ndarray:
+    @property
+    def tracks(self) -> bool:
+        """The simulation sets each pair's ``pair_solreffriction`` every step
+        (:meth:`pair_solreffriction`)."""
+        return self.friction_gain > 0.0 and any(mu_s > 0.0 for _, mu_s in self.pair_friction)
+
+    def pair_solreffriction(self, normal: Any, speed: Any) -> np.ndarray:
+        """Each ``<pair>``'s ``pair_solreffriction[1]`` (``−b'_t``) for its mean normal force per
+        point ``normal`` (N) and sliding speed ``speed`` (m/s) of the step before: the pair's
+        law's slope at rest ``μ_s,p·F_n/v_ε`` times :meth:`sliding_factor` with the pair's own
+        coefficients (:attr:`pair_friction`)."""
+        mu = np.asarray(self.pair_friction, dtype=float).reshape(-1, 2)
+        slope = mu[:, 1] / self.stick_velocity
+        return -self.friction_gain * slope * np.asarray(normal, dtype=float) * self.sliding_factor(speed, mu)
+
+    def sliding_factor(self, speed: Any, mu: Any = None) -> np.ndarray:
         """The friction's viscous coefficient at sliding speed ``speed`` (m/s) over its value at
         rest: ``μ(s)·v_ε / (μ_s·√(s² + v_ε²))`` with ``track_sliding`` (the scenario's law's
         secant: MuJoCo's viscous friction ``c_t·s`` is then the law's force, inside the cone), 1
         without. ``μ(s)`` is the law's Stribeck curve (docs/model.md, "Friction")."""
         s = np.asarray(speed, dtype=float)
-        if not self.track_sliding or self.mu_static <= 0.0:
+        mu_k, mu_s = (self.mu_kinetic, self.mu_static) if mu is None else (np.asarray(mu)[:, 0], np.asarray(mu)[:, 1])
+        if not self.track_sliding:
             return np.ones_like(s)
         v_eps, v_s = self.stick_velocity, self.stribeck_velocity
-        mu = self.mu_kinetic + (self.mu_static - self.mu_kinetic) * np.exp(-(s / v_s) ** 2)
-        return mu * v_eps / (self.mu_static * np.sqrt(s * s + v_eps * v_eps))
+        peak = np.where(np.asarray(mu_s) > 0.0, mu_s, 1.0)
+        mu_now = mu_k + (mu_s - mu_k) * np.exp(-(s / v_s) ** 2)
+        return np.where(np.asarray(mu_s) > 0.0, mu_now * v_eps / (peak * np.sqrt(s * s + v_eps * v_eps)), 1.0)
 
 
 def wall_geom_name(index: int, name: str) -> str:
@@ -220,7 +254,7 @@ def _geom(name: str, kind: str, size: Any, pos: Any, quat: Any, mesh: str = "") 
 def _mesh_asset(name: str, vertices: np.ndarray) -> str:
     """A mesh asset of ``vertices`` (m, the geom's frame): MuJoCo collides a mesh geom as the
     convex hull of its vertices."""
-    return f'    <mesh name={quoteattr(name)} vertex="{_num(vertices)}" inertia="convex"/>\n'
+    return f'    <mesh name={quoteattr(name)} vertex="{_num(vertices)}"/>\n'
 
 
 def _rounded_box_points(size: Any, margin: float, k: int) -> np.ndarray:
@@ -358,9 +392,9 @@ def _triangle_prisms(vertices: np.ndarray, triangles: np.ndarray, thickness: flo
     return out
 
 
-def _shape_geoms(body: str, shapes: Any, match: ContactMatch, static: bool) -> tuple[list[tuple[str, str]], list[str]]:
+def _shape_geoms(body: str, shapes: Any, match: ContactMatch, static: bool) -> tuple[list[tuple[str, str, str]], list[str]]:
     """The geoms of a body's ``shapes`` (``[[servicer.shapes]]``, ``[[target.shapes]]``): (name,
-    XML) per geom and the mesh assets they use (docs/mujoco.md, "Shapes in MJCF"):
+    XML, the shape's material) per geom and the mesh assets they use (docs/mujoco.md, "Shapes in MJCF"):
 
     - sphere, capsule (``length`` between the cap centres): MuJoCo's own, rounded as ours;
     - box, cylinder: with a ``margin`` and ``match.round_edges``, a convex mesh of points on the
@@ -375,10 +409,11 @@ def _shape_geoms(body: str, shapes: Any, match: ContactMatch, static: bool) -> t
     - mesh (a surface): one convex prism per flat convex piece (a triangle, or coplanar
       neighbours whose union is convex), ``match.mesh_thickness`` deep behind the face its
       winding's normal faces (:func:`_triangle_prisms`), named ``<shape>-piece<j>``."""
-    geoms: list[tuple[str, str]] = []
+    geoms: list[tuple[str, str, str]] = []
     assets: list[str] = []
     for i, shape in enumerate(shapes or []):
         kind = str(shape.kind)
+        first = len(geoms)
         name = f"{body}-shape{i}" + (f"-{shape.name}" if shape.name else "")
         pos, quat = shape.position, shape.orientation
         margin = float(shape.margin) if match.round_edges else 0.0
@@ -418,10 +453,26 @@ def _shape_geoms(body: str, shapes: Any, match: ContactMatch, static: bool) -> t
                 geoms.append((piece, _geom(piece, "mesh", None, pos, quat, mesh=piece)))
         else:
             raise ScenarioError(f"{body}.shapes[{i}].kind: the MJCF writer has no {kind!r} geom")
+        geoms[first:] = [(g, xml, str(shape.material)) for g, xml, *_ in geoms[first:]]
     return geoms, assets
 
 
-def _match(scenario: Any, match: ContactMatch, diag: float) -> MatchedContact:
+def pair_coefficients(scenario: Any, material_a: str, material_b: str) -> tuple[float, float]:
+    """(μ_k, μ_s) of a contact between shapes of materials ``material_a`` and ``material_b``:
+    the ``[[contact.friction.pairs]]`` entry naming both (either order), else
+    ``[contact.friction]``'s; ``μ_s`` 0 means ``μ_k`` (docs/scenario.md)."""
+    friction = scenario.contact.friction
+    for pair in getattr(friction, "pairs", None) or []:
+        a, b = (str(x) for x in pair.materials)
+        if {a, b} == {material_a, material_b} and (a == b) == (material_a == material_b):
+            mu_k = float(pair.kinetic)
+            return mu_k, float(pair.static) or mu_k
+    mu_k = float(friction.kinetic)
+    return mu_k, float(friction.static) or mu_k
+
+
+def _match(scenario: Any, match: ContactMatch, diag: float,
+           pair_friction: tuple[tuple[float, float], ...] = ()) -> MatchedContact:
     c = scenario.contact
     if c.model != "linear":
         raise ScenarioError(
@@ -444,11 +495,12 @@ def _match(scenario: Any, match: ContactMatch, diag: float) -> MatchedContact:
     else:
         c_t = 0.0
     slope = mu_s / friction.stick_velocity if mu_s > 0.0 else 0.0
-    sliding = match.track_friction and match.track_sliding and mu_s > 0.0
+    any_friction = mu_s > 0.0 or any(p_s > 0.0 for _, p_s in pair_friction)
+    sliding = match.track_friction and match.track_sliding and any_friction
     return MatchedContact(
         diag=diag,
         solref=(-c.stiffness * scale, -c.damping * scale),
-        solreffriction=(0.0, -c_t * scale / match.impratio),
+        solreffriction=(0.0, -c_t * scale / match.cone_impratio),
         friction=max(mu_k, mu_s) if sliding else mu_k,
         mu_static=mu_s,
         mu_kinetic=mu_k,
@@ -457,22 +509,31 @@ def _match(scenario: Any, match: ContactMatch, diag: float) -> MatchedContact:
         track_sliding=sliding,
         friction_damping=c_t,
         friction_slope=slope if match.track_friction else 0.0,
-        solreffriction_per_newton=-slope * scale / match.impratio if match.track_friction else 0.0,
+        solreffriction_per_newton=-slope * scale / match.cone_impratio if match.track_friction else 0.0,
+        pair_friction=tuple(pair_friction),
+        friction_gain=scale / match.cone_impratio if match.track_friction else 0.0,
     )
 
 
 def _document(scenario: Any, timestep: float, match: ContactMatch, matched: MatchedContact | None,
               fixed_target: bool) -> str:
     d = match.impedance
-    if matched is None:  # first pass: only the mass matrix matters
-        contact = f'condim="1" solimp="{d!r} {d!r} 0.001 0.5 2"'
-    else:
-        friction = matched.friction
+
+    def contact(index: int) -> str:
+        if matched is None:  # first pass: only the mass matrix matters
+            return f'condim="1" solimp="{d!r} {d!r} 0.001 0.5 2"'
+        mu_k, mu_s = matched.pair_friction[index]
+        friction = max(mu_k, mu_s) if matched.track_sliding else mu_k
         condim = 3 if friction > 0.0 else 1
-        contact = (
+        # the pair's viscous coefficient at rest before the first step (the simulation then sets
+        # it every step): the table's, scaled to the pair's μ_s
+        ratio = mu_s / matched.mu_static if matched.mu_static > 0.0 else 0.0
+        b_t = matched.solreffriction[1] * ratio if matched.mu_static > 0.0 else matched.solreffriction[1]
+        return (
             f'condim="{condim}" friction="{friction!r} {friction!r} 0 0 0" solimp="{d!r} {d!r} 0.001 0.5 2" '
-            f'solref="{_num(matched.solref)}" solreffriction="{_num(matched.solreffriction)}" margin="0" gap="0"'
+            f'solref="{_num(matched.solref)}" solreffriction="{_num((0.0, b_t))}" margin="0" gap="0"'
         )
+
     rho = match.tip_radius
     tip = _geom("rod-tip", "sphere", [rho], scenario.rod.tip, [1, 0, 0, 0])
     walls, pairs = [], []
@@ -484,16 +545,16 @@ def _document(scenario: Any, timestep: float, match: ContactMatch, matched: Matc
         name = wall_geom_name(i, wall.name)
         walls.append(_geom(name, "box", [match.wall_half_size, match.wall_half_size, h], centre,
                            rotation_z_to(n)))
-        pairs.append(f'    <pair geom1="rod-tip" geom2={quoteattr(name)} {contact}/>\n')
+        pairs.append(f'    <pair geom1="rod-tip" geom2={quoteattr(name)} {contact(len(pairs))}/>\n')
     servicer_shapes, servicer_assets = _shape_geoms("servicer", getattr(scenario.servicer, "shapes", None), match, False)
     target_shapes, target_assets = _shape_geoms("target", getattr(scenario.target, "shapes", None), match, fixed_target)
     assets = servicer_assets + target_assets
     asset = f"  <asset>\n{''.join(assets)}  </asset>\n" if assets else ""
-    walls += [xml for _, xml in target_shapes]
-    tip += "".join(xml for _, xml in servicer_shapes)
-    for a, _ in servicer_shapes:
-        for b, _ in target_shapes:
-            pairs.append(f'    <pair geom1={quoteattr(a)} geom2={quoteattr(b)} {contact}/>\n')
+    walls += [xml for _, xml, _ in target_shapes]
+    tip += "".join(xml for _, xml, _ in servicer_shapes)
+    for a, _, _ in servicer_shapes:
+        for b, _, _ in target_shapes:
+            pairs.append(f'    <pair geom1={quoteattr(a)} geom2={quoteattr(b)} {contact(len(pairs))}/>\n')
     servicer = _body_xml("servicer", scenario.servicer, [tip], free=True)
     if fixed_target:
         target = "".join(walls).replace("      <geom", "    <geom")
@@ -505,7 +566,7 @@ def _document(scenario: Any, timestep: float, match: ContactMatch, matched: Matc
         f'<mujoco model={quoteattr(scenario.name)}>\n'
         '  <compiler angle="radian" autolimits="true"/>\n'
         f'  <option timestep="{timestep!r}" gravity="0 0 0" integrator="Euler" cone="{cone}" '
-        f'impratio="{match.impratio!r}" solver="Newton" tolerance="1e-12" iterations="100">\n'
+        f'impratio="{match.cone_impratio!r}" solver="Newton" tolerance="1e-12" iterations="100">\n'
         f'    <flag multiccd="{"enable" if match.multiccd else "disable"}"/>\n'
         "  </option>\n"
         f"{asset}"
@@ -517,6 +578,20 @@ def _document(scenario: Any, timestep: float, match: ContactMatch, matched: Matc
         "  </contact>\n"
         "</mujoco>\n"
     )
+
+
+def _pair_friction(scenario: Any, match: ContactMatch, fixed_target: bool) -> tuple[tuple[float, float], ...]:
+    """(μ_k, μ_s) of every ``<pair>`` in the order :func:`_document` writes them: the rod tip on
+    each wall (``[contact.friction]``), then every servicer geom on every target geom (their
+    shapes' materials, :func:`pair_coefficients`)."""
+    table = pair_coefficients(scenario, "\0", "\0")  # no shape has a NUL material: the table's
+    out = [table] * len(scenario.walls)
+    servicer, _ = _shape_geoms("servicer", getattr(scenario.servicer, "shapes", None), match, False)
+    target, _ = _shape_geoms("target", getattr(scenario.target, "shapes", None), match, fixed_target)
+    for _, _, a in servicer:
+        for _, _, b in target:
+            out.append(pair_coefficients(scenario, a, b))
+    return tuple(out)
 
 
 def write_mjcf(scenario: Any, timestep: float = 1e-4, *, match: ContactMatch | None = None,
@@ -535,5 +610,5 @@ def write_mjcf(scenario: Any, timestep: float = 1e-4, *, match: ContactMatch | N
     servicer = mujoco.mj_name2id(first, mujoco.mjtObj.mjOBJ_BODY, "servicer")
     target = 0 if fixed_target else mujoco.mj_name2id(first, mujoco.mjtObj.mjOBJ_BODY, "target")
     diag = float(first.body_invweight0[servicer, 0] + first.body_invweight0[target, 0])
-    matched = _match(scenario, match, diag)
+    matched = _match(scenario, match, diag, _pair_friction(scenario, match, fixed_target))
     return _document(scenario, timestep, match, matched, fixed_target), matched
