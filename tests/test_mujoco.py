@@ -457,3 +457,55 @@ def test_crosscheck_rod_in_frame(core, name):
     _check_shapes(rows)
     assert rows[0]["episodes"] == (1, 1)
 
+
+def test_mjcf_friction_per_material_pair(core):
+    """[[contact.friction.pairs]]: each <pair> takes its shapes' materials' coefficients (either
+    order), every other pair [contact.friction]'s; the cone's μ is max(μ_s, μ_k) when the
+    friction follows the sliding speed (never reached), μ_k when Coulomb is the cone's."""
+    case = _case("rod-in-frame two materials")
+    s = hc.load_scenario(case.preset, dict(case.overrides))
+    for match, front, side in ((ContactMatch(), 0.35, 0.25), (ContactMatch(track_sliding=False), 0.35, 0.2)):
+        xml, matched = write_mjcf(s, 1e-4, match=match)
+        m = mujoco.MjModel.from_xml_string(xml)
+        names = [(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, m.pair_geom1[j]),
+                  mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, m.pair_geom2[j])) for j in range(m.npair)]
+        target = [a if a.startswith("target") else b for a, b in names]
+        mu = {t.split("-")[-1]: m.pair_friction[j, 0] for j, t in enumerate(target)}
+        assert mu == pytest.approx({"front": front, "rear": side, "left": side, "right": side}, rel=1e-12)
+        assert [p for p in matched.pair_friction] == [(0.35, 0.35), (0.2, 0.25), (0.2, 0.25), (0.2, 0.25)]
+    # with tracking, each pair's viscous slope is its own μ_s: bronze's 0.35 against steel's 0.25
+    slopes = matched.pair_solreffriction(np.ones(4), np.zeros(4))
+    assert slopes[0] / slopes[1] == pytest.approx(0.35 / 0.25, rel=1e-12)
+
+
+def test_crosscheck_two_materials(core):
+    """rod-in-frame with a bronze front bar (μ 0.35) and steel side bars (0.2/0.25): matched
+    within the targets; the pair's coefficient acts in both engines (the tangential impulse is
+    not the single-material preset's)."""
+    rows = cc.run_case(_case("rod-in-frame two materials"))
+    _check_shapes(rows)
+    steel = cc.run_case(_case("rod-in-frame"))
+    assert abs(rows[0]["tangential_impulse"] - steel[0]["tangential_impulse"]) > 0.05 * steel[0]["tangential_impulse"]
+
+
+def test_mujoco_facility_with_shapes_at_zero_delay(core):
+    """rod-in-frame on the MuJoCo facility (the mockup's rounded bars as hulls, fixed in MuJoCo's
+    world): every collision's CoV and CoF within the targets of the model facility's, and as
+    faithful; probe-drogue's first collision (the strike on the cone's wall) too (its later ones
+    touch 4-6 facets at once: docs/mujoco.md, "What differs")."""
+    over = {"facility.robot_delay": 0.0}
+    model = hc.simulate(hc.load_scenario("rod-in-frame", over))
+    mj = hc.simulate(hc.load_scenario("rod-in-frame", {**over, "facility.kind": "mujoco"}))
+    assert model.status == mj.status == "ok"
+    a, b = _collisions(model), _collisions(mj)
+    assert len(a) == len(b) >= 3
+    for (cov_m, cof_m), (cov_j, cof_j) in zip(a, b):
+        assert abs(cov_j - cov_m) <= VELOCITY_TOLERANCE
+        assert abs(cof_j - cof_m) <= IMPULSE_TOLERANCE
+    over = {"facility.robot_delay": 0.0, "simulation.duration": 3.0}
+    model = hc.simulate(hc.load_scenario("probe-drogue", over))
+    mj = hc.simulate(hc.load_scenario("probe-drogue", {**over, "facility.kind": "mujoco"}))
+    (cov_m, cof_m), = _collisions(model)
+    (cov_j, cof_j), = _collisions(mj)
+    assert abs(cov_j - cov_m) <= VELOCITY_TOLERANCE
+    assert abs(cof_j - cof_m) <= IMPULSE_TOLERANCE
