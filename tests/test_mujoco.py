@@ -415,11 +415,12 @@ def test_crosscheck_box_landing_with_friction(core):
     assert rows[0]["tangential_impulse"] > 0.05 * rows[0]["normal_impulse"][0]
 
 
-@pytest.mark.parametrize("name", ["cylinder on an edge", "cylinder on an edge rounded", "cylinder on an edge mu=0.2"])
+@pytest.mark.parametrize("name", ["cylinder on an edge", "cylinder on an edge rounded", "cylinder on an edge mu=0.2",
+                                  "cone on a half-space mu=0.2"])
 def test_crosscheck_cylinder_on_an_edge(core, name):
     """rod-in-frame's tilted rod across the front bar's edge: one point in both engines (MuJoCo's
     multi-point convex collision off), sharp or rounded by 2 mm (MuJoCo: hulls of the rounded
-    surfaces), with and without friction."""
+    surfaces), with and without friction; a rounded cone's apex on a half-space (one point)."""
     rows = cc.run_case(_case(name))
     _check_shapes(rows, velocity=5e-3, impulse=5e-3)
 

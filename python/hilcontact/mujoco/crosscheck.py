@@ -80,6 +80,17 @@ _BOX_ON_FACE = {
     "contact.friction.kinetic": 0.0, "contact.friction.static": 0.0,
 }
 
+#: A cone (30 mm base radius, 100 mm long, 2 mm rounding) on the servicer, its apex ahead (+x),
+#: strikes a half-space 10 mm away obliquely with friction 0.2.
+_CONE = {
+    "servicer.shapes": [{"name": "cone", "kind": "cone", "radius": 0.03, "length": 0.1, "margin": 0.002,
+                         "position": [0.95, 0.0, 0.0], "orientation": [0.70710678, 0.0, 0.70710678, 0.0]}],
+    "target.shapes": [{"name": "ground", "kind": "half-space", "position": [0.01, 0.0, 0.0],
+                       "normal": [-1.0, 0.0, 0.0]}],
+    "servicer.velocity": [0.02, 0.005, 0.0],
+    "contact.friction.kinetic": 0.2, "contact.friction.static": 0.2,
+}
+
 _ROD = {"name": "rod", "kind": "cylinder", "radius": 0.010, "length": 0.300, "margin": 0.0,
         "position": [1.0, 0.0, 0.0], "orientation": [0.99950507, 0.01744643, 0.02617296, 0.00045685]}
 
@@ -143,6 +154,8 @@ CASES: tuple[Case, ...] = (
     Case("box on a face mu=0.2", "rod-in-frame",
          {**_SHORT, **_BOX_ON_FACE, "servicer.velocity": [0.02, 0.01, 0.0], "contact.friction.kinetic": 0.2, "contact.friction.static": 0.2},
          "the cube landing obliquely, sliding with friction 0.2 on its four corners"),
+    Case("cone on a half-space mu=0.2", "rod-in-frame", {**_SHORT, **_CONE},
+         "a 2 mm rounded cone's apex strikes a half-space obliquely, friction 0.2 (MuJoCo: the rounded hull)"),
     Case("cylinder on an edge", "rod-in-frame", {**_SHORT, **_EDGE},
          "rod-in-frame's rod (sharp) across the front bar's edge (sharp): one point"),
     Case("cylinder on an edge rounded", "rod-in-frame", {**_SHORT, **_EDGE, **_ROUNDED_EDGE},
