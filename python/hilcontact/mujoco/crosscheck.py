@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from . import require
-from .mjcf import ContactMatch, MatchedContact, rotation_matrix, wall_geom_name, write_mjcf
+from .mjcf import ContactMatch, MatchedContact, MeshFaceFilter, mesh_faces, rotation_matrix, wall_geom_name, write_mjcf
 
 __all__ = ["CASES", "Case", "Episode", "MujocoTrace", "crosscheck", "simulate_mujoco", "table"]
 
@@ -227,9 +227,13 @@ def simulate_mujoco(scenario: Any, timestep: float, duration: float,
     """The scene of a resolved scenario (both bodies free, no facility) simulated by MuJoCo for
     ``duration`` s with steps of ``timestep`` s (:func:`hilcontact.mujoco.mjcf.write_mjcf`)."""
     mj = require("the MuJoCo cross-check")
+    match = match or ContactMatch()
     xml, matched = write_mjcf(scenario, timestep, match=match)
     m = mj.MjModel.from_xml_string(xml)
     d = mj.MjData(m)
+    faces = MeshFaceFilter(mj, m, mesh_faces(scenario)) if match.mesh_faces_only else None
+    if faces is not None and not faces.pieces:
+        faces = None
     joints = {}
     for body in ("servicer", "target"):
         b = mj.mj_name2id(m, mj.mjtObj.mjOBJ_BODY, body)
@@ -269,9 +273,14 @@ def simulate_mujoco(scenario: Any, timestep: float, duration: float,
                 speed = np.divide(slide, normal, out=np.zeros_like(slide), where=normal > 0.0)
                 mean = np.divide(normal, points, out=np.zeros_like(normal), where=points > 0)
                 m.pair_solreffriction[:, 1] = matched.pair_solreffriction(mean, speed)
-            mj.mj_step(m, d)
-        else:
+            if faces is None:
+                mj.mj_step(m, d)
+            else:
+                faces.step(m, d)
+        elif faces is None:
             mj.mj_forward(m, d)
+        else:
+            faces.forward(m, d)
         time[k] = d.time
         velocity[k], angular[k] = relative_tip_motion(d.qpos[qs:qs + 7], d.qvel[vs:vs + 6],
                                                       d.qpos[qt:qt + 7], d.qvel[vt:vt + 6], tip)
@@ -282,7 +291,7 @@ def simulate_mujoco(scenario: Any, timestep: float, duration: float,
             r_t = rotation_matrix(d.qpos[qt + 3:qt + 7])
             for i in range(d.ncon):
                 c = d.contact[i]
-                if c.efc_address < 0:
+                if c.efc_address < 0 or c.exclude:
                     continue
                 mj.mj_contactForce(m, d, i, f6)
                 # the force of geom1 on geom2, in the contact frame (rows: normal, tangents)

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import ScenarioError
 from . import require
-from .mjcf import ContactMatch, MatchedContact, rotation_matrix, write_mjcf
+from .mjcf import ContactMatch, MatchedContact, MeshFaceFilter, mesh_faces, rotation_matrix, write_mjcf
 
 __all__ = ["MujocoContact", "simulate_facility"]
 
@@ -37,16 +37,20 @@ class MujocoContact:
         self._mj = mj
         path = scenario.facility.mujoco_model
         self.matched: MatchedContact | None = None
+        self._faces: MeshFaceFilter | None = None
         if path:
             try:
                 self.model = mj.MjModel.from_xml_path(os.fspath(path))
             except (ValueError, OSError) as exc:
                 raise ScenarioError(f"facility.mujoco_model: {path}: {' '.join(str(exc).split())}") from None
         else:
+            match = match or ContactMatch()
             xml, self.matched = write_mjcf(scenario, float(scenario.facility.mujoco_timestep),
                                            match=match, fixed_target=True)
             self.xml = xml
             self.model = mj.MjModel.from_xml_string(xml)
+            if match.mesh_faces_only:
+                self._faces = MeshFaceFilter(mj, self.model, mesh_faces(scenario))
         m = self.model
         body = mj.mj_name2id(m, mj.mjtObj.mjOBJ_BODY, "servicer")
         if body < 0 or m.body_jntnum[body] != 1 or m.jnt_type[m.body_jntadr[body]] != mj.mjtJoint.mjJNT_FREE:
@@ -67,7 +71,10 @@ class MujocoContact:
         """Force on the rod, force on the mockup and its moment about the sensor origin (``t``),
         and each pair's normal force, for the state in ``data``."""
         mj, m, d = self._mj, self.model, self.data
-        mj.mj_forward(m, d)
+        if self._faces is not None and self._faces.pieces:
+            self._faces.forward(m, d)
+        else:
+            mj.mj_forward(m, d)
         on_rod = np.zeros(3)
         friction = np.zeros(3)
         moment = np.zeros(3)
@@ -76,7 +83,7 @@ class MujocoContact:
         points = np.zeros(max(m.npair, 1))
         for i in range(d.ncon):
             c = d.contact[i]
-            if c.efc_address < 0:
+            if c.efc_address < 0 or c.exclude:
                 continue
             rod1 = m.geom_bodyid[c.geom1] == self._body
             rod2 = m.geom_bodyid[c.geom2] == self._body

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..errors import ScenarioError
 
-__all__ = ["ContactMatch", "MatchedContact", "inertia_matrix", "rotation_matrix", "rotation_z_to", "wall_geom_name", "write_mjcf"]
+__all__ = ["ContactMatch", "MatchedContact", "MeshFaceFilter", "mesh_faces", "inertia_matrix", "rotation_matrix", "rotation_z_to", "wall_geom_name", "write_mjcf"]
 
 
 @dataclass(frozen=True)
@@ -85,6 +85,11 @@ class ContactMatch:
             faces overlap, the ends of the segment where a hull's facet crosses an edge (two
             points where ours has one, each a full spring); False: one point per pair of geoms
             (box against box keeps MuJoCo's own box-box collision, up to 8 points).
+        mesh_faces_only: the core's rule for meshes (docs/model.md, "Shapes"): where a mesh's
+            piece touches on its face, the contacts of the same mesh on a piece's edge or corner
+            (their normal is not the piece's face normal) are dropped before MuJoCo's solver
+            (:func:`mesh_faces`, :func:`drop_mesh_edge_contacts`); False: every touched piece is a
+            spring of its own (a probe in a narrow faceted cone touches 4-6 pieces at once).
         mesh_thickness: how deep behind its face each triangle of a mesh surface is extruded
             into a convex prism, m (deeper than any penetration; thinner than what lies behind).
     """
@@ -113,6 +118,7 @@ class ContactMatch:
     mesh_thickness: float = 0.005
     cylinder_primitive: bool = False
     multiccd: bool = False
+    mesh_faces_only: bool = True
 
 
 @dataclass(frozen=True)
@@ -390,6 +396,87 @@ def _triangle_prisms(vertices: np.ndarray, triangles: np.ndarray, thickness: flo
         depth = thickness / np.maximum(behind @ n, 0.2)
         out.append(np.vstack([front, front - depth[:, None] * behind]))
     return out
+
+
+def mesh_faces(scenario: Any) -> dict[str, tuple[str, np.ndarray]]:
+    """Each mesh piece's geom name → (its mesh's name, the piece's front-face unit normal in its
+    body's frame), as :func:`_shape_geoms` names and writes them."""
+    out: dict[str, tuple[str, np.ndarray]] = {}
+    for body in ("servicer", "target"):
+        for i, shape in enumerate(getattr(getattr(scenario, body), "shapes", None) or []):
+            if str(shape.kind) != "mesh":
+                continue
+            name = f"{body}-shape{i}" + (f"-{shape.name}" if shape.name else "")
+            vertices = np.asarray(shape.vertices, dtype=float) * float(shape.scale)
+            triangles = np.asarray(shape.triangles, dtype=int)
+            normals = np.cross(vertices[triangles[:, 1]] - vertices[triangles[:, 0]],
+                               vertices[triangles[:, 2]] - vertices[triangles[:, 0]])
+            rotation = rotation_matrix(np.asarray(shape.orientation, dtype=float))
+            for j, piece in enumerate(_flat_pieces(vertices, triangles)):
+                n = normals[piece[0]] / np.linalg.norm(normals[piece[0]])
+                out[f"{name}-piece{j}"] = (name, rotation @ n)
+    return out
+
+
+class MeshFaceFilter:
+    """The core's rule for mesh contacts in a compiled MuJoCo model (``ContactMatch.mesh_faces_only``):
+    :meth:`apply` drops, after MuJoCo's collision, every contact on a mesh piece whose normal is
+    not the piece's face normal when a contact of the same mesh is on a face, and rebuilds the
+    constraints. ``faces``: :func:`mesh_faces` of the scenario written."""
+
+    #: |cos| above which a contact's normal is its piece's face normal.
+    FACE = 1.0 - 1e-6
+
+    def __init__(self, mj: Any, model: Any, faces: dict[str, tuple[str, np.ndarray]]) -> None:
+        self._mj = mj
+        self.pieces: dict[int, tuple[str, np.ndarray, int]] = {}
+        for name, (mesh, normal) in faces.items():
+            g = mj.mj_name2id(model, mj.mjtObj.mjOBJ_GEOM, name)
+            if g >= 0:
+                self.pieces[g] = (mesh, normal, int(model.geom_bodyid[g]))
+        #: Contacts dropped so far.
+        self.dropped = 0
+
+    def apply(self, model: Any, data: Any) -> None:
+        """Drop the edge contacts of ``data`` (after ``mj_fwdPosition``) and rebuild the
+        constraints (``mj_makeConstraint``, ``mj_island``, ``mj_projectConstraint``)."""
+        if not self.pieces or not data.ncon:
+            return
+        face_meshes = set()
+        edges = []
+        for i in range(data.ncon):
+            c = data.contact[i]
+            g = c.geom1 if c.geom1 in self.pieces else c.geom2 if c.geom2 in self.pieces else -1
+            if g < 0 or c.exclude:
+                continue
+            mesh, normal, body = self.pieces[g]
+            n = data.xmat[body].reshape(3, 3) @ normal
+            if abs(float(c.frame[:3] @ n)) > self.FACE:
+                face_meshes.add(mesh)
+            else:
+                edges.append((i, mesh))
+        drop = [i for i, mesh in edges if mesh in face_meshes]
+        if not drop:
+            return
+        for i in drop:
+            data.contact[i].exclude = 1
+        self.dropped += len(drop)
+        mj = self._mj
+        mj.mj_makeConstraint(model, data)
+        mj.mj_island(model, data)
+        mj.mj_projectConstraint(model, data)
+
+    def forward(self, model: Any, data: Any) -> None:
+        """``mj_forward`` with the rule: the position stage, the drop, the rest."""
+        mj = self._mj
+        mj.mj_fwdPosition(model, data)
+        self.apply(model, data)
+        mj.mj_forwardSkip(model, data, mj.mjtStage.mjSTAGE_POS, 0)
+
+    def step(self, model: Any, data: Any) -> None:
+        """``mj_step`` (Euler) with the rule."""
+        self.forward(model, data)
+        self._mj.mj_Euler(model, data)
 
 
 def _shape_geoms(body: str, shapes: Any, match: ContactMatch, static: bool) -> tuple[list[tuple[str, str, str]], list[str]]:
