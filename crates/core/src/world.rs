@@ -250,9 +250,16 @@ impl TwoBodySystem {
                 .for_each_point(&servicer_pose(rel), |point| {
                     let v =
                         rel.velocity + rel.angular_velocity.cross(&(point.point - rel.position));
-                    let f = self
+                    let friction = self
                         .contact
-                        .point_force(point.depth, &point.normal, &v, added_damping);
+                        .friction_between(point.servicer_shape, point.target_shape);
+                    let f = self.contact.point_force(
+                        point.depth,
+                        &point.normal,
+                        &v,
+                        added_damping,
+                        friction,
+                    );
                     let w =
                         FrameWrench::from_rod_force(&f.force, &point.point, &self.sensor_origin);
                     c.force += f.force;

@@ -421,11 +421,14 @@ impl PyFacilityHandle {
         Ok(self.0.get()?.is_finished())
     }
 
-    /// Stops the emulator, waits for it (GIL released) and returns its final counters.
+    /// Stops the emulator, waits for it (GIL released) and returns its final counters, with
+    /// `live`: the live view's report (None without `--live`).
     fn join<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let handle = self.0.take()?;
-        let status = py.allow_threads(move || handle.join());
-        json_to_py(py, &status)
+        let (status, live) = py.allow_threads(move || handle.join_with_live());
+        let mut value = serde_json::to_value(status).unwrap_or_default();
+        value["live"] = live.unwrap_or_default();
+        json_to_py(py, &value)
     }
 }
 
