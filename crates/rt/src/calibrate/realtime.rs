@@ -13,6 +13,7 @@
 //! (overruns).
 
 use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::Mutex;
 use std::time::Duration;
 
 use nalgebra::{UnitQuaternion, Vector3};
@@ -221,7 +222,7 @@ pub struct CalibrationHandle {
     options: CalibrateOptions,
     force_limit: f64,
     measured_at: String,
-    progress: Receiver<String>,
+    progress: Mutex<Receiver<String>>,
 }
 
 impl CalibrationHandle {
@@ -252,7 +253,7 @@ impl CalibrationHandle {
             options: options.clone(),
             force_limit,
             measured_at: measured_at.to_string(),
-            progress,
+            progress: Mutex::new(progress),
         })
     }
 
@@ -263,7 +264,10 @@ impl CalibrationHandle {
 
     /// The progress lines since the last call, surface by surface.
     pub fn progress(&self) -> Vec<String> {
-        self.progress.try_iter().collect()
+        match self.progress.lock() {
+            Ok(receiver) => receiver.try_iter().collect(),
+            Err(_) => Vec::new(),
+        }
     }
 
     /// Asks the loop to stop (the robot backs out of contact and holds); returns at once.
