@@ -16,6 +16,7 @@ use pyo3::prelude::*;
 use pyo3::sync::GILOnceCell;
 use pyo3::types::{PyDict, PyTuple, PyType};
 
+mod calibrate;
 mod facility;
 mod mesh;
 mod plugin;
@@ -978,6 +979,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mesh::read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_simulated, m)?)?;
     m.add_function(wrap_pyfunction!(calibration_schema, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate::start_calibration, m)?)?;
+    m.add_class::<calibrate::PyCalibrationHandle>()?;
     m.add_function(wrap_pyfunction!(plugin::simulate_python, m)?)?;
     m.add_function(wrap_pyfunction!(plugin::compensator_context, m)?)?;
     m.add_function(wrap_pyfunction!(facility::simulate_facility, m)?)?;

@@ -18,7 +18,7 @@ from rich.markup import escape
 from ..errors import HilContactError, ScenarioError
 from ..limits import Limits, check_run
 from ..scenario import load_scenario
-from .calibrate import CALIBRATION_OPTION, with_calibration
+from .calibration_file import CALIBRATION_OPTION, with_calibration
 from .options import (
     _SET_HELP,
     NON_NEGATIVE,
