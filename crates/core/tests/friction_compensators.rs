@@ -194,3 +194,129 @@ fn pida_is_faithful_on_a_frictional_oblique_contact_at_10_ms() {
         assert!(error <= 0.05, "velocity error {error}");
     }
 }
+
+/// A corner scene: `oblique-6dof` without spins, the rod tip driven into the inside edge of two
+/// walls `half_angle` (rad) either side of −x (rotated by `yaw` about z), the edge along z
+/// straight ahead, the servicer drifting along the edge at `drift` (m/s) so that the tip
+/// presses both walls and slides on both; Coulomb friction `mu`; no noise and no sensor delay
+/// unless set.
+fn corner_scene(half_angle: f64, yaw: f64, mu: f64, drift: f64) -> Scenario {
+    let mut s = oblique_6dof(([0.0; 3], [0.0; 3]), [0.0; 3], [0.0, 0.0], [0.0, 0.0]);
+    s.contact.friction = FrictionConfig {
+        kinetic_coefficient: mu,
+        ..FrictionConfig::default()
+    };
+    let wall = |sign: f64| {
+        let a = yaw + sign * half_angle;
+        [-a.cos(), -a.sin(), 0.0]
+    };
+    s.walls.truncate(1);
+    s.walls[0].name = "corner-a".into();
+    s.walls[0].point = [0.010, 0.0, 0.0];
+    s.walls[0].normal = wall(1.0);
+    let mut b = s.walls[0].clone();
+    b.name = "corner-b".into();
+    b.normal = wall(-1.0);
+    s.walls.push(b);
+    s.servicer.velocity = [0.02, 0.0, drift];
+    s.servicer.angular_velocity = [0.0; 3];
+    s.target.angular_velocity = [0.0; 3];
+    s.target.velocity = [0.0; 3];
+    s.facility.sensor_noise = 0.0;
+    s.facility.sensor_delay = 0.0;
+    // a fast robot: the physical contact follows the virtual one closely
+    s.facility.robot_delay = 0.001;
+    s.simulation.duration = 2.0;
+    s.compensator = CompensatorConfig::from_kind("pida").expect("pida");
+    s
+}
+
+/// The corner's two walls split from the robot's physical contact in a run of `s` (the
+/// measured force, read with added Gaussian noise of `noise` N per axis, seeded, and the robot
+/// tip's kinematics the sensor delay earlier), the scenario's walls as the prior geometry
+/// ([`CornerFit`]): per wall (k̂/k − 1, |μ̂ − μ|), and how many samples pressed both walls.
+/// The noise is added after the run, so that it does not change where the tip goes.
+fn split_corner(s: &Scenario, noise: f64, seed: u64) -> ([(f64, f64); 2], usize) {
+    use hilcontact_core::compensator::surface::CornerFit;
+    use nalgebra::Vector3;
+    use rand_distr::{Distribution, Normal};
+    let plan = s.resolve().expect("plan");
+    let out = simulate_plan(&plan);
+    let v3 = |name: &str, i: usize| {
+        Vector3::new(
+            common::col(&out, &format!("{name}_x"))[i],
+            common::col(&out, &format!("{name}_y"))[i],
+            common::col(&out, &format!("{name}_z"))[i],
+        )
+    };
+    let walls = &plan.system.contact.walls;
+    let into = |w: usize| -walls[w].normal;
+    let mut fit = CornerFit::new([into(0), into(1)], [walls[0].point, walls[1].point]);
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+    let gauss = Normal::new(0.0, 1.0).expect("normal");
+    let mut both = 0;
+    // the force measured at tick i was produced by the kinematics the sensor delay earlier
+    let lag = (s.facility.sensor_delay / s.simulation.period).round() as usize;
+    for i in lag..common::col(&out, "time").len() {
+        let (p, v) = (
+            v3("actual_tip_position", i - lag),
+            v3("actual_tip_velocity", i - lag),
+        );
+        let force =
+            v3("measured_force", i) + Vector3::from_fn(|_, _| noise * gauss.sample(&mut rng));
+        if fit.add(&force, &p, &v) && (0..2).all(|w| (p - walls[w].point).dot(&into(w)) > 0.0) {
+            both += 1;
+        }
+    }
+    let surfaces = fit.fit().expect("both walls determined");
+    let (k, mu) = (s.contact.stiffness, s.contact.friction.kinetic_coefficient);
+    (
+        [0, 1].map(|w| {
+            (
+                surfaces[w].stiffness / k - 1.0,
+                (surfaces[w].friction - mu).abs(),
+            )
+        }),
+        both,
+    )
+}
+
+/// Random corner scenes (half angle 25-40°, yaw ±10°, μ 0.1-0.3, drift 5-10 mm/s), the
+/// sensor delayed by `sensor_delay` (s) and the force read with noise `noise` (N): each
+/// wall's stiffness and friction coefficient from the corner contact split by the prior
+/// geometry, within `k_tolerance` (share) and `mu_tolerance`.
+fn check_corners(seed: u64, noise: f64, sensor_delay: f64, mu_tolerance: f64, k_tolerance: f64) {
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+    for _ in 0..4 {
+        let half = rng.random_range(25f64..40.0).to_radians();
+        let yaw = rng.random_range(-10f64..10.0).to_radians();
+        let mu = rng.random_range(0.1..0.3);
+        let drift = rng.random_range(0.005..0.01);
+        let mut s = corner_scene(half, yaw, mu, drift);
+        s.facility.sensor_delay = sensor_delay;
+        let (walls, both) = split_corner(&s, noise, seed);
+        println!(
+            "noise {noise}: half {:.0}° yaw {:.0}° μ {mu:.3}: (k̂/k − 1, |μ̂ − μ|) {walls:?}, {both} samples on both walls",
+            half.to_degrees(),
+            yaw.to_degrees()
+        );
+        assert!(
+            both >= 20,
+            "the tip pressed both walls on {both} samples only"
+        );
+        for (k_error, mu_error) in walls {
+            assert!(k_error.abs() <= k_tolerance, "k̂/k − 1 = {k_error}");
+            assert!(mu_error <= mu_tolerance, "|μ̂ − μ| = {mu_error}");
+        }
+    }
+}
+
+#[test]
+fn random_clean_corner_contacts_are_split_into_their_two_walls() {
+    check_corners(2222, 0.0, 0.0, 0.03, 0.02);
+}
+
+#[test]
+fn random_noisy_corner_contacts_are_split_into_their_two_walls() {
+    check_corners(2222, 0.2, 0.0, 0.05, 0.05);
+}
