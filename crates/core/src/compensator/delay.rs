@@ -87,6 +87,16 @@ struct Sample {
 /// robot kinematics kept; older records are paired with the kinematics this long before).
 pub const MAX_HELD_TICKS: usize = 64;
 
+/// Largest standard error of the re-seeding fit's stiffness, as a share of it (a good fit on
+/// `oblique-6dof`: 0.1-0.4 %; an ill-conditioned one: 20 % and more).
+pub const RESEED_STIFFNESS_STD: f64 = 0.02;
+/// Largest standard error of the re-seeding fit's damping, as a share of its stiffness, s
+/// (`1e-3·k`: 176 N·s/m at Table 1's stiffness; a good fit: 5-30 N·s/m).
+pub const RESEED_DAMPING_STD: f64 = 1e-3;
+/// Largest change of the stiffness a re-seeding may make, as a share of the filter's (the
+/// lean's bias: 2-10 %).
+pub const RESEED_STIFFNESS_CHANGE: f64 = 0.2;
+
 /// Delay compensation and online identification of the contact.
 #[derive(Debug, Clone)]
 pub struct ContactEstimator {
@@ -118,6 +128,9 @@ pub struct ContactEstimator {
     surface: KnownSurface,
     /// The last filter update's row `H` and measurement `Z`.
     last_update: Option<(Vector2<f64>, f64)>,
+    /// Whether the current contact's filter state was re-seeded from the law along its
+    /// fitted normal ([`ContactEstimator::contact_sample`]).
+    reseeded: bool,
 }
 
 impl ContactEstimator {
@@ -158,6 +171,7 @@ impl ContactEstimator {
             surfaces: [KnownSurface::default(); KNOWN_SURFACES],
             surface: KnownSurface::default(),
             last_update: None,
+            reseeded: false,
         }
     }
 
@@ -182,6 +196,7 @@ impl ContactEstimator {
     /// friction cone and 15°), else none.
     fn start_contact(&mut self, force: &Vector3<f64>) {
         self.fit.reset();
+        self.reseeded = false;
         let e = force.normalize();
         self.surface = self
             .surfaces
@@ -203,8 +218,12 @@ impl ContactEstimator {
         if self.fit.samples() >= MIN_FIT_SAMPLES {
             self.fit.fit(2);
             if self.fit.is_determined() {
+                let was_frictional = self.surface.frictional;
                 self.surface.frictional = self.fit.leans();
                 self.surface.normal = self.fit.normal().0;
+                if self.surface.frictional && !was_frictional && !self.reseeded {
+                    self.reseed();
+                }
             }
         }
         if self.surface.frictional {
@@ -214,6 +233,32 @@ impl ContactEstimator {
             if weight > 0.0 {
                 self.surface.friction = mu;
                 self.surface.weight = weight;
+            }
+        }
+    }
+
+    /// The contact turned out frictional: its increments so far were taken along the force's
+    /// direction, which friction leans by `atan μ` towards the sliding, so that the sliding
+    /// entered the penetration (`Δd′ = Δd·cos δ + Δs·sin δ`) and biased the filter (on
+    /// `oblique-6dof` at μ 0.1: k̂ 2-3 % low and ĉ up to 220 N·s/m on a contact without
+    /// damping; the damping booked as real then made the energy controller over-dissipate).
+    /// The filter's state is re-seeded with the least-squares law along the fitted normal over
+    /// the contact's samples ([`SurfaceFit::law`]) when that fit is well conditioned
+    /// ([`RESEED_STIFFNESS_STD`], [`RESEED_DAMPING_STD`], [`RESEED_STIFFNESS_CHANGE`]); its
+    /// covariance is kept. Once per contact.
+    fn reseed(&mut self) {
+        self.reseeded = true;
+        if let Some(((k, c), (k_std, c_std))) = self.fit.law(&self.surface.normal) {
+            // only a well-conditioned fit near the filter's stiffness: a spurious lean (a
+            // frictionless contact on a spinning wall) gives an ill-conditioned one
+            let k_now = self.filter.x[0];
+            let well = k_std > 0.0
+                && k_std < RESEED_STIFFNESS_STD * k
+                && c_std > 0.0
+                && c_std < RESEED_DAMPING_STD * k
+                && (k / k_now - 1.0).abs() < RESEED_STIFFNESS_CHANGE;
+            if well && c.is_finite() {
+                self.filter.x = Vector2::new(k, c);
             }
         }
     }
@@ -253,6 +298,7 @@ impl ContactEstimator {
         self.surfaces = [KnownSurface::default(); KNOWN_SURFACES];
         self.surface = KnownSurface::default();
         self.last_update = None;
+        self.reseeded = false;
     }
 
     /// One tick: delay compensation, identification, contact direction. Allocation-free.

@@ -371,6 +371,228 @@ impl SurfaceFit {
     }
 }
 
+/// One surface of a corner contact as [`CornerFit`] identifies it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CornerSurface {
+    /// Stiffness k̂, N/m.
+    pub stiffness: f64,
+    /// Damping ĉ, N·s/m.
+    pub damping: f64,
+    /// Friction coefficient μ̂.
+    pub friction: f64,
+}
+
+/// The unknowns of [`CornerFit`]: per surface `k, c, μ·k, μ·c`.
+type CornerMoments = SMatrix<f64, 8, 8>;
+
+/// A contact pressing two surfaces at once (a corner, an edge): the measured force split into
+/// the two surfaces' laws, with each surface's geometry known (from the scenario's shapes as the
+/// prior, or identified planes). With `n_i` surface i's normal (into it), `d_i = (p − p_i)·n_i`
+/// the penetration of the robot tip `p` (`p_i` a point of the surface), `ḋ_i = v·n_i`, and
+/// `ŝ_i` the tip's sliding direction on the surface (its velocity less the normal part), the
+/// force on the frame is, while each pressed surface slides,
+/// ```text
+/// F = Σ_i (k_i·d_i + c_i·ḋ_i)·(n_i + μ_i·ŝ_i)
+///   = Σ_i [k_i·d_i·n_i + c_i·ḋ_i·n_i + (μ_i k_i)·d_i·ŝ_i + (μ_i c_i)·ḋ_i·ŝ_i]
+/// ```
+/// linear in the eight unknowns `(k_i, c_i, μ_i k_i, μ_i c_i)`: least squares over the samples
+/// (three equations each), `μ̂_i = (μ_i k_i)^/k̂_i`. Samples where a pressed surface does not
+/// slide (faster than [`SLIDE_SPEED`]) are left out (sticking friction is not `μ·F_n`); a
+/// sample pressing one surface only enters that surface's columns. Allocation-free.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CornerFit {
+    normals: [Vector3<f64>; 2],
+    points: [Vector3<f64>; 2],
+    moments: CornerMoments,
+    right: SVector<f64, 8>,
+    samples: usize,
+}
+
+impl CornerFit {
+    /// A fit for the surfaces of normals `normals` (into each surface, unit) through `points`
+    /// (m, `t` frame).
+    pub fn new(normals: [Vector3<f64>; 2], points: [Vector3<f64>; 2]) -> Self {
+        CornerFit {
+            normals,
+            points,
+            moments: CornerMoments::zeros(),
+            right: SVector::zeros(),
+            samples: 0,
+        }
+    }
+
+    /// Samples used so far.
+    pub fn samples(&self) -> usize {
+        self.samples
+    }
+
+    /// Adds a sample: force on the frame (N), robot tip position (m) and velocity (m/s) that
+    /// produced it. Returns whether it was used (a surface pressed, every pressed one sliding).
+    pub fn add(
+        &mut self,
+        force: &Vector3<f64>,
+        position: &Vector3<f64>,
+        velocity: &Vector3<f64>,
+    ) -> bool {
+        let mut columns = [Vector3::zeros(); 8];
+        let mut pressed = false;
+        for i in 0..2 {
+            let n = self.normals[i];
+            let d = (position - self.points[i]).dot(&n);
+            if d <= 0.0 {
+                continue;
+            }
+            let v_t = velocity - n * velocity.dot(&n);
+            let speed = v_t.norm();
+            if speed <= SLIDE_SPEED {
+                return false;
+            }
+            let (rate, slide) = (velocity.dot(&n), v_t / speed);
+            columns[4 * i] = n * d;
+            columns[4 * i + 1] = n * rate;
+            columns[4 * i + 2] = slide * d;
+            columns[4 * i + 3] = slide * rate;
+            pressed = true;
+        }
+        if !pressed {
+            return false;
+        }
+        for a in 0..8 {
+            self.right[a] += columns[a].dot(force);
+            for b in 0..8 {
+                self.moments[(a, b)] += columns[a].dot(&columns[b]);
+            }
+        }
+        self.samples += 1;
+        true
+    }
+
+    /// The two surfaces' laws and friction coefficients, or `None` while the samples do not
+    /// determine them (a surface never pressed, or its penetration and rate not independent).
+    pub fn fit(&self) -> Option<[CornerSurface; 2]> {
+        // scaled to unit diagonal: the columns' sizes differ by orders of magnitude
+        let mut scale = SVector::<f64, 8>::zeros();
+        for a in 0..8 {
+            let m = self.moments[(a, a)];
+            if m <= 0.0 {
+                return None;
+            }
+            scale[a] = m.sqrt().recip();
+        }
+        let scaled = CornerMoments::from_fn(|a, b| self.moments[(a, b)] * scale[a] * scale[b]);
+        let beta = scaled
+            .cholesky()?
+            .solve(&self.right.component_mul(&scale))
+            .component_mul(&scale);
+        let surface = |i: usize| CornerSurface {
+            stiffness: beta[4 * i],
+            damping: beta[4 * i + 1],
+            friction: if beta[4 * i] > 0.0 {
+                (beta[4 * i + 2] / beta[4 * i]).max(0.0)
+            } else {
+                0.0
+            },
+        };
+        Some([surface(0), surface(1)])
+    }
+}
+
+#[cfg(test)]
+mod corner_tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+
+    /// A random corner (two planes 60-120° apart), laws and friction; a tip pressing both
+    /// while sliding along their edge, the penetrations varying independently; the force of
+    /// the laws with Coulomb friction on each surface, plus Gaussian noise `noise` (N per
+    /// axis). Returns the worst |μ̂ − μ| and |k̂/k − 1| over `count` corners.
+    fn corners(seed: u64, count: usize, noise: f64) -> (f64, f64) {
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+        let gauss = Normal::new(0.0, 1.0).expect("normal");
+        let (mut worst_mu, mut worst_k) = (0.0f64, 0.0f64);
+        for _ in 0..count {
+            let n1 = Vector3::new(1.0, 0.0, 0.0);
+            let angle = rng.random_range(60f64..120.0).to_radians();
+            let tilt = rng.random_range(-0.3f64..0.3);
+            let n2 = Vector3::new(
+                angle.cos(),
+                angle.sin() * tilt.cos(),
+                angle.sin() * tilt.sin(),
+            );
+            let edge = n1.cross(&n2).normalize();
+            let corner = Vector3::new(0.1, -0.2, 0.05);
+            let k = [rng.random_range(1e5..3e5), rng.random_range(1e5..3e5)];
+            let c = [rng.random_range(0.0..200.0), rng.random_range(0.0..200.0)];
+            let mu = [rng.random_range(0.1..0.3), rng.random_range(0.1..0.3)];
+            let slide = rng.random_range(0.01..0.03); // m/s along the edge
+            let (w1, w2) = (rng.random_range(20.0..40.0), rng.random_range(45.0..70.0));
+            // p with (p − corner)·n_i = d_i and (p − corner)·edge = s: the dual basis
+            let basis = Matrix3::from_rows(&[n1.transpose(), n2.transpose(), edge.transpose()]);
+            let inverse = basis.try_inverse().expect("basis");
+            let mut fit = CornerFit::new([n1, n2], [corner, corner]);
+            for j in 0..400 {
+                let t = j as f64 * 1e-3;
+                let d = [
+                    2e-4 + 1.5e-4 * (w1 * t).sin(),
+                    2e-4 + 1.5e-4 * (w2 * t + 1.0).sin(),
+                ];
+                let rate = [
+                    1.5e-4 * w1 * (w1 * t).cos(),
+                    1.5e-4 * w2 * (w2 * t + 1.0).cos(),
+                ];
+                let p = corner + inverse * Vector3::new(d[0], d[1], slide * t);
+                let v = inverse * Vector3::new(rate[0], rate[1], slide);
+                let mut force = Vector3::zeros();
+                for (i, n) in [n1, n2].iter().enumerate() {
+                    let f_n = (k[i] * d[i] + c[i] * rate[i]).max(0.0);
+                    let v_t = v - n * v.dot(n);
+                    force += (n + v_t.normalize() * mu[i]) * f_n;
+                }
+                let noisy = force + Vector3::from_fn(|_, _| noise * gauss.sample(&mut rng));
+                fit.add(&noisy, &p, &v);
+            }
+            let surfaces = fit.fit().expect("determined");
+            for i in 0..2 {
+                worst_mu = worst_mu.max((surfaces[i].friction - mu[i]).abs());
+                worst_k = worst_k.max((surfaces[i].stiffness / k[i] - 1.0).abs());
+            }
+        }
+        (worst_mu, worst_k)
+    }
+
+    #[test]
+    fn a_clean_corner_is_split_into_its_two_surfaces() {
+        let (mu, k) = corners(22, 20, 0.0);
+        println!("clean: worst μ error {mu:.2e}, k error {k:.2e}");
+        assert!(mu <= 0.03 && k <= 0.02, "μ {mu}, k {k}");
+    }
+
+    #[test]
+    fn a_noisy_corner_is_split_into_its_two_surfaces() {
+        let (mu, k) = corners(23, 20, 0.2);
+        println!("0.2 N noise: worst μ error {mu:.2e}, k error {k:.2e}");
+        assert!(mu <= 0.05 && k <= 0.05, "μ {mu}, k {k}");
+    }
+
+    /// One surface never pressed: the fit says so instead of inventing it.
+    #[test]
+    fn a_surface_never_pressed_is_not_determined() {
+        let n1 = Vector3::x();
+        let n2 = Vector3::y();
+        let mut fit = CornerFit::new([n1, n2], [Vector3::zeros(), Vector3::new(0.0, 1.0, 0.0)]);
+        for j in 0..100 {
+            let t = j as f64 * 1e-3;
+            let p = Vector3::new(1e-4 * (1.0 + (30.0 * t).sin()), 0.0, 0.02 * t);
+            let v = Vector3::new(3e-3 * (30.0 * t).cos(), 0.0, 0.02);
+            let force = (n1 + Vector3::z() * 0.2) * (1e5 * p.x);
+            fit.add(&force, &p, &v);
+        }
+        assert!(fit.samples() > 0);
+        assert!(fit.fit().is_none());
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
