@@ -500,6 +500,31 @@ pub fn identify(
     })
 }
 
+/// The updates' rows and measurements with the gains of the filter of `params` (eqs. 11-12:
+/// `P₀`, the walk Q) at a fixed measurement noise `r`, N² (eq. 13's adaptation off): then each
+/// gain no longer depends on its own innovation, and the estimate is linear in the
+/// measurements.
+pub fn fixed_gain_replay(updates: &[Update], params: &ModelParams, r: f64) -> Vec<Update> {
+    let mut p = Matrix2::from_diagonal(&Vector2::new(
+        params.stiffness_std.powi(2),
+        params.damping_std.powi(2),
+    ));
+    let q = Matrix2::from_diagonal(&Vector2::new(
+        params.stiffness_walk.powi(2),
+        params.damping_walk.powi(2),
+    ));
+    updates
+        .iter()
+        .map(|u| {
+            let prior = p + q;
+            let gain = prior * u.h / (u.h.dot(&(prior * u.h)) + r);
+            let i_kh = Matrix2::identity() - gain * u.h.transpose();
+            p = i_kh * prior * i_kh.transpose() + gain * r * gain.transpose();
+            Update { gain, ..*u }
+        })
+        .collect()
+}
+
 /// A collision's first and last updates whose force is within this many noise standard
 /// deviations above the detector's thresholds are left out of the noisy case's estimate: the
 /// detector keeps a contact only while its noisy force is above the threshold, so the noise of
@@ -616,9 +641,12 @@ pub struct OnlineIdentification {
 /// The identification front end of `params` replayed over `recording` as the live loop runs
 /// it (one filter over the whole run, never restarted, the compensator's own forgetting), and
 /// the uncertainty of its final `k̂`, `ĉ`: [`segmented_covariance`] of all its updates (a run
-/// of consecutive updates per contact), plus the direction bias of its increments
-/// ([`direction_bias`], which the loop does not remove: stated as a known error,
-/// `b·bᵀ` with `b` its part of the final estimate). None before any update.
+/// of consecutive updates per contact), plus three errors the loop does not remove, each as
+/// `b·bᵀ` with `b` its part of the final estimate: the direction bias of its increments
+/// ([`direction_bias`]), the updates on levels the detector truncates (within
+/// [`TRUNCATION_SIGMAS`] of its thresholds), and the adaptive gains' own pull (the estimate
+/// against [`fixed_gain_replay`]'s at R = 2σ²; eq. 13 makes each gain depend on its own
+/// innovation, which the linear analysis does not see). None before any update.
 pub fn online_identification(
     params: &ModelParams,
     context: &CompensatorContext,
@@ -699,9 +727,17 @@ pub fn online_identification(
         })
         .collect();
     let edge = linear_estimate(&updates, &x0) - linear_estimate(&edgeless, &x0);
+    // how far the adaptive gains (eq. 13: each gain depends on its own innovation) moved the
+    // estimate from the same filter's with R fixed at the noise's level
+    let adaptive = if variance > 0.0 {
+        x - linear_estimate(&fixed_gain_replay(&updates, params, 2.0 * variance), &x0)
+    } else {
+        Vector2::zeros()
+    };
     let cov = segmented_covariance(&updates, &breaks, &x, &x0, RESIDUAL_LAGS)
         + bias * bias.transpose()
-        + edge * edge.transpose();
+        + edge * edge.transpose()
+        + adaptive * adaptive.transpose();
     Ok(Some(OnlineIdentification {
         stiffness: x[0],
         stiffness_std: cov[(0, 0)].sqrt(),
