@@ -3,9 +3,9 @@ facility` process on loopback, 20 ms robot delay, pida, a damped contact and a n
 over several runs, the σ that the summary prints for the loop's final ĉ and k̂
 (`recording.online_identification`) holds their error. A loaded machine starves the emulator
 and holds sensor records, which is what this checks; one run may still drift past its 2σ, so
-the bound is on the runs together (at least two of three), never on one. Measured at load 8-10:
-ĉ −137.7 ± 341.0, 87.9 ± 329.7, −91.2 ± 344.1 N s/m for c = 130 (the σ is mostly the robot
-feedback's timing, 1.9 ms RMS, times k̂); k̂ 177432 ± 1167, 176122 ± 140, 178704 ± 810 N/m."""
+the bound is on the runs together (at least two of three), never on one. Measured at load 5-6:
+ĉ 17.0 ± 434.8, −237.1 ± 383.3, 95.1 ± 333.1 N s/m for c = 130 (the σ is mostly the robot
+feedback's timing, 1.9-2.0 ms RMS, times k̂); k̂ 174673 ± 6584, 172639 ± 2997, 175916 ± 345 N/m."""
 
 from __future__ import annotations
 
