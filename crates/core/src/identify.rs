@@ -841,6 +841,36 @@ mod tests {
     }
 
     #[test]
+    fn the_direction_bias_is_the_mean_of_an_increment_projected_on_its_noisy_direction() {
+        // two samples of the same force F̄ with white noise σ per axis: ΔF·e, e = F_t/|F_t|,
+        // has the mean 2σ²/|F̄| (second order in σ/|F̄|), for several forces and noises
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(11);
+        for (force, sigma) in [(10.0, 0.5), (20.0, 1.0), (40.0, 0.5), (5.0, 0.2)] {
+            let normal = Normal::new(0.0, sigma).expect("normal");
+            let mean_force = Vector3::new(0.6, -0.48, 0.64) * force;
+            let n = 400_000;
+            let mut sum = 0.0;
+            for _ in 0..n {
+                let mut draw = || Vector3::from_fn(|_, _| normal.sample(&mut rng));
+                let (before, now) = (mean_force + draw(), mean_force + draw());
+                sum += (now - before).dot(&now.normalize());
+            }
+            let measured = sum / n as f64;
+            let stated = direction_bias(sigma * sigma, force);
+            // the sample mean's standard error is σ·√2/√n (0.0022 N at σ = 1); the formula's
+            // own error is of order σ⁴/|F̄|³
+            println!("|F| {force} σ {sigma}: mean {measured:.5} N, 2σ²/|F| {stated:.5} N");
+            assert!(
+                (measured - stated).abs() < 4.0 * sigma * (2.0 / n as f64).sqrt() + 0.05 * stated,
+                "{measured} against {stated}"
+            );
+        }
+        assert_eq!(direction_bias(0.0, 10.0), 0.0);
+    }
+
+    #[test]
     fn white_level_noise_has_the_covariance_of_its_levels() {
         // z_t = ε_t − ε_{t−1} with ε white (σ = 1): the estimate's noise is Σ D_t ε_t,
         // variance Σ D_t² — checked against the empirical variance over many draws
