@@ -210,6 +210,13 @@ def identify(scenario_json: str, columns: dict[str, Any]) -> dict[str, Any]:
     offset_std (m), peak_force). Raises like :func:`replay`."""
 
 
+def online_identification(scenario_json: str, columns: dict[str, Any]) -> dict[str, Any] | None:
+    """The live loop's own identification at the end of a run, replayed over its recording
+    (columns as :func:`identify`'s) as the loop runs its front end (one filter, never
+    restarted): ``{stiffness, stiffness_std (N/m), damping, damping_std (N s/m), updates,
+    contacts}``, None before any update. Raises like :func:`replay`."""
+
+
 def calibrate_simulated(
     scenario_json: str,
     options_json: str,

@@ -529,6 +529,58 @@ def _fresh_rows(recording: Recording) -> np.ndarray | None:
     return None if fresh.all() else fresh
 
 
+def _fresh_recording(recording: Recording, scenario: Scenario,
+                     fresh: np.ndarray) -> tuple[Recording, Scenario, np.ndarray]:
+    """A real-time run's ticks without a new sensor record held the last force while the
+    kinematics moved on: the recording of the ticks with a new record only, each with the
+    kinematics that produced it (τ_p earlier for align, taken here, so the returned scenario's
+    sensor delay is 0; the increments then span the held ticks), and the rows kept."""
+    data = recording.data
+    kept_rows = np.flatnonzero(fresh)
+    lag = alignment_lag(scenario)
+    kept = data.iloc[kept_rows].reset_index(drop=True)
+    for name in (*_vec("actual_tip_position"), *_vec("actual_tip_velocity")):
+        kept[name] = data[name].to_numpy(dtype=np.float64)[np.maximum(kept_rows - lag, 0)]
+    shifted = scenario.to_dict()
+    if lag:
+        shifted["facility"]["sensor_delay"] = 0.0
+    note = (f"sensor_age: identified on the {len(kept_rows)} ticks with a new sensor record "
+            f"({len(data) - len(kept_rows)} held the previous one)")
+    if note not in recording.derived:
+        recording.derived.append(note)
+    sub = Recording(source=recording.source, data=kept, scenario=recording.scenario)
+    return sub, load_scenario(shifted), kept_rows
+
+
+#: A real-time run's column: the age of the robot feedback in use, s.
+ROBOT_AGE = "robot_age"
+
+
+def online_identification(recording: Recording) -> dict[str, Any] | None:
+    """The live loop's own k̂, ĉ at the end of a run and their standard deviations
+    (``{stiffness, stiffness_std (N/m), damping, damping_std (N s/m), updates, contacts}``,
+    None before any update): the scenario compensator's front end replayed over the recording
+    as the loop runs it (one filter, never restarted, its own forgetting), its uncertainty from
+    its gains and residuals (``identify.rs`` ``online_identification``). A real-time run's held
+    records are left out as :func:`identify` leaves them (the loop learns only from new ones),
+    and its ``robot_age`` adds the pairing's timing to ĉ's: ``timing`` (s), the RMS age of the
+    robot feedback, times k̂ (docs/identification.md)."""
+    scenario = identification_scenario(recording.scenario, None)
+    fresh = _fresh_rows(recording)
+    if fresh is None:
+        out = _call(recording, "online_identification", scenario, IDENTIFY_COLUMNS)
+    else:
+        sub, shifted, _ = _fresh_recording(recording, scenario, fresh)
+        out = _call(sub, "online_identification", shifted, IDENTIFY_COLUMNS)
+    if out is not None and ROBOT_AGE in recording.data.columns:
+        # the kinematics a force is paired with are known to within their feedback's age: a
+        # timing error δ shifts ĉ by −k·δ (F(t − δ) = k·d + (c − k·δ)·ḋ + …), stated as k̂·δ_rms
+        age = recording.data[ROBOT_AGE].to_numpy(dtype=np.float64)
+        out["timing"] = float(np.sqrt(np.mean(age[np.isfinite(age)] ** 2))) if np.isfinite(age).any() else 0.0
+        out["damping_std"] = float(np.hypot(out["damping_std"], abs(out["stiffness"]) * out["timing"]))
+    return out
+
+
 def identify(recording: Recording, forgetting: float | None = OFFLINE_FORGETTING) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Per tick (time, in_contact, stiffness/damping estimate and std) and per collision
     (index, start, end, samples, updates, stiffness, stiffness_std (N/m), damping,
@@ -540,25 +592,9 @@ def identify(recording: Recording, forgetting: float | None = OFFLINE_FORGETTING
         out = _call(recording, "identify", scenario, IDENTIFY_COLUMNS)
         ticks = pd.DataFrame({k: np.asarray(v, dtype=np.float64) for k, v in out["timeseries"].items()})
     else:
-        # a real-time run's ticks without a new sensor record held the last force while the
-        # kinematics moved on: identified on the ticks with a new record only, each with the
-        # kinematics that produced it (τ_p earlier for align, taken here; the increments then
-        # span the held ticks)
         data = recording.data
-        kept_rows = np.flatnonzero(fresh)
-        lag = alignment_lag(scenario)
-        kept = data.iloc[kept_rows].reset_index(drop=True)
-        for name in (*_vec("actual_tip_position"), *_vec("actual_tip_velocity")):
-            kept[name] = data[name].to_numpy(dtype=np.float64)[np.maximum(kept_rows - lag, 0)]
-        shifted = scenario.to_dict()
-        if lag:
-            shifted["facility"]["sensor_delay"] = 0.0
-        note = (f"sensor_age: identified on the {len(kept_rows)} ticks with a new sensor record "
-                f"({len(data) - len(kept_rows)} held the previous one)")
-        if note not in recording.derived:
-            recording.derived.append(note)
-        sub = Recording(source=recording.source, data=kept, scenario=recording.scenario)
-        out = _call(sub, "identify", load_scenario(shifted), IDENTIFY_COLUMNS)
+        sub, shifted, kept_rows = _fresh_recording(recording, scenario, fresh)
+        out = _call(sub, "identify", shifted, IDENTIFY_COLUMNS)
         part = pd.DataFrame({k: np.asarray(v, dtype=np.float64) for k, v in out["timeseries"].items()})
         # back on every tick: a held tick shows the estimate of its record's tick
         source = np.maximum.accumulate(np.where(fresh, np.arange(len(data)), 0))

@@ -30,6 +30,7 @@
 
 use nalgebra::{Matrix2, UnitQuaternion, Vector2, Vector3};
 
+use crate::compensator::detect::ON_SIGMAS;
 use crate::compensator::surface::{SurfaceFit, SLIDE_SPEED};
 use crate::compensator::{
     CompensatorConfig, CompensatorContext, ContactEstimator, DelayMode, ModelParams,
@@ -81,6 +82,21 @@ pub fn increment_covariance(
     x0: &Vector2<f64>,
     lags: usize,
 ) -> Matrix2<f64> {
+    segmented_covariance(updates, &[], x, x0, lags)
+}
+
+/// [`increment_covariance`] of updates made over several contacts: `breaks` are the indices
+/// of the updates that start a new run of consecutive levels (a new collision: its first
+/// increment shares no level with the one before). Each run's levels get their own
+/// coefficients, residuals and fit (a constant per run); the residuals' autocovariance is
+/// pooled over the runs, and the runs' noises are independent.
+pub fn segmented_covariance(
+    updates: &[Update],
+    breaks: &[usize],
+    x: &Vector2<f64>,
+    x0: &Vector2<f64>,
+    lags: usize,
+) -> Matrix2<f64> {
     let n = updates.len();
     // W_t backwards, and Φ
     let mut weights = vec![Vector2::zeros(); n];
@@ -98,41 +114,64 @@ pub fn increment_covariance(
     if n < 4 {
         return bias * bias.transpose();
     }
-    // the n + 1 levels' coefficients and residuals
-    let coefficient: Vec<Vector2<f64>> = std::iter::once(-weights[0])
-        .chain(
-            (0..n).map(|t| weights[t] - weights.get(t + 1).copied().unwrap_or_else(Vector2::zeros)),
-        )
+    // the runs of consecutive levels
+    let mut starts: Vec<usize> = std::iter::once(0)
+        .chain(breaks.iter().copied().filter(|&b| b > 0 && b < n))
         .collect();
-    let mut level = vec![0.0; n + 1];
-    let mut sums = vec![Vector3::zeros(); n + 1];
-    sums[0] = Vector3::new(1.0, 0.0, 0.0);
-    for (t, u) in updates.iter().enumerate() {
-        level[t + 1] = level[t] + (u.z - u.h.dot(x));
-        sums[t + 1] = sums[t] + Vector3::new(0.0, u.h[0], u.h[1]);
+    starts.sort_unstable();
+    starts.dedup();
+    let ends: Vec<usize> = starts.iter().skip(1).copied().chain([n]).collect();
+    // per run: its levels' coefficients and residuals (less the fit by a constant and the
+    // running sums of H)
+    let mut runs: Vec<(Vec<Vector2<f64>>, Vec<f64>)> = Vec::new();
+    for (&from, &to) in starts.iter().zip(&ends) {
+        let w = &weights[from..to];
+        let coefficient: Vec<Vector2<f64>> = std::iter::once(-w[0])
+            .chain(
+                (0..w.len()).map(|t| w[t] - w.get(t + 1).copied().unwrap_or_else(Vector2::zeros)),
+            )
+            .collect();
+        let mut level = vec![0.0; w.len() + 1];
+        let mut sums = vec![Vector3::zeros(); w.len() + 1];
+        sums[0] = Vector3::new(1.0, 0.0, 0.0);
+        for (t, u) in updates[from..to].iter().enumerate() {
+            level[t + 1] = level[t] + (u.z - u.h.dot(x));
+            sums[t + 1] = sums[t] + Vector3::new(0.0, u.h[0], u.h[1]);
+        }
+        let normal: nalgebra::Matrix3<f64> = sums.iter().map(|s| s * s.transpose()).sum();
+        let right: Vector3<f64> = sums.iter().zip(&level).map(|(s, e)| s * *e).sum();
+        if let Some(fit) = normal.try_inverse().map(|inverse| inverse * right) {
+            level
+                .iter_mut()
+                .zip(&sums)
+                .for_each(|(e, s)| *e -= s.dot(&fit));
+        }
+        runs.push((coefficient, level));
     }
-    // less the fit by a constant and the running sums of H
-    let normal: nalgebra::Matrix3<f64> = sums.iter().map(|s| s * s.transpose()).sum();
-    let right: Vector3<f64> = sums.iter().zip(&level).map(|(s, e)| s * *e).sum();
-    if let Some(fit) = normal.try_inverse().map(|inverse| inverse * right) {
-        level
-            .iter_mut()
-            .zip(&sums)
-            .for_each(|(e, s)| *e -= s.dot(&fit));
-    }
-    let dof = (n + 1 - 3) as f64;
+    let levels: usize = runs.iter().map(|(_, l)| l.len()).sum();
+    let dof = levels.saturating_sub(3 * runs.len()).max(1) as f64;
     let lags = lags.min(n);
     let mut noise = Matrix2::zeros();
     for l in 0..=lags {
-        let gamma = (0..=n - l).map(|a| level[a] * level[a + l]).sum::<f64>() / dof;
+        let gamma = runs
+            .iter()
+            .map(|(_, level)| {
+                (0..level.len().saturating_sub(l))
+                    .map(|a| level[a] * level[a + l])
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            / dof;
         let bartlett = 1.0 - l as f64 / (lags as f64 + 1.0);
-        for a in 0..=n - l {
-            let term = coefficient[a] * coefficient[a + l].transpose();
-            noise += if l == 0 {
-                term
-            } else {
-                term + term.transpose()
-            } * (gamma * bartlett);
+        for (coefficient, _) in &runs {
+            for a in 0..coefficient.len().saturating_sub(l) {
+                let term = coefficient[a] * coefficient[a + l].transpose();
+                noise += if l == 0 {
+                    term
+                } else {
+                    term + term.transpose()
+                } * (gamma * bartlett);
+            }
         }
     }
     noise[(0, 0)] = noise[(0, 0)].max(0.0);
@@ -314,18 +353,59 @@ pub fn identify(
                 .collect()
         })
         .collect();
+    // the same updates less the bias of projecting on the noisy direction F/|F| (align only:
+    // lead's force is a difference, its noise another)
+    let variance = match params.delay_mode {
+        DelayMode::Align => force_noise_variance(recording, &spans),
+        DelayMode::Lead => 0.0,
+    };
+    // the force above which a level's noise is not truncated by the detector's thresholds
+    let sigma = variance.sqrt();
+    let band = params.contact_force.max(ON_SIGMAS * sigma) + TRUNCATION_SIGMAS * sigma;
+    let unbiased: Vec<Vec<Update>> = spans
+        .iter()
+        .zip(&logs)
+        .map(|(&(_, last), log)| {
+            let log: Vec<(usize, Update)> =
+                log.iter().filter(|(k, _)| *k <= last).copied().collect();
+            // both levels of an update (its sample and the one before) above the band
+            let clear = |j: usize| {
+                let before = if j == 0 {
+                    log[0].0.saturating_sub(1)
+                } else {
+                    log[j - 1].0
+                };
+                force(log[j].0).norm() > band && force(before).norm() > band
+            };
+            let from = (0..log.len()).find(|&j| clear(j)).unwrap_or(log.len());
+            let to = (from..log.len())
+                .rev()
+                .find(|&j| clear(j))
+                .map_or(from, |j| j + 1);
+            log[from..to]
+                .iter()
+                .map(|&(k, u)| Update {
+                    z: u.z - direction_bias(variance, force(k).norm()),
+                    ..u
+                })
+                .collect()
+        })
+        .collect();
     let collisions = spans
         .iter()
         .zip(&updates)
         .enumerate()
         .map(|(i, (&(first, last), &u))| {
-            let (stiffness, damping) = (k_hat[last], c_hat[last]);
-            let cov = increment_covariance(
-                &made[i],
-                &Vector2::new(stiffness, damping),
-                &x0,
-                RESIDUAL_LAGS,
-            );
+            // without noise, the filter's own estimate; with noise, its gains over the
+            // updates clear of the thresholds, less the direction bias
+            let (stiffness, damping, used) = if variance > 0.0 {
+                let x = linear_estimate(&unbiased[i], &x0);
+                (x[0], x[1], &unbiased[i])
+            } else {
+                (k_hat[last], c_hat[last], &made[i])
+            };
+            let cov =
+                increment_covariance(used, &Vector2::new(stiffness, damping), &x0, RESIDUAL_LAGS);
             // no update: the initial guess and its prior
             let (sk, sc) = if made[i].is_empty() {
                 (params.stiffness_std, params.damping_std)
@@ -420,6 +500,84 @@ pub fn identify(
     })
 }
 
+/// The updates' rows and measurements with the gains of the filter of `params` (eqs. 11-12:
+/// `P₀`, the walk Q) at a fixed measurement noise `r`, N² (eq. 13's adaptation off): then each
+/// gain no longer depends on its own innovation, and the estimate is linear in the
+/// measurements.
+pub fn fixed_gain_replay(updates: &[Update], params: &ModelParams, r: f64) -> Vec<Update> {
+    let mut p = Matrix2::from_diagonal(&Vector2::new(
+        params.stiffness_std.powi(2),
+        params.damping_std.powi(2),
+    ));
+    let q = Matrix2::from_diagonal(&Vector2::new(
+        params.stiffness_walk.powi(2),
+        params.damping_walk.powi(2),
+    ));
+    updates
+        .iter()
+        .map(|u| {
+            let prior = p + q;
+            let gain = prior * u.h / (u.h.dot(&(prior * u.h)) + r);
+            let i_kh = Matrix2::identity() - gain * u.h.transpose();
+            p = i_kh * prior * i_kh.transpose() + gain * r * gain.transpose();
+            Update { gain, ..*u }
+        })
+        .collect()
+}
+
+/// A collision's first and last updates whose force is within this many noise standard
+/// deviations above the detector's thresholds are left out of the noisy case's estimate: the
+/// detector keeps a contact only while its noisy force is above the threshold, so the noise of
+/// the levels near it is truncated (not zero-mean), which biased k̂ low by about 0.3 σ.
+pub const TRUNCATION_SIGMAS: f64 = 3.0;
+
+/// Ticks on either side of a collision left out of [`force_noise_variance`] (the force's
+/// rise and fall below the detector's threshold).
+pub const NOISE_MARGIN: usize = 50;
+
+/// The force sensor's noise variance per axis σ², N², of a recording whose collisions span
+/// `spans` (first, last tick): the variance about their mean of the force samples more than
+/// [`NOISE_MARGIN`] ticks from every collision, averaged over the three axes (0 with fewer
+/// than 10 such samples: no correction).
+pub fn force_noise_variance(recording: &Recording<'_>, spans: &[(usize, usize)]) -> f64 {
+    let n = recording.len();
+    let free = |k: usize| {
+        spans
+            .iter()
+            .all(|&(a, b)| k + NOISE_MARGIN < a || k > b + NOISE_MARGIN)
+    };
+    let ticks: Vec<usize> = (0..n).filter(|&k| free(k)).collect();
+    if ticks.len() < 10 {
+        return 0.0;
+    }
+    let count = ticks.len() as f64;
+    recording
+        .measured_force
+        .iter()
+        .map(|axis| {
+            let mean = ticks.iter().map(|&k| axis[k]).sum::<f64>() / count;
+            ticks.iter().map(|&k| (axis[k] - mean).powi(2)).sum::<f64>() / (count - 1.0)
+        })
+        .sum::<f64>()
+        / 3.0
+}
+
+/// The mean bias, N, of an increment `ΔF·e` projected on the noisy direction `e = F/|F|` of
+/// the later sample (eqs. 7-8), for a white force noise of variance σ² per axis and a force
+/// of magnitude `force` (N): `F_t·e_t = |F_t|` gains `|ε⊥|²/(2|F|)`, on average `σ²/|F|`
+/// (the noise across the force, two axes), and `F_{t−1}·e_t` loses as much (`e_t` leans
+/// from `F_{t−1}` by the angle `|ε⊥|/|F|`), so `ΔF·e` gains `2σ²/|F|`. Against
+/// the damping's part of an increment, `c·Δḋ = c·F·T/m`, this is not small: at 0.5 N on 20 N
+/// it is 0.025 N a tick, as much as `c·Δḋ` for c = 190 N·s/m and m = 300 kg, and as `Δḋ < 0`
+/// throughout a contact it drove ĉ low (docs/identification.md, "Coverage").
+pub fn direction_bias(variance: f64, force: f64) -> f64 {
+    if variance > 0.0 && force > 0.0 {
+        2.0 * variance / force
+    } else {
+        0.0
+    }
+}
+
 /// The friction coefficient of a collision's samples `(F, v)` (force on the frame N, robot tip
 /// velocity m/s) against the normal `n` (into the wall): least squares of `F_t·ŝ = μ·F_n` over
 /// the samples that slide faster than [`SLIDE_SPEED`] and push; returns μ̂, its standard error
@@ -456,6 +614,147 @@ pub fn identify_plan(
     recording: &Recording<'_>,
 ) -> Result<Identification, RecordingError> {
     identify(
+        &model_params(&plan.compensator),
+        &compensator_context(plan),
+        &plan.sensor.orientation,
+        recording,
+    )
+}
+
+/// The live loop's own identification at the end of a run ([`online_identification`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OnlineIdentification {
+    /// The loop's k̂ at the last tick, N/m.
+    pub stiffness: f64,
+    /// Its standard deviation, N/m.
+    pub stiffness_std: f64,
+    /// The loop's ĉ at the last tick, N·s/m.
+    pub damping: f64,
+    /// Its standard deviation, N·s/m.
+    pub damping_std: f64,
+    /// Filter updates over the run.
+    pub updates: usize,
+    /// Runs of consecutive updates (contacts).
+    pub contacts: usize,
+}
+
+/// The identification front end of `params` replayed over `recording` as the live loop runs
+/// it (one filter over the whole run, never restarted, the compensator's own forgetting), and
+/// the uncertainty of its final `k̂`, `ĉ`: [`segmented_covariance`] of all its updates (a run
+/// of consecutive updates per contact), plus three errors the loop does not remove, each as
+/// `b·bᵀ` with `b` its part of the final estimate: the direction bias of its increments
+/// ([`direction_bias`]), the updates on levels the detector truncates (within
+/// [`TRUNCATION_SIGMAS`] of its thresholds), and the adaptive gains' own pull (the estimate
+/// against [`fixed_gain_replay`]'s at R = 2σ²; eq. 13 makes each gain depend on its own
+/// innovation, which the linear analysis does not see). None before any update.
+pub fn online_identification(
+    params: &ModelParams,
+    context: &CompensatorContext,
+    sensor_to_t: &UnitQuaternion<f64>,
+    recording: &Recording<'_>,
+) -> Result<Option<OnlineIdentification>, RecordingError> {
+    recording.check()?;
+    let mut estimator = ContactEstimator::new(params, context);
+    let mut log: Vec<(usize, Update)> = Vec::new();
+    let mut spans: Vec<(usize, usize)> = Vec::new();
+    let mut previous = false;
+    for k in 0..recording.len() {
+        let before = estimator.filter.t;
+        let view = estimator.step(&recording.input(k, sensor_to_t));
+        if estimator.filter.t != before {
+            if let Some((h, z)) = estimator.last_update() {
+                let gain = estimator.filter.k;
+                log.push((k, Update { h, z, gain }));
+            }
+        }
+        match (previous, view.in_contact) {
+            (false, true) => spans.push((k, k)),
+            (true, true) => {
+                if let Some(span) = spans.last_mut() {
+                    span.1 = k;
+                }
+            }
+            _ => {}
+        }
+        previous = view.in_contact;
+    }
+    if log.is_empty() {
+        return Ok(None);
+    }
+    let x = estimator.filter.x;
+    let x0 = Vector2::new(params.stiffness_initial, params.damping_initial);
+    let breaks: Vec<usize> = (1..log.len())
+        .filter(|&j| log[j].0 != log[j - 1].0 + 1)
+        .collect();
+    let updates: Vec<Update> = log.iter().map(|(_, u)| *u).collect();
+    let variance = match params.delay_mode {
+        DelayMode::Align => force_noise_variance(recording, &spans),
+        DelayMode::Lead => 0.0,
+    };
+    let force = |k: usize| {
+        let c = &recording.measured_force;
+        (sensor_to_t * Vector3::new(c[0][k], c[1][k], c[2][k])).norm()
+    };
+    let unbiased: Vec<Update> = log
+        .iter()
+        .map(|&(k, u)| Update {
+            z: u.z - direction_bias(variance, force(k)),
+            ..u
+        })
+        .collect();
+    let bias = linear_estimate(&updates, &x0) - linear_estimate(&unbiased, &x0);
+    // the part of the estimate that rests on levels the detector truncates: their residuals'
+    // weight in it (the estimate with those residuals zeroed, against the estimate)
+    let sigma = variance.sqrt();
+    let band = params.contact_force.max(ON_SIGMAS * sigma) + TRUNCATION_SIGMAS * sigma;
+    let edgeless: Vec<Update> = log
+        .iter()
+        .enumerate()
+        .map(|(j, &(k, u))| {
+            let before = if j > 0 && !breaks.contains(&j) {
+                log[j - 1].0
+            } else {
+                k.saturating_sub(1)
+            };
+            if variance > 0.0 && (force(k) <= band || force(before) <= band) {
+                Update {
+                    z: u.h.dot(&x),
+                    ..u
+                }
+            } else {
+                u
+            }
+        })
+        .collect();
+    let edge = linear_estimate(&updates, &x0) - linear_estimate(&edgeless, &x0);
+    // how far the adaptive gains (eq. 13: each gain depends on its own innovation) moved the
+    // estimate from the same filter's with R fixed at the noise's level
+    let adaptive = if variance > 0.0 {
+        x - linear_estimate(&fixed_gain_replay(&updates, params, 2.0 * variance), &x0)
+    } else {
+        Vector2::zeros()
+    };
+    let cov = segmented_covariance(&updates, &breaks, &x, &x0, RESIDUAL_LAGS)
+        + bias * bias.transpose()
+        + edge * edge.transpose()
+        + adaptive * adaptive.transpose();
+    Ok(Some(OnlineIdentification {
+        stiffness: x[0],
+        stiffness_std: cov[(0, 0)].sqrt(),
+        damping: x[1],
+        damping_std: cov[(1, 1)].sqrt(),
+        updates: log.len(),
+        contacts: breaks.len() + 1,
+    }))
+}
+
+/// [`online_identification`] with a plan's compensator parameters ([`model_params`]),
+/// context and sensor attitude.
+pub fn online_identification_plan(
+    plan: &Plan,
+    recording: &Recording<'_>,
+) -> Result<Option<OnlineIdentification>, RecordingError> {
+    online_identification(
         &model_params(&plan.compensator),
         &compensator_context(plan),
         &plan.sensor.orientation,
@@ -539,6 +838,36 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn the_direction_bias_is_the_mean_of_an_increment_projected_on_its_noisy_direction() {
+        // two samples of the same force F̄ with white noise σ per axis: ΔF·e, e = F_t/|F_t|,
+        // has the mean 2σ²/|F̄| (second order in σ/|F̄|), for several forces and noises
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(11);
+        for (force, sigma) in [(10.0, 0.5), (20.0, 1.0), (40.0, 0.5), (5.0, 0.2)] {
+            let normal = Normal::new(0.0, sigma).expect("normal");
+            let mean_force = Vector3::new(0.6, -0.48, 0.64) * force;
+            let n = 400_000;
+            let mut sum = 0.0;
+            for _ in 0..n {
+                let mut draw = || Vector3::from_fn(|_, _| normal.sample(&mut rng));
+                let (before, now) = (mean_force + draw(), mean_force + draw());
+                sum += (now - before).dot(&now.normalize());
+            }
+            let measured = sum / n as f64;
+            let stated = direction_bias(sigma * sigma, force);
+            // the sample mean's standard error is σ·√2/√n (0.0022 N at σ = 1); the formula's
+            // own error is of order σ⁴/|F̄|³
+            println!("|F| {force} σ {sigma}: mean {measured:.5} N, 2σ²/|F| {stated:.5} N");
+            assert!(
+                (measured - stated).abs() < 4.0 * sigma * (2.0 / n as f64).sqrt() + 0.05 * stated,
+                "{measured} against {stated}"
+            );
+        }
+        assert_eq!(direction_bias(0.0, 10.0), 0.0);
     }
 
     #[test]

@@ -63,7 +63,7 @@ fn within(z: &[f64], n: f64) -> f64 {
 
 #[test]
 fn stated_uncertainties_cover_the_errors_over_50_noisy_runs() {
-    // measured (this test's output): k within 1σ / 2σ: 0.656 / 0.944 at 0.2 N, 0.588 / 0.916
+    // measured (this test's output): k within 1σ / 2σ: 0.656 / 0.928 at 0.2 N, 0.576 / 0.892
     // at 0.5 N (Gaussian: 0.683 / 0.954); the filter's own √P had every collision within 1σ.
     // 250 collisions: a binomial fraction's σ is about 0.03, the bounds allow 3-4 of them.
     for noise in [0.2, 0.5] {
@@ -80,10 +80,13 @@ fn stated_uncertainties_cover_the_errors_over_50_noisy_runs() {
         assert!((0.55..=0.82).contains(&one), "k within 1σ: {one}");
         assert!((0.86..=0.995).contains(&two), "k within 2σ: {two}");
     }
-    // the damping: ĉ is biased low by the noise (the front end's, not the uncertainty's:
-    // about −15 N·s/m at 0.2 N and −60 at 0.5 N, docs/identification.md), which its stated
-    // uncertainty does not cover at 0.5 N; at 0.2 N most collisions are within 2σ
-    let (_, zc) = normalised_errors("paper-exp-2.64hz", 0.2);
-    let two = within(&zc, 2.0);
-    assert!(two >= 0.7, "c within 2σ at 0.2 N: {two}");
+    // the damping: the projection on the noisy direction F/|F| biased ĉ low (about −15 N·s/m
+    // at 0.2 N and −60 at 0.5 N); `identify` now removes that bias (`direction_bias`) and the
+    // levels the detector truncates: c within 2σ 0.872 at 0.2 N and 0.896 at 0.5 N (before:
+    // 0.824 and 0.672)
+    for noise in [0.2, 0.5] {
+        let (_, zc) = normalised_errors("paper-exp-2.64hz", noise);
+        let two = within(&zc, 2.0);
+        assert!(two >= 0.85, "c within 2σ at {noise} N: {two}");
+    }
 }

@@ -813,6 +813,35 @@ fn identify<'py>(
     Ok(result)
 }
 
+/// The live loop's own identification at the end of a run, replayed over its recording
+/// (columns as `identify`'s) with the scenario compensator's front end as the loop runs it
+/// (one filter, never restarted): `{stiffness, stiffness_std (N/m), damping, damping_std
+/// (N s/m), updates, contacts}`, or None before any update. Raises like `replay`.
+#[pyfunction]
+fn online_identification<'py>(
+    py: Python<'py>,
+    scenario_json: &str,
+    columns: &Bound<'py, PyDict>,
+) -> PyResult<Option<Bound<'py, PyDict>>> {
+    let plan = parse_scenario(py, scenario_json)?;
+    let table = recording_table(columns)?;
+    let out = py.allow_threads(|| {
+        let recording = hilcontact_core::replay::Recording::from_table(&table, false)?;
+        hilcontact_core::identify::online_identification_plan(&plan, &recording)
+    });
+    let Some(o) = out.map_err(|e| recording_err(py, e))? else {
+        return Ok(None);
+    };
+    let result = PyDict::new(py);
+    result.set_item("stiffness", o.stiffness)?;
+    result.set_item("stiffness_std", o.stiffness_std)?;
+    result.set_item("damping", o.damping)?;
+    result.set_item("damping_std", o.damping_std)?;
+    result.set_item("updates", o.updates)?;
+    result.set_item("contacts", o.contacts)?;
+    Ok(Some(result))
+}
+
 /// The frame maths of a run's figures, from the core's resolved scenario (its sensor attitude
 /// and its walls, normals normalised), vectorised over a run's rows:
 ///
@@ -975,6 +1004,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(realtime_schema, m)?)?;
     m.add_function(wrap_pyfunction!(replay, m)?)?;
     m.add_function(wrap_pyfunction!(identify, m)?)?;
+    m.add_function(wrap_pyfunction!(online_identification, m)?)?;
     m.add_function(wrap_pyfunction!(frames, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_simulated, m)?)?;

@@ -382,10 +382,18 @@ def _identification_lines(run: Run) -> list[tuple[str, bool]]:
     last = contact[-1]
     k, c = float(run.scenario.contact.stiffness), float(run.scenario.contact.damping)
     k_err, c_err = ident.get("stiffness_error"), ident.get("damping_error")
-    line = (f"identification: k̂ {k_hat[last] / 1e3:.2f} N/mm, ĉ {c_hat[last] / 1e3:.3f} N·s/mm at the last contact "
+    online = _online_identification(run)
+    spread = (f" (± {online['stiffness_std'] / 1e3:.2f}, ± {online['damping_std'] / 1e3:.3f}: 1σ of the loop's "
+              "final estimate)") if online else ""
+    line = (f"identification: k̂ {k_hat[last] / 1e3:.2f} N/mm, ĉ {c_hat[last] / 1e3:.3f} N·s/mm at the last contact{spread} "
             f"(scenario {k / 1e3:.2f} N/mm, {c / 1e3:.3f} N·s/mm); mean error over {ident.get('samples')} contact "
             f"samples after the first collision: k {k_err * 100:.3g} %, c {c_err / 1e3:.3g} N·s/mm")
     lines = [(line, False)]
+    if online and (abs(online["stiffness"] - k) > 3 * online["stiffness_std"]
+                   or abs(online["damping"] - c) > 3 * online["damping_std"]):
+        lines.append((f"the loop's final k̂ {online['stiffness'] / 1e3:.2f} N/mm, ĉ {online['damping'] / 1e3:.3f} "
+                      "N·s/mm: the scenario's values are outside their 3σ (the facility's contact differs "
+                      "from the scenario's, or the identification drifted)", True))
     if k_err is not None and c_err is not None and (k_err > IDENTIFICATION_DRIFT[0] or c_err > IDENTIFICATION_DRIFT[1]):
         rt = run.metrics.get("realtime") or {}
         late, ticks = (rt.get("sensor") or {}).get("late", 0), rt.get("ticks") or 1
@@ -394,6 +402,19 @@ def _identification_lines(run: Run) -> list[tuple[str, bool]]:
         lines.append((f"the identification drifts (k {k_err * 100:.3g} % > {IDENTIFICATION_DRIFT[0] * 100:g} % "
                       f"or c {c_err:.3g} > {IDENTIFICATION_DRIFT[1]:g} N·s/m){cause}", True))
     return lines
+
+
+def _online_identification(run: Run) -> dict[str, Any] | None:
+    """The loop's final k̂, ĉ with their standard deviations (:func:`recording.online_identification`
+    over the run's own time series), None when its columns or an update are missing."""
+    from ..recording import IDENTIFY_COLUMNS, Recording, RecordingError, online_identification
+
+    if any(name not in run.timeseries.columns for name in IDENTIFY_COLUMNS):
+        return None
+    try:
+        return online_identification(Recording(source="run", data=run.timeseries, scenario=run.scenario))
+    except RecordingError:
+        return None
 
 
 def _vector(values: Sequence[float] | None, scale: float = 1.0, fmt: str = ".2f") -> str:
