@@ -470,16 +470,32 @@ pub fn columns<R>(fields: &[Field<R>]) -> Vec<(String, &'static str, Only)> {
 
 /// The table of `rows` with the `fields` for which `has(field.only)`.
 pub fn table<R>(rows: &[R], fields: &[Field<R>], has: impl Fn(Only) -> bool) -> Table {
-    let mut columns = Vec::new();
-    for f in fields.iter().filter(|f| has(f.only)) {
+    let used: Vec<&Field<R>> = fields.iter().filter(|f| has(f.only)).collect();
+    let mut columns: Vec<(String, Vec<f64>)> = Vec::new();
+    for f in &used {
         match f.get {
-            Get::Scalar(get) => columns.push((f.name.to_string(), rows.iter().map(get).collect())),
-            Get::Vector(get) => {
-                for (axis, label) in ["x", "y", "z"].iter().enumerate() {
+            Get::Scalar(_) => columns.push((f.name.to_string(), Vec::with_capacity(rows.len()))),
+            Get::Vector(_) => {
+                for label in ["x", "y", "z"] {
                     columns.push((
                         format!("{}_{label}", f.name),
-                        rows.iter().map(|r| get(r)[axis]).collect(),
+                        Vec::with_capacity(rows.len()),
                     ));
+                }
+            }
+        }
+    }
+    // one pass over the records (each read once, a vector field's getter called once per row)
+    for r in rows {
+        let mut column = columns.iter_mut().map(|(_, values)| values);
+        for f in &used {
+            match f.get {
+                Get::Scalar(get) => column.next().expect("a column per field").push(get(r)),
+                Get::Vector(get) => {
+                    let v = get(r);
+                    for x in v.iter() {
+                        column.next().expect("three columns per field").push(*x);
+                    }
                 }
             }
         }
