@@ -124,8 +124,9 @@ COMPENSATOR = """
 """
 
 
-@pytest.mark.skipif(sys.platform == "win32", reason="SIGINT to a child process")
-def test_ctrl_c_in_a_run_with_a_python_compensator_saves_it(core, tmp_path):
+@pytest.mark.skipif(sys.platform == "win32", reason="signals to a child process")
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_ctrl_c_in_a_run_with_a_python_compensator_saves_it(core, tmp_path, signum):
     (tmp_path / "announcing.py").write_text(textwrap.dedent(COMPENSATOR), encoding="utf-8")
     package_root = str(Path(hc.__file__).resolve().parent.parent)
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [package_root, os.environ.get("PYTHONPATH")])))
@@ -137,7 +138,7 @@ def test_ctrl_c_in_a_run_with_a_python_compensator_saves_it(core, tmp_path):
         assert proc.stdout is not None
         first = proc.stdout.readline()  # blocks until the compensator has run 300 ticks
         assert first.strip() == "running", (first, proc.stderr.read() if proc.poll() is not None else "")
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signum)  # SIGTERM: the command turns it into a Ctrl-C
         out, err = proc.communicate(timeout=600)
     finally:
         if proc.poll() is None:
