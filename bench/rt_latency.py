@@ -31,7 +31,9 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 CONFIGS = {
     "normal": ["--rt-priority", "0", "--no-lock-memory"],
@@ -76,6 +78,38 @@ def steal_percent(before: list[int], after: list[int]) -> float | None:
     return 100.0 * delta[7] / max(sum(delta), 1)
 
 
+def run_interleaved(names: Sequence[str], repeats: int, run: Callable[[str, int], dict],
+                    line: Callable[[dict], str]) -> list[dict]:
+    """Runs ``run(name, i)`` ``repeats`` times per configuration, alternating between them (a
+    change of the machine's background load hits them alike), printing ``line(result)`` after
+    each run; returns the results, each with its ``config`` and ``repeat``. The one loop of the
+    ``bench/rt_*.py`` scripts."""
+    runs: list[dict] = []
+    for i in range(repeats):
+        for name in names:
+            r = {"config": name, "repeat": i, **run(name, i)}
+            runs.append(r)
+            print(f"{name:10s} run {i + 1}: {line(r)}", flush=True)
+    return runs
+
+
+def median_table(runs: Sequence[dict], names: Sequence[str], first: str,
+                 columns: Sequence[tuple[str, Callable[[list[dict]], Any]]]) -> None:
+    """Prints a Markdown table, a row per configuration: ``first`` titles its name's column,
+    each of ``columns`` is (title, its cell from the configuration's runs)."""
+    print(f"\n| {first} | " + " | ".join(title for title, _ in columns) + " |")
+    print("|---" * (len(columns) + 1) + "|")
+    for name in names:
+        rs = [r for r in runs if r["config"] == name]
+        print(f"| {name} | " + " | ".join(str(cell(rs)) for _, cell in columns) + " |")
+
+
+def median(rs: Sequence[dict], key: str) -> float:
+    """The median of ``key`` over runs (those without it left out; NaN if none has it)."""
+    values = [r[key] for r in rs if r.get(key) is not None]
+    return statistics.median(values) if values else float("nan")
+
+
 def run_once(name: str, duration: float, folder: Path) -> dict:
     out = folder / name
     before = cpu_times()
@@ -90,7 +124,6 @@ def run_once(name: str, duration: float, folder: Path) -> dict:
     rt = json.loads((out / "metrics.json").read_text())["realtime"]
     lat, per = rt["timing"]["wake_latency_us"], rt["timing"]["period_error_us"]
     return {
-        "config": name,
         "ticks": rt["ticks"],
         "stop": rt["stop"]["kind"],
         "p50": lat["p50"], "p99": lat["p99"], "max": lat["max"],
@@ -117,30 +150,30 @@ def main() -> None:
 
     print(f"machine: {platform.platform()}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at start; "
           f"{args.busy} busy processes; {args.duration:g} s per run", flush=True)
-    runs: list[dict] = []
+    def line(r: dict) -> str:
+        s = r["scheduling"]
+        return (f"wake latency p50/p99/max {r['p50']:.0f}/{r['p99']:.0f}/{r['max']:.0f} µs, "
+                f"period jitter p99 {r['period_p99']:.0f} µs, overruns {r['overruns']} of {r['ticks']} "
+                f"({r['stop']}); steal {r['steal_percent'] or 0:.1f} %, load average {r['load_average']:.1f}; "
+                f"policy {s['policy']} {s['priority']}, memory locked {s['memory_locked']}, "
+                f"pinned {s['pinned']}, refused {s['refused']}")
+
     load = start_load(args.busy)
     try:
         time.sleep(1.0)
         with tempfile.TemporaryDirectory(prefix="rt-latency-") as tmp:
-            for i in range(args.repeats):
-                for name in names:
-                    r = run_once(name, args.duration, Path(tmp) / str(i))
-                    runs.append(r)
-                    s = r["scheduling"]
-                    print(f"{name:10s} run {i + 1}: wake latency p50/p99/max {r['p50']:.0f}/{r['p99']:.0f}/{r['max']:.0f} µs, "
-                          f"period jitter p99 {r['period_p99']:.0f} µs, overruns {r['overruns']} of {r['ticks']} "
-                          f"({r['stop']}); steal {r['steal_percent'] or 0:.1f} %, load average {r['load_average']:.1f}; policy {s['policy']} {s['priority']}, memory locked {s['memory_locked']}, "
-                          f"pinned {s['pinned']}, refused {s['refused']}", flush=True)
+            runs = run_interleaved(names, args.repeats,
+                                   lambda name, i: run_once(name, args.duration, Path(tmp) / str(i)), line)
     finally:
         stop_load(load)
 
-    print("\n| scheduling | wake-up latency p50 | p99 | max | period jitter p99 | overruns (per run) |")
-    print("|---|---|---|---|---|---|")
-    for name in names:
-        rs = [r for r in runs if r["config"] == name]
-        med = lambda key: statistics.median(r[key] for r in rs)  # noqa: E731
-        print(f"| {name} | {med('p50'):.0f} µs | {med('p99'):.0f} µs | {max(r['max'] for r in rs):.0f} µs | "
-              f"{med('period_p99'):.0f} µs | {', '.join(str(r['overruns']) for r in rs)} |")
+    median_table(runs, names, "scheduling", [
+        ("wake-up latency p50", lambda rs: f"{median(rs, 'p50'):.0f} µs"),
+        ("p99", lambda rs: f"{median(rs, 'p99'):.0f} µs"),
+        ("max", lambda rs: f"{max(r['max'] for r in rs):.0f} µs"),
+        ("period jitter p99", lambda rs: f"{median(rs, 'period_p99'):.0f} µs"),
+        ("overruns (per run)", lambda rs: ", ".join(str(r["overruns"]) for r in rs)),
+    ])
     if args.json is not None:
         args.json.write_text(json.dumps(runs, indent=1) + "\n")
 

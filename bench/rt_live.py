@@ -1,21 +1,27 @@
 """The live view's cost to the real-time loop (docs/realtime.md, "Live view", quotes it): the
-loop's wake-up latency, overruns and the process's peak memory without ``--live``, with a
-viewer that stops reading, and with 20 viewers.
+loop's wake-up latency, overruns and the process's peak memory without ``--live``, with one
+viewer that keeps up, with a viewer that stops reading, and with 20 viewers.
 
-    python bench/rt_live.py [--duration 10] [--repeats 2] [--configs none,stalled,clients20] [--json FILE]
+    python bench/rt_live.py [--duration 10] [--repeats 3] [--configs none,one,stalled,clients20] [--json FILE]
+    python bench/rt_live.py --from-json FILE      # the table again, from a run's --json
 
 Each run is ``hilcontact demo-rt paper-table1`` (emulated facility and HIL loop in one process
 on loopback: 1 kHz, 20 ms robot delay, ``pida``) for ``--duration`` s. Configurations:
 
 - ``none``: no ``--live``;
+- ``one``: ``--live``, one viewer subscribed to every channel, reading everything;
 - ``stalled``: ``--live``, one viewer that subscribes to every channel and then never reads
   (its socket buffers fill, then the server's per-client queue, bounded by the live view's
   ``backlog``, 4096 messages, drops the oldest);
 - ``clients20``: ``--live``, 20 viewers subscribed to every channel, each reading everything.
 
-The run starts once a viewer has subscribed (``--live-wait``). Runs alternate between the
-configurations, so that a change of the machine's background load hits them alike; the table
-gives the medians over the repeats. Peak memory is the process's ``VmHWM`` (Linux).
+With ``--live`` the run starts once a viewer has subscribed (``--live-wait``). Runs alternate
+between the configurations (bench/rt_latency.py's ``run_interleaved``), so that a change of the
+machine's background load hits them alike; the table gives the medians over the repeats, and
+each configuration's p99 and overruns against ``none``'s. Peak memory is the process's
+``VmHWM`` (Linux). The live counters are ``metrics.json`` ``realtime.live``'s: messages
+published, the SDK's "outbox full" reports (a client lost its oldest messages) and the loop's
+own ``samples_dropped`` (its ring to the writer thread, which feeds the live view).
 """
 
 from __future__ import annotations
@@ -26,7 +32,6 @@ import json
 import os
 import platform
 import socket
-import statistics
 import struct
 import subprocess
 import sys
@@ -34,6 +39,12 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from rt_latency import cpu_times, median, median_table, run_interleaved, steal_percent  # noqa: E402
+
+#: Viewers per configuration, and whether they read.
+CONFIGS = {"none": (0, True), "one": (1, True), "stalled": (1, False), "clients20": (20, True)}
 
 
 def free_tcp_port() -> int:
@@ -109,24 +120,21 @@ def peak_memory_mb(pid: int) -> float | None:
 
 
 def run_once(name: str, duration: float, folder: Path) -> dict:
+    viewers, reading = CONFIGS[name]
     out = folder / name
     port = free_tcp_port()
     cmd = [sys.executable, "-m", "hilcontact", "demo-rt", "paper-table1", "--set", f"simulation.duration={duration}",
            "--no-plots", "--out", str(out)]
-    if name != "none":
+    if viewers:
         cmd += ["--live", str(port), "--live-wait", "60"]
+    before = cpu_times()
     process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     sockets: list[socket.socket] = []
-    threads: list[threading.Thread] = []
-    if name == "stalled":
-        sockets.append(connect(port))  # never read again
-    elif name == "clients20":
-        for _ in range(20):
-            s = connect(port)
-            sockets.append(s)
-            t = threading.Thread(target=drain, args=(s,), daemon=True)
-            t.start()
-            threads.append(t)
+    for _ in range(viewers):
+        s = connect(port)
+        sockets.append(s)
+        if reading:
+            threading.Thread(target=drain, args=(s,), daemon=True).start()
     peak = None
     while process.poll() is None:
         peak = peak_memory_mb(process.pid) or peak
@@ -140,43 +148,84 @@ def run_once(name: str, duration: float, folder: Path) -> dict:
     lat = rt["timing"]["wake_latency_us"]
     live = rt.get("live") or {}
     return {
-        "config": name, "ticks": rt["ticks"], "stop": rt["stop"]["kind"],
+        "ticks": rt["ticks"], "stop": rt["stop"]["kind"],
         "p50": lat["p50"], "p99": lat["p99"], "max": lat["max"], "overruns": rt["timing"]["overruns"],
         "samples_dropped": rt["samples_dropped"], "peak_mb": peak,
         "live_messages": live.get("messages"), "peak_clients": live.get("peak_clients"),
+        "outbox_full_reports": live.get("outbox_full_reports"), "lossy_clients": live.get("lossy_clients"),
+        "scheduling": rt["scheduling"], "steal_percent": steal_percent(before, cpu_times()),
         "load_average": os.getloadavg()[0], "command": " ".join(cmd[1:]),
     }
+
+
+def line(r: dict) -> str:
+    s = r["scheduling"]
+    return (f"wake latency p50/p99/max {r['p50']:.0f}/{r['p99']:.0f}/{r['max']:.0f} µs, "
+            f"overruns {r['overruns']} of {r['ticks']} ({r['stop']}), samples dropped {r['samples_dropped']}, "
+            f"peak memory {r['peak_mb'] or 0:.1f} MB, live messages {r['live_messages']}, "
+            f"peak clients {r['peak_clients']}, outbox full {r['outbox_full_reports']} {r['lossy_clients'] or ''}; "
+            f"load average {r['load_average']:.1f}, steal {r['steal_percent'] or 0:.1f} %; "
+            f"policy {s['policy']} {s['priority']}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--duration", type=float, default=10.0, help="seconds per run [10]")
-    parser.add_argument("--repeats", type=int, default=2, help="runs per configuration [2]")
-    parser.add_argument("--configs", default="none,stalled,clients20", help="comma-separated: none, stalled, clients20")
+    parser.add_argument("--repeats", type=int, default=3, help="runs per configuration [3]")
+    parser.add_argument("--configs", default="none,one,stalled,clients20", help=f"comma-separated: {', '.join(CONFIGS)}")
     parser.add_argument("--json", type=Path, default=None, help="write every run's numbers here")
+    parser.add_argument("--from-json", type=Path, default=None, help="print the table of the runs of this --json file")
     args = parser.parse_args()
     names = args.configs.split(",")
+    for name in names:
+        if name not in CONFIGS:
+            raise SystemExit(f"unknown configuration {name!r}: {', '.join(CONFIGS)}")
+    if args.from_json is not None:
+        runs = json.loads(args.from_json.read_text())
+        names = [n for n in names if any(r["config"] == n for r in runs)]
+        loads = [r["load_average"] for r in runs]
+        print(f"{len(runs)} runs from {args.from_json}; load average {min(loads):.1f} to {max(loads):.1f}")
+        table(runs, names)
+        return
     print(f"machine: {platform.platform()}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f} at start; "
           f"{args.duration:g} s per run", flush=True)
-    runs: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="rt-live-") as tmp:
-        for i in range(args.repeats):
-            for name in names:
-                r = run_once(name, args.duration, Path(tmp) / str(i))
-                runs.append(r)
-                print(f"{name:10s} run {i + 1}: wake latency p50/p99/max {r['p50']:.0f}/{r['p99']:.0f}/{r['max']:.0f} µs, "
-                      f"overruns {r['overruns']} of {r['ticks']} ({r['stop']}), samples dropped {r['samples_dropped']}, "
-                      f"peak memory {r['peak_mb'] or 0:.1f} MB, live messages {r['live_messages']}, "
-                      f"peak clients {r['peak_clients']}; load average {r['load_average']:.1f}", flush=True)
-    print("\n| live view | wake-up latency p50 | p99 | max | overruns (per run) | peak memory |")
-    print("|---|---|---|---|---|---|")
-    for name in names:
-        rs = [r for r in runs if r["config"] == name]
-        med = lambda key: statistics.median(r[key] for r in rs)  # noqa: E731
-        print(f"| {name} | {med('p50'):.0f} µs | {med('p99'):.0f} µs | {max(r['max'] for r in rs):.0f} µs | "
-              f"{', '.join(str(r['overruns']) for r in rs)} | {med('peak_mb'):.1f} MB |")
+        runs = run_interleaved(names, args.repeats,
+                               lambda name, i: run_once(name, args.duration, Path(tmp) / str(i)), line)
+    print(f"load average at the end {os.getloadavg()[0]:.2f}")
+    table(runs, names)
     if args.json is not None:
         args.json.write_text(json.dumps(runs, indent=1) + "\n")
+
+
+def table(runs: list[dict], names: list[str]) -> None:
+    """The medians per configuration, against ``none``'s."""
+    base = [r for r in runs if r["config"] == "none"]
+
+    def versus(key: str):
+        def cell(rs: list[dict]) -> str:
+            if not base or rs[0]["config"] == "none":
+                return "-"
+            return f"{100 * (median(rs, key) / max(median(base, key), 1e-9) - 1):+.0f} %"
+        return cell
+
+    def stops(rs: list[dict]) -> str:
+        kinds = sorted({r["stop"] for r in rs})
+        return ", ".join(f"{sum(r['stop'] == k for r in rs)} {k}" for k in kinds)
+
+    median_table(runs, names, "live view", [
+        ("wake-up latency p50", lambda rs: f"{median(rs, 'p50'):.0f} µs"),
+        ("p99", lambda rs: f"{median(rs, 'p99'):.0f} µs"),
+        ("p99 vs none", versus("p99")),
+        ("max", lambda rs: f"{max(r['max'] for r in rs):.0f} µs"),
+        ("overruns (per run)", lambda rs: ", ".join(str(r["overruns"]) for r in rs)),
+        ("overruns, median", lambda rs: f"{median(rs, 'overruns'):.0f}"),
+        ("vs none", versus("overruns")),
+        ("runs ended", stops),
+        ("peak memory", lambda rs: f"{median(rs, 'peak_mb'):.1f} MB"),
+        ("samples dropped", lambda rs: sum(r["samples_dropped"] for r in rs)),
+        ("outbox full reports", lambda rs: ", ".join(str(r["outbox_full_reports"]) for r in rs)),
+    ])
 
 
 if __name__ == "__main__":

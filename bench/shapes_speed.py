@@ -1,8 +1,9 @@
 """The cost of collision shapes (issue 21's speed target): a 6 s `rod-in-frame` run at 1 ms
 (a cylinder rod against four boxes, friction) and a `probe-drogue` run (a capsule against a
-384-triangle mesh) against today's `paper-table1` run, each as it is, back to back; medians of
-`--repeat` runs of `hilcontact.simulate` (time series included). The target: rod-in-frame at
-most 3x paper-table1.
+384-triangle mesh) against today's `paper-table1` run, each as it is; medians of `--repeat`
+runs of `hilcontact.simulate` (time series included), the presets taken in turn in every round
+(so that a change of the machine's load weighs on all three alike), with the load average
+printed. The target: rod-in-frame at most 3x paper-table1.
 
     python bench/shapes_speed.py [--repeat 7]
 """
@@ -10,19 +11,11 @@ most 3x paper-table1.
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import time
 
 import hilcontact as hc
-
-
-def median_seconds(scenario: hc.Scenario, repeat: int) -> float:
-    times = []
-    for _ in range(repeat):
-        start = time.perf_counter()
-        hc.simulate(scenario)
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
 
 
 def main() -> None:
@@ -33,10 +26,17 @@ def main() -> None:
     scenarios = {name: hc.load_scenario(name) for name in names}
     for s in scenarios.values():
         hc.simulate(s)  # warm up
-    base = None
+    load = os.getloadavg()[0]
+    times: dict[str, list[float]] = {name: [] for name in names}
+    for _ in range(args.repeat):
+        for name, s in scenarios.items():
+            start = time.perf_counter()
+            hc.simulate(s)
+            times[name].append(time.perf_counter() - start)
+    print(f"load average {load:.1f} before, {os.getloadavg()[0]:.1f} after ({os.cpu_count()} cores)")
+    base = statistics.median(times[names[0]])
     for name, s in scenarios.items():
-        t = median_seconds(s, args.repeat)
-        base = base or t
+        t = statistics.median(times[name])
         simulated = s.simulation.duration
         print(f"{name:14s} {simulated:4.1f} s simulated: median {t * 1e3:7.1f} ms  ({t / base:4.2f}x paper-table1)")
 

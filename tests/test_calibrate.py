@@ -75,7 +75,9 @@ def test_calibrate_simulated_measures_the_true_hardware_and_run_renders_the_firs
 
 def test_calibrate_refuses_bad_input_and_writes_nothing(tmp_path: Path):
     cal = tmp_path / "cal.toml"
-    one_error(invoke("calibrate", "paper-table1", "--out", str(cal)), 2, "--simulate")
+    # without --simulate: the device options of `hil`, checked as `hil` checks them, before anything is opened
+    one_error(invoke("calibrate", "paper-table1", "--out", str(cal), "--connect-timeout", "-1"), 2, "connect_timeout")
+    one_error(invoke("calibrate", "paper-table1", "--out", str(cal), "--option", "press_force=400"), 2, "press_force")
     one_error(invoke("calibrate", "paper-table1", "--simulate", "--out", str(tmp_path / "no" / "cal.toml")), 2,
               "no such folder")
     one_error(invoke("calibrate", "paper-table1", "--simulate", "--out", str(cal), "--option", "nonsense=1"), 2,

@@ -261,3 +261,42 @@ def test_run_live_replays_a_simulation_to_a_viewer(tmp_path: Path) -> None:
     # 0.5 s at 5x: at least 0.1 s of wall time (paced, not dumped)
     assert elapsed >= 0.09, elapsed
     assert "/hil/loop_timing" not in seen["times"]  # a simulation has no loop
+
+
+def test_the_facility_serves_its_truth_and_the_scene_and_the_operator_stop_ends_it(tmp_path: Path) -> None:
+    """`hilcontact facility --live --live-control` in its own process: a viewer gets every
+    period of its channels (the facility's, not the virtual dynamics'), the scene, and its stop
+    ends the facility with exit 3."""
+    port = free_tcp_port()
+    ports = [str(free_tcp_port()) for _ in range(3)]
+    process = subprocess.Popen(
+        [sys.executable, "-m", "hilcontact", "facility", "paper-table1", "--sensor-port", ports[0],
+         "--http-port", ports[1], "--robot-port", ports[2], "--live", str(port), "--live-control",
+         "--live-wait", "60", "--duration", "120"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        viewer = Viewer(port)
+        topics = {c["topic"] for c in viewer.channels.values()}
+        viewer.subscribe_all()
+        seen = viewer.read_all(stop_at=0.5)
+        out, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 3, err + out
+    assert "stop: operator (live view)" in out, out
+    assert "operator stop from client" in err
+    assert f"live view 127.0.0.1:{port}: " in out and "stop calls 1" in out, out
+    # the facility's truth: its own channels, none of the virtual dynamics'
+    assert {"/hil/measured_wrench", "/hil/contact_force", "/hil/tip/commanded", "/hil/tip/actual",
+            "/hil/loop_timing", "/facility/contact_moment", "/hil/scene", "/tf"} <= topics, topics
+    assert not topics & {"/hil/applied_wrench", "/hil/energy", "/hil/estimates"}, topics
+    # every period from the first, in order, at the facility's 1 ms period, none missing
+    times = seen["times"]["/hil/measured_wrench"]
+    assert len(times) >= 500 and times == [round(k * 1e-3 * 1e9) for k in range(len(times))]
+    for topic in ("/hil/contact_force", "/hil/tip/actual", "/hil/loop_timing", "/facility/contact_moment"):
+        assert seen["times"][topic] == times, topic
+    assert len(seen["times"]["/hil/scene"]) == -(-len(times) // 33) and seen["scene"] is not None
+    assert seen["responses"] == [(viewer.services["/hilcontact/stop"], 7)]
+    events = b"".join(seen["events"])
+    assert b"facility stopped by the operator" in events, events

@@ -147,11 +147,12 @@ def test_abb_robot_client_drives_the_emulated_robot(core):
             assert moved_at is not None, "the robot never followed the correction"
             assert state.cartesian[0] == pytest.approx(target, abs=1e-6)
             assert state.cartesian_planned[0] == pytest.approx(target, abs=1e-6)
-            # after the correction and within 0.3 s; the 10 ms response lag is in the emulator's
-            # time, which catches up on periods a busy machine made it miss (8.2 ms of wall time
-            # once under load), so it is not a floor in wall time (the lag in ticks:
-            # crates/core/tests/hil_loop.rs, robot_follows_the_command_with_its_pure_delay)
-            assert 0.0 < moved_at - first_sent < 0.3
+            # after the correction, and well within the 2 s of the loop: the 10 ms response lag
+            # is in the emulator's time, which catches up on periods a busy machine made it miss
+            # (8.2 ms of wall time once under load), so it is neither a floor nor a tight
+            # ceiling in wall time (a 0.3 s bound failed once at load 10; the lag in ticks is
+            # asserted in crates/core/tests/hil_loop.rs, robot_follows_the_command_with_its_pure_delay)
+            assert 0.0 < moved_at - first_sent < 1.5
             status = facility.status()
             assert status["corrections"] > 10
             # the client's sequence numbers step by 2: gaps are accepted, nothing is dropped

@@ -142,3 +142,52 @@ def test_rod_in_frame_touches_an_edge_and_a_corner_with_friction(core):
     both = (np.abs(fx) > 1.0) & (fy < -1.0)
     assert both.any(), "no moment with the rod on the front and the side bar at once"
     assert (ref["friction_force_x"].abs() + ref["friction_force_y"].abs() + ref["friction_force_z"].abs()).max() > 0.0
+
+
+def pairs_scene(tmp_path, pairs: list[dict]) -> str:
+    """`rod-in-frame` with its rod of `steel` and its bars of `steel` (the two front bars) and
+    `bronze`, a `[[contact.friction.pairs]]` list, written to a file."""
+    raw = hc.load_scenario("rod-in-frame").to_dict()
+    for shape in raw["servicer"]["shapes"]:
+        shape["material"] = "steel"
+    for i, shape in enumerate(raw["target"]["shapes"]):
+        shape["material"] = "steel" if i < 2 else "bronze"
+    raw["contact"]["friction"]["pairs"] = pairs
+    raw["simulation"]["duration"] = 0.3
+    path = tmp_path / "pairs.toml"
+    path.write_text(tomli_w.dumps(raw))
+    return str(path)
+
+
+def test_friction_per_material_pair_loads_from_a_scenario_file(core, tmp_path):
+    path = pairs_scene(tmp_path, [{"materials": ["bronze", "steel"], "kinetic": 0.4, "static": 0.5}])
+    scenario = hc.load_scenario(path)
+    assert scenario.to_dict()["contact"]["friction"]["pairs"] == [
+        {"materials": ["bronze", "steel"], "kinetic": 0.4, "static": 0.5}
+    ]
+    assert hc.load_scenario("rod-in-frame").to_dict()["contact"]["friction"]["pairs"] == []
+
+
+@pytest.mark.parametrize(
+    "pairs,fragments",
+    [
+        ([{"materials": ["steel", "bronz"], "kinetic": 0.2}], ["contact.friction.pairs[0].materials", "bronz", "bronze, steel"]),
+        ([{"materials": ["steel", "bronze"], "kinetic": 0.3, "static": 0.2}], ["contact.friction.pairs[0].static", "must not be below"]),
+        ([{"materials": ["steel", "bronze"], "kinetic": 3}], ["contact.friction.pairs[0].kinetic", "between 0 and 2"]),
+        ([{"materials": ["steel"], "kinetic": 0.2}], ["contact.friction.pairs[0].materials"]),
+        ([{"materials": ["steel", "bronze"]}, {"materials": ["bronze", "steel"]}], ["contact.friction.pairs[1].materials", "twice"]),
+        ([{"materials": ["steel", "bronze"], "mu": 0.2}], ["contact.friction.pairs[0]", "mu"]),
+    ],
+    ids=["unknown-material", "static-below-kinetic", "range", "one-material", "twice", "unknown-key"],
+)
+def test_bad_material_pairs_are_one_line(tmp_path, pairs, fragments):
+    path = pairs_scene(tmp_path, pairs)
+    result = invoke("run", path, "--out", str(tmp_path / "out"), "--no-plots", cwd=tmp_path)
+    assert_one_error_line(result, *fragments)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_shape_value_out_of_range_names_its_range(tmp_path):
+    result = invoke("run", "rod-in-frame", "--set", "servicer.shapes[0].radius=200",
+                    "--out", str(tmp_path / "out"), *SHORT, cwd=tmp_path)
+    assert_one_error_line(result, "servicer.shapes[0].radius", "between 0 and 100")

@@ -40,6 +40,7 @@ import re
 import stat
 import sys
 import tomllib
+import typing
 from collections.abc import Mapping
 from importlib import resources
 from typing import Annotated, Any, Literal, Union
@@ -547,6 +548,8 @@ def _locate(loc: tuple[Any, ...]) -> tuple[list[str | int], Any]:
         else:  # a table inside a table (e.g. [contact.friction]): its model, if it is one
             field = getattr(current, "model_fields", {}).get(part) if isinstance(current, type) else None
             sub = getattr(field, "annotation", None)
+            if typing.get_origin(sub) is list:  # a list of tables (e.g. [[servicer.shapes]])
+                sub = typing.get_args(sub)[0]
             current = sub if isinstance(sub, type) and issubclass(sub, _Table) else None
     return parts, owner
 

@@ -190,7 +190,7 @@ pub struct ShapeConfig {
     #[serde(default)]
     #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e6))]
     pub normal: [f64; 3],
-    /// Material name (for reports; friction is `[contact.friction]`'s for every pair).
+    /// Material name: `[[contact.friction.pairs]]` gives friction per pair of materials.
     #[serde(default)]
     pub material: String,
     /// A mesh's file, STL or OBJ, relative to the scenario file (read by the scenario loader,

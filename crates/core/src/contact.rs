@@ -144,6 +144,30 @@ pub struct FrictionConfig {
     #[serde(default = "default_stribeck_velocity")]
     #[schemars(range(min = 1e-6, max = 1.0))]
     pub stribeck_velocity: f64,
+    /// Coefficients for pairs of shape materials (`[[contact.friction.pairs]]`): a contact
+    /// between a servicer shape and a target shape whose `material`s are a listed pair (either
+    /// order) takes that pair's coefficients; every other contact (the rod tip on the walls,
+    /// shapes of unlisted materials) takes this table's. The velocities `stick_velocity` and
+    /// `stribeck_velocity` are this table's for every pair.
+    #[serde(default)]
+    pub pairs: Vec<MaterialPairFriction>,
+}
+
+/// Friction between two shape materials, one `[[contact.friction.pairs]]` entry.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialPairFriction {
+    /// The two materials, as the shapes' `material` names (either order; the same name twice
+    /// for a material on itself).
+    pub materials: [String; 2],
+    /// Kinetic (sliding) coefficient μ_k of the pair, 0 to 2; 0 with `static` 0: frictionless.
+    #[serde(default, rename = "kinetic")]
+    #[schemars(range(min = 0.0, max = 2.0))]
+    pub kinetic_coefficient: f64,
+    /// Static coefficient μ_s of the pair, 0 to 2, ≥ `kinetic`; 0: the same as `kinetic`.
+    #[serde(default, rename = "static")]
+    #[schemars(range(min = 0.0, max = 2.0))]
+    pub static_coefficient: f64,
 }
 
 fn default_stick_velocity() -> f64 {
@@ -161,6 +185,7 @@ impl Default for FrictionConfig {
             static_coefficient: 0.0,
             stick_velocity: default_stick_velocity(),
             stribeck_velocity: default_stribeck_velocity(),
+            pairs: Vec::new(),
         }
     }
 }
@@ -174,15 +199,23 @@ impl FrictionConfig {
     /// The friction law: `Ok(None)` when frictionless, `Err` with a message when the static
     /// coefficient is set below the kinetic one.
     pub fn friction(&self) -> std::result::Result<Option<Friction>, String> {
-        if self.is_frictionless() {
+        self.law(self.kinetic_coefficient, self.static_coefficient)
+    }
+
+    /// The friction law of the `i`-th material pair (this table's velocities), as
+    /// [`FrictionConfig::friction`].
+    pub fn pair_friction(&self, i: usize) -> std::result::Result<Option<Friction>, String> {
+        let p = &self.pairs[i];
+        self.law(p.kinetic_coefficient, p.static_coefficient)
+    }
+
+    /// The law for coefficients `mu_k`, `mu_s` (μ_s 0: the same as μ_k) with this table's
+    /// velocities: `None` when both are 0.
+    fn law(&self, mu_k: f64, mu_s: f64) -> std::result::Result<Option<Friction>, String> {
+        if mu_k == 0.0 && mu_s == 0.0 {
             return Ok(None);
         }
-        let mu_k = self.kinetic_coefficient;
-        let mu_s = if self.static_coefficient == 0.0 {
-            mu_k
-        } else {
-            self.static_coefficient
-        };
+        let mu_s = if mu_s == 0.0 { mu_k } else { mu_s };
         if mu_s < mu_k {
             return Err(format!(
                 "the static coefficient ({mu_s}) must not be below the kinetic one ({mu_k})"
@@ -260,8 +293,13 @@ pub struct ContactGeometry {
     pub walls: Vec<Wall>,
     /// The contact law.
     pub law: ContactModel,
-    /// Friction between rod and walls, and between shapes (`None`: frictionless).
+    /// Friction between rod and walls, and between shapes of materials no pair names
+    /// (`None`: frictionless).
     pub friction: Option<Friction>,
+    /// Friction per pair of shapes, servicer shape `a` against target shape `b` at
+    /// `a·(number of target shapes) + b`, from `[[contact.friction.pairs]]` (empty: every pair
+    /// has `friction`).
+    pub shape_friction: Vec<Option<Friction>>,
     /// The bodies' collision shapes (empty: only the rod tip against the walls).
     pub shapes: ShapePairs,
 }
@@ -307,10 +345,23 @@ impl ContactGeometry {
         out
     }
 
+    /// The friction between servicer shape `servicer_shape` and target shape `target_shape`:
+    /// their material pair's, or `friction` when no pair names them.
+    pub fn friction_between(
+        &self,
+        servicer_shape: usize,
+        target_shape: usize,
+    ) -> Option<&Friction> {
+        if self.shape_friction.is_empty() {
+            return self.friction.as_ref();
+        }
+        self.shape_friction[servicer_shape * self.shapes.target.len() + target_shape].as_ref()
+    }
+
     /// The force on the servicer at one contact point of penetration `d` (m) along the unit
     /// normal `normal` (from the target into free space), where the servicer's material point
     /// moves at `v` (m/s, relative to the target), with `added_damping` as in
-    /// [`ContactGeometry::force_with_added_damping`]: the law along the normal and friction
+    /// [`ContactGeometry::force_with_added_damping`]: the law along the normal and `friction`
     /// against the sliding velocity `v − (v·n)n`. Allocation-free.
     pub fn point_force(
         &self,
@@ -318,6 +369,7 @@ impl ContactGeometry {
         normal: &Vector3<f64>,
         v: &Vector3<f64>,
         added_damping: f64,
+        friction: Option<&Friction>,
     ) -> PointForce {
         let d_dot = -v.dot(normal);
         let mut f_n = self.law.normal_force(d, d_dot);
@@ -328,7 +380,7 @@ impl ContactGeometry {
             force: normal * f_n,
             ..PointForce::default()
         };
-        if let Some(friction) = &self.friction {
+        if let Some(friction) = friction {
             let v_t = v - normal * v.dot(normal);
             let f_t = friction.force(f_n, &v_t);
             out.force += f_t;
@@ -433,6 +485,7 @@ mod tests {
                 damping: 0.0,
             }),
             friction: None,
+            shape_friction: Vec::new(),
             shapes: ShapePairs::default(),
         };
         let f = geometry.force_on_rod(&Vector3::new(0.012, 0.0, 0.0), &Vector3::zeros());

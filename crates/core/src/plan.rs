@@ -26,7 +26,9 @@ use crate::config::{
     MIN_INERTIA,
 };
 use crate::config::{ShapeConfig, ShapeKind};
-use crate::contact::{ContactGeometry, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
+use crate::contact::{
+    ContactGeometry, ContactModel, Friction, FrictionConfig, HuntCrossley, LinearSpringDamper, Wall,
+};
 use crate::error::{CoreError, Issues, Result};
 use crate::metrics::Tolerances;
 use crate::schema::check_ranges;
@@ -250,6 +252,13 @@ impl Plan {
             issues.push("contact.friction.static", message);
             None
         });
+        let shape_friction = material_pairs(
+            &mut issues,
+            &c.friction,
+            friction,
+            &r.servicer.shapes,
+            &r.target.shapes,
+        );
 
         let resolvable = [
             "servicer.mass",
@@ -332,6 +341,7 @@ impl Plan {
                 walls,
                 law,
                 friction,
+                shape_friction,
                 shapes: ShapePairs {
                     servicer: servicer_shapes,
                     target: target_shapes,
@@ -846,6 +856,88 @@ fn delay(
 
 /// The shapes of a body (`key`: `servicer` or `target`), checked; names set (`{kind}{i}`) in
 /// the resolved scenario. A shape with a problem is recorded and left out.
+/// The friction of every pair of shapes (servicer shape `a`, target shape `b` at
+/// `a·target.len() + b`) from `[[contact.friction.pairs]]`: a listed pair of materials takes
+/// its coefficients, any other pair `default`. Empty when no pair is listed (every contact has
+/// `default`). Refuses a pair without shapes on both bodies, an empty or unused material name,
+/// a pair listed twice and a static coefficient below the kinetic one.
+fn material_pairs(
+    issues: &mut Issues,
+    table: &FrictionConfig,
+    default: Option<Friction>,
+    servicer: &[ShapeConfig],
+    target: &[ShapeConfig],
+) -> Vec<Option<Friction>> {
+    if table.pairs.is_empty() {
+        return Vec::new();
+    }
+    if servicer.is_empty() || target.is_empty() {
+        issues.push(
+            "contact.friction.pairs",
+            "friction per material pair needs shapes on both bodies ([[servicer.shapes]] and \
+             [[target.shapes]] with `material` names)",
+        );
+        return Vec::new();
+    }
+    let used: BTreeSet<&str> = servicer
+        .iter()
+        .chain(target)
+        .map(|s| s.material.as_str())
+        .filter(|m| !m.is_empty())
+        .collect();
+    let mut laws = Vec::with_capacity(table.pairs.len());
+    for (i, pair) in table.pairs.iter().enumerate() {
+        let key = format!("contact.friction.pairs[{i}]");
+        for m in &pair.materials {
+            if m.trim().is_empty() {
+                issues.push(
+                    format!("{key}.materials"),
+                    "a material name must not be empty",
+                );
+            } else if !used.contains(m.as_str()) {
+                let known: Vec<&str> = used.iter().copied().collect();
+                issues.push(
+                    format!("{key}.materials"),
+                    format!(
+                        "no shape has material '{m}' (the shapes' materials: {})",
+                        if known.is_empty() {
+                            "none given".to_string()
+                        } else {
+                            known.join(", ")
+                        }
+                    ),
+                );
+            }
+        }
+        let same = |q: &crate::contact::MaterialPairFriction| {
+            let [a, b] = &pair.materials;
+            let [c, d] = &q.materials;
+            (a == c && b == d) || (a == d && b == c)
+        };
+        if let Some(j) = table.pairs[..i].iter().position(same) {
+            issues.push(
+                format!("{key}.materials"),
+                format!("the pair is listed twice (also contact.friction.pairs[{j}])"),
+            );
+        }
+        laws.push(table.pair_friction(i).unwrap_or_else(|message| {
+            issues.push(format!("{key}.static"), message);
+            None
+        }));
+    }
+    let mut out = Vec::with_capacity(servicer.len() * target.len());
+    for s in servicer {
+        for t in target {
+            let listed = table.pairs.iter().position(|p| {
+                let [a, b] = &p.materials;
+                (*a == s.material && *b == t.material) || (*a == t.material && *b == s.material)
+            });
+            out.push(listed.map_or(default, |i| laws[i]));
+        }
+    }
+    out
+}
+
 fn body_shapes(
     issues: &mut Issues,
     failed: &BTreeSet<String>,

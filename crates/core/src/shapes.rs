@@ -13,21 +13,29 @@
 //! n = (p_A − p_B) / |p_A − p_B|     normal from the target into free space (toward the servicer)
 //! ```
 //!
-//! The distance queries are parry3d's (`query::contact` on the cores, point projections,
-//! polygonal support features); a contact may have several points: each vertex of the
-//! servicer core's support feature toward the target that lies within reach of the target's
-//! core is a point, and each vertex of the target's feature within reach of the servicer's
-//! core; the cores' closest pair is a point too unless a vertex is as deep (so a box face
-//! resting on a plate touches at its four corners, a rod across an edge at one point). Each
-//! point gets the contact law along its own normal, and friction against its own sliding
-//! velocity ([`crate::contact::ContactGeometry`]).
+//! The distance queries are parry3d's (`query::contact` and `query::distance` on the cores,
+//! point projections, support points); a contact may have several points: each fixed vertex
+//! of the smaller piece's core (a box's corners, a segment's ends, a cylinder's or a cone's rim
+//! points, a triangle's corners) within reach of the larger one's core is a point; the cores'
+//! closest pair is a point too, for the depth beyond the deepest vertex's (so a box face
+//! resting on a plate touches at its four corners, a rod across an edge at one point); a
+//! cylinder's or a cone's side lying on a face touches at the two ends of its line
+//! (`side_line`). Each point gets the contact law along its own normal, and friction against
+//! its own sliding velocity ([`crate::contact::ContactGeometry`]).
+//!
+//! Cost: bounding boxes, a triangle's plane, the separating axis remembered from the last
+//! evaluation (`AxisCache`, temporal coherence: tested, never trusted, so the results do not
+//! depend on it), the target piece's own axes, and only then parry's query.
 //!
 //! Allocation-free while the penetration stays below `r_A + r_B` (the cores then never
 //! overlap, and parry's GJK needs no EPA); the queries allocate nothing else.
 
+use std::sync::atomic::{AtomicU64, Ordering};
+
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use parry3d_f64::bounding_volume::{Aabb, BoundingVolume};
-use parry3d_f64::query;
+use parry3d_f64::query::gjk::{self, CSOPoint, GJKResult, VoronoiSimplex};
+use parry3d_f64::query::{self, Contact};
 use parry3d_f64::shape::{Ball, Cone, Cuboid, Cylinder, HalfSpace, Segment, SharedShape, Triangle};
 
 /// Most contact points kept apart per pair of shapes in one evaluation (more are still
@@ -35,6 +43,57 @@ use parry3d_f64::shape::{Ball, Cone, Cuboid, Cylinder, HalfSpace, Segment, Share
 const DEDUPE_SLOTS: usize = 32;
 /// Two contact points of the same pair of shapes closer than this are one point, m.
 const SAME_POINT: f64 = 1e-7;
+/// Separating axes remembered per target piece: one per servicer piece (by its index among
+/// all the servicer's pieces, modulo this).
+const AXIS_SLOTS: usize = 4;
+
+/// The separating axes last found between a target piece and the servicer's pieces (`t`, unit,
+/// from the servicer toward the target): temporal coherence. A pair that an axis separated
+/// at the last evaluation is usually still separated by it at the next; testing that costs two
+/// support points, against a whole GJK query. Any axis is only *tested* (the gap along it is
+/// a lower bound of the distance), never trusted, so a stale axis, a slot shared by two
+/// servicer pieces, or a write from another thread changes no result, only the cost. Atomic
+/// (relaxed) so that a plan can be shared between threads.
+struct AxisCache([[AtomicU64; 3]; AXIS_SLOTS]);
+
+impl AxisCache {
+    fn new() -> Self {
+        AxisCache(std::array::from_fn(|_| {
+            std::array::from_fn(|_| AtomicU64::new(0))
+        }))
+    }
+
+    /// The axis in `slot`, if any.
+    fn get(&self, slot: usize) -> Option<Unit<Vector3<f64>>> {
+        let s = &self.0[slot % AXIS_SLOTS];
+        let a = Vector3::from_fn(|i, _| f64::from_bits(s[i].load(Ordering::Relaxed)));
+        // (zero before the first query; components written by two threads at once still make
+        // a direction, or are dropped here)
+        Unit::try_new(a, 0.5)
+    }
+
+    /// Remembers the axis `a` (unit, `t`) in `slot`.
+    fn set(&self, slot: usize, a: &Vector3<f64>) {
+        if a.iter().all(|x| x.is_finite()) {
+            let s = &self.0[slot % AXIS_SLOTS];
+            for i in 0..3 {
+                s[i].store(a[i].to_bits(), Ordering::Relaxed);
+            }
+        }
+    }
+}
+
+impl Clone for AxisCache {
+    fn clone(&self) -> Self {
+        let c = AxisCache::new();
+        for (to, from) in c.0.iter().zip(&self.0) {
+            for (t, f) in to.iter().zip(from) {
+                t.store(f.load(Ordering::Relaxed), Ordering::Relaxed);
+            }
+        }
+        c
+    }
+}
 
 /// What a shape is, with its dimensions (m) in its own frame: cylinders, capsules and cones
 /// along the shape's `z` axis, centred on its origin.
@@ -109,6 +168,8 @@ struct Piece {
     /// The diagonal of the core's own bounding box, m (`+∞` for a half-space): of two pieces,
     /// the smaller one's vertices are tested against the larger one's core.
     size: f64,
+    /// On a target piece, the separating axes last found toward the servicer's pieces.
+    axes: AxisCache,
 }
 
 impl Piece {
@@ -221,6 +282,7 @@ fn piece(core: SharedShape, pose: Isometry3<f64>, radius: f64) -> Piece {
         vertices,
         n_vertices,
         size,
+        axes: AxisCache::new(),
     }
 }
 
@@ -278,6 +340,7 @@ impl BodyShape {
                     vertices: [Point3::origin(); 8],
                     n_vertices: 0,
                     size: f64::INFINITY,
+                    axes: AxisCache::new(),
                 };
                 (0.0, vec![p])
             }
@@ -387,6 +450,11 @@ impl Seen {
         }
     }
 
+    /// Forgets the points of the last pair of shapes.
+    fn clear(&mut self) {
+        self.n = 0;
+    }
+
     /// Takes a point: a face contact (or any point, once the slots are full) goes to `f` at
     /// once unless it repeats one; an edge or corner contact waits for [`Seen::finish`].
     fn insert(&mut self, p: &ContactPoint, on_face: bool, f: &mut impl FnMut(&ContactPoint)) {
@@ -434,15 +502,20 @@ impl ShapePairs {
     /// Allocation-free while no penetration exceeds the pair's `r_A + r_B`.
     pub fn for_each_point(&self, pose: &Isometry3<f64>, mut f: impl FnMut(&ContactPoint)) {
         let mut pair = 0u64;
+        let mut seen = Seen::new();
+        // the index of the servicer shape's first piece among all the servicer's pieces
+        let mut first_piece = 0;
         for (a, s) in self.servicer.iter().enumerate() {
+            // a one-piece shape (every primitive): its pose and box once for all target shapes
+            let single = (s.pieces.len() == 1).then(|| placed(&s.pieces[0], s.radius, pose));
             for (b, t) in self.target.iter().enumerate() {
                 pair += 1;
                 let reach = s.radius + t.radius;
                 let mesh = s.is_mesh() || t.is_mesh();
-                let mut seen = Seen::new();
+                seen.clear();
                 for (i, ps) in s.pieces.iter().enumerate() {
-                    let pose_s = pose * ps.pose;
-                    let aabb_s = ps.core.compute_aabb(&pose_s).loosened(s.radius);
+                    let (pose_s, aabb_s) = single.unwrap_or_else(|| placed(ps, s.radius, pose));
+                    let slot = first_piece + i;
                     for (j, pt) in t.pieces.iter().enumerate() {
                         if !t.is_unbounded() && !aabb_s.intersects(&pt.aabb) {
                             continue;
@@ -460,7 +533,16 @@ impl ShapePairs {
                                 continue;
                             }
                         }
-                        if face.is_none() && !t.is_unbounded() && separated(ps, &pose_s, pt, reach)
+                        let remembered = remembered_gap(ps, &pose_s, pt, slot);
+                        if remembered.is_some_and(|g| g > reach) {
+                            continue;
+                        }
+                        // (an axis remembered that no longer separates them is about the
+                        // contact's normal: the target's own axes would not do better)
+                        if face.is_none()
+                            && !t.is_unbounded()
+                            && remembered.is_none()
+                            && separated(ps, &pose_s, pt, reach)
                         {
                             continue;
                         }
@@ -470,6 +552,7 @@ impl ShapePairs {
                             &pose_s,
                             &aabb_s,
                             pt,
+                            slot,
                             s.radius,
                             t.radius,
                             reach,
@@ -492,6 +575,7 @@ impl ShapePairs {
                 }
                 seen.finish(reach, &mut f);
             }
+            first_piece += s.pieces.len();
         }
     }
 
@@ -513,25 +597,38 @@ impl ShapePairs {
     /// the boxes come closer than that. (The reference's free-flight test: no point of the
     /// servicer can move `threshold` in the period.)
     pub fn clear_of(&self, pose: &Isometry3<f64>, threshold: f64) -> bool {
+        let mut first_piece = 0;
         for s in &self.servicer {
+            let single = (s.pieces.len() == 1).then(|| placed(&s.pieces[0], s.radius, pose));
             for t in &self.target {
                 let reach = s.radius + t.radius;
-                for ps in &s.pieces {
-                    let pose_s = pose * ps.pose;
-                    let aabb_s = ps.core.compute_aabb(&pose_s).loosened(s.radius);
+                for (i, ps) in s.pieces.iter().enumerate() {
+                    let (pose_s, aabb_s) = single.unwrap_or_else(|| placed(ps, s.radius, pose));
+                    let slot = first_piece + i;
                     for pt in &t.pieces {
-                        if !t.is_unbounded()
-                            && (aabb_distance(&aabb_s, &pt.aabb) > threshold
-                                || separated(ps, &pose_s, pt, reach + threshold))
+                        if t.is_unbounded() {
+                            if core_distance(ps, &pose_s, pt) - reach <= threshold {
+                                return false;
+                            }
+                            continue;
+                        }
+                        if aabb_distance(&aabb_s, &pt.aabb) > threshold {
+                            continue;
+                        }
+                        let remembered = remembered_gap(ps, &pose_s, pt, slot);
+                        if remembered.is_some_and(|g| g > reach + threshold)
+                            || (remembered.is_none()
+                                && separated(ps, &pose_s, pt, reach + threshold))
                         {
                             continue;
                         }
-                        if core_distance(ps, &pose_s, pt) - reach <= threshold {
+                        if core_distance_noting(ps, &pose_s, pt, slot) - reach <= threshold {
                             return false;
                         }
                     }
                 }
             }
+            first_piece += s.pieces.len();
         }
         true
     }
@@ -565,6 +662,37 @@ impl ShapePairs {
         }
         gap
     }
+}
+
+/// A servicer piece's pose in `t` (its body at `pose`) and its bounding box there, radius
+/// `radius` included.
+fn placed(ps: &Piece, radius: f64, pose: &Isometry3<f64>) -> (Isometry3<f64>, Aabb) {
+    let pose_s = pose * ps.pose;
+    (pose_s, ps.core.compute_aabb(&pose_s).loosened(radius))
+}
+
+/// The gap between the cores of the servicer piece `ps` (at `pose_s`; `slot`, its index among
+/// the servicer's pieces) and the target piece `pt` along the axis remembered for them
+/// ([`AxisCache`]), m: a lower bound of their distance (negative where their projections
+/// overlap); none without a remembered axis. The temporal-coherence cull: the pair is apart by
+/// more than `g` if this is.
+fn remembered_gap(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece, slot: usize) -> Option<f64> {
+    let a = pt.axes.get(slot)?;
+    let ms = ps.core.as_support_map()?;
+    let mt = pt.core.as_support_map()?;
+    // the servicer's farthest point along `a`, the target's nearest
+    let s_hi = ms.support_point(pose_s, &a).coords.dot(&a);
+    let t_lo = mt.support_point(&pt.pose, &-a.into_inner()).coords.dot(&a);
+    Some(t_lo - s_hi)
+}
+
+/// Whether parry answers the pair of cores by GJK (two support maps, neither a ball nor a
+/// half-space), the query whose separating axis [`AxisCache`] keeps.
+fn by_gjk(ps: &Piece, pt: &Piece) -> bool {
+    ps.core.as_ball().is_none()
+        && pt.core.as_ball().is_none()
+        && ps.core.as_support_map().is_some()
+        && pt.core.as_support_map().is_some()
 }
 
 /// Whether the core of `ps` (at `pose_s`) comes within `reach` of the plane of the triangle
@@ -643,6 +771,93 @@ fn core_distance(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece) -> f64 {
     }
 }
 
+/// [`core_distance`], remembering the axis GJK ends on in the target piece's [`AxisCache`]
+/// `slot`: the same computation as parry's `query::distance` for two support maps (same
+/// start, same GJK, same result), its direction kept.
+fn core_distance_noting(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece, slot: usize) -> f64 {
+    // parry's own closed forms for these pairs
+    let closed_form = (ps.core.as_cuboid().is_some() && pt.core.as_cuboid().is_some())
+        || (ps.core.as_segment().is_some() && pt.core.as_segment().is_some());
+    let (true, false, Some(g1), Some(g2)) = (
+        by_gjk(ps, pt),
+        closed_form,
+        ps.core.as_support_map(),
+        pt.core.as_support_map(),
+    ) else {
+        return core_distance(ps, pose_s, pt);
+    };
+    let pos12 = pose_s.inv_mul(&pt.pose);
+    let dir = Unit::try_new(
+        -pos12.translation.vector,
+        parry3d_f64::math::DEFAULT_EPSILON,
+    )
+    .unwrap_or(Vector3::x_axis());
+    let mut simplex = VoronoiSimplex::new();
+    simplex.reset(CSOPoint::from_shapes(&pos12, g1, g2, &dir));
+    match gjk::closest_points(&pos12, g1, g2, f64::MAX, true, &mut simplex) {
+        GJKResult::ClosestPoints(p1, p2, n) => {
+            pt.axes.set(slot, &(pose_s.rotation * n.into_inner()));
+            nalgebra::distance(&p1, &p2)
+        }
+        _ => 0.0,
+    }
+}
+
+/// The contact of two pieces' cores within `reach` (`t`), as parry's `query::contact` gives it
+/// (for two support maps the same computation, with the axis GJK ends on, or the contact's
+/// normal, remembered in the target piece's [`AxisCache`] `slot`).
+fn core_contact(
+    ps: &Piece,
+    pose_s: &Isometry3<f64>,
+    pt: &Piece,
+    slot: usize,
+    reach: f64,
+) -> Option<Contact> {
+    if pt.core.as_halfspace().is_some() {
+        // parry 0.22's (support map, half-space) order answers wrongly; its own order is right
+        let c = query::contact(&pt.pose, &*pt.core, pose_s, &*ps.core, reach);
+        return c.ok().flatten().map(|mut c| {
+            c.flip();
+            c
+        });
+    }
+    let (true, Some(g1), Some(g2)) = (
+        by_gjk(ps, pt),
+        ps.core.as_support_map(),
+        pt.core.as_support_map(),
+    ) else {
+        return query::contact(pose_s, &*ps.core, &pt.pose, &*pt.core, reach)
+            .ok()
+            .flatten();
+    };
+    // `query::contact` → `contact_support_map_support_map`, step by step
+    let pos12 = pose_s.inv_mul(&pt.pose);
+    let result = query::details::contact_support_map_support_map_with_params(
+        &pos12,
+        g1,
+        g2,
+        reach,
+        &mut VoronoiSimplex::new(),
+        None,
+    );
+    match result {
+        GJKResult::ClosestPoints(point1, point2_1, normal1) => {
+            let dist = (point2_1 - point1).dot(&normal1);
+            let point2 = pos12.inverse_transform_point(&point2_1);
+            let normal2 = pos12.inverse_transform_unit_vector(&-normal1);
+            let mut c = Contact::new(point1, point2, normal1, normal2, dist);
+            c.transform_by_mut(pose_s, &pt.pose);
+            pt.axes.set(slot, &c.normal1);
+            Some(c)
+        }
+        GJKResult::NoIntersection(dir) => {
+            pt.axes.set(slot, &(pose_s.rotation * dir.into_inner()));
+            None
+        }
+        GJKResult::Intersection | GJKResult::Proximity(_) => None,
+    }
+}
+
 /// The signed distance of the point `v` (`t`) to a piece's core at `pose`, m (negative inside,
 /// where the query can say how deep without allocating; 0 inside a cylinder's or cone's core),
 /// the nearest point of the core and the core's outward normal there (`fallback` where the
@@ -676,6 +891,65 @@ fn signed_distance(
     }
 }
 
+/// The ends of the side's line of a cylinder's or a cone's core that faces a direction, and
+/// how much they count against the core's fixed rim points (see [`side_line`]).
+struct SideLine {
+    /// The ends (the core's own frame): on both rims of a cylinder, on the base rim of a cone
+    /// (its apex, the line's other end, is a fixed vertex).
+    ends: [Point3<f64>; 2],
+    /// How many ends.
+    n: usize,
+    /// Their weight `w` (0 to 1); the fixed rim points count `1 − w`.
+    weight: f64,
+    /// How many of the core's first fixed vertices are rim points (8 on a cylinder, the 4 of a
+    /// cone's base rim; 0 on other cores).
+    fixed_rim: usize,
+}
+
+/// The side's line of a cylinder's or a cone's core that faces the direction `toward` (the
+/// core's own frame: parry's, axis `y`): a cylinder or a cone lying on a face touches along
+/// that line, and its fixed rim points (four per rim) are off it unless the body happens to
+/// be rolled just so (then the contact would be one point where the distance query puts it
+/// on the line, and the body would turn). The line's ends move with `toward` about the axis,
+/// and are undefined when `toward` is along the axis (standing on an end face, where the
+/// fixed rim points hold the body), so they are weighted: `w = 1` while `toward` is at least
+/// 45° off the axis, falling linearly in `sin` of that angle to 0 at 30°, and the fixed rim
+/// points count `1 − w` (each point's depth is scaled by its weight: every point still enters
+/// at depth 0, and no contact is counted twice).
+fn side_line(core: &SharedShape, toward: &Vector3<f64>) -> SideLine {
+    let mut line = SideLine {
+        ends: [Point3::origin(); 2],
+        n: 0,
+        weight: 0.0,
+        fixed_rim: 0,
+    };
+    let (cylinder, cone) = (core.as_cylinder(), core.as_cone());
+    line.fixed_rim = if cylinder.is_some() {
+        8
+    } else if cone.is_some() {
+        4
+    } else {
+        return line;
+    };
+    let radial = Vector3::new(toward.x, 0.0, toward.z);
+    let (len, norm) = (radial.norm(), toward.norm());
+    if !len.is_finite() || len <= 1e-12 * norm {
+        return line;
+    }
+    let (s0, s1) = (0.5, std::f64::consts::FRAC_1_SQRT_2);
+    line.weight = ((len / norm - s0) / (s1 - s0)).clamp(0.0, 1.0);
+    let u = radial / len;
+    if let Some(c) = cylinder {
+        line.ends[0] = Point3::from(u * c.radius + Vector3::y() * c.half_height);
+        line.ends[1] = Point3::from(u * c.radius - Vector3::y() * c.half_height);
+        line.n = 2;
+    } else if let Some(c) = cone {
+        line.ends[0] = Point3::from(u * c.radius - Vector3::y() * c.half_height);
+        line.n = 1;
+    }
+    line
+}
+
 /// The contact points of a servicer piece at `pose_s` (`t`) and a target piece (`r_s`, `r_t`
 /// their radii, `reach = r_s + r_t`), to `emit`.
 #[allow(clippy::too_many_arguments)]
@@ -684,24 +958,14 @@ fn piece_contacts(
     pose_s: &Isometry3<f64>,
     aabb_s: &Aabb,
     pt: &Piece,
+    slot: usize,
     r_s: f64,
     r_t: f64,
     reach: f64,
     id: u64,
     emit: &mut impl FnMut(&ContactPoint),
 ) {
-    // parry 0.22's (support map, half-space) order answers wrongly; its own order is right
-    let contact = if pt.core.as_halfspace().is_some() {
-        query::contact(&pt.pose, &*pt.core, pose_s, &*ps.core, reach).map(|c| {
-            c.map(|mut c| {
-                c.flip();
-                c
-            })
-        })
-    } else {
-        query::contact(pose_s, &*ps.core, &pt.pose, &*pt.core, reach)
-    };
-    let Ok(Some(c)) = contact else {
+    let Some(c) = core_contact(ps, pose_s, pt, slot, reach) else {
         return;
     };
     if c.dist >= reach {
@@ -726,33 +990,48 @@ fn piece_contacts(
     // the direction and make the force jump; each enters at depth 0; one side only, so that a
     // contact of two ends is not counted from both)
     let mut deepest_vertex: f64 = 0.0;
-    if ps.size <= pt.size {
+    // the vertices' piece and the piece they are projected onto, with the side the latter is
+    // on (+1: the target, whose outward normal is the contact normal; −1: the servicer)
+    let servicer_vertices = ps.size <= pt.size;
+    let (from, from_pose, onto, onto_pose, onto_box, r_from, side, code) = if servicer_vertices {
         let bounded = pt.core.as_halfspace().is_none();
-        for (k, local) in ps.vertices().iter().enumerate() {
-            let v = pose_s * local;
-            // out of the target piece's reach by its bounding box: no need to project
-            if bounded && aabb_point_distance(&pt.aabb, &v) >= r_s {
-                continue;
-            }
-            let (on_t, dist, normal) = signed_distance(pt, &pt.pose, &v, &n);
-            if dist < reach {
-                let depth = reach - dist;
-                deepest_vertex = deepest_vertex.max(depth);
-                point(v, on_t, normal, depth, 1 + k as u64);
-            }
-        }
+        (
+            ps,
+            pose_s,
+            pt,
+            &pt.pose,
+            bounded.then_some(&pt.aabb),
+            r_s,
+            1.0,
+            1,
+        )
     } else {
-        for (k, local) in pt.vertices().iter().enumerate() {
-            let v = pt.pose * local;
-            if aabb_point_distance(aabb_s, &v) >= r_t {
-                continue;
-            }
-            let (on_s, dist, outward) = signed_distance(ps, pose_s, &v, &-n);
-            if dist < reach {
-                let depth = reach - dist;
-                deepest_vertex = deepest_vertex.max(depth);
-                point(on_s, v, -outward, depth, 17 + k as u64);
-            }
+        (pt, &pt.pose, ps, pose_s, Some(aabb_s), r_t, -1.0, 17)
+    };
+    // and, on a cylinder's or a cone's core, the ends of its side's line that faces the other
+    // piece, weighted against the fixed rim points ([`side_line`])
+    let toward = from_pose.rotation.inverse_transform_vector(&(n * -side));
+    let line = side_line(&from.core, &toward);
+    let fixed = from.vertices().iter().enumerate().map(|(k, p)| {
+        let rim = k < line.fixed_rim;
+        (p, if rim { 1.0 - line.weight } else { 1.0 })
+    });
+    let moving = line.ends[..line.n].iter().map(|p| (p, line.weight));
+    for (k, (local, weight)) in fixed.chain(moving).enumerate() {
+        if weight <= 0.0 {
+            continue;
+        }
+        let v = from_pose * local;
+        // out of the other piece's reach by its bounding box: no need to project
+        if onto_box.is_some_and(|b| aabb_point_distance(b, &v) >= r_from) {
+            continue;
+        }
+        let (on, dist, outward) = signed_distance(onto, onto_pose, &v, &(n * side));
+        if dist < reach {
+            let depth = weight * (reach - dist);
+            deepest_vertex = deepest_vertex.max(depth);
+            let (on_s, on_t) = if servicer_vertices { (v, on) } else { (on, v) };
+            point(on_s, on_t, outward * side, depth, code + k as u64);
         }
     }
     // the cores' closest pair (an edge across an edge, a cylinder's rim between its fixed

@@ -257,9 +257,16 @@ impl TwoBodySystem {
                 .for_each_point(&servicer_pose(rel), |point| {
                     let v =
                         rel.velocity + rel.angular_velocity.cross(&(point.point - rel.position));
-                    let f = self
+                    let friction = self
                         .contact
-                        .point_force(point.depth, &point.normal, &v, added_damping);
+                        .friction_between(point.servicer_shape, point.target_shape);
+                    let f = self.contact.point_force(
+                        point.depth,
+                        &point.normal,
+                        &v,
+                        added_damping,
+                        friction,
+                    );
                     let w =
                         FrameWrench::from_rod_force(&f.force, &point.point, &self.sensor_origin);
                     c.force += f.force;
@@ -461,9 +468,10 @@ impl TwoBodySystem {
         let h = period / substeps as f64;
         let mut remaining = period;
         let mut friction_work = 0.0;
+        // the active set at `x` (a step's end is the next step's start: asked once)
+        let mut before = known.unwrap_or_else(|| self.active_set(x));
         while remaining > period * 1e-12 {
             let step = h.min(remaining);
-            let before = known.take().unwrap_or_else(|| self.active_set(x));
             let mut y = *x;
             let work = self.step_rk4(&mut y, step);
             let after = self.active_set(&y);
@@ -471,7 +479,7 @@ impl TwoBodySystem {
                 *x = y;
                 friction_work += work;
                 remaining -= step;
-                known = Some(after);
+                before = after;
                 continue;
             }
             // the set changes within the step: bisect for the first moment it does
@@ -490,6 +498,7 @@ impl TwoBodySystem {
             friction_work += self.step_rk4(x, lo);
             friction_work += self.step_rk4(x, hi - lo);
             remaining -= hi;
+            before = self.active_set(x);
         }
         (friction_work, None)
     }

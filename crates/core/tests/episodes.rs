@@ -20,6 +20,7 @@ fn friction(mu: f64) -> FrictionConfig {
         kinetic_coefficient: mu,
         stick_velocity: 1e-4,
         stribeck_velocity: 5e-3,
+        ..FrictionConfig::default()
     }
 }
 

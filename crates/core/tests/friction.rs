@@ -17,6 +17,7 @@ fn friction(mu_s: f64, mu_k: f64, stick_velocity: f64) -> FrictionConfig {
         kinetic_coefficient: mu_k,
         stick_velocity,
         stribeck_velocity: 5e-3,
+        ..FrictionConfig::default()
     }
 }
 

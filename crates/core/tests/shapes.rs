@@ -485,3 +485,173 @@ fn hardware_mounted_off_nominal_moves_the_target_shapes_for_the_facility_only() 
         "0.5 mm short of the mounted one"
     );
 }
+
+/// The attitude (`[w, x, y, z]`) that lays a shape's own `z` axis along the body's `y` axis,
+/// rolled by `roll` (rad) about its own axis first (so that a cylinder's or cone's fixed rim
+/// points are off the line of contact).
+fn along_y(roll: f64) -> [f64; 4] {
+    let q = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), -std::f64::consts::FRAC_PI_2)
+        * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), roll);
+    [q.w, q.i, q.j, q.k]
+}
+
+/// A cone (radius `r`, length `l`, margin `m`) lying with a side line along the body's `y`
+/// axis, facing +x, rolled by `roll` about its own axis, placed so that the middle of that
+/// line lies on the body's `x` axis.
+fn cone_on_its_side(r: f64, l: f64, m: f64, roll: f64) -> ShapeConfig {
+    // the core's side line, from the base rim to the apex (shape frame, in the xz plane),
+    // and its outward normal
+    let (rc, hc) = (r - m, 0.5 * l - m);
+    let line = Vector3::new(-rc, 0.0, 2.0 * hc).normalize();
+    let out = Vector3::new(2.0 * hc, 0.0, rc).normalize();
+    let m_rows = nalgebra::Matrix3::from_rows(&[
+        out.transpose(),
+        line.transpose(),
+        out.cross(&line).transpose(),
+    ]);
+    let q =
+        UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(m_rows))
+            * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), roll);
+    let mid = m_rows * Vector3::new(0.5 * rc, 0.0, 0.0);
+    let mut s = shape(json!({"kind": "cone", "radius": r, "length": l, "margin": m}));
+    s.orientation = [q.w, q.i, q.j, q.k];
+    s.position = [0.0, -mid.y, -mid.z];
+    s
+}
+
+/// A line or face contact landing square (a cylinder's side on a plane, a box face and
+/// across a box's edge, a cylinder's end face on a plane, a capsule on a plane and a box face,
+/// a cone's side on a plane, a box's face on a plane and on a larger box), rolled about the
+/// shape's axis so that no fixed rim point lies on the line, the middle of its line or face of
+/// contact on the line of the servicer's centre of mass along the normal, the target's centre
+/// of mass on it too: by symmetry the contact has no moment about either, so neither body turns. One
+/// point where the distance query puts it along the 0.3 m line would turn the servicer at
+/// about 1e-2 rad/s; the bound is 1e-8 rad/s. Momentum of the pair conserved to 1e-9.
+#[test]
+fn a_parallel_line_or_face_contact_lands_without_turning() {
+    let (r, l, m) = (0.05, 0.3, 0.001);
+    let gap = 0.0005;
+    let cylinder = |roll: f64| {
+        let mut s = shape(json!({"kind": "cylinder", "radius": r, "length": l, "margin": m}));
+        s.orientation = along_y(roll);
+        s
+    };
+    let capsule = {
+        let mut s = shape(json!({"kind": "capsule", "radius": r, "length": l}));
+        s.orientation = along_y(0.0);
+        s
+    };
+    let slab = |x: f64| {
+        shape(
+            json!({"kind": "box", "size": [0.1, 0.6, 0.6], "margin": m, "position": [x + 0.05, 0.0, 0.0]}),
+        )
+    };
+    // a box standing on an edge along y, the edge at x
+    let edge = |x: f64| {
+        let q = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::FRAC_PI_4);
+        let half_diagonal = 0.05 * std::f64::consts::SQRT_2 - m * (std::f64::consts::SQRT_2 - 1.0);
+        let mut s = shape(json!({"kind": "box", "size": [0.1, 0.6, 0.1], "margin": m}));
+        s.orientation = [q.w, q.i, q.j, q.k];
+        s.position = [x + half_diagonal, 0.0, 0.0];
+        s
+    };
+    let tilted_box = {
+        let q = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.3);
+        let mut s = shape(json!({"kind": "box", "size": [0.1, 0.3, 0.2], "margin": m}));
+        s.orientation = [q.w, q.i, q.j, q.k];
+        s
+    };
+    // a cylinder standing on its end face (its axis along x), rolled about its axis
+    let end_on = {
+        let q = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::FRAC_PI_2)
+            * UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.3);
+        let mut s = shape(json!({"kind": "cylinder", "radius": r, "length": l, "margin": m}));
+        s.orientation = [q.w, q.i, q.j, q.k];
+        s
+    };
+    let x = r + gap;
+    let cone = cone_on_its_side(r, l, m, 0.0);
+    // the cone's side line: its outward offset from the body origin along x
+    let cone_x = {
+        let (rc, hc) = (r - m, 0.5 * l - m);
+        let out = Vector3::new(2.0 * hc, 0.0, rc).normalize();
+        0.5 * rc * out.x + m + gap
+    };
+    let cases: Vec<(&str, ShapeConfig, ShapeConfig)> = vec![
+        ("cylinder side on a plane", cylinder(0.0), plane_at(x)),
+        (
+            "cylinder side on a plane, rolled 0.3 rad",
+            cylinder(0.3),
+            plane_at(x),
+        ),
+        (
+            "cylinder side on a plane, rolled π/4",
+            cylinder(std::f64::consts::FRAC_PI_4),
+            plane_at(x),
+        ),
+        (
+            "cylinder side on a box face, rolled 0.3 rad",
+            cylinder(0.3),
+            slab(x),
+        ),
+        (
+            "cylinder side across a box edge, rolled 0.3 rad",
+            cylinder(0.3),
+            edge(x),
+        ),
+        ("capsule on a plane", capsule.clone(), plane_at(x)),
+        ("capsule on a box face", capsule, slab(x)),
+        ("cone side on a plane", cone, plane_at(cone_x)),
+        (
+            "cone side on a plane, rolled 0.3 rad",
+            cone_on_its_side(r, l, m, 0.3),
+            plane_at(cone_x),
+        ),
+        (
+            "cylinder end face on a plane, rolled 0.3 rad",
+            end_on,
+            plane_at(0.5 * l + gap),
+        ),
+        (
+            "box face on a plane",
+            tilted_box.clone(),
+            plane_at(0.05 + gap),
+        ),
+        ("box face on a box face", tilted_box, slab(0.05 + gap)),
+    ];
+    let v = 0.02;
+    let mut failures = Vec::new();
+    for (name, servicer, target) in cases {
+        let s = shapes_scene(vec![servicer], vec![target], [v, 0.0, 0.0], 4000.0);
+        let (x, plan) = reference_end(&s);
+        let x0 = plan.initial;
+        let sys = &plan.system;
+        let touched = x.servicer.velocity.x < 0.0;
+        let turn = x
+            .servicer
+            .angular_velocity
+            .norm()
+            .max(x.target.angular_velocity.norm());
+        let (p0, p1) = (sys.linear_momentum(&x0), sys.linear_momentum(&x));
+        let (l0, l1) = (sys.angular_momentum(&x0), sys.angular_momentum(&x));
+        eprintln!(
+            "{name}: rebound {:.6} m/s, |ω| {turn:.3e} rad/s",
+            x.servicer.velocity.x
+        );
+        if !touched || turn > 1e-8 {
+            failures.push(format!(
+                "{name}: rebound {:?}, |ω| {turn:.3e} rad/s",
+                x.servicer.velocity
+            ));
+        }
+        assert!(
+            (p1 - p0).norm() <= 1e-9 * p0.norm().max(1.0),
+            "{name}: p {p0:?} → {p1:?}"
+        );
+        assert!(
+            (l1 - l0).norm() <= 1e-9 * l0.norm().max(1.0),
+            "{name}: L {l0:?} → {l1:?}"
+        );
+    }
+    assert!(failures.is_empty(), "{failures:#?}");
+}

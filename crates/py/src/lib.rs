@@ -16,6 +16,7 @@ use pyo3::prelude::*;
 use pyo3::sync::GILOnceCell;
 use pyo3::types::{PyDict, PyTuple, PyType};
 
+mod calibrate;
 mod facility;
 mod mesh;
 mod plugin;
@@ -421,11 +422,14 @@ impl PyFacilityHandle {
         Ok(self.0.get()?.is_finished())
     }
 
-    /// Stops the emulator, waits for it (GIL released) and returns its final counters.
+    /// Stops the emulator, waits for it (GIL released) and returns its final counters, with
+    /// `live`: the live view's report (None without `--live`).
     fn join<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let handle = self.0.take()?;
-        let status = py.allow_threads(move || handle.join());
-        json_to_py(py, &status)
+        let (status, live) = py.allow_threads(move || handle.join_with_live());
+        let mut value = serde_json::to_value(status).unwrap_or_default();
+        value["live"] = live.unwrap_or_default();
+        json_to_py(py, &value)
     }
 }
 
@@ -1019,6 +1023,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mesh::read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate_simulated, m)?)?;
     m.add_function(wrap_pyfunction!(calibration_schema, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate::start_calibration, m)?)?;
+    m.add_class::<calibrate::PyCalibrationHandle>()?;
     m.add_function(wrap_pyfunction!(plugin::simulate_python, m)?)?;
     m.add_function(wrap_pyfunction!(plugin::compensator_context, m)?)?;
     m.add_function(wrap_pyfunction!(facility::simulate_facility, m)?)?;

@@ -21,18 +21,33 @@
 //! Every datagram and socket error of both endpoints is counted in their [`LinkStats`]
 //! ([`FacilityStatus::sensor`], [`FacilityStatus::robot`]); nothing is dropped uncounted. Each
 //! control period never allocates after start-up.
+//!
+//! **Live view** ([`EmulatorOptions::live`], `hilcontact facility --live`): the facility's
+//! physical truth, as a [`Sample`] per period (the commanded pose it received as the record's
+//! commanded pose and velocity, the actual ones, the physical contact force, its friction part
+//! and moment, the sensor's wrench as measured, the wake-up latency as `wake_latency` and the
+//! newest command's age as `robot_age`; no virtual dynamics: applied wrench zero, energy and
+//! estimates NaN), goes through the same output seam as a run's ([`Outputs`], the `live`
+//! sink). The real-time thread only pushes it into a preallocated ring (full: the sample is
+//! dropped and counted, [`FacilityStatus::live_samples_dropped`]); a thread of normal priority
+//! drains the ring into the sink every 5 ms, and watches for the operator's stop: the facility
+//! then stops serving ([`FacilityStatus::operator_stop`]).
 
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
+use std::time::Duration;
 
 use nalgebra::Vector3;
 use serde::Serialize;
+use serde_json::Value;
 
-use hilcontact_core::facility::FacilityLoop;
+use hilcontact_core::facility::{FacilityLoop, Measurement};
+use hilcontact_core::frames::FrameWrench;
+use hilcontact_core::hil::HilRecord;
 use hilcontact_core::world::RelativeMotion;
-use hilcontact_core::Scenario;
+use hilcontact_core::{Plan, Scenario};
 
 use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack};
 use crate::devices::{
@@ -40,6 +55,9 @@ use crate::devices::{
     SensorEndpoint, Wrench,
 };
 use crate::error::{Result, RtError};
+use crate::output::live::FACILITY_RUN;
+use crate::output::{EventLevel, Outputs, RunInfo};
+use crate::report::Sample;
 
 use crate::counters::SharedLinkStats;
 pub use crate::options::EmulatorOptions;
@@ -58,6 +76,12 @@ struct Shared {
     max_latency_ns: AtomicU64,
     /// The robot's session end: 0 running (or none), 1 ended cleanly, 2 ended with an error.
     session: std::sync::atomic::AtomicU8,
+    /// The live view's operator asked for the stop.
+    operator_stop: AtomicBool,
+    /// Samples the live view's ring had no room for.
+    live_dropped: AtomicU64,
+    /// The live view's report once it has finished (`realtime.live`'s fields).
+    live_report: Mutex<Option<Value>>,
 }
 
 /// A snapshot of the emulator's counters.
@@ -103,6 +127,14 @@ pub struct FacilityStatus {
     /// the controller's error (too many late answers), None while it runs or without
     /// sessions.
     pub session_ended_cleanly: Option<bool>,
+    /// Whether the live view's operator stopped the facility (`/hilcontact/stop` with
+    /// `--live-control`): it stopped serving (the CLI exits 3, reason `operator`).
+    pub operator_stop: bool,
+    /// The live view's port as asked for (0: any free one, the server prints the one bound on
+    /// stderr); None: no live view.
+    pub live_port: Option<u16>,
+    /// Periods whose sample the live view's ring had no room for (its thread fell behind).
+    pub live_samples_dropped: u64,
 }
 
 /// Where the emulator listens and sends.
@@ -122,6 +154,9 @@ pub struct FacilityAddresses {
 pub struct FacilityHandle {
     shared: Arc<Shared>,
     thread: Option<JoinHandle<()>>,
+    /// The live view's thread (drains the ring into the sink).
+    live_thread: Option<JoinHandle<()>>,
+    live_port: Option<u16>,
     addresses: FacilityAddresses,
     protocols: (&'static str, &'static str),
     period: f64,
@@ -153,8 +188,17 @@ impl FacilityHandle {
         };
         let protocols = (sensor.name(), robot.name());
 
-        let facility = FacilityLoop::new(&plan);
         let shared = Arc::new(Shared::default());
+        // the live view first: its port refused before the facility's thread starts
+        let (live, live_thread, live_port) = match &o.live {
+            Some(live) => {
+                let (producer, consumer) = rtrb::RingBuffer::new(LIVE_RING);
+                let (thread, port) = spawn_live(&plan, live, consumer, shared.clone())?;
+                (Some(producer), Some(thread), port)
+            }
+            None => (None, None, None),
+        };
+        let facility = FacilityLoop::new(&plan);
         let silence = |after: Option<f64>| after.map(|s| (s / period).round() as u64);
         let mut state = Emulator {
             facility,
@@ -171,6 +215,9 @@ impl FacilityHandle {
             },
             command: initial,
             unit: o.sensor_unit.newtons(),
+            live,
+            truth: Truth::new(&plan),
+            last_command: 0,
         };
         let thread = std::thread::Builder::new()
             .name("hil-facility".into())
@@ -178,12 +225,15 @@ impl FacilityHandle {
                 tighten_timer_slack();
                 state.run();
                 state.publish();
+                state.live = None; // the ring abandoned: the live view drains it and ends
                 state.shared.finished.store(true, Ordering::Release);
             })
             .map_err(|e| RtError::io("emulator thread", &e))?;
         Ok(FacilityHandle {
             shared,
             thread: Some(thread),
+            live_thread,
+            live_port,
             addresses,
             protocols,
             period,
@@ -222,7 +272,16 @@ impl FacilityHandle {
                 2 => Some(false),
                 _ => None,
             },
+            operator_stop: s.operator_stop.load(Ordering::Acquire),
+            live_port: self.live_port,
+            live_samples_dropped: s.live_dropped.load(Ordering::Relaxed),
         }
+    }
+
+    /// The live view's report once the facility has been joined ([`FacilityHandle::join`]):
+    /// `metrics.json` `realtime.live`'s fields; None without a live view or before.
+    pub fn live_report(&self) -> Option<Value> {
+        self.shared.live_report.lock().ok().and_then(|r| r.clone())
     }
 
     /// Asks the emulator to stop (returns at once).
@@ -235,21 +294,160 @@ impl FacilityHandle {
         self.shared.finished.load(Ordering::Acquire)
     }
 
-    /// Stops the emulator and waits for its thread; returns the final counters.
+    /// Stops the emulator and waits for its thread (and the live view's); returns the final
+    /// counters.
     pub fn join(mut self) -> FacilityStatus {
+        self.end();
+        self.status()
+    }
+
+    /// [`FacilityHandle::join`] that also returns the live view's report
+    /// ([`FacilityHandle::live_report`]).
+    pub fn join_with_live(mut self) -> (FacilityStatus, Option<Value>) {
+        self.end();
+        (self.status(), self.live_report())
+    }
+
+    fn end(&mut self) {
         self.stop();
-        if let Some(t) = self.thread.take() {
+        for t in [self.thread.take(), self.live_thread.take()]
+            .into_iter()
+            .flatten()
+        {
             let _ = t.join(); // a panic has already been reported by the thread; the counters stand
         }
-        self.status()
     }
 }
 
 impl Drop for FacilityHandle {
     fn drop(&mut self) {
-        self.stop();
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
+        self.end();
+    }
+}
+
+/// Periods the live view's ring holds (8 s at 1 kHz, as the loop's): its thread drains it every
+/// [`LIVE_DRAIN`].
+const LIVE_RING: usize = 8192;
+
+/// How often the live view's thread drains the ring.
+const LIVE_DRAIN: Duration = Duration::from_millis(5);
+
+/// Opens the live view (binds its server: a port in use refuses the start) and starts its
+/// thread: it drains `ring` into the sink, hands the operator's stop to the facility, and
+/// once the ring is abandoned (the facility ended) finishes the sink into
+/// [`Shared::live_report`].
+fn spawn_live(
+    plan: &Plan,
+    live: &crate::output::live::LiveOptions,
+    mut ring: rtrb::Consumer<Sample>,
+    shared: Arc<Shared>,
+) -> Result<(JoinHandle<()>, Option<u16>)> {
+    let info = RunInfo {
+        kind: FACILITY_RUN,
+        estimates_contact: false,
+        ..RunInfo::new(plan, true)
+    };
+    let options = serde_json::json!({ "live": live });
+    let mut outputs = Outputs::open(plan, &info, &options)?;
+    let control = outputs.control();
+    let thread = std::thread::Builder::new()
+        .name("facility-live".into())
+        .spawn(move || {
+            let mut stop_told = false;
+            loop {
+                let abandoned = ring.is_abandoned();
+                while let Ok(s) = ring.pop() {
+                    outputs.sample(&s);
+                }
+                if control.operator_stop_requested() && !stop_told {
+                    stop_told = true;
+                    shared.operator_stop.store(true, Ordering::Release);
+                    shared.stop.store(true, Ordering::Release);
+                }
+                if abandoned {
+                    break;
+                }
+                std::thread::sleep(LIVE_DRAIN);
+            }
+            let text = if stop_told {
+                "facility stopped by the operator (live view): no longer serving".to_string()
+            } else {
+                "facility stopped".to_string()
+            };
+            let level = if stop_told {
+                EventLevel::Error
+            } else {
+                EventLevel::Info
+            };
+            outputs.event(outputs.last_time(), level, &text);
+            let report = outputs.finish().into_iter().find(|(k, _)| *k == "live");
+            if let (Ok(mut slot), Some((_, value))) = (shared.live_report.lock(), report) {
+                *slot = Some(value);
+            }
+        })
+        .map_err(|e| RtError::io("live view thread", &e))?;
+    Ok((thread, Some(live.port)))
+}
+
+/// What the live view's sample is built from: the plan's rod and sensor origin.
+struct Truth {
+    rod_tip: Vector3<f64>,
+    sensor_origin: Vector3<f64>,
+    period: f64,
+}
+
+impl Truth {
+    fn new(plan: &Plan) -> Self {
+        Truth {
+            rod_tip: plan.system.rod_tip,
+            sensor_origin: plan.system.sensor_origin,
+            period: plan.period,
+        }
+    }
+
+    /// Period `k`'s sample: the command held, the measurement `m` (sensor's wrench in N), the
+    /// physical contact, the wake-up latency (s) and the command's age (s). Never allocates.
+    fn sample(
+        &self,
+        k: u64,
+        command: &RelativeMotion,
+        m: &Measurement,
+        facility: &FacilityLoop,
+        latency: f64,
+        command_age: f64,
+    ) -> Sample {
+        let rod = &self.rod_tip;
+        let p = facility.physical_contact();
+        let tip = m.actual.point(rod);
+        let moment = p.moment.unwrap_or_else(|| {
+            FrameWrench::from_rod_force(&p.force, &tip, &self.sensor_origin).moment
+        });
+        Sample {
+            record: HilRecord {
+                time: k as f64 * self.period,
+                tip_position: command.point(rod),
+                tip_velocity: command.point_velocity(rod),
+                angular_velocity: command.angular_velocity,
+                orientation: command.orientation,
+                actual_tip_position: tip,
+                actual_tip_velocity: m.actual.point_velocity(rod),
+                actual_orientation: m.actual.orientation,
+                actual_angular_velocity: m.actual.angular_velocity,
+                contact_force: p.force,
+                friction_force: p.friction_force,
+                contact_moment: moment,
+                measured_force: m.force,
+                measured_moment: m.moment,
+                applied_force: Vector3::zeros(),
+                applied_moment: Vector3::zeros(),
+                energy: f64::NAN,
+                stiffness_estimate: f64::NAN,
+                damping_estimate: f64::NAN,
+                observed_energy: f64::NAN,
+            },
+            wake_latency: latency,
+            sensor_age: 0.0,
+            robot_age: command_age,
         }
     }
 }
@@ -272,6 +470,12 @@ struct Emulator {
     command: RelativeMotion,
     /// Newtons per unit the sensor reports in (fault injection: 9.80665 for kgf).
     unit: f64,
+    /// The live view's ring (None: no live view).
+    live: Option<rtrb::Producer<Sample>>,
+    /// What the live view's samples are built from.
+    truth: Truth,
+    /// The tick the newest command arrived.
+    last_command: u64,
 }
 
 impl Emulator {
@@ -288,7 +492,7 @@ impl Emulator {
             if latency > self.period_ns {
                 self.shared.overruns.fetch_add(1, Ordering::Relaxed);
             }
-            self.step(k);
+            self.step(k, latency as f64 * 1e-9);
             k += 1;
             self.publish();
             self.shared.tick.store(k, Ordering::Relaxed);
@@ -307,11 +511,12 @@ impl Emulator {
         self.shared.session.store(session, Ordering::Relaxed);
     }
 
-    fn step(&mut self, k: u64) {
+    fn step(&mut self, k: u64, latency: f64) {
         self.sensor.serve();
         if let Some(command) = self.robot.receive() {
             self.command = command;
             self.first_command.get_or_insert(k);
+            self.last_command = k;
         }
         let m = self.facility.tick(&self.command);
         let contact_force = self.facility.contact_force().norm();
@@ -336,5 +541,19 @@ impl Emulator {
         );
         self.sensor.sample(&wrench, sensor_speaks);
         self.robot.feedback(k, &m.actual, robot_speaks);
+        if let Some(ring) = &mut self.live {
+            let measured = Measurement {
+                force: m.force + self.offset.force,
+                moment: m.moment + self.offset.moment,
+                ..m
+            };
+            let age = (k - self.last_command) as f64 * self.truth.period;
+            let sample =
+                self.truth
+                    .sample(k, &self.command, &measured, &self.facility, latency, age);
+            if ring.push(sample).is_err() {
+                self.shared.live_dropped.fetch_add(1, Ordering::Relaxed);
+            }
+        }
     }
 }

@@ -171,6 +171,10 @@ pub struct EmulatorOptions {
     /// Fault injection: the unit the sensor reports its wrench in while the loop takes N and
     /// N·m (a box configured in kgf or lbf; moments scaled by the same factor).
     pub sensor_unit: ReportedUnit,
+    /// A Foxglove live view of the facility's physical truth and scene (`--live
+    /// [HOST:]PORT`, [`crate::output::live`]): None, or the server's options; its operator
+    /// stop ends the facility (it stops serving).
+    pub live: Option<LiveOptions>,
 }
 
 /// The unit an emulated sensor reports in ([`EmulatorOptions::sensor_unit`]).
@@ -229,6 +233,9 @@ impl EmulatorOptions {
                 "sensor_offset",
                 format!("must be 6 finite numbers, got {:?}", o.sensor_offset),
             ));
+        }
+        if let Some(live) = &o.live {
+            live.validate()?;
         }
         let parsed = ParsedFacility {
             sensor: o.sensor.parse()?,

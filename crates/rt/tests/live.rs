@@ -128,7 +128,13 @@ impl Viewer {
 
     /// Reads until the server closes; calls `stop` (once) when the force channel passes
     /// `stop_at` s of run time.
-    fn read_all(mut self, stop_at: Option<f64>) -> Seen {
+    fn read_all(self, stop_at: Option<f64>) -> Seen {
+        self.read_all_calling(stop_at.map(|at| (at, "/hilcontact/stop", b"{}".to_vec())))
+    }
+
+    /// Reads until the server closes; calls `service` with `payload` (once, call id 7) when
+    /// the force channel passes `at` s of run time.
+    fn read_all_calling(mut self, call: Option<(f64, &str, Vec<u8>)>) -> Seen {
         let mut seen = Seen::default();
         let mut stopped = false;
         loop {
@@ -142,16 +148,19 @@ impl Viewer {
                     let t = u64::from_le_bytes(b[5..13].try_into().unwrap());
                     let topic = self.subscriptions[&sub].clone();
                     seen.times.entry(topic.clone()).or_default().push(t);
-                    if topic == "/hil/events" || topic == "/hil/scene" {
+                    if topic == "/hil/events"
+                        || topic == "/hil/scene"
+                        || topic == "/hil/contact_force"
+                    {
                         seen.payloads
                             .entry(topic.clone())
                             .or_default()
                             .push(b[13..].to_vec());
                     }
-                    if let Some(at) = stop_at {
-                        if !stopped && topic == "/hil/measured_wrench" && t as f64 * 1e-9 >= at {
+                    if let Some((at, service, payload)) = &call {
+                        if !stopped && topic == "/hil/measured_wrench" && t as f64 * 1e-9 >= *at {
                             stopped = true;
-                            self.call("/hilcontact/stop", 7, b"{}");
+                            self.call(service, 7, payload);
                         }
                     }
                 }
@@ -406,6 +415,19 @@ fn bad_input_on_the_live_port_changes_nothing() {
         "{}",
         rt["live"]
     );
+    // every refused message counted (the SDK answered each with an error status): the
+    // advertisement and the data of the would-be publisher among them, and the subscriptions
+    // to channels that do not exist (as many as reached the server before it closed the client)
+    assert!(
+        rt["live"]["client_publish_refused"].as_u64().unwrap() >= 1,
+        "{}",
+        rt["live"]
+    );
+    assert!(
+        rt["live"]["refused_input"].as_u64().unwrap() >= 3,
+        "{}",
+        rt["live"]
+    );
 }
 
 #[test]
@@ -431,4 +453,147 @@ fn a_viewer_that_stops_reading_neither_slows_the_loop_nor_holds_the_end() {
     // the stalled client, which held its socket for 8 s
     assert!(finish_time < Duration::from_secs(4), "{finish_time:?}");
     assert_eq!(rt["live"]["peak_clients"], 1);
+}
+
+/// The three `float64`s of a CDR `geometry_msgs/Vector3Stamped` (after its header).
+fn vector3_stamped(payload: &[u8]) -> [f64; 3] {
+    let body = &payload[4..]; // the CDR encapsulation
+    let len = u32::from_le_bytes(body[8..12].try_into().unwrap()) as usize;
+    let at = (12 + len).div_ceil(8) * 8;
+    let f = |i: usize| f64::from_le_bytes(body[at + 8 * i..at + 8 * i + 8].try_into().unwrap());
+    [f(0), f(1), f(2)]
+}
+
+#[test]
+fn the_facility_serves_its_truth_and_the_scene_and_its_operator_stop_ends_it() {
+    // the emulated facility with a live view; the loop (no live view) runs against it until the
+    // viewer stops the facility at 1 s of the facility's time: it stops serving, the loop's
+    // watchdog stops the run
+    let s = delayed(CompensatorConfig::default(), 4.0);
+    let (mut emu, rt) = loopback_options();
+    let port = free_tcp_port();
+    emu.live = Some(LiveOptions {
+        port,
+        control: true,
+        wait: 20.0,
+        ..LiveOptions::default()
+    });
+    let client = std::thread::spawn(move || {
+        let mut v = Viewer::connect(port);
+        let topics: Vec<String> = v.channels.values().cloned().collect();
+        v.subscribe_all();
+        (topics, v.read_all(Some(1.0)))
+    });
+    let (facility, hil) = start_both(&s, &emu, &rt);
+    let begun = Instant::now();
+    while !facility.is_finished() && begun.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert!(
+        facility.is_finished(),
+        "the operator's stop did not end the facility"
+    );
+    assert!(hil.wait(Duration::from_secs(30)), "the loop did not end");
+    let hil_out = hil.finish();
+    let (status, report) = facility.join_with_live();
+    let (topics, seen) = client.join().expect("viewer");
+    assert!(status.operator_stop, "{status:?}");
+    assert_eq!(status.live_samples_dropped, 0, "{status:?}");
+    // the loop saw its facility go silent: a safety stop, exit 3
+    let m = hil_out.expect("the loop's run").metrics;
+    assert_eq!(
+        m["realtime"]["stop"]["exit_code"], 3,
+        "{}",
+        m["realtime"]["stop"]
+    );
+    // the facility's channels: its truth, no virtual dynamics
+    for absent in ["/hil/applied_wrench", "/hil/energy", "/hil/estimates"] {
+        assert!(
+            !topics.iter().any(|t| t == absent),
+            "{absent} in {topics:?}"
+        );
+    }
+    let ticks = status.tick;
+    assert!(ticks >= 1000, "{ticks}");
+    assert_eq!(
+        seen.times["/hil/measured_wrench"],
+        tick_times(ticks),
+        "every period, in order"
+    );
+    for topic in [
+        "/hil/contact_force",
+        "/hil/tip/commanded",
+        "/hil/tip/actual",
+        "/hil/tip/actual_velocity",
+        "/hil/loop_timing",
+        "/facility/contact_moment",
+    ] {
+        assert_eq!(seen.times[topic].len() as u64, ticks, "{topic}");
+    }
+    assert_eq!(seen.times["/hil/scene"].len() as u64, ticks.div_ceil(33));
+    assert_eq!(seen.times["/tf"].len() as u64, ticks.div_ceil(33));
+    // the server's clock is the facility's time, advertised with each scene
+    assert_eq!(seen.clock, seen.times["/hil/scene"]);
+    // the contact force is the facility's own: its peak is the status's
+    let peak = seen.payloads["/hil/contact_force"]
+        .iter()
+        .map(|p| {
+            let [x, y, z] = vector3_stamped(p);
+            (x * x + y * y + z * z).sqrt()
+        })
+        .fold(0.0, f64::max);
+    assert!(peak > 0.0, "no contact before the stop");
+    assert!(
+        (peak - status.peak_contact_force).abs() <= 1e-9 * peak,
+        "{peak} vs {}",
+        status.peak_contact_force
+    );
+    // the call answered, counted, logged
+    assert_eq!(seen.responses, [7]);
+    let report = report.expect("the live view's report");
+    assert_eq!(report["stop_calls"], 1, "{report}");
+    assert_eq!(report["connections"], 1, "{report}");
+    let events = String::from_utf8_lossy(&seen.payloads["/hil/events"].concat()).into_owned();
+    assert!(events.contains("operator stop from client"), "{events}");
+    assert!(
+        events.contains("facility stopped by the operator"),
+        "{events}"
+    );
+}
+
+#[test]
+fn a_mark_is_an_event_of_the_run_its_label_cleaned_and_cut() {
+    // a label with a control character and 300 more characters than the 200 kept
+    let label = format!("pulse 1\n{}", "a".repeat(300));
+    let payload = json!({ "label": label }).to_string().into_bytes();
+    let live = LiveOptions {
+        control: true,
+        ..LiveOptions::default()
+    };
+    let (m, seen, _, _) = run_live(1.0, live, move |port| {
+        let mut v = Viewer::connect(port);
+        v.subscribe_all();
+        v.read_all_calling(Some((0.3, "/hilcontact/mark", payload)))
+    });
+    let rt = &m["realtime"];
+    // a mark changes nothing of the run
+    assert_eq!(rt["stop"]["kind"], "completed", "{rt}");
+    let ticks = rt["ticks"].as_u64().unwrap();
+    assert_eq!(seen.times["/hil/measured_wrench"], tick_times(ticks));
+    assert_eq!(seen.responses, [7]);
+    assert!(seen.failures.is_empty(), "{:?}", seen.failures);
+    assert_eq!(rt["live"]["mark_calls"], 1, "{}", rt["live"]);
+    assert_eq!(rt["live"]["stop_calls"], 0);
+    let kept = format!("pulse 1{}", "a".repeat(193));
+    let events: Vec<String> = seen.payloads["/hil/events"]
+        .iter()
+        .map(|p| String::from_utf8_lossy(p).into_owned())
+        .collect();
+    let mark = events
+        .iter()
+        .find(|e| e.contains("mark from client"))
+        .unwrap_or_else(|| panic!("no mark in {events:?}"));
+    // the text ends with the label as kept: no control character, 200 characters
+    assert!(mark.contains(&format!(": {kept}\0")), "{mark}");
+    assert!(!mark.contains(&format!("{kept}a")), "{mark}");
 }

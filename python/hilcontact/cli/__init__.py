@@ -13,7 +13,7 @@
     hilcontact presets
     hilcontact init FILE.toml [--from PRESET] [--set KEY=VALUE ...]
     hilcontact show SCENARIO [--set KEY=VALUE ...]
-    hilcontact facility SCENARIO [--sensor-port 49152 --http-port 80 --egm-host H --egm-port 6510 ...]
+    hilcontact facility SCENARIO [--sensor-port 49152 --http-port 80 --egm-host H --egm-port 6510 ...] [--live PORT --live-control]
     hilcontact hil SCENARIO --sensor HOST [--sensor-protocol rdt|sri --robot-protocol egm|rsi --robot-port N
                    --robot-option KEY=VALUE --force-limit N --rt-priority 80 --cpu N ...] [--out DIR] [--mcap FILE]
     hilcontact check SCENARIO --sensor HOST [the options of hil] [--duration 1] [--out DIR]

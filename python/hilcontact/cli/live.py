@@ -86,10 +86,14 @@ def live_report_line(report: dict[str, Any] | None) -> str | None:
     """The live view's summary after the run (``metrics.json`` ``realtime.live``)."""
     if not report:
         return None
-    return (f"live view {report.get('address')}: {report.get('messages')} messages, "
+    line = (f"live view {report.get('address')}: {report.get('messages')} messages, "
             f"{report.get('connections')} connections (at most {report.get('peak_clients')} at once), "
             f"stop calls {report.get('stop_calls')}, marks {report.get('mark_calls')}, "
             f"refused calls {report.get('refused_calls')}")
+    if report.get("outbox_full_reports"):
+        line += (f"; clients fell behind and lost their oldest messages: "
+                 f"{', '.join(report.get('lossy_clients') or []) or 'unknown'}")
+    return line
 
 
 def layout_text() -> str:

@@ -18,7 +18,7 @@ from rich.markup import escape
 from ..errors import HilContactError, ScenarioError
 from ..limits import Limits, check_run
 from ..scenario import load_scenario
-from .calibrate import CALIBRATION_OPTION, with_calibration
+from .calibration_file import CALIBRATION_OPTION, with_calibration
 from .options import (
     _SET_HELP,
     NON_NEGATIVE,
@@ -142,11 +142,21 @@ def _realtime_options(section: str, flags: list[RealtimeFlag], kw: dict[str, Any
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
 @_with(_link_flags("facility", _FACILITY_FLAGS))
 @click.option("--duration", type=POSITIVE, default=None, metavar="S", help="Stop after S seconds [default: run until Ctrl-C].")
-def facility_command(scenario: str, sets: tuple[str, ...], duration: float | None, **kw: Any) -> None:
+@_with(live_flags())
+def facility_command(scenario: str, sets: tuple[str, ...], duration: float | None, live: str | None,
+                     live_control: bool, live_remote: bool, live_wait: float, **kw: Any) -> None:
     """Emulate the facility of SCENARIO in real time: an F/T sensor speaking ATI's Net F/T RDT
     protocol (UDP, 1 record per control period, /netftapi2.xml over HTTP) and a robot speaking
     ABB's EGM (UDP + protobuf, feedback every 4 ms to --egm-host:--egm-port, corrections back),
     with the scenario's robot delay, sensor delay and noise, and the contact between them.
+
+    With --live, a Foxglove live view of the facility's physical truth (the commanded pose it
+    received, the actual pose, the contact force and moment, the sensor's wrench, its own loop
+    timing) and the scene; with --live-control its /hilcontact/stop ends the facility (it stops
+    serving; exit 3, reason operator).
+
+    Exit code: 0 stopped by --duration or Ctrl-C, 3 stopped by the live view's operator, 1 a
+    port cannot be bound, 2 bad input.
 
     \b
     Example (then run `hilcontact hil` against it, see there):
@@ -157,6 +167,9 @@ def facility_command(scenario: str, sets: tuple[str, ...], duration: float | Non
     with _errors():
         resolved = load_scenario(scenario, parse_set_options(sets))
         options = _realtime_options("facility", _FACILITY_FLAGS, kw)
+        settings = live_settings(live, live_control, live_remote, live_wait)
+        if settings is not None:
+            options["live"] = settings
         facility = start_facility(resolved, options)
     _stop_on_signals()
     a = facility.addresses
@@ -178,12 +191,23 @@ def facility_command(scenario: str, sets: tuple[str, ...], duration: float | Non
         with stderr.status("facility starting ...") as status:
             while duration is None or facility.status()["time"] < duration:
                 time.sleep(0.1)
-                status.update(_facility_line(facility.status()))
+                now = facility.status()
+                if now.get("operator_stop") or now.get("finished"):
+                    break
+                status.update(_facility_line(now))
     except KeyboardInterrupt:
         pass
     final = facility.stop()
     click.echo("stopped: " + _facility_line(final))
     click.echo("endpoints: " + _facility_errors(final))
+    live_summary = live_report_line(final.get("live"))
+    if live_summary:
+        click.echo(live_summary)
+    if final.get("live_samples_dropped"):
+        click.echo(f"live view: {final['live_samples_dropped']} periods not shown (its thread fell behind)")
+    if final.get("operator_stop"):
+        click.echo("stop: operator (live view): the facility stopped serving")
+        raise click.exceptions.Exit(3)
 
 
 def _scheduling_options(rt_priority: int | None, no_lock_memory: bool | None, cpu: int | None) -> dict[str, Any] | None:

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import ScenarioError
 from . import require
-from .mjcf import ContactMatch, MatchedContact, rotation_matrix, write_mjcf
+from .mjcf import ContactMatch, MatchedContact, MeshFaceFilter, mesh_faces, rotation_matrix, write_mjcf
 
 __all__ = ["MujocoContact", "simulate_facility"]
 
@@ -37,16 +37,20 @@ class MujocoContact:
         self._mj = mj
         path = scenario.facility.mujoco_model
         self.matched: MatchedContact | None = None
+        self._faces: MeshFaceFilter | None = None
         if path:
             try:
                 self.model = mj.MjModel.from_xml_path(os.fspath(path))
             except (ValueError, OSError) as exc:
                 raise ScenarioError(f"facility.mujoco_model: {path}: {' '.join(str(exc).split())}") from None
         else:
+            match = match or ContactMatch()
             xml, self.matched = write_mjcf(scenario, float(scenario.facility.mujoco_timestep),
                                            match=match, fixed_target=True)
             self.xml = xml
             self.model = mj.MjModel.from_xml_string(xml)
+            if match.mesh_faces_only:
+                self._faces = MeshFaceFilter(mj, self.model, mesh_faces(scenario))
         m = self.model
         body = mj.mj_name2id(m, mj.mjtObj.mjOBJ_BODY, "servicer")
         if body < 0 or m.body_jntnum[body] != 1 or m.jnt_type[m.body_jntadr[body]] != mj.mjtJoint.mjJNT_FREE:
@@ -57,7 +61,7 @@ class MujocoContact:
         self.data = mj.MjData(m)
         self._sensor = np.asarray(scenario.facility.sensor_position, dtype=float)
         self._f6 = np.zeros(6)
-        self._track = self.matched is not None and self.matched.solreffriction_per_newton != 0.0
+        self._track = self.matched is not None and self.matched.tracks
         #: MuJoCo contacts at the last call.
         self.contacts = 0
         #: The friction (tangential) part of the force on the rod at the last call, ``t``, N.
@@ -67,14 +71,19 @@ class MujocoContact:
         """Force on the rod, force on the mockup and its moment about the sensor origin (``t``),
         and each pair's normal force, for the state in ``data``."""
         mj, m, d = self._mj, self.model, self.data
-        mj.mj_forward(m, d)
+        if self._faces is not None and self._faces.pieces:
+            self._faces.forward(m, d)
+        else:
+            mj.mj_forward(m, d)
         on_rod = np.zeros(3)
         friction = np.zeros(3)
         moment = np.zeros(3)
         normal = np.zeros(max(m.npair, 1))
+        slide = np.zeros(max(m.npair, 1))
+        points = np.zeros(max(m.npair, 1))
         for i in range(d.ncon):
             c = d.contact[i]
-            if c.efc_address < 0:
+            if c.efc_address < 0 or c.exclude:
                 continue
             rod1 = m.geom_bodyid[c.geom1] == self._body
             rod2 = m.geom_bodyid[c.geom2] == self._body
@@ -89,10 +98,17 @@ class MujocoContact:
             friction += tangential if rod2 else -tangential
             moment += np.cross(c.pos - self._sensor, -f)
             if self._track:
-                normal[self._pair_of(c)] += self._f6[0]
+                pair = self._pair_of(c)
+                normal[pair] += self._f6[0]
+                points[pair] += 1.0
+                if c.dim >= 3:
+                    a = c.efc_address
+                    slide[pair] += self._f6[0] * float(np.hypot(d.efc_vel[a + 1], d.efc_vel[a + 2]))
         self.contacts = int(d.ncon)
         self.friction = friction
-        return on_rod, moment, normal
+        self._speed = np.divide(slide, normal, out=np.zeros_like(slide), where=normal > 0.0)
+        # a pair's parameters apply to each of its points: its mean normal force per point
+        return on_rod, moment, np.divide(normal, points, out=np.zeros_like(normal), where=points > 0)
 
     def _pair_of(self, contact: Any) -> int:
         m = self.model
@@ -113,11 +129,13 @@ class MujocoContact:
         d.qvel[self._dof:self._dof + 3] = velocity
         d.qvel[self._dof + 3:self._dof + 6] = rotation_matrix(q).T @ np.asarray(angular_velocity, dtype=float)
         if self._track:
-            # friction's viscous slope follows the normal force (docs/mujoco.md): a first pass
-            # gives each pair's normal force, the second the forces with that slope
+            # friction's viscous slope follows the normal force and the sliding speed
+            # (docs/mujoco.md): a first pass gives each pair's normal force and sliding speed at
+            # this state, the second the forces with that slope
             self.model.pair_solreffriction[:, 1] = 0.0
             _, _, normal = self._forces()
-            self.model.pair_solreffriction[:, 1] = self.matched.solreffriction_per_newton * normal[: self.model.npair]
+            npair = self.model.npair
+            self.model.pair_solreffriction[:, 1] = self.matched.pair_solreffriction(normal[:npair], self._speed[:npair])
         on_rod, moment, _ = self._forces()
         return on_rod, -on_rod, moment
 

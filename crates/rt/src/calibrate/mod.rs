@@ -7,10 +7,12 @@
 //! - [`options`]: its options;
 //! - [`simulate`]: the procedure against the plan's simulated facility (the facility model of
 //!   the true hardware: `facility.mount_*`, `robot_repeatability`, `stiffness_error`), as fast
-//!   as it computes.
+//!   as it computes;
+//! - [`realtime`]: the procedure in real time over the device links, as `hil`'s loop's driver.
 
 pub mod options;
 pub mod procedure;
+pub mod realtime;
 
 use hilcontact_core::calibration::{
     CalibratedLaw, CalibratedLawKind, CalibratedRobot, CalibratedWall, CalibrationFile,
@@ -22,6 +24,7 @@ use hilcontact_core::Plan;
 
 pub use options::CalibrateOptions;
 pub use procedure::{Procedure, Progress, Step};
+pub use realtime::{CalibrationHandle, RealtimeCalibration};
 
 /// Longest a calibration may take per wall, s, beyond the excitation (a bound of the
 /// simulation's loop; the procedure itself ends far earlier).

@@ -350,6 +350,14 @@ impl Procedure {
         self.form
     }
 
+    /// Where the current probe first felt its wall: the commanded tip at the detection (m,
+    /// `t`) and the wall's nominal normal, while the probe presses, dwells or retreats; None
+    /// otherwise (for the real-time loop's units check).
+    pub fn contact_reference(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        matches!(self.phase, Phase::Press | Phase::Dwell | Phase::Retreat)
+            .then(|| (self.detect_tip, self.walls[self.wall].1.normal))
+    }
+
     fn elapsed(&self) -> f64 {
         (self.tick - self.phase_start) as f64 * self.period
     }

@@ -37,12 +37,15 @@
 //!   outputs of [`crate::output`], the loop's live events);
 //! - `start.rs`: the start checks, shared with the dry run ([`crate::check()`]);
 //! - `tick.rs`: the loop thread and one tick;
+//! - `driver.rs`: the virtual side of a tick ([`driver::Driver`]): the HIL step, or the
+//!   calibration procedure (`hilcontact calibrate` over the device links);
 //! - `connect.rs`: the loop thread's start-up, before the first tick;
 //! - `hold.rs`: the loop thread after a stop (retreat, hold).
 //!
 //! The options are [`crate::options::RuntimeOptions`].
 
 mod connect;
+pub(crate) mod driver;
 pub mod handle;
 mod hold;
 pub(crate) mod start;
@@ -54,5 +57,6 @@ pub use crate::devices::LinkStats;
 pub use crate::options::{RuntimeOptions, MAX_CONNECT_TIMEOUT};
 pub use crate::report::{RunOutcome, Sample};
 pub use handle::HilHandle;
+pub(crate) use handle::{LoopEnd, LoopHandle};
 pub use status::StatusSnapshot;
 pub use tick::CONTACT_FREE_FORCE;

@@ -9,9 +9,9 @@ use std::sync::Arc;
 use nalgebra::Vector3;
 
 use hilcontact_core::facility::Measurement;
-use hilcontact_core::hil::HilStep;
 use hilcontact_core::world::RelativeMotion;
 
+use super::driver::Driver;
 use super::status::SharedStatus;
 use crate::clock::{now_ns, sleep_until_ns, Histogram, SchedulingReport};
 use crate::devices::{Pacing, RobotLink, SensorLink, Wrench};
@@ -31,8 +31,8 @@ pub const CONTACT_FREE_FORCE: f64 = 5.0;
 
 /// The loop thread's state: the virtual side, the two links and the timing statistics.
 pub(super) struct Loop {
-    /// The virtual side of a tick: the core's one HIL step.
-    pub(super) step: HilStep,
+    /// The virtual side of a tick: the core's one HIL step, or the calibration procedure.
+    pub(super) step: Driver,
     pub(super) rod: Vector3<f64>,
     pub(super) period: f64,
     pub(super) period_ns: u64,
@@ -120,10 +120,13 @@ impl Loop {
         let mut last_wake: Option<u64> = None;
         let mut k = 0u64;
         let cycle_ns = self.cycle_ns();
+        // the clock's deadlines moved later by the periods a driver that does not catch up
+        // skipped, ns
+        let mut skipped_ns = 0u64;
         while k <= self.ticks {
             let (wake, deadline) = match self.pacing {
                 Pacing::Clock => {
-                    let deadline = self.t0_ns + k * self.period_ns;
+                    let deadline = self.t0_ns + k * self.period_ns + skipped_ns;
                     sleep_until_ns(deadline);
                     (now_ns(), deadline)
                 }
@@ -140,6 +143,11 @@ impl Loop {
             self.compute.record(end - wake);
             if end > deadline + cycle_ns {
                 self.overruns += 1;
+                if !self.step.catches_up() {
+                    // the next deadline one period from now: the missed periods are skipped,
+                    // not caught up in a burst of commands
+                    skipped_ns += (end - deadline) / self.period_ns * self.period_ns;
+                }
             }
             self.publish(self.last_step + 1, latency);
             if let Some(event) = outcome {
@@ -346,7 +354,7 @@ impl Loop {
         latency: u64,
     ) -> std::result::Result<RelativeMotion, StopEvent> {
         let time = k as f64 * self.period;
-        let (record, verdict) = self.step.observe(k as usize, m, None);
+        let (record, verdict) = self.step.observe(k, m);
         let sample = Sample {
             record,
             wake_latency: latency as f64 * 1e-9,
@@ -362,7 +370,7 @@ impl Loop {
         }
         let measured = m.force.norm();
         self.safety.measured_peak_force = self.safety.measured_peak_force.max(measured);
-        let expected = predicted_wrench(&self.system, &m.actual).0;
+        let expected = self.step.units_expected(&self.system, &m.actual);
         if let Some(stop) = self.units.push(expected, measured, time) {
             return Err(stop);
         }
@@ -379,7 +387,7 @@ impl Loop {
         if let Some(stop) = verdict {
             return Err(stop);
         }
-        let command = self.step.advance(k as usize)?;
+        let command = self.step.advance(k)?;
         let (force, moment) = predicted_wrench(&self.system, &command);
         if let Some(stop) = check_predicted(&self.limits, force, moment, time) {
             self.safety.limit_line = Some("predicted");
@@ -406,7 +414,7 @@ impl Loop {
         s.force_bits
             .store(self.force.norm().to_bits(), Ordering::Relaxed);
         s.energy_bits
-            .store(self.step.dynamics().energy().to_bits(), Ordering::Relaxed);
+            .store(self.step.energy().to_bits(), Ordering::Relaxed);
         s.max_latency_ns.fetch_max(latency, Ordering::Relaxed);
         s.overruns.store(self.overruns, Ordering::Relaxed);
         s.sensor.store(sensor);

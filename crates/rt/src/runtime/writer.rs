@@ -30,11 +30,13 @@ pub(super) fn open_outputs(plan: &Plan, options: &RuntimeOptions) -> Result<Outp
 /// Starts the writer thread: it drains the loop's ring buffer every 5 ms into the run folder
 /// and the outputs, with the loop's events (its counters that grew, the stop) after each
 /// drain; once the loop has ended (the ring abandoned) and the ring is empty, it hands both
-/// back. It keeps normal scheduling and never runs on the loop thread.
+/// back. It keeps normal scheduling and never runs on the loop thread. `keep`: whether the
+/// samples go into the run folder (a calibration keeps none: it writes no run folder).
 pub(super) fn spawn_writer(
     mut consumer: rtrb::Consumer<Sample>,
     shared: Arc<SharedStatus>,
     mut run_folder: RunFolder,
+    keep: bool,
     mut outputs: Outputs,
 ) -> Result<JoinHandle<(RunFolder, Outputs)>> {
     let mut events = EventWatch::new();
@@ -46,7 +48,9 @@ pub(super) fn spawn_writer(
                 // read before draining: every sample up to the stop is in the ring then
                 let stop = StopKind::from_code(shared.stop_code.load(Ordering::Acquire));
                 while let Ok(s) = consumer.pop() {
-                    run_folder.push(&s);
+                    if keep {
+                        run_folder.push(&s);
+                    }
                     outputs.sample(&s);
                 }
                 if !outputs.is_empty() {

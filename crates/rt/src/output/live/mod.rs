@@ -18,6 +18,13 @@
 //! every call, accepted or refused, is an event on `/hil/events`, a line on stderr and a count
 //! in the report.
 //!
+//! **The emulated facility** (`hilcontact facility --live`, [`crate::emulator`]) serves the
+//! same view of its own physical truth: a run of kind [`FACILITY_RUN`] has the channels of the
+//! recording that a facility knows (measured wrench, contact force, the commanded pose it
+//! received and its velocity, the actual pose and velocity, its own loop timing, events) plus
+//! [`FACILITY_CHANNELS`], and the scene; not the virtual dynamics' (applied wrench, energy,
+//! estimates). Its operator stop ends the facility (it stops serving its devices).
+//!
 //! The server needs the cargo feature `live` of `hilcontact-rt` (on in the Python extension);
 //! without it, the option is refused at start with a message saying so.
 
@@ -27,8 +34,25 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
+use super::mcap::{ChannelScope, ChannelSpec, FRAME_TARGET};
 use super::{Sink, SinkContext};
 use crate::error::{Result, RtError};
+
+/// [`super::RunInfo::kind`] of the emulated facility's live view: its samples are the
+/// facility's truth (no virtual dynamics), its timing the emulator's, and it is not paced.
+pub const FACILITY_RUN: &str = "facility";
+
+/// Topics of the recording a facility does not have (the virtual dynamics' own).
+pub const FACILITY_ABSENT: [&str; 3] = ["/hil/applied_wrench", "/hil/energy", "/hil/estimates"];
+
+/// The facility's channels beyond the recording's (the one list; docs/realtime.md shows it).
+pub const FACILITY_CHANNELS: [ChannelSpec; 1] = [ChannelSpec {
+    topic: "/facility/contact_moment",
+    schema: "geometry_msgs/msg/Vector3Stamped",
+    frame: FRAME_TARGET,
+    scope: ChannelScope::Always,
+    doc: "the physical contact's moment on the frame about the sensor origin, t, N·m, per tick",
+}];
 
 #[cfg(feature = "live")]
 mod clients;
@@ -117,7 +141,10 @@ impl LiveOptions {
         if !(16..=1_048_576).contains(&self.backlog) {
             return Err(RtError::option(
                 "live.backlog",
-                format!("must be a whole number from 16 to 1048576, got {}", self.backlog),
+                format!(
+                    "must be a whole number from 16 to 1048576, got {}",
+                    self.backlog
+                ),
             ));
         }
         Ok(())
@@ -166,7 +193,10 @@ mod tests {
         }
         for host in ["0.0.0.0", "192.168.1.5", "::"] {
             let err = ok(host, false).expect_err(host).to_string();
-            assert!(err.contains("live.host") && err.contains("--live-remote"), "{err}");
+            assert!(
+                err.contains("live.host") && err.contains("--live-remote"),
+                "{err}"
+            );
             assert!(ok(host, true).is_ok(), "{host}");
         }
         let err = ok("robot.lab", true).expect_err("a name").to_string();

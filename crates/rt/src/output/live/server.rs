@@ -16,7 +16,7 @@ use serde::Serialize;
 use serde_json::Value;
 
 use super::clients::{self, ClientLog};
-use super::LiveOptions;
+use super::{LiveOptions, FACILITY_ABSENT, FACILITY_CHANNELS, FACILITY_RUN};
 use crate::error::{Result, RtError};
 use crate::output::mcap::{schema_text, Cdr, ChannelScope, CHANNELS, FRAME_SENSOR, FRAME_TARGET};
 use crate::output::scene::{scene_schema_text, Scene, SCENE_CHANNELS};
@@ -104,8 +104,14 @@ pub struct LiveReport {
     pub peak_clients: u64,
     /// Most subscriptions at once (all clients).
     pub peak_subscriptions: u64,
-    /// Client advertisements and messages (refused: clients may not publish).
+    /// Client advertisements and messages on channels (refused: clients may not publish), as
+    /// the listener and the SDK's log see them.
     pub client_publish_refused: u64,
+    /// Client messages the server answered with an error or warning status (unparsable, a
+    /// subscription to a channel that does not exist, publishing, ...), as the SDK logs them;
+    /// 0 when `addresses_known` is false. A call of a service that does not exist is answered
+    /// but not logged by the SDK: not counted.
+    pub refused_input: u64,
     /// Stop calls accepted.
     pub stop_calls: u64,
     /// Mark calls accepted.
@@ -121,6 +127,13 @@ pub struct LiveReport {
     /// Connections dropped at the WebSocket handshake (not a WebSocket client), as the SDK
     /// logs them; 0 when `addresses_known` is false.
     pub failed_handshakes: u64,
+    /// The SDK's "outbox for client ... full" lines: > 0 means at least one client's queue was
+    /// full and its oldest messages were dropped. Not a count of messages nor of clients: the
+    /// SDK (0.30.3) counts neither and logs this at most once per 30 s for the whole process;
+    /// 0 when `addresses_known` is false.
+    pub outbox_full_reports: u64,
+    /// The clients (addresses) of those lines.
+    pub lossy_clients: Vec<String>,
     /// The per-client backlog, messages.
     pub backlog: u32,
 }
@@ -131,6 +144,8 @@ pub struct LiveSink {
     _context: Arc<Context>,
     channels: Vec<Option<Arc<RawChannel>>>,
     scene_channels: Vec<Arc<RawChannel>>,
+    /// [`FACILITY_CHANNELS`]' channels (a facility's run only).
+    facility_channels: Vec<Arc<RawChannel>>,
     scene: Scene,
     cdr: Cdr,
     info: RunInfo,
@@ -167,15 +182,23 @@ impl LiveSink {
                 .build_raw()
                 .map_err(|e| RtError::io_other(format!("live channel {topic}"), e.to_string()))
         };
+        let facility = info.kind == FACILITY_RUN;
         let mut channels = Vec::with_capacity(CHANNELS.len());
         for spec in CHANNELS {
             let wanted = match spec.scope {
+                _ if facility && FACILITY_ABSENT.contains(&spec.topic) => false,
                 ChannelScope::Estimates => info.estimates_contact,
-                ChannelScope::Realtime => info.realtime(),
+                ChannelScope::Realtime => info.realtime() || facility,
                 _ => true,
             };
             channels.push(if wanted {
-                Some(raw(spec.topic, spec.schema, schema_text(spec.schema), spec.frame, spec.doc)?)
+                Some(raw(
+                    spec.topic,
+                    spec.schema,
+                    schema_text(spec.schema),
+                    spec.frame,
+                    spec.doc,
+                )?)
             } else {
                 None
             });
@@ -189,6 +212,13 @@ impl LiveSink {
                 spec.frame,
                 spec.doc,
             )?);
+        }
+        let mut facility_channels = Vec::new();
+        if facility {
+            for spec in FACILITY_CHANNELS {
+                let text = schema_text(spec.schema);
+                facility_channels.push(raw(spec.topic, spec.schema, text, spec.frame, spec.doc)?);
+            }
         }
         let services = services(options.control, &control, &counters, &clients);
         let server = WebSocketServer::new()
@@ -227,7 +257,8 @@ impl LiveSink {
                 String::new()
             }
         );
-        let advertised = channels.iter().flatten().count() + scene_channels.len();
+        let advertised =
+            channels.iter().flatten().count() + scene_channels.len() + facility_channels.len();
         let begun = Instant::now();
         while begun.elapsed().as_secs_f64() < options.wait
             && (counters.subscriptions.load(Ordering::Relaxed) as usize) < advertised
@@ -239,6 +270,7 @@ impl LiveSink {
             _context: ctx,
             channels,
             scene_channels,
+            facility_channels,
             scene: Scene::new(context.plan),
             cdr: Cdr::new(),
             info,
@@ -261,8 +293,13 @@ impl LiveSink {
         let i = CHANNELS.iter().position(|c| c.topic == "/tf_static");
         if let Some(Some(channel)) = i.map(|i| sink.channels[i].clone()) {
             let c = &sink.info;
-            sink.cdr
-                .tf_message(0, FRAME_TARGET, FRAME_SENSOR, &c.sensor_position, &c.sensor_orientation);
+            sink.cdr.tf_message(
+                0,
+                FRAME_TARGET,
+                FRAME_SENSOR,
+                &c.sensor_position,
+                &c.sensor_orientation,
+            );
             channel.log_with_meta(sink.cdr.bytes(), PartialMetadata::with_log_time(0));
             sink.report.messages += 1;
         }
@@ -275,6 +312,12 @@ impl LiveSink {
             channel.log_with_meta(self.cdr.bytes(), PartialMetadata::with_log_time(t_ns));
             self.report.messages += 1;
         }
+    }
+
+    /// Whether the samples are a simulation's, replayed at [`LiveOptions::speed`] (a
+    /// real-time run's and a facility's are shown as they happen).
+    fn replay(&self) -> bool {
+        self.info.kind == "simulation"
     }
 
     /// A simulation's replay waits until the record's time at the replay speed; a stop from
@@ -297,13 +340,17 @@ impl LiveSink {
         r.connections = c.connections.load(Ordering::Relaxed);
         r.peak_clients = c.peak_clients.load(Ordering::Relaxed);
         r.peak_subscriptions = c.peak_subscriptions.load(Ordering::Relaxed);
-        r.client_publish_refused = c.client_publish.load(Ordering::Relaxed);
+        r.client_publish_refused = c.client_publish.load(Ordering::Relaxed)
+            + self.clients.publish_refused.load(Ordering::Relaxed);
+        r.refused_input = self.clients.refused_input.load(Ordering::Relaxed);
         r.stop_calls = c.stop_calls.load(Ordering::Relaxed);
         r.mark_calls = c.mark_calls.load(Ordering::Relaxed);
         r.refused_calls = c.refused_calls.load(Ordering::Relaxed);
         r.addresses_known = clients::addresses_known();
         r.invalid_messages = self.clients.invalid_messages.load(Ordering::Relaxed);
         r.failed_handshakes = self.clients.failed_handshakes.load(Ordering::Relaxed);
+        r.outbox_full_reports = self.clients.outbox_full.load(Ordering::Relaxed);
+        r.lossy_clients = self.clients.lossy_clients();
         r.clone()
     }
 
@@ -357,7 +404,8 @@ fn services(
             let who = name(&request);
             if !control_on {
                 up(&c.refused_calls, None);
-                let text = format!("live view: {STOP_SERVICE} refused from {who} (no --live-control)");
+                let text =
+                    format!("live view: {STOP_SERVICE} refused from {who} (no --live-control)");
                 eprintln!("{text}");
                 r.push_event(EventLevel::Warn, text);
                 return Err("refused: the run was started without --live-control".into());
@@ -376,7 +424,8 @@ fn services(
             let who = who(&request);
             if !control_on {
                 up(&c.refused_calls, None);
-                let text = format!("live view: {MARK_SERVICE} refused from {who} (no --live-control)");
+                let text =
+                    format!("live view: {MARK_SERVICE} refused from {who} (no --live-control)");
                 eprintln!("{text}");
                 r.push_event(EventLevel::Warn, text);
                 return Err("refused: the run was started without --live-control".into());
@@ -400,11 +449,11 @@ fn services(
 
 impl Sink for LiveSink {
     fn paced(&self) -> bool {
-        !self.info.realtime()
+        self.replay()
     }
 
     fn sample(&mut self, s: &Sample) {
-        if !self.info.realtime() {
+        if self.replay() {
             if self.control.operator_stop_requested() {
                 return; // the operator stopped the replay
             }
@@ -413,28 +462,47 @@ impl Sink for LiveSink {
         let r = &s.record;
         let t = time_ns(r.time);
         self.last_ns = self.last_ns.max(t);
-        self.cdr.wrench_stamped(t, FRAME_SENSOR, &r.measured_force, &r.measured_moment);
+        self.cdr
+            .wrench_stamped(t, FRAME_SENSOR, &r.measured_force, &r.measured_moment);
         self.put(0, t);
-        self.cdr.wrench_stamped(t, FRAME_SENSOR, &r.applied_force, &r.applied_moment);
+        self.cdr
+            .wrench_stamped(t, FRAME_SENSOR, &r.applied_force, &r.applied_moment);
         self.put(1, t);
         self.cdr.vector3_stamped(t, FRAME_TARGET, &r.contact_force);
         self.put(2, t);
-        self.cdr.pose_stamped(t, FRAME_TARGET, &r.tip_position, &r.orientation);
+        self.cdr
+            .pose_stamped(t, FRAME_TARGET, &r.tip_position, &r.orientation);
         self.put(3, t);
-        self.cdr
-            .pose_stamped(t, FRAME_TARGET, &r.actual_tip_position, &r.actual_orientation);
+        self.cdr.pose_stamped(
+            t,
+            FRAME_TARGET,
+            &r.actual_tip_position,
+            &r.actual_orientation,
+        );
         self.put(4, t);
-        self.cdr.twist_stamped(t, FRAME_TARGET, &r.tip_velocity, &r.angular_velocity);
-        self.put(5, t);
         self.cdr
-            .twist_stamped(t, FRAME_TARGET, &r.actual_tip_velocity, &r.actual_angular_velocity);
+            .twist_stamped(t, FRAME_TARGET, &r.tip_velocity, &r.angular_velocity);
+        self.put(5, t);
+        self.cdr.twist_stamped(
+            t,
+            FRAME_TARGET,
+            &r.actual_tip_velocity,
+            &r.actual_angular_velocity,
+        );
         self.put(6, t);
         self.cdr.header_f64s(t, "", &[r.energy, r.observed_energy]);
         self.put(7, t);
-        self.cdr.header_f64s(t, "", &[r.stiffness_estimate, r.damping_estimate]);
+        self.cdr
+            .header_f64s(t, "", &[r.stiffness_estimate, r.damping_estimate]);
         self.put(8, t);
-        self.cdr.header_f64s(t, "", &[s.wake_latency, s.sensor_age, s.robot_age]);
+        self.cdr
+            .header_f64s(t, "", &[s.wake_latency, s.sensor_age, s.robot_age]);
         self.put(9, t);
+        if let Some(channel) = self.facility_channels.first() {
+            self.cdr.vector3_stamped(t, FRAME_TARGET, &r.contact_moment);
+            channel.log_with_meta(self.cdr.bytes(), PartialMetadata::with_log_time(t));
+            self.report.messages += 1;
+        }
         if self.scene.due(self.tick) {
             let meta = PartialMetadata::with_log_time(t);
             self.scene_channels[0].log_with_meta(self.scene.markers(t, s), meta);

@@ -1,0 +1,397 @@
+//! `hilcontact calibrate SCENARIO --out cal.toml` over the device links: the calibration
+//! [`Procedure`] as the real-time loop's driver ([`crate::runtime`]), with the links, options
+//! and safety functions of `hil` unchanged (workspace, force and moment limits including the
+//! predicted one, tracking, watchdogs, start checks, retreat and hold on every stop); the
+//! procedure's own bounds (probe depth, press force, its abort force) apply as well.
+//!
+//! [`CalibrationHandle::start`] starts it; [`CalibrationHandle::progress`] gives the progress
+//! lines, surface by surface, as they come; [`CalibrationHandle::finish`] waits for the end
+//! and builds the calibration file when every wall was measured.
+//!
+//! The procedure's ticks are not allocation-free as `hil`'s are (its sample logs grow, and a
+//! wall's fit runs at its last tick); each tick's time is measured and reported like `hil`'s
+//! (overruns).
+
+use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::Mutex;
+use std::time::Duration;
+
+use nalgebra::{UnitQuaternion, Vector3};
+use serde_json::{json, Value};
+
+use hilcontact_core::contact::ContactModel;
+use hilcontact_core::facility::Measurement;
+use hilcontact_core::hil::HilRecord;
+use hilcontact_core::world::RelativeMotion;
+use hilcontact_core::{Plan, Scenario};
+
+use super::{
+    calibration_file, describe, CalibrateOptions, CalibrationOutcome, Procedure, Progress, Step,
+    MAX_SECONDS_PER_WALL,
+};
+use crate::error::{Result, RtError};
+use crate::options::RuntimeOptions;
+use crate::runtime::driver::Driver;
+use crate::runtime::{LoopEnd, LoopHandle, StatusSnapshot};
+use crate::safety::{StopEvent, StopKind};
+
+/// The procedure as the loop's driver: each tick's measurement in, the next command out; its
+/// progress lines sent to the handle.
+pub struct RealtimeProcedure {
+    procedure: Procedure,
+    /// The scenario's contact law (the units check's expectation).
+    law: ContactModel,
+    rod: Vector3<f64>,
+    /// Sensor to `t`.
+    sensor_to_t: UnitQuaternion<f64>,
+    /// Control period, s.
+    period: f64,
+    /// The loop's bound, ticks: past it the procedure has not finished in time.
+    ticks: u64,
+    initial: RelativeMotion,
+    /// The command the procedure gave last (sent after this tick's checks).
+    command: RelativeMotion,
+    /// Whether the procedure reached its end (finished or stopped by itself).
+    done: bool,
+    progress: Sender<String>,
+    /// Time spent on each wall measured, s.
+    wall_seconds: Vec<f64>,
+    /// Every progress line, in order.
+    lines: Vec<String>,
+}
+
+impl RealtimeProcedure {
+    /// The procedure of `plan` as a driver, with the loop's bound in ticks; refuses (before
+    /// anything is opened) what [`Procedure::new`] refuses.
+    fn new(
+        plan: &Plan,
+        options: &CalibrateOptions,
+        force_limit: f64,
+        progress: Sender<String>,
+    ) -> Result<(Self, u64)> {
+        let procedure = Procedure::new(plan, options, force_limit)
+            .map_err(|message| RtError::option("calibrate", message))?;
+        let initial = plan.nominal.relative_motion(&plan.initial);
+        let initial = RelativeMotion {
+            velocity: Vector3::zeros(),
+            angular_velocity: Vector3::zeros(),
+            ..initial
+        };
+        let seconds = options.excitation_duration
+            + 10.0
+            + MAX_SECONDS_PER_WALL * plan.nominal.contact.walls.len() as f64;
+        let ticks = (seconds / plan.period).ceil() as u64;
+        Ok((
+            RealtimeProcedure {
+                procedure,
+                law: plan.nominal.contact.law,
+                rod: plan.nominal.rod_tip,
+                sensor_to_t: plan.sensor.orientation,
+                period: plan.period,
+                ticks,
+                initial,
+                command: initial,
+                done: false,
+                progress,
+                wall_seconds: Vec::new(),
+                lines: Vec::new(),
+            },
+            ticks,
+        ))
+    }
+
+    /// The force the loop's units check expects at the fed-back pose `actual`, N: the
+    /// scenario's (static) law at the penetration past the contact the current probe detected,
+    /// 0 while no probe is in contact.
+    pub(crate) fn units_expected(&self, actual: &RelativeMotion) -> f64 {
+        let Some((point, normal)) = self.procedure.contact_reference() else {
+            return 0.0;
+        };
+        let depth = (point - actual.point(&self.rod)).dot(&normal).max(0.0);
+        match self.law {
+            ContactModel::Linear(l) => l.stiffness * depth,
+            ContactModel::HuntCrossley(h) => h.stiffness * depth.powf(h.exponent),
+        }
+    }
+
+    /// The command the run starts from: the scenario's initial pose at rest.
+    pub(crate) fn initial(&self) -> RelativeMotion {
+        self.initial
+    }
+
+    /// Tick `k`'s first half: the procedure's step on `m`; the tick's record (desired: the
+    /// command being followed; measured: `m`) and the stop it calls for: `completed` when the
+    /// procedure is over (finished, or stopped by itself and backed out of contact) or at the
+    /// loop's bound, `non-finite` for a record that is not finite.
+    pub(crate) fn observe(&mut self, k: u64, m: &Measurement) -> (HilRecord, Option<StopEvent>) {
+        let time = k as f64 * self.period;
+        let desired = self.command;
+        let step = self.procedure.step(m);
+        for event in self.procedure.take_events() {
+            if let Progress::Wall(_, _, _, spent) = &event {
+                self.wall_seconds.push(*spent);
+            }
+            let line = describe(&event, &self.procedure);
+            // the handle may be gone (dropped): the lines are kept here as well
+            let _ = self.progress.send(line.clone());
+            self.lines.push(line);
+        }
+        let mut stop = None;
+        match step {
+            Step::Command(c) => self.command = c,
+            Step::Done => {
+                self.done = true;
+                stop = Some(StopEvent::plain(StopKind::Completed, time));
+            }
+        }
+        if k >= self.ticks {
+            stop = Some(StopEvent::plain(StopKind::Completed, time));
+        }
+        let rod_force = -(self.sensor_to_t * m.force);
+        let record = HilRecord {
+            time,
+            tip_position: desired.point(&self.rod),
+            tip_velocity: desired.point_velocity(&self.rod),
+            angular_velocity: desired.angular_velocity,
+            orientation: desired.orientation,
+            actual_tip_position: m.actual.point(&self.rod),
+            actual_tip_velocity: m.actual.point_velocity(&self.rod),
+            actual_orientation: m.actual.orientation,
+            actual_angular_velocity: m.actual.angular_velocity,
+            contact_force: rod_force,
+            friction_force: Vector3::zeros(),
+            contact_moment: self.sensor_to_t * m.moment,
+            measured_force: m.force,
+            measured_moment: m.moment,
+            applied_force: Vector3::zeros(),
+            applied_moment: Vector3::zeros(),
+            energy: 0.0,
+            stiffness_estimate: f64::NAN,
+            damping_estimate: f64::NAN,
+            observed_energy: f64::NAN,
+        };
+        if !record.is_finite() {
+            stop = Some(StopEvent::plain(StopKind::NonFinite, time));
+        }
+        (record, stop)
+    }
+
+    /// Tick `k`'s second half: the procedure's command for the next tick, or a `non-finite`
+    /// stop (never sent).
+    pub(crate) fn advance(&mut self, k: u64) -> std::result::Result<RelativeMotion, StopEvent> {
+        let c = &self.command;
+        let finite = c.position.iter().all(|x| x.is_finite())
+            && c.velocity.iter().all(|x| x.is_finite())
+            && c.angular_velocity.iter().all(|x| x.is_finite())
+            && c.orientation.coords.iter().all(|x| x.is_finite());
+        if finite {
+            Ok(self.command)
+        } else {
+            Err(StopEvent::plain(
+                StopKind::NonFinite,
+                k as f64 * self.period,
+            ))
+        }
+    }
+}
+
+/// A real-time calibration's end: the calibration (or why there is none) and the loop's stop.
+#[derive(Debug, Clone)]
+pub struct RealtimeCalibration {
+    /// The file (when every wall was measured and the loop ran to the procedure's end), the
+    /// progress lines, the time taken (s, the loop's wall-clock time), the time per wall (s),
+    /// the peak and the last measured force (N).
+    pub outcome: CalibrationOutcome,
+    /// Why the loop stopped: `completed` at the procedure's end, else a safety stop of `hil`
+    /// (the robot retreated from the contact where `hil` does, then held) or `user`.
+    pub stop: StopEvent,
+    /// The stop's reason in words (None when completed).
+    pub stop_reason: Option<String>,
+    /// 0 calibrated, 1 the procedure stopped itself (a wall not found, its force bound, a
+    /// failed fit, its time bound: the tip backed out of contact, the robot holds), 3 a
+    /// safety stop of the loop (as `hil`), 130 stopped by the user.
+    pub exit_code: i32,
+    /// The loop's report: stop, timing, the links' counters, the safety functions' peaks.
+    pub realtime: Value,
+}
+
+/// A running real-time calibration.
+pub struct CalibrationHandle {
+    running: LoopHandle,
+    plan: Plan,
+    options: CalibrateOptions,
+    force_limit: f64,
+    measured_at: String,
+    progress: Mutex<Receiver<String>>,
+}
+
+impl CalibrationHandle {
+    /// Validates the scenario, the runtime options (as `hil`'s) and the procedure's options
+    /// against the runtime's force limit (`limits.force_limit`: the probes press to a fifth of
+    /// it), then opens the outputs and links of `runtime` and starts the loop with the
+    /// procedure as its driver. `measured_at`: the time stamp written into the file.
+    pub fn start(
+        scenario: &Scenario,
+        runtime: &RuntimeOptions,
+        options: &CalibrateOptions,
+        measured_at: &str,
+    ) -> Result<Self> {
+        let force_limit = runtime.limits.force_limit;
+        let (sender, progress) = channel();
+        let (plan, running) = LoopHandle::start(
+            scenario,
+            runtime,
+            |plan| {
+                let (driver, ticks) = RealtimeProcedure::new(plan, options, force_limit, sender)?;
+                Ok((Driver::Calibrate(Box::new(driver)), ticks))
+            },
+            false,
+        )?;
+        Ok(CalibrationHandle {
+            running,
+            plan,
+            options: options.clone(),
+            force_limit,
+            measured_at: measured_at.to_string(),
+            progress: Mutex::new(progress),
+        })
+    }
+
+    /// A snapshot for a live display (lock-free reads).
+    pub fn status(&self) -> StatusSnapshot {
+        self.running.status(self.plan.period)
+    }
+
+    /// The progress lines since the last call, surface by surface.
+    pub fn progress(&self) -> Vec<String> {
+        match self.progress.lock() {
+            Ok(receiver) => receiver.try_iter().collect(),
+            Err(_) => Vec::new(),
+        }
+    }
+
+    /// Asks the loop to stop (the robot backs out of contact and holds); returns at once.
+    pub fn stop(&self) {
+        self.running.stop();
+    }
+
+    /// Whether the loop has ended.
+    pub fn is_finished(&self) -> bool {
+        self.running.is_finished()
+    }
+
+    /// Waits up to `timeout` for the loop to end; returns whether it has.
+    pub fn wait(&self, timeout: Duration) -> bool {
+        self.running.wait(timeout)
+    }
+
+    /// Waits for the loop's end and builds the calibration: the file when the procedure
+    /// measured every wall and the loop ran to its end; else why not. Errors only when the
+    /// loop never started (a peer not heard, the start pose refused) or a thread panicked.
+    pub fn finish(self) -> Result<RealtimeCalibration> {
+        let last_force = self.status().force;
+        let LoopEnd {
+            outcome,
+            driver,
+            outputs,
+            ..
+        } = self.running.join()?;
+        let outcome = match outcome {
+            Ok(outcome) => outcome,
+            Err(e) => {
+                outputs.discard();
+                return Err(e);
+            }
+        };
+        let _ = outputs.finish();
+        let Some(Driver::Calibrate(driver)) = driver else {
+            return Err(RtError::io_other("loop thread", "panicked"));
+        };
+        let stop = outcome.stop;
+        let stop_reason = stop.reason_naming(outcome.sensor_name, outcome.robot_name);
+        let procedure = &driver.procedure;
+        let error = if let Some(reason) = &stop_reason {
+            Some(format!("the loop stopped: {reason}"))
+        } else if let Some(e) = procedure.error() {
+            Some(e.to_string())
+        } else if !driver.done {
+            Some(format!(
+                "the calibration did not finish in its time bound ({})",
+                procedure.whereabouts()
+            ))
+        } else {
+            None
+        };
+        let facility = format!(
+            "real time: {} sensor, {} robot{}",
+            outcome.sensor_name,
+            outcome.robot_name,
+            outcome
+                .robot_address
+                .map_or(String::new(), |a| format!(" at {a}"))
+        );
+        let file = match &error {
+            Some(_) => None,
+            None => Some(
+                calibration_file(
+                    &self.plan,
+                    procedure,
+                    &self.options,
+                    self.force_limit,
+                    &facility,
+                    &self.measured_at,
+                    outcome.wall_time,
+                )
+                .map_err(|e| RtError::io_other("calibration", e))?,
+            ),
+        };
+        let exit_code = if stop.kind != StopKind::Completed {
+            stop.kind.exit_code()
+        } else if error.is_some() {
+            1
+        } else {
+            0
+        };
+        let realtime = json!({
+            "period": self.plan.period,
+            "ticks": outcome.ticks,
+            "wall_time": outcome.wall_time,
+            "stop": {
+                "kind": stop.kind,
+                "reason": stop_reason,
+                "time": stop.time,
+                "safety_stop": stop.kind.is_safety_stop(),
+                "exit_code": exit_code,
+            },
+            "timing": {
+                "wake_latency_us": outcome.wake_latency,
+                "period_error_us": outcome.period_error,
+                "compute_us": outcome.compute,
+                "overruns": outcome.overruns,
+            },
+            "sensor": outcome.sensor,
+            "robot": outcome.robot,
+            "commands_sent": outcome.commands_sent,
+            "send_errors": outcome.send_errors,
+            "pacing": outcome.pacing,
+            "robot_address": outcome.robot_address.map(|a| a.to_string()),
+            "scheduling": outcome.scheduling,
+            "safety": outcome.safety,
+        });
+        Ok(RealtimeCalibration {
+            outcome: CalibrationOutcome {
+                file,
+                error,
+                progress: driver.lines.clone(),
+                duration: outcome.wall_time,
+                wall_seconds: driver.wall_seconds.clone(),
+                peak_force: outcome.safety.measured_peak_force,
+                final_force: last_force,
+            },
+            stop,
+            stop_reason,
+            exit_code,
+            realtime,
+        })
+    }
+}
