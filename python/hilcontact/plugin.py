@@ -31,11 +31,14 @@ import importlib.util
 import inspect
 import math
 import os
+import signal
 import sys
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -262,6 +265,9 @@ class _Adapter:
         self.observes_energy = bool(compensator.observes_energy)
         self.uses_tip_mobility = bool(compensator.uses_tip_mobility)
         self.period = 0.0
+        #: Set by a Ctrl-C during the run (:func:`stop_on_interrupt`): ``_core.simulate_python``
+        #: reads it after each tick and ends the run there, as ``interrupted``.
+        self.interrupted = False
 
     def reset(self, context: Mapping[str, Any]) -> None:
         self.period = float(context["period"])
@@ -321,6 +327,47 @@ class _Adapter:
                 raise PluginError(f"{where} returned an infinite {key}")
             values.append(number)
         return tuple(values)
+
+
+def _interrupts(number: int, handler: Any) -> bool:
+    """Whether a Python signal handler turns its signal into KeyboardInterrupt: Python's own
+    Ctrl-C handler, or the one the ``hilcontact`` commands give SIGTERM."""
+    if handler is signal.default_int_handler:
+        return True
+    options = sys.modules.get("hilcontact.cli.options")
+    return number == signal.SIGTERM and options is not None and handler is getattr(
+        options, "_raise_keyboard_interrupt", None)
+
+
+@contextmanager
+def stop_on_interrupt(adapter: _Adapter) -> Iterator[None]:
+    """While a run with a Python compensator runs in the main thread: the first Ctrl-C (or a
+    SIGTERM the command turns into one) sets ``adapter.interrupted`` instead of raising
+    KeyboardInterrupt inside the compensator's ``step``; the core's loop then ends the run at
+    that tick and returns it as ``interrupted``, as it does a native run. The handlers are
+    given back then, so that a second one raises KeyboardInterrupt as usual. Elsewhere (another
+    thread, handlers of the user's own) nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {n: signal.getsignal(n) for n in (signal.SIGINT, signal.SIGTERM)}
+    replaced = {n: h for n, h in previous.items() if _interrupts(n, h)}
+
+    def restore() -> None:
+        for number, handler in replaced.items():
+            if signal.getsignal(number) is stop:
+                signal.signal(number, handler)
+
+    def stop(_signum: int, _frame: Any) -> None:
+        adapter.interrupted = True
+        restore()
+
+    for number in replaced:
+        signal.signal(number, stop)
+    try:
+        yield
+    finally:
+        restore()
 
 
 def make_adapter(entry: Any, scenario: Any, step_limit: float = STEP_LIMIT) -> _Adapter:

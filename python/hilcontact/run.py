@@ -71,7 +71,9 @@ PLOT_FILES_EPISODES = ("contact_points.png", "contact_normal_tangential.png")
 def _frame(columns: dict[str, Any], order: list[str]) -> pd.DataFrame:
     data = {name: np.asarray(values, dtype=np.float64) for name, values in columns.items()}
     names = [c for c in order if c in data] + sorted(c for c in data if c not in order)
-    return pd.DataFrame({name: data[name] for name in names})
+    # the core's arrays as the columns, not copied into one block (fresh from the core's thread,
+    # the copy cost a run about 0.3 ms of CPU); the same values
+    return pd.DataFrame({name: data[name] for name in names}, copy=False)
 
 
 @dataclass
@@ -327,16 +329,20 @@ def _simulate_mujoco(scenario: Scenario) -> Run:
 
 def _simulate_python(scenario: Scenario, compensator: Any, step_limit: float | None) -> Run:
     """A run with a compensator written in Python (``_core.simulate_python``)."""
-    from .plugin import STEP_LIMIT, compensator_name, make_adapter
+    from .plugin import STEP_LIMIT, compensator_name, make_adapter, stop_on_interrupt
 
     adapter = make_adapter(compensator, scenario, STEP_LIMIT if step_limit is None else step_limit)
     if isinstance(compensator, str) and scenario.python_entry != compensator:
         scenario = scenario.model_copy()  # scenario.toml names the compensator that ran
         scenario._python_entry = compensator
-    result = _core().simulate_python(scenario.to_json(), adapter, compensator_name(compensator))
-    return Run(
+    with stop_on_interrupt(adapter):  # Ctrl-C: the run so far, as a native run's
+        result = _core().simulate_python(scenario.to_json(), adapter, compensator_name(compensator))
+    run = Run(
         scenario=scenario,
         metrics=json.loads(result["metrics"]),
         timeseries=_frame(result["timeseries"], TIMESERIES_COLUMNS + OPTIONAL_TIMESERIES_COLUMNS),
         reference=_frame(result["reference"], REFERENCE_COLUMNS),
     )
+    if result.get("interrupted") or adapter.interrupted:  # (after the last tick: the whole run)
+        raise RunInterrupted(run)
+    return run

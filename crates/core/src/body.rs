@@ -162,12 +162,7 @@ impl BodyState {
         torque_world: &Vector3<f64>,
         h: f64,
     ) {
-        self.velocity += force_world * (h / mp.mass);
-        if *torque_world != Vector3::zeros() {
-            // ΔL = h τ in the world; in the body frame at this attitude Δω = I⁻¹ Rᵀ h τ
-            let torque_body = self.orientation.inverse_transform_vector(torque_world);
-            self.angular_velocity += mp.inertia_inv * torque_body * h;
-        }
+        self.kick(mp, force_world, torque_world, h);
         self.drift(mp, h);
     }
 
@@ -185,9 +180,60 @@ impl BodyState {
         *self = self.advanced(&BodyRate::rk4_average(&k1, &k2, &k3, &k4), h);
     }
 
+    /// [`BodyState::drift`] of two bodies over the same `h`, the same numbers to the bit, with
+    /// their RK4 stages side by side: two independent chains of dependent operations (each
+    /// stage waits for the last one's square root and divisions) that the processor overlaps.
+    pub fn drift_pair(
+        a: &mut BodyState,
+        mass_a: &MassProperties,
+        b: &mut BodyState,
+        mass_b: &MassProperties,
+        h: f64,
+    ) {
+        if a.angular_velocity == Vector3::zeros() || b.angular_velocity == Vector3::zeros() {
+            a.drift(mass_a, h);
+            b.drift(mass_b, h);
+            return;
+        }
+        let (a1, b1) = (a.free_rate(mass_a), b.free_rate(mass_b));
+        let (a2, b2) = (
+            a.advanced(&a1, 0.5 * h).free_rate(mass_a),
+            b.advanced(&b1, 0.5 * h).free_rate(mass_b),
+        );
+        let (a3, b3) = (
+            a.advanced(&a2, 0.5 * h).free_rate(mass_a),
+            b.advanced(&b2, 0.5 * h).free_rate(mass_b),
+        );
+        let (a4, b4) = (
+            a.advanced(&a3, h).free_rate(mass_a),
+            b.advanced(&b3, h).free_rate(mass_b),
+        );
+        *a = a.advanced(&BodyRate::rk4_average(&a1, &a2, &a3, &a4), h);
+        *b = b.advanced(&BodyRate::rk4_average(&b1, &b2, &b3, &b4), h);
+    }
+
+    /// The kick of [`BodyState::step_kick_drift`] alone (its first half): `v ← v + h F/m`
+    /// (m/s), `ω ← ω + I⁻¹ Rᵀ h τ` (rad/s, body frame) for a force (N) and a torque (N·m),
+    /// both in the world frame.
+    pub fn kick(
+        &mut self,
+        mp: &MassProperties,
+        force_world: &Vector3<f64>,
+        torque_world: &Vector3<f64>,
+        h: f64,
+    ) {
+        self.velocity += force_world * (h / mp.mass);
+        if *torque_world != Vector3::zeros() {
+            // ΔL = h τ in the world; in the body frame at this attitude Δω = I⁻¹ Rᵀ h τ
+            let torque_body = self.orientation.inverse_transform_vector(torque_world);
+            self.angular_velocity += mp.inertia_inv * torque_body * h;
+        }
+    }
+
     /// [`BodyState::rate`] with no force and no torque, to the bit (a zero wrench turned
     /// into the body frame and divided by the mass is +0 exactly), without the rotation and
     /// the division that [`BodyState::drift`] would spend on it at each of its four stages.
+    #[inline(always)]
     fn free_rate(&self, mp: &MassProperties) -> BodyRate {
         let zero = Vector3::zeros();
         BodyRate {

@@ -109,8 +109,15 @@ impl VirtualDynamics {
     /// Runs the compensator on a measurement; the applied wrench is returned in the sensor's
     /// convention (`t` frame inside [`CompensatorOutput`]).
     pub fn compensate(&mut self, m: &Measurement) -> CompensatorOutput {
+        self.compensate_input(m).1
+    }
+
+    /// [`VirtualDynamics::compensate`], also returning the compensator's input (the rod tips
+    /// the tick's record reads, computed once).
+    fn compensate_input(&mut self, m: &Measurement) -> (CompensatorInput, CompensatorOutput) {
         let input = self.input(m);
-        self.compensator.step(&input)
+        let output = self.compensator.step(&input);
+        (input, output)
     }
 
     /// What the compensator sees of a measurement at this tick: the wrench turned into `t`,
@@ -280,20 +287,19 @@ impl HilStep {
         m: &Measurement,
         physical: Option<PhysicalContact>,
     ) -> (HilRecord, Option<Stop>) {
-        let out = self.virt.compensate(m);
+        let (input, out) = self.virt.compensate_input(m);
         self.output = out;
         let sensor_to_t = self.virt.sensor_orientation();
-        let rod = self.virt.system().rod_tip;
         let desired = self.virt.command();
         let time = k as f64 * self.period;
         let record = HilRecord {
             time,
-            tip_position: desired.point(&rod),
-            tip_velocity: desired.point_velocity(&rod),
+            tip_position: input.tip_position_desired,
+            tip_velocity: input.tip_velocity_desired,
             angular_velocity: desired.angular_velocity,
             orientation: desired.orientation,
-            actual_tip_position: m.actual.point(&rod),
-            actual_tip_velocity: m.actual.point_velocity(&rod),
+            actual_tip_position: input.tip_position_actual,
+            actual_tip_velocity: input.tip_velocity_actual,
             actual_orientation: m.actual.orientation,
             actual_angular_velocity: m.actual.angular_velocity,
             contact_force: physical.map_or_else(|| -(sensor_to_t * m.force), |p| p.force),
@@ -304,8 +310,8 @@ impl HilStep {
                     ..
                 }) => moment,
                 Some(p) => {
-                    let tip = m.actual.point(&rod);
-                    FrameWrench::from_rod_force(&p.force, &tip, &self.virt.system().sensor_origin)
+                    let tip = &input.tip_position_actual;
+                    FrameWrench::from_rod_force(&p.force, tip, &self.virt.system().sensor_origin)
                         .moment
                 }
                 None => sensor_to_t * m.moment,

@@ -122,8 +122,9 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
     let mut trace = Trace::with_capacity(n + 1, false);
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut friction_work = 0.0;
+    // the relative motion at `x` (kept from the step that computed it)
+    let mut rel = system.relative_motion(&x);
     for k in 0..=n {
-        let rel = system.relative_motion(&x);
         let contact = system.contact_at(&rel, 0.0);
         let (contact_force, wrench) = (contact.force, contact.wrench);
         let row = ReferenceRecord {
@@ -151,7 +152,10 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
             rows.push(row);
         }
         if k < n {
-            friction_work += system.step_reference(&mut x, period, plan.reference_substeps);
+            let (work, end) =
+                system.step_reference_from(&mut x, &rel, period, plan.reference_substeps);
+            friction_work += work;
+            rel = end.unwrap_or_else(|| system.relative_motion(&x));
         }
     }
     trace.friction_work = friction_work;
@@ -274,6 +278,38 @@ pub fn simulate_metrics(s: &Scenario) -> Result<Metrics> {
 /// keeping the records (what a sweep keeps of a run).
 pub fn simulate_plan_metrics(plan: &Plan) -> Metrics {
     run(plan, false).metrics
+}
+
+/// What a plan's ideal reference depends on, as text that tells every bit apart: the true
+/// system, the initial state, the period, the ticks and the reference's sub-steps (all
+/// [`run_reference`] reads of a plan). Plans with the same key have the same reference, to the
+/// bit (e.g. a sweep's runs that differ only in the facility's delays, noise, seed or the
+/// compensator), so a batch of runs computes it once ([`simulate_plan_metrics_with_reference`]).
+/// Exact: `f64`'s `Debug` writes the shortest text that reads back to the same bits, and tells
+/// `-0.0` from `0.0`.
+pub fn reference_key(plan: &Plan) -> String {
+    format!(
+        "{:?}|{:?}|{:?}|{}|{}",
+        plan.system, plan.initial, plan.period, plan.ticks, plan.reference_substeps
+    )
+}
+
+/// [`simulate_plan_metrics`] with the plan's reference trace already computed
+/// (`run_reference(p, false).0` of a plan `p` with the same [`reference_key`]): the same
+/// metrics, to the bit, without running the reference again.
+pub fn simulate_plan_metrics_with_reference(plan: &Plan, reference: &Trace) -> Metrics {
+    let hil = run_hil(plan, divergence_bound_of(plan, reference), false);
+    trace_metrics(plan, reference, &hil.trace, hil.estimates_contact, hil.stop)
+}
+
+/// The divergence bound of a plan's HIL run from its reference's trace, J
+/// ([`metrics::divergence_bound`]).
+fn divergence_bound_of(plan: &Plan, reference: &Trace) -> f64 {
+    metrics::divergence_bound(
+        plan.divergence_energy_ratio,
+        reference.energy[0],
+        &reference.energy,
+    )
 }
 
 /// Runs the reference and the HIL loop of a scenario and computes the metrics.
@@ -434,16 +470,32 @@ pub fn columns<R>(fields: &[Field<R>]) -> Vec<(String, &'static str, Only)> {
 
 /// The table of `rows` with the `fields` for which `has(field.only)`.
 pub fn table<R>(rows: &[R], fields: &[Field<R>], has: impl Fn(Only) -> bool) -> Table {
-    let mut columns = Vec::new();
-    for f in fields.iter().filter(|f| has(f.only)) {
+    let used: Vec<&Field<R>> = fields.iter().filter(|f| has(f.only)).collect();
+    let mut columns: Vec<(String, Vec<f64>)> = Vec::new();
+    for f in &used {
         match f.get {
-            Get::Scalar(get) => columns.push((f.name.to_string(), rows.iter().map(get).collect())),
-            Get::Vector(get) => {
-                for (axis, label) in ["x", "y", "z"].iter().enumerate() {
+            Get::Scalar(_) => columns.push((f.name.to_string(), Vec::with_capacity(rows.len()))),
+            Get::Vector(_) => {
+                for label in ["x", "y", "z"] {
                     columns.push((
                         format!("{}_{label}", f.name),
-                        rows.iter().map(|r| get(r)[axis]).collect(),
+                        Vec::with_capacity(rows.len()),
                     ));
+                }
+            }
+        }
+    }
+    // one pass over the records (each read once, a vector field's getter called once per row)
+    for r in rows {
+        let mut column = columns.iter_mut().map(|(_, values)| values);
+        for f in &used {
+            match f.get {
+                Get::Scalar(get) => column.next().expect("a column per field").push(get(r)),
+                Get::Vector(get) => {
+                    let v = get(r);
+                    for x in v.iter() {
+                        column.next().expect("three columns per field").push(*x);
+                    }
                 }
             }
         }
@@ -518,12 +570,7 @@ fn run_with(
     stop: &AtomicBool,
 ) -> Runs {
     let (mut reference_trace, mut reference) = run_reference(plan, keep_rows);
-    let reference_energy = &reference_trace.energy;
-    let bound = metrics::divergence_bound(
-        plan.divergence_energy_ratio,
-        reference_energy[0],
-        reference_energy,
-    );
+    let bound = divergence_bound_of(plan, &reference_trace);
     let step = match compensator {
         None => HilStep::new(plan, bound),
         Some(c) => HilStep::with_dynamics(plan, bound, VirtualDynamics::with_compensator(plan, c)),

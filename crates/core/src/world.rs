@@ -215,9 +215,16 @@ impl TwoBodySystem {
     /// [`crate::body::BodyState::step_kick_drift`] for each body.
     pub fn step_virtual(&self, x: &mut TwoBodyState, w: &FrameWrench, period: f64) {
         let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, w);
-        x.servicer
-            .step_kick_drift(&self.servicer, &f_s, &tau_s, period);
-        x.target.step_kick_drift(&self.target, &f_t, &tau_t, period);
+        // each body's kick then drift, the two drifts side by side (the same numbers)
+        x.servicer.kick(&self.servicer, &f_s, &tau_s, period);
+        x.target.kick(&self.target, &f_t, &tau_t, period);
+        BodyState::drift_pair(
+            &mut x.servicer,
+            &self.servicer,
+            &mut x.target,
+            &self.target,
+            period,
+        );
     }
 
     /// The physical contact at a state of the true system.
@@ -416,28 +423,53 @@ impl TwoBodySystem {
     /// Returns the energy friction dissipated over the period, J (0 without friction).
     pub fn step_reference(&self, x: &mut TwoBodyState, period: f64, substeps: u32) -> f64 {
         let start = self.relative_motion(x);
+        self.step_reference_from(x, &start, period, substeps).0
+    }
+
+    /// [`TwoBodySystem::step_reference`] with the relative motion at `x` given (`start`, as
+    /// [`TwoBodySystem::relative_motion`] gives it): the same step, to the bit. Also returns the
+    /// relative motion at the new state when the step computed it (a free-flight step without
+    /// shapes), so that the next step need not compute it again.
+    pub fn step_reference_from(
+        &self,
+        x: &mut TwoBodyState,
+        start: &RelativeMotion,
+        period: f64,
+        substeps: u32,
+    ) -> (f64, Option<RelativeMotion>) {
         let tip_velocity = start.point_velocity(&self.rod_tip);
+        // the active set at `x`, once known
+        let mut known = None;
         if !self.contact.shapes.is_empty() {
-            if self.free_flight_with_shapes(x, &start, &tip_velocity, period) {
-                return 0.0;
+            if self.free_flight_with_shapes(x, start, &tip_velocity, period) {
+                return (0.0, None);
             }
-        } else if self.active_set_at(&start) == 0 {
-            let mut y = *x;
-            y.servicer.drift(&self.servicer, period);
-            y.target.drift(&self.target, period);
-            let end = self.relative_motion(&y);
-            let bend = self.bend(&end, &tip_velocity, period);
-            let clear = |m: &RelativeMotion| self.clearance_at(m);
-            if clear(&start) > bend && clear(&end) > bend {
-                *x = y;
-                return 0.0;
+        } else {
+            let set = self.active_set_at(start);
+            known = Some(set);
+            if set == 0 {
+                let mut y = *x;
+                BodyState::drift_pair(
+                    &mut y.servicer,
+                    &self.servicer,
+                    &mut y.target,
+                    &self.target,
+                    period,
+                );
+                let end = self.relative_motion(&y);
+                let bend = self.bend(&end, &tip_velocity, period);
+                let clear = |m: &RelativeMotion| self.clearance_at(m);
+                if clear(start) > bend && clear(&end) > bend {
+                    *x = y;
+                    return (0.0, Some(end));
+                }
             }
         }
         let h = period / substeps as f64;
         let mut remaining = period;
         let mut friction_work = 0.0;
         // the active set at `x` (a step's end is the next step's start: asked once)
-        let mut before = self.active_set(x);
+        let mut before = known.unwrap_or_else(|| self.active_set(x));
         while remaining > period * 1e-12 {
             let step = h.min(remaining);
             let mut y = *x;
@@ -468,7 +500,7 @@ impl TwoBodySystem {
             remaining -= hi;
             before = self.active_set(x);
         }
-        friction_work
+        (friction_work, None)
     }
 }
 

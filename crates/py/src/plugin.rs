@@ -4,6 +4,7 @@
 //! returns and times it). Frames are turned here: the adapter sees the wrenches in the sensor
 //! frame, the core in `t`. No numerics beyond the rotation.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
 use hilcontact_core::compensator::{
@@ -43,6 +44,9 @@ struct PyCompensator {
     energy: bool,
     mobility: bool,
     fault: Arc<Mutex<Option<PyErr>>>,
+    /// The user's stop (Ctrl-C): set once the adapter's `interrupted` is true after a tick
+    /// (`hilcontact.plugin.stop_on_interrupt`); the HIL loop ends the run at that tick.
+    stop: Arc<AtomicBool>,
 }
 
 impl PyCompensator {
@@ -67,9 +71,17 @@ impl PyCompensator {
             }
         }
         let args = PyTuple::new(py, data)?;
-        self.adapter
+        let output = self
+            .adapter
             .call_method1(py, "step_flat", (self.tick, args))?
-            .extract(py)
+            .extract(py)?;
+        // a Ctrl-C meanwhile (its handler ran in the step): the run ends at this tick
+        // (an adapter without the attribute is never interrupted)
+        let interrupted = self.adapter.bind(py).getattr("interrupted").ok();
+        if interrupted.map_or(Ok(false), |v| v.is_truthy())? {
+            self.stop.store(true, Ordering::Relaxed);
+        }
+        Ok(output)
     }
 }
 
@@ -129,7 +141,11 @@ impl Compensator for PyCompensator {
 /// 3x3 matrix, `reduced_mass` kg), then
 /// `step_flat(k, numbers)` each tick (see `INPUT_LEN`, `OUTPUT_LEN`); its attributes
 /// `estimates_contact`, `observes_energy`, `uses_tip_mobility` (bool) say what it reports.
-/// The GIL is released between ticks. Returns what `simulate` returns (no outputs), with
+/// The GIL is released between ticks. A true `interrupted` attribute of the adapter after a
+/// tick (set by a Ctrl-C, `hilcontact.plugin.stop_on_interrupt`) ends the run at that tick as
+/// a user stop (`sim::simulate_plan_with_compensator_until`): status `interrupted`, the tables
+/// and metrics up to there, and `"interrupted": True` in the result (else False). Returns
+/// what `simulate` returns (no outputs), with
 /// `metrics.compensator` set to `name`, and `summary`: the run's sweep row (`status` and the
 /// columns of `summary_columns()` but `wall_time`). An error raised by the adapter stops the run at that
 /// tick and is raised again here, nothing returned.
@@ -148,6 +164,7 @@ pub fn simulate_python<'py>(
     bound.call_method1("reset", (ctx,))?;
     let flag = |name: &str| -> PyResult<bool> { bound.getattr(name)?.is_truthy() };
     let fault = Arc::new(Mutex::new(None));
+    let stop = Arc::new(AtomicBool::new(false));
     let compensator = PyCompensator {
         sensor_to_t: q,
         tick: 0,
@@ -156,10 +173,16 @@ pub fn simulate_python<'py>(
         energy: flag("observes_energy")?,
         mobility: flag("uses_tip_mobility")?,
         fault: fault.clone(),
+        stop: stop.clone(),
         adapter: adapter.clone_ref(py),
     };
     let (output, _) = py.allow_threads(|| {
-        hilcontact_core::sim::simulate_plan_with_compensator(&plan, Box::new(compensator), true)
+        hilcontact_core::sim::simulate_plan_with_compensator_until(
+            &plan,
+            Box::new(compensator),
+            true,
+            &stop,
+        )
     });
     if let Some(error) = fault.lock().unwrap_or_else(|e| e.into_inner()).take() {
         return Err(error);
@@ -187,6 +210,7 @@ pub fn simulate_python<'py>(
     result.set_item("reference", crate::table_to_dict(py, output.reference)?)?;
     result.set_item("metrics", metrics.to_string())?;
     result.set_item("summary", summary)?;
+    result.set_item("interrupted", stop.load(Ordering::Relaxed))?;
     Ok(result)
 }
 

@@ -32,9 +32,9 @@ and exits with code 130.
 Ctrl-C (or SIGTERM) at any other moment of a batch command, from its start-up (importing the
 package: :mod:`hilcontact._startup`) to its last line, prints one ``interrupted: ...`` line
 naming what it had completely saved, or saying that nothing was written, and exits with code
-130; no traceback. A simulation stopped midway is not saved (the core's run has no stop hook;
-the bindings stop waiting for it within 20 ms), nor is the part of its ``--mcap`` recording;
-an output folder is never left half-replaced (:mod:`hilcontact.output`). A Ctrl-C during
+130; no traceback. A simulation stopped midway (``run``, with a shipped or a Python
+compensator) is saved up to the tick it stopped at, as ``interrupted``; a second Ctrl-C
+meanwhile saves nothing, nor the part of its ``--mcap`` recording; an output folder is never left half-replaced (:mod:`hilcontact.output`). A Ctrl-C during
 Python's own start-up, before hilcontact's code runs, is Python's.
 Two commands writing the same ``--out``: the last one wins and prints a ``note: ...`` line
 when it replaced the other's folder.
