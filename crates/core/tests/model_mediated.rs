@@ -475,3 +475,37 @@ proptest::proptest! {
         }
     }
 }
+
+/// `paper-table1` at 80 ms with 0.2 N noise and a 5 ms sensor delay, the scenario's walls as
+/// priors with the rear one (the first touched once the law is known) moved `offset` m along
+/// its normal (positive: out into free space) and tilted 1.5° about y.
+fn table1_with_a_prior_off(offset: f64) -> Scenario {
+    let mut s = table1(0.08, 0.005);
+    s.facility.sensor_noise = 0.2;
+    let mut priors = s.walls.clone();
+    let n = Vector3::from(priors[1].normal).normalize();
+    let tilted = Rotation3::from_axis_angle(&Vector3::y_axis(), 1.5f64.to_radians()) * n;
+    priors[1].point = (Vector3::from(priors[1].point) + n * offset).into();
+    priors[1].normal = tilted.into();
+    model_mediated(
+        &mut s,
+        ModelMediatedParams {
+            prior_walls: priors,
+            ..ModelMediatedParams::default()
+        },
+    );
+    s
+}
+
+#[test]
+fn a_contradicted_prior_is_corrected_by_the_contact_that_contradicts_it() {
+    // 1.5 mm out: the virtual tip bounces off the prior before the robot (80 ms behind, the
+    // contact 0.8 mm deep) reaches the real wall. The phantom's impulse is taken back, the
+    // robot reaches the wall in the same collision (pida's, not lost) and the wall's second
+    // contact is rendered. 1.5 mm deep: the first contact is pida's, the second rendered.
+    for offset in [1.5e-3, -1.5e-3] {
+        let s = table1_with_a_prior_off(offset);
+        // collision 1 is the front wall's first (law unknown), 2 the moved rear wall's first
+        assert_targets(&format!("prior {offset} m off"), &s, 3, 0.02, 1.05, 0.03);
+    }
+}

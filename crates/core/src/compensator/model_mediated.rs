@@ -154,6 +154,12 @@ pub struct ModelMediated {
     hold_ticks: usize,
     /// Ticks since the virtual tip was last inside the model, in this contact.
     since_model: usize,
+    /// Impulse the model applied to the virtual dynamics in this contact, `Σ T·F` (on the
+    /// frame, `t`), N·s: taken back if the robot never felt the contact (a phantom).
+    model_impulse: Vector3<f64>,
+    /// An impulse to take back at this tick (N·s, on the frame), applied through the
+    /// velocity correction `K·J`.
+    undo: Option<Vector3<f64>>,
 }
 
 impl ModelMediated {
@@ -195,6 +201,8 @@ impl ModelMediated {
                 _ => 0,
             },
             since_model: 0,
+            model_impulse: Vector3::zeros(),
+            undo: None,
         }
     }
 
@@ -274,6 +282,12 @@ impl ModelMediated {
             if let (Some(i), true) = (self.rendered, self.params.correct_priors) {
                 self.surfaces[i] = None;
                 self.pending[i] = None;
+                // and its impulse is taken back: the virtual bodies go on towards the real
+                // surface as if the phantom had not been rendered, the robot reaches it and
+                // that contact (pida's) corrects the model
+                if self.model_impulse != Vector3::zeros() {
+                    self.undo = Some(self.model_impulse);
+                }
             }
         } else if self.samples.len() >= self.params.min_samples as usize {
             // with a calibration, `auto` fits the calibrated law's form (measured at leisure)
@@ -301,6 +315,7 @@ impl ModelMediated {
         self.rendered = None;
         self.residual_energy = 0.0;
         self.previous = None;
+        self.model_impulse = Vector3::zeros();
         self.mode = Mode::Free;
     }
 
@@ -793,8 +808,13 @@ impl Compensator for ModelMediated {
         {
             // a force that no surface explains (none there): `pida` takes the contact. A force
             // that a surface explains but at the wrong level stays with the model (handing a
-            // contact to `pida` midway loses more than it saves; see the doc page)
+            // contact to `pida` midway loses more than it saves; see the doc page). What the
+            // model applied so far was wrong: its impulse is taken back
             self.mode = Mode::Fallback;
+            if self.model_impulse != Vector3::zeros() {
+                self.undo = Some(self.model_impulse);
+                self.model_impulse = Vector3::zeros();
+            }
         }
 
         if self.mode != Mode::Free && physical {
@@ -849,6 +869,7 @@ impl Compensator for ModelMediated {
                 }
                 self.previous = Some((residual + damping, v_des));
                 let force = base + damping;
+                self.model_impulse += force * self.period;
                 // the measured moment that the measured force at the robot's tip does not make
                 let unexplained = m_mea - (p_then - s).cross(&f_mea);
                 let moment = if physical {
@@ -867,9 +888,14 @@ impl Compensator for ModelMediated {
         } else {
             fallback.observed_energy
         };
+        // a phantom's impulse taken back by an impulse at the tip: Δv = K·J
+        let velocity_correction = self
+            .undo
+            .take()
+            .map_or_else(Vector3::zeros, |j| input.tip_mobility * j);
         CompensatorOutput {
             applied,
-            velocity_correction: Vector3::zeros(),
+            velocity_correction,
             estimate: self.estimate().or(fallback.estimate),
             observed_energy: observed,
         }
@@ -893,6 +919,12 @@ impl Compensator for ModelMediated {
         self.residual_energy = 0.0;
         self.previous = None;
         self.since_model = 0;
+        self.model_impulse = Vector3::zeros();
+        self.undo = None;
+    }
+
+    fn uses_tip_mobility(&self) -> bool {
+        true
     }
 
     fn estimates_contact(&self) -> bool {
