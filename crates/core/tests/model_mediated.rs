@@ -7,7 +7,7 @@ mod common;
 use common::{oblique_6dof, preset, table1};
 use hilcontact_core::compensator::{
     Compensator, CompensatorConfig, CompensatorContext, CompensatorInput, LawForm, ModelMediated,
-    ModelMediatedParams, ModelParams,
+    ModelMediatedParams, ModelParams, Rendering,
 };
 use hilcontact_core::config::{ContactModelKind, WallConfig};
 use hilcontact_core::contact::{ContactLaw, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
@@ -508,4 +508,55 @@ fn a_contradicted_prior_is_corrected_by_the_contact_that_contradicts_it() {
         // collision 1 is the front wall's first (law unknown), 2 the moved rear wall's first
         assert_targets(&format!("prior {offset} m off"), &s, 3, 0.02, 1.05, 0.03);
     }
+}
+
+/// Each collision's [`Rendering`] in a run.
+fn renderings(s: &Scenario) -> Vec<Option<Rendering>> {
+    run(s)
+        .collisions
+        .iter()
+        .map(|c| c.collision.rendering)
+        .collect()
+}
+
+#[test]
+fn the_report_says_per_collision_whether_the_model_or_pida_handled_it_and_why() {
+    use Rendering::{Model, PidaLawUnknown, PidaNoPrior, PidaPriorContradicted};
+    let mut s = table1(0.04, 0.0);
+    // no prior: each wall's first contact is pida's, the others are rendered
+    model_mediated(&mut s, ModelMediatedParams::default());
+    let r = renderings(&s);
+    assert_eq!(r.len(), 5, "{r:?}");
+    assert_eq!(
+        &r[..3],
+        &[Some(PidaNoPrior), Some(PidaNoPrior), Some(Model)]
+    );
+    assert!(r[3..].iter().all(|x| *x == Some(Model)), "{r:?}");
+    // priors: the very first contact is pida's (no law yet), every other rendered
+    let p = ModelMediatedParams {
+        prior_walls: s.walls.clone(),
+        ..ModelMediatedParams::default()
+    };
+    model_mediated(&mut s, p);
+    let r = renderings(&s);
+    assert_eq!(r[0], Some(PidaLawUnknown), "{r:?}");
+    assert!(r[1..].iter().all(|x| *x == Some(Model)), "{r:?}");
+    // a prior 1.5 mm out (a phantom) or deep: its wall's first contact is pida's, contradicted
+    for offset in [1.5e-3, -1.5e-3] {
+        let r = renderings(&table1_with_a_prior_off(offset));
+        assert_eq!(
+            &r[..3],
+            &[
+                Some(PidaLawUnknown),
+                Some(PidaPriorContradicted),
+                Some(Model)
+            ],
+            "{offset}: {r:?}"
+        );
+    }
+    // a compensator without a model reports nothing
+    assert!(pida(&s)
+        .collisions
+        .iter()
+        .all(|c| c.collision.rendering.is_none()));
 }

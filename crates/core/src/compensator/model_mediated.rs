@@ -36,6 +36,7 @@ use super::params::{LawForm, ModelMediatedParams};
 use super::pida::Pida;
 use super::{
     Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
+    Rendering,
 };
 use crate::calibration::CalibratedSurface;
 use crate::contact::{ContactLaw, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
@@ -160,6 +161,10 @@ pub struct ModelMediated {
     /// An impulse to take back at this tick (N·s, on the frame), applied through the
     /// velocity correction `K·J`.
     undo: Option<Vector3<f64>>,
+    /// Why `pida` has the current contact (in [`Mode::Fallback`]).
+    reason: Rendering,
+    /// Normals of the surfaces dropped as phantoms (a contact contradicted them).
+    contradicted: [Option<Vector3<f64>>; MAX_SURFACES],
 }
 
 impl ModelMediated {
@@ -203,7 +208,31 @@ impl ModelMediated {
             since_model: 0,
             model_impulse: Vector3::zeros(),
             undo: None,
+            reason: Rendering::PidaNoPrior,
+            contradicted: [None; MAX_SURFACES],
         }
+    }
+
+    /// Why a force that no surface explains (frame convention, at the robot's tip) is
+    /// `pida`'s: no surface faces it; one does but no law is known yet; or one does (or did,
+    /// until a contact contradicted it) but the robot met the force away from it.
+    fn fallback_reason(&self, force: &Vector3<f64>) -> Rendering {
+        let cos_max = self.params.match_angle.to_radians().cos();
+        let direction = -force.normalize();
+        let facing = |normal: &Vector3<f64>| direction.dot(normal) >= cos_max;
+        let mut reason = Rendering::PidaNoPrior;
+        for s in self.surfaces.iter().flatten() {
+            if facing(&s.wall.normal) {
+                if self.law_of(s).is_none() {
+                    return Rendering::PidaLawUnknown;
+                }
+                reason = Rendering::PidaPriorContradicted;
+            }
+        }
+        if self.contradicted.iter().flatten().any(facing) {
+            reason = Rendering::PidaPriorContradicted;
+        }
+        reason
     }
 
     /// The modelled surfaces (prior, identified or both).
@@ -280,6 +309,7 @@ impl ModelMediated {
         if self.physical_ticks == 0 {
             // the model rendered a contact the robot never felt: a phantom surface
             if let (Some(i), true) = (self.rendered, self.params.correct_priors) {
+                self.contradicted[i] = self.surfaces[i].map(|s| s.wall.normal);
                 self.surfaces[i] = None;
                 self.pending[i] = None;
                 // and its impulse is taken back: the virtual bodies go on towards the real
@@ -788,7 +818,10 @@ impl Compensator for ModelMediated {
             } else {
                 match self.explaining_surface(&f_mea, &p_then) {
                     Some(_) => Mode::Model,
-                    None => Mode::Fallback,
+                    None => {
+                        self.reason = self.fallback_reason(&f_mea);
+                        Mode::Fallback
+                    }
                 }
             };
         } else if self.mode != Mode::Free
@@ -811,6 +844,7 @@ impl Compensator for ModelMediated {
             // contact to `pida` midway loses more than it saves; see the doc page). What the
             // model applied so far was wrong: its impulse is taken back
             self.mode = Mode::Fallback;
+            self.reason = Rendering::PidaPriorContradicted;
             if self.model_impulse != Vector3::zeros() {
                 self.undo = Some(self.model_impulse);
                 self.model_impulse = Vector3::zeros();
@@ -921,6 +955,16 @@ impl Compensator for ModelMediated {
         self.since_model = 0;
         self.model_impulse = Vector3::zeros();
         self.undo = None;
+        self.reason = Rendering::PidaNoPrior;
+        self.contradicted = [None; MAX_SURFACES];
+    }
+
+    fn rendering(&self) -> Rendering {
+        match self.mode {
+            Mode::Free => Rendering::Unreported,
+            Mode::Model => Rendering::Model,
+            Mode::Fallback => self.reason,
+        }
     }
 
     fn uses_tip_mobility(&self) -> bool {
