@@ -23,7 +23,9 @@ pub use dac::Dac;
 pub use delay::{ContactEstimator, ContactView};
 pub use energy::{DampingAmendment, EnergyController, EnergyObserver};
 pub use force::{compensate_force, CompensatedWrench};
-pub use model_mediated::{fit_contact, Fit, ModelMediated, Sample, Surface, MAX_SURFACES};
+pub use model_mediated::{
+    fit_contact, rebound_speed, Fit, ModelMediated, Sample, Surface, MAX_SURFACES,
+};
 pub use none::{NoParams, PassThrough};
 pub use params::{
     ControllerMode, DelayMode, LawForm, ModelMediatedParams, ModelParams, ObserverMode, TdpaParams,

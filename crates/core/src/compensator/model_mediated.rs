@@ -53,6 +53,16 @@ pub const CALIBRATION_FLOOR: f64 = 5e-5;
 /// times [`CALIBRATION_TRUST_SIGMAS`]) away from a calibrated law's contradicts it.
 pub const CALIBRATION_STIFFNESS_TOLERANCE: f64 = 0.1;
 
+/// A contact `pida` handled has its rebound set to the fitted law's only when the two
+/// changes of the normal velocity differ by at most this share of the law's (beyond it the
+/// contact is not the one-dimensional one the restoration accounts for).
+pub const RESTORE_LIMIT: f64 = 0.2;
+/// ... and only when the normal impulse turns the bodies little: `|K·n − (nᵀK·n)·n|` at most
+/// this share of `nᵀK·n`.
+pub const RESTORE_COUPLING: f64 = 0.05;
+/// ... and by more than this share (within it, `pida`'s rebound is as good as the fit's).
+pub const RESTORE_DEADBAND: f64 = 0.01;
+
 /// Most surfaces the compensator models.
 pub const MAX_SURFACES: usize = 8;
 /// Most samples of one contact the Hunt-Crossley fit uses (evenly strided).
@@ -165,6 +175,13 @@ pub struct ModelMediated {
     reason: Rendering,
     /// Normals of the surfaces dropped as phantoms (a contact contradicted them).
     contradicted: [Option<Vector3<f64>>; MAX_SURFACES],
+    /// Impulse `pida` applied to the virtual dynamics in this contact, `Σ T·F` (on the frame,
+    /// `t`), N·s.
+    fallback_impulse: Vector3<f64>,
+    /// A contact `pida` handled, fitted: its normal (into free space), the incoming speed
+    /// along it (m/s, the robot's at the contact's first sample), the fitted law and `pida`'s
+    /// impulse; the virtual rebound is set to the law's at this tick.
+    restore: Option<(Vector3<f64>, f64, ContactModel, Vector3<f64>)>,
 }
 
 impl ModelMediated {
@@ -210,6 +227,8 @@ impl ModelMediated {
             undo: None,
             reason: Rendering::PidaNoPrior,
             contradicted: [None; MAX_SURFACES],
+            fallback_impulse: Vector3::zeros(),
+            restore: None,
         }
     }
 
@@ -331,6 +350,16 @@ impl ModelMediated {
                 (form, _) => form,
             };
             if let Some(fit) = fit_contact(&self.samples, &self.force_sum, form) {
+                if self.mode == Mode::Fallback && self.params.correct_priors {
+                    // pida's rebound is not the contact's: the fitted law's is restored
+                    // the robot replays the virtual motion: its velocity at the first sample is
+                    // the virtual tip's when it met the surface
+                    let normal = fit.wall.normal;
+                    let speed_in = -self.samples[0].velocity.dot(&normal);
+                    if speed_in > 0.0 {
+                        self.restore = Some((normal, speed_in, fit.law, self.fallback_impulse));
+                    }
+                }
                 let n = self.samples.len() as f64;
                 let centre = self
                     .samples
@@ -346,6 +375,7 @@ impl ModelMediated {
         self.residual_energy = 0.0;
         self.previous = None;
         self.model_impulse = Vector3::zeros();
+        self.fallback_impulse = Vector3::zeros();
         self.mode = Mode::Free;
     }
 
@@ -576,6 +606,46 @@ fn blend_laws(a: &ContactModel, wa: f64, b: &ContactModel, wb: f64) -> ContactMo
         }
         (_, b) => *b,
     }
+}
+
+/// The rebound speed (m/s) of a mass `mass` (kg) meeting a surface of law `law` at
+/// `speed_in` (m/s, > 0) along its normal: `m·d̈ = −f(d, ḋ)` from `d = 0`, `ḋ = speed_in`,
+/// integrated (RK4, about 400 steps over the contact) until the surface lets go (`d ≤ 0`, or
+/// no force while moving out). At most `speed_in`: the laws never create energy.
+pub fn rebound_speed(law: &ContactModel, mass: f64, speed_in: f64) -> f64 {
+    if !(mass > 0.0 && speed_in > 0.0) {
+        return speed_in.max(0.0);
+    }
+    // time scale: the undamped penetration d_max = ((n+1)·m·v²/(2k))^(1/(n+1)) over v
+    let (k, n) = match law {
+        ContactModel::Linear(l) => (l.stiffness, 1.0),
+        ContactModel::HuntCrossley(h) => (h.stiffness, h.exponent),
+    };
+    if !(k > 0.0) {
+        return speed_in;
+    }
+    let d_max = ((n + 1.0) * mass * speed_in * speed_in / (2.0 * k)).powf(1.0 / (n + 1.0));
+    let dt = d_max / speed_in / 100.0;
+    let accel = |d: f64, rate: f64| -law.normal_force(d.max(0.0), rate) / mass;
+    let (mut d, mut rate) = (0.0, speed_in);
+    for _ in 0..20_000 {
+        let (k1d, k1v) = (rate, accel(d, rate));
+        let (k2d, k2v) = (
+            rate + 0.5 * dt * k1v,
+            accel(d + 0.5 * dt * k1d, rate + 0.5 * dt * k1v),
+        );
+        let (k3d, k3v) = (
+            rate + 0.5 * dt * k2v,
+            accel(d + 0.5 * dt * k2d, rate + 0.5 * dt * k2v),
+        );
+        let (k4d, k4v) = (rate + dt * k3v, accel(d + dt * k3d, rate + dt * k3v));
+        d += dt / 6.0 * (k1d + 2.0 * k2d + 2.0 * k3d + k4d);
+        rate += dt / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
+        if d <= 0.0 || (rate < 0.0 && law.normal_force(d, rate) == 0.0) {
+            break;
+        }
+    }
+    (-rate).clamp(0.0, speed_in)
 }
 
 /// Fits a plane and a law to one contact's samples: the normal is the mean reaction's
@@ -869,7 +939,10 @@ impl Compensator for ModelMediated {
         let applied = match self.mode {
             // free flight as pida has it: the measured force below the detection level passes
             Mode::Free => fallback.applied,
-            Mode::Fallback => fallback.applied,
+            Mode::Fallback => {
+                self.fallback_impulse += fallback.applied.force * self.period;
+                fallback.applied
+            }
             Mode::Model => {
                 let s = self.sensor_origin;
                 let f_model = -rod_des; // on the frame
@@ -923,10 +996,32 @@ impl Compensator for ModelMediated {
             fallback.observed_energy
         };
         // a phantom's impulse taken back by an impulse at the tip: Δv = K·J
-        let velocity_correction = self
+        let mut velocity_correction = self
             .undo
             .take()
             .map_or_else(Vector3::zeros, |j| input.tip_mobility * j);
+        if let Some((n, speed_in, law, impulse)) = self.restore.take() {
+            // the law's change of the normal velocity, −u_in → u_out, against pida's,
+            // n·K·(−J): the difference is made up by an impulse j·n at the tip (Δv = K·n·j).
+            // Impulses, not velocities, are compared: the normal velocity also drifts in free
+            // flight when the bodies turn
+            let kn = input.tip_mobility * n;
+            let mobility = n.dot(&kn);
+            // the account holds where a normal impulse does not turn the bodies (`K·n ∥ n`):
+            // there pida's wrench is a force at the tip; elsewhere its moment changes the
+            // normal velocity too, and the contact is left as pida made it
+            let coupled = (kn - n * mobility).norm() > RESTORE_COUPLING * mobility;
+            if mobility > 0.0 && !coupled {
+                let ideal = rebound_speed(&law, 1.0 / mobility, speed_in) + speed_in;
+                let done = -n.dot(&(input.tip_mobility * impulse));
+                // a contact far from the law's (several bounces, the bodies turning much) is
+                // beyond this one-dimensional account: left as pida made it
+                let error = (ideal - done).abs();
+                if error > RESTORE_DEADBAND * ideal && error <= RESTORE_LIMIT * ideal {
+                    velocity_correction += input.tip_mobility * n * ((ideal - done) / mobility);
+                }
+            }
+        }
         CompensatorOutput {
             applied,
             velocity_correction,
@@ -955,6 +1050,8 @@ impl Compensator for ModelMediated {
         self.since_model = 0;
         self.model_impulse = Vector3::zeros();
         self.undo = None;
+        self.fallback_impulse = Vector3::zeros();
+        self.restore = None;
         self.reason = Rendering::PidaNoPrior;
         self.contradicted = [None; MAX_SURFACES];
     }
