@@ -677,3 +677,26 @@ fn the_law_s_rebound_speed_keeps_an_undamped_contact_s_speed_and_never_gains() {
         );
     }
 }
+
+#[test]
+fn a_rendered_contact_shorter_than_the_delay_is_no_phantom() {
+    // 8 Hz at 80 ms: the virtual contact (62 ms) is over before the robot reaches the wall.
+    // The contact then ends before the robot got there: its impulse is not taken back (that
+    // would send the virtual bodies into the wall again: an extra collision after each one)
+    for (noise, seed) in [(0.0, 1), (0.3, 2)] {
+        let mut s = table1_model_mediated(0.08, false);
+        s.contact.stiffness = 705100.0;
+        (s.facility.sensor_noise, s.facility.seed) = (noise, seed);
+        let m = run(&s);
+        assert!(
+            m.lost_collisions.is_empty() && m.extra_collisions.is_empty(),
+            "{noise} N: lost {:?}, extra {:?}",
+            m.lost_collisions,
+            m.extra_collisions
+        );
+        for c in &m.collisions[2..] {
+            let (v, f) = (c.cov.unwrap(), c.cof.unwrap());
+            assert!((v - 1.0).abs() <= 0.02 && f <= 1.05, "{noise} N: {c:?}");
+        }
+    }
+}

@@ -171,6 +171,9 @@ pub struct ModelMediated {
     /// An impulse to take back at this tick (N·s, on the frame), applied through the
     /// velocity correction `K·J`.
     undo: Option<Vector3<f64>>,
+    /// How far past the rendered surface the robot went in this contact (m, its penetration
+    /// less the surface's band: [`CALIBRATION_TRUST_SIGMAS`] σ plus [`CALIBRATION_FLOOR`]).
+    robot_past: f64,
     /// Why `pida` has the current contact (in [`Mode::Fallback`]).
     reason: Rendering,
     /// Normals of the surfaces dropped as phantoms (a contact contradicted them).
@@ -225,6 +228,7 @@ impl ModelMediated {
             since_model: 0,
             model_impulse: Vector3::zeros(),
             undo: None,
+            robot_past: 0.0,
             reason: Rendering::PidaNoPrior,
             contradicted: [None; MAX_SURFACES],
             fallback_impulse: Vector3::zeros(),
@@ -331,10 +335,12 @@ impl ModelMediated {
                 self.contradicted[i] = self.surfaces[i].map(|s| s.wall.normal);
                 self.surfaces[i] = None;
                 self.pending[i] = None;
-                // and its impulse is taken back: the virtual bodies go on towards the real
-                // surface as if the phantom had not been rendered, the robot reaches it and
-                // that contact (pida's) corrects the model
-                if self.model_impulse != Vector3::zeros() {
+                // and, if the robot went past it and felt nothing, its impulse is taken back:
+                // the virtual bodies go on towards the real surface as if the phantom had not
+                // been rendered, the robot reaches it and that contact (pida's) corrects the
+                // model. A contact that ended before the robot got there (shorter than the
+                // loop's delay) is not judged so
+                if self.model_impulse != Vector3::zeros() && self.robot_past > 0.0 {
                     self.undo = Some(self.model_impulse);
                 }
             }
@@ -376,6 +382,7 @@ impl ModelMediated {
         self.previous = None;
         self.model_impulse = Vector3::zeros();
         self.fallback_impulse = Vector3::zeros();
+        self.robot_past = 0.0;
         self.mode = Mode::Free;
     }
 
@@ -935,6 +942,13 @@ impl Compensator for ModelMediated {
         if let Some(i) = surface_des {
             self.rendered.get_or_insert(i);
         }
+        if let Some(s) = self.rendered.and_then(|i| self.surfaces[i]) {
+            let band = s
+                .calibrated
+                .map_or(0.0, |c| CALIBRATION_TRUST_SIGMAS * c.sigma_at(&p_then))
+                + CALIBRATION_FLOOR;
+            self.robot_past = self.robot_past.max(s.wall.penetration(&p_then) - band);
+        }
 
         let applied = match self.mode {
             // free flight as pida has it: the measured force below the detection level passes
@@ -1050,6 +1064,7 @@ impl Compensator for ModelMediated {
         self.since_model = 0;
         self.model_impulse = Vector3::zeros();
         self.undo = None;
+        self.robot_past = 0.0;
         self.fallback_impulse = Vector3::zeros();
         self.restore = None;
         self.reason = Rendering::PidaNoPrior;
