@@ -36,3 +36,35 @@ def test_prior_walls_round_trip_through_a_commented_file_and_render_the_rear_wal
     # the identified stiffness of the walls is the scenario's
     k = run.timeseries["stiffness_estimate"].dropna().iloc[-1]
     assert abs(k / s.contact.stiffness - 1) < 1e-3
+
+
+def test_the_reports_say_per_collision_whether_the_model_or_pida_handled_it_and_why(tmp_path):
+    from click.testing import CliRunner
+
+    from hilcontact.cli import cli
+
+    walls = hc.load_scenario("paper-table1").to_dict()["walls"]
+    # metrics.json: pida's very first contact (no law yet), the rest rendered at the priors
+    s = hc.load_scenario("paper-table1", {**AT_40_MS, "compensator.kind": "model-mediated",
+                                          "compensator.prior_walls": walls})
+    run = hc.simulate(s)
+    assert [c["rendering"] for c in run.metrics["collisions"]] == ["pida-law-unknown"] + ["model"] * 4
+    assert list(run.collision_table()["rendering"]) == ["pida: law unknown"] + ["model"] * 4
+    # a compensator without a model reports nothing
+    pida = hc.simulate(hc.load_scenario("paper-table1", {**AT_40_MS, "compensator.kind": "pida"}))
+    assert all(c["rendering"] is None for c in pida.metrics["collisions"])
+    assert set(pida.collision_table()["rendering"]) == {"-"}
+    # the comparison's table and report: one column, "-" for the others
+    comparison = hc.compare("paper-table1", ["pida", "model-mediated"], overrides=AT_40_MS)
+    table = comparison.table
+    assert list(table[table["compensator"] == "model-mediated"]["rendering"]) == ["pida: no prior"] * 2 + ["model"] * 3
+    assert set(table[table["compensator"] == "pida"]["rendering"]) == {"-"}
+    markdown = comparison.to_markdown()
+    assert "| rendered by |" in markdown and "| pida: no prior |" in markdown
+    # the terminal report of a run
+    out = tmp_path / "run"
+    result = CliRunner().invoke(cli, ["run", "paper-table1", "--set", "compensator.kind=model-mediated",
+                                      "--set", "facility.robot_delay=0.04", "--out", str(out)],
+                                prog_name="hilcontact")
+    assert result.exit_code == 0, result.output
+    assert "rendered by: 1-2 pida: no prior, 3-5 model" in result.output

@@ -121,7 +121,10 @@ def test_collision_table(fake_run):
         "direction_error", "normal_impulse_error", "tangential_impulse_error", "peak_moment_ratio",
         "reference_normal_impulse", "reference_tangential_impulse", "reference_peak_moment",
         "reference_rebound_velocity_x", "reference_rebound_velocity_y", "reference_rebound_velocity_z",
+        # how the compensator handled it (model-mediated's report; "-" without one)
+        "rendering",
     ]
+    assert list(table["rendering"]) == ["-", "-"]
     assert table.loc[1, "cov"] == 1.25 and table.loc[1, "reference_rebound_speed"] == 0.02
     assert table.loc[1, "reference"] == 1 and table.loc[1, "velocity_error"] == 0.25
     assert math.isnan(table.loc[2, "reference"])

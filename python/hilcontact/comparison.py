@@ -27,7 +27,7 @@ from .errors import ArgumentError, HilContactError, ScenarioError, describe
 from .registry import KINDS
 from .output import write_atomically
 from .run import Run, simulate
-from .verdict import Violation, _finite, _judge, _ratio  # noqa: F401  (Violation is part of this module's API)
+from .verdict import RENDERING_LABELS, Violation, _finite, _judge, _ratio, rendering_label  # noqa: F401  (Violation, RENDERING_LABELS are part of this module's API)
 from .scenario import COMPENSATOR_MODELS, Scenario, _check_overrides, _override_steps, _read_source, load_scenario
 
 if TYPE_CHECKING:
@@ -84,6 +84,7 @@ TABLE_COLUMNS = [
     "compensator",
     "collision",
     *[column for column, _, _ in PER_COLLISION_COLUMNS],
+    "rendering",
     "status",
     "worst_cov_error",
     "worst_cof",
@@ -378,11 +379,11 @@ class Comparison:
         row with an empty collision number): compensator, collision, the collision's values of
         :data:`PER_COLLISION_COLUMNS` (cov, cof, peak_force_N, rebound_speed_mm_s,
         velocity_error_pct, direction_error_deg, tangential_impulse_error_pct,
-        normal_impulse_error_pct, tangential_impulse_Ns, normal_impulse_Ns) and the
-        compensator's summary values (status, worst_cov_error, worst_cof, mean_cov,
+        normal_impulse_error_pct, tangential_impulse_Ns, normal_impulse_Ns), rendering (how the
+        collision was handled: :func:`rendering_label`) and the compensator's summary values (status, worst_cov_error, worst_cof, mean_cov,
         stiffness_error_pct, damping_error_Ns_mm)."""
         rows = []
-        first_per_run = 2 + len(PER_COLLISION_COLUMNS)
+        first_per_run = TABLE_COLUMNS.index("rendering") + 1
         for kind, run in self.runs.items():
             stats = self._stats(run)
             per_run = {key: stats[key] for key in TABLE_COLUMNS[first_per_run:]}
@@ -393,6 +394,7 @@ class Comparison:
                         "compensator": kind,
                         "collision": collision.get("index"),
                         **{column: _nan(collision.get(key)) * scale for column, key, scale in PER_COLLISION_COLUMNS},
+                        "rendering": rendering_label(collision.get("rendering")),
                         **per_run,
                     }
                 )
@@ -459,8 +461,8 @@ class Comparison:
             "## Per collision",
             "",
             "| compensator | # | CoV | CoF | peak force (N) | rebound speed (mm/s) | velocity error (%) "
-            "| direction error (°) | J_t error (%) | J_n error (%) | J_t (N·s) | J_n (N·s) |",
-            "|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|",
+            "| direction error (°) | J_t error (%) | J_n error (%) | J_t (N·s) | J_n (N·s) | rendered by |",
+            "|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|---|",
         ]
         for _, row in self.table.iterrows():
             number = "-" if pd.isna(row["collision"]) else str(int(row["collision"]))
@@ -469,7 +471,8 @@ class Comparison:
                 f"| {_cell(row['peak_force_N'], '.1f')} | {_cell(row['rebound_speed_mm_s'], '.2f')} "
                 f"| {_cell(row['velocity_error_pct'], '.2f')} | {_cell(row['direction_error_deg'], '.2f')} "
                 f"| {_cell(row['tangential_impulse_error_pct'], '.2f')} | {_cell(row['normal_impulse_error_pct'], '.2f')} "
-                f"| {_cell(row['tangential_impulse_Ns'], '.4g')} | {_cell(row['normal_impulse_Ns'], '.4g')} |"
+                f"| {_cell(row['tangential_impulse_Ns'], '.4g')} | {_cell(row['normal_impulse_Ns'], '.4g')} "
+                f"| {row['rendering']} |"
             )
         figures = list(figures)
         if figures:

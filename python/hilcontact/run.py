@@ -17,6 +17,7 @@ from .errors import ArgumentError, ScenarioError, describe
 from .native import core as _core
 from .output import write_atomically
 from .scenario import Scenario, load_scenario
+from .verdict import rendering_label
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -118,7 +119,10 @@ class Run:
         (rad/s, `t`), direction_error (degrees), normal_impulse_error,
         tangential_impulse_error (fractions), peak_moment_ratio, reference_normal_impulse,
         reference_tangential_impulse (N s), reference_peak_moment (N m),
-        reference_rebound_velocity_x/_y/_z (m/s). NaN where there is no value."""
+        reference_rebound_velocity_x/_y/_z (m/s); rendering (how the compensator handled the
+        collision, :func:`~hilcontact.verdict.rendering_label`: ``model``, ``pida: no
+        prior``, ``pida: prior contradicted``, ``pida: law unknown``; ``-`` for a compensator
+        without a model). NaN where there is no value."""
         reference = {c.get("index"): c for c in self.metrics.get("reference_collisions") or []}
         numbers = [
             "start", "end", "peak_force", "rebound_speed", "cov", "cof", "velocity_error",
@@ -148,6 +152,7 @@ class Run:
             row.update({key: collision.get(key) for key in errors})
             row.update({f"reference_{key}": ref.get(key) for key in from_reference})
             row.update(spread("reference_rebound_velocity", ref.get("rebound_velocity")))
+            row["rendering"] = rendering_label(collision.get("rendering"))
             rows.append(row)
         floats = [
             *numbers, "reference", "reference_peak_force", "reference_rebound_speed",
@@ -157,7 +162,7 @@ class Run:
             *[f"reference_{key}" for key in from_reference],
             *[f"reference_rebound_velocity_{axis}" for axis in axes],
         ]
-        columns = ["collision", "complete", *floats]
+        columns = ["collision", "complete", *floats, "rendering"]
         table = pd.DataFrame(rows, columns=columns)
         table[floats] = table[floats].astype(np.float64)
         return table.set_index("collision")

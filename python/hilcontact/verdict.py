@@ -13,7 +13,22 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from .run import Run
 
-__all__ = ["Violation"]
+__all__ = ["RENDERING_LABELS", "Violation", "rendering_label"]
+
+#: How a collision was handled, ``metrics.json``'s per-collision key ``rendering`` (reported
+#: by ``model-mediated``: rendered from its model, or handled by ``pida`` and why; none for the
+#: other compensators), and its label in the tables.
+RENDERING_LABELS: dict[str, str] = {
+    "model": "model",
+    "pida-no-prior": "pida: no prior",
+    "pida-prior-contradicted": "pida: prior contradicted",
+    "pida-law-unknown": "pida: law unknown",
+}
+
+
+def rendering_label(value: Any) -> str:
+    """The table label of a collision's ``rendering`` value (``-`` when none is reported)."""
+    return RENDERING_LABELS.get(value, "-") if isinstance(value, str) else "-"
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,9 @@
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
-use crate::compensator::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
+use crate::compensator::{
+    Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, Rendering,
+};
 use crate::facility::Measurement;
 pub use crate::facility::PhysicalContact;
 use crate::frames::{FrameWrench, RelativeMotion};
@@ -104,6 +106,11 @@ impl VirtualDynamics {
     /// Whether the compensator observes the port energy.
     pub fn observes_energy(&self) -> bool {
         self.compensator.observes_energy()
+    }
+
+    /// How the compensator handled the contact of its last step ([`Rendering`]).
+    pub fn rendering(&self) -> Rendering {
+        self.compensator.rendering()
     }
 
     /// Runs the compensator on a measurement; the applied wrench is returned in the sensor's
@@ -207,6 +214,9 @@ pub struct HilRecord {
     pub damping_estimate: f64,
     /// Energy observed by the compensator at the environment port, J (NaN when not observed).
     pub observed_energy: f64,
+    /// How the compensator handled this tick's contact ([`Rendering::Unreported`] in free
+    /// flight and for compensators without a model).
+    pub rendering: Rendering,
 }
 
 impl HilRecord {
@@ -324,6 +334,7 @@ impl HilStep {
             stiffness_estimate: out.estimate.map_or(f64::NAN, |e| e.stiffness),
             damping_estimate: out.estimate.map_or(f64::NAN, |e| e.damping),
             observed_energy: out.observed_energy,
+            rendering: self.virt.rendering(),
         };
         let stop = if !record.is_finite() {
             Some(Stop::plain(StopKind::NonFinite, time))

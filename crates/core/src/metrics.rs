@@ -46,6 +46,7 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
+use crate::compensator::Rendering;
 use crate::frames::FrameWrench;
 use crate::stop::{Status, Stop};
 
@@ -79,6 +80,8 @@ pub struct Trace {
     pub damping_estimate: Vec<f64>,
     /// Energy friction dissipated over the whole run, J (the ideal reference's; 0 otherwise).
     pub friction_work: f64,
+    /// How the compensator handled each tick's contact (empty for the ideal reference).
+    pub rendering: Vec<Rendering>,
 }
 
 /// One tick of a [`Trace`].
@@ -120,6 +123,7 @@ impl Trace {
             stiffness_estimate: Vec::with_capacity(e),
             damping_estimate: Vec::with_capacity(e),
             friction_work: 0.0,
+            rendering: Vec::with_capacity(n),
         }
     }
 
@@ -254,6 +258,9 @@ pub struct Collision {
     /// Angular velocity of the servicer relative to the target at the same sample, `t`,
     /// rad/s (none for an incomplete collision).
     pub rebound_angular_velocity: Option<[f64; 3]>,
+    /// How the compensator handled the collision ([`collision_rendering`]); none for a
+    /// compensator without a model and for the ideal reference.
+    pub rendering: Option<Rendering>,
 }
 
 impl Collision {
@@ -275,8 +282,27 @@ impl Collision {
             peak_moment: peak_norm(&trace.contact_moment[s.start..=s.end]),
             rebound_velocity: s.complete.then(|| trace.velocity[rebound].into()),
             rebound_angular_velocity: s.complete.then(|| trace.angular_velocity[rebound].into()),
+            rendering: collision_rendering(&trace.rendering, s.start, s.next),
         }
     }
+}
+
+/// How a collision was handled, from the compensator's report of the ticks from its start
+/// (`start`) up to the next collision's (`next`, excluded; or the end): `pida`'s (with its reason, the first reported) if
+/// `pida` handled any of them, the model's if the model rendered any, else none. A contact
+/// the compensator starts late (the measured force is the sensor delay behind the physical
+/// one) or hands to `pida` midway is counted so.
+pub fn collision_rendering(
+    rendering: &[Rendering],
+    start: usize,
+    next: usize,
+) -> Option<Rendering> {
+    let ticks = rendering.get(start..next.max(start + 1).min(rendering.len()))?;
+    ticks
+        .iter()
+        .find(|r| !matches!(r, Rendering::Unreported | Rendering::Model))
+        .or_else(|| ticks.iter().find(|r| **r == Rendering::Model))
+        .copied()
 }
 
 /// The largest norm of `v` (0 if empty).
@@ -1195,6 +1221,30 @@ mod tests {
     }
 
     #[test]
+    fn a_collision_is_pidas_if_pida_handled_any_of_its_ticks_else_the_models() {
+        use crate::compensator::Rendering::{
+            Model, PidaLawUnknown, PidaPriorContradicted, Unreported,
+        };
+        let r = [
+            Unreported,
+            Model,
+            Model,
+            PidaPriorContradicted,
+            PidaLawUnknown,
+            Unreported,
+            Model,
+        ];
+        // handed over midway: pida's, with the first reason reported
+        assert_eq!(collision_rendering(&r, 0, 6), Some(PidaPriorContradicted));
+        assert_eq!(collision_rendering(&r, 0, 3), Some(Model));
+        assert_eq!(collision_rendering(&r, 4, 7), Some(PidaLawUnknown));
+        assert_eq!(collision_rendering(&r, 5, 6), None);
+        // no report at all (the reference, a compensator without a model)
+        assert_eq!(collision_rendering(&[], 0, 3), None);
+        assert_eq!(collision_rendering(&r, 9, 12), None);
+    }
+
+    #[test]
     fn summary_takes_the_values_farthest_from_one() {
         let mk = |cov: Option<f64>, cof: Option<f64>, ve: Option<f64>| ComparedCollision {
             collision: Collision {
@@ -1209,6 +1259,7 @@ mod tests {
                 peak_moment: 0.0,
                 rebound_velocity: None,
                 rebound_angular_velocity: None,
+                rendering: None,
             },
             reference: Some(1),
             rebound_time: None,

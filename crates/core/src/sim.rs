@@ -75,6 +75,7 @@ fn push_record(trace: &mut Trace, plan: &Plan, row: &HilRecord, estimates_contac
     if estimates_contact {
         trace.push_estimates(row.stiffness_estimate, row.damping_estimate);
     }
+    trace.rendering.push(row.rendering);
 }
 
 /// One tick of the ideal reference.

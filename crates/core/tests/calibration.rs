@@ -575,3 +575,42 @@ fn a_wrong_calibration_is_passive_and_corrected_after_its_first_contact() {
         }
     }
 }
+
+#[test]
+fn a_calibration_renders_damped_and_hunt_crossley_contacts_from_the_first_at_any_delay() {
+    // ζ ≈ 0.1 (c = 1403 N·s/m, μ = 279 kg) and Hunt-Crossley (n = 1.5), the hardware mounted
+    // 0.5 mm and 0.5° off and 5 % stiffer than the scenario says, an exact calibration
+    for hunt in [false, true] {
+        for delay in [0.04, 0.08, 0.12] {
+            let mut s = preset("paper-table1");
+            s.facility.robot_delay = delay;
+            if hunt {
+                s.contact.model = hilcontact_core::config::ContactModelKind::HuntCrossley;
+                (s.contact.stiffness, s.contact.exponent, s.contact.damping) = (6.2e6, 1.5, 3.1e7);
+            } else {
+                s.contact.damping = 1403.0;
+            }
+            s.facility.mount_offset = [0.0003, -0.0004, 0.0];
+            s.facility.mount_rotation = [0.0, 0.3, 0.4];
+            s.facility.stiffness_error = 1.05;
+            let plan = s.resolve().unwrap();
+            model_mediated(&mut s, calibration_of(&plan, 0.0, 1.0));
+            let out = hilcontact_core::simulate(&s).unwrap();
+            let m = &out.metrics;
+            assert!(m.collisions.len() >= 3, "{hunt} {delay}: {m:?}");
+            assert!(m.lost_collisions.is_empty() && m.extra_collisions.is_empty());
+            for c in m.collisions.iter().filter(|c| c.collision.complete) {
+                let (cov, cof) = (c.cov.unwrap(), c.cof.unwrap());
+                assert!(
+                    (cov - 1.0).abs() <= 0.02 && cof <= 1.05,
+                    "hunt-crossley {hunt} at {delay} s, collision {}: CoV {cov}, CoF {cof}",
+                    c.collision.index
+                );
+                assert_eq!(
+                    c.collision.rendering,
+                    Some(hilcontact_core::compensator::Rendering::Model)
+                );
+            }
+        }
+    }
+}

@@ -7,7 +7,7 @@ mod common;
 use common::{oblique_6dof, preset, table1};
 use hilcontact_core::compensator::{
     Compensator, CompensatorConfig, CompensatorContext, CompensatorInput, LawForm, ModelMediated,
-    ModelMediatedParams, ModelParams,
+    ModelMediatedParams, ModelParams, Rendering,
 };
 use hilcontact_core::config::{ContactModelKind, WallConfig};
 use hilcontact_core::contact::{ContactLaw, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
@@ -472,6 +472,231 @@ proptest::proptest! {
             if let Some(e) = c.velocity_error {
                 proptest::prop_assert!(e <= 0.05, "collision {}: velocity error {}", c.collision.index, e);
             }
+        }
+    }
+}
+
+/// `paper-table1` at 80 ms with 0.2 N noise and a 5 ms sensor delay, the scenario's walls as
+/// priors with the rear one (the first touched once the law is known) moved `offset` m along
+/// its normal (positive: out into free space) and tilted 1.5° about y.
+fn table1_with_a_prior_off(offset: f64) -> Scenario {
+    let mut s = table1(0.08, 0.005);
+    s.facility.sensor_noise = 0.2;
+    let mut priors = s.walls.clone();
+    let n = Vector3::from(priors[1].normal).normalize();
+    let tilted = Rotation3::from_axis_angle(&Vector3::y_axis(), 1.5f64.to_radians()) * n;
+    priors[1].point = (Vector3::from(priors[1].point) + n * offset).into();
+    priors[1].normal = tilted.into();
+    model_mediated(
+        &mut s,
+        ModelMediatedParams {
+            prior_walls: priors,
+            ..ModelMediatedParams::default()
+        },
+    );
+    s
+}
+
+#[test]
+fn a_contradicted_prior_is_corrected_by_the_contact_that_contradicts_it() {
+    // 1.5 mm out: the virtual tip bounces off the prior before the robot (80 ms behind, the
+    // contact 0.8 mm deep) reaches the real wall. The phantom's impulse is taken back, the
+    // robot reaches the wall in the same collision (pida's, not lost) and the wall's second
+    // contact is rendered. 1.5 mm deep: the first contact is pida's, the second rendered.
+    for offset in [1.5e-3, -1.5e-3] {
+        let s = table1_with_a_prior_off(offset);
+        // collision 1 is the front wall's first (law unknown), 2 the moved rear wall's first
+        assert_targets(&format!("prior {offset} m off"), &s, 3, 0.02, 1.05, 0.03);
+    }
+}
+
+/// Each collision's [`Rendering`] in a run.
+fn renderings(s: &Scenario) -> Vec<Option<Rendering>> {
+    run(s)
+        .collisions
+        .iter()
+        .map(|c| c.collision.rendering)
+        .collect()
+}
+
+#[test]
+fn the_report_says_per_collision_whether_the_model_or_pida_handled_it_and_why() {
+    use Rendering::{Model, PidaLawUnknown, PidaNoPrior, PidaPriorContradicted};
+    let mut s = table1(0.04, 0.0);
+    // no prior: each wall's first contact is pida's, the others are rendered
+    model_mediated(&mut s, ModelMediatedParams::default());
+    let r = renderings(&s);
+    assert_eq!(r.len(), 5, "{r:?}");
+    assert_eq!(
+        &r[..3],
+        &[Some(PidaNoPrior), Some(PidaNoPrior), Some(Model)]
+    );
+    assert!(r[3..].iter().all(|x| *x == Some(Model)), "{r:?}");
+    // priors: the very first contact is pida's (no law yet), every other rendered
+    let p = ModelMediatedParams {
+        prior_walls: s.walls.clone(),
+        ..ModelMediatedParams::default()
+    };
+    model_mediated(&mut s, p);
+    let r = renderings(&s);
+    assert_eq!(r[0], Some(PidaLawUnknown), "{r:?}");
+    assert!(r[1..].iter().all(|x| *x == Some(Model)), "{r:?}");
+    // a prior 1.5 mm out (a phantom) or deep: its wall's first contact is pida's, contradicted
+    for offset in [1.5e-3, -1.5e-3] {
+        let r = renderings(&table1_with_a_prior_off(offset));
+        assert_eq!(
+            &r[..3],
+            &[
+                Some(PidaLawUnknown),
+                Some(PidaPriorContradicted),
+                Some(Model)
+            ],
+            "{offset}: {r:?}"
+        );
+    }
+    // a compensator without a model reports nothing
+    assert!(pida(&s)
+        .collisions
+        .iter()
+        .all(|c| c.collision.rendering.is_none()));
+}
+
+/// `paper-table1` at `delay` s with the scenario's walls as priors (or none).
+fn table1_model_mediated(delay: f64, priors: bool) -> Scenario {
+    let mut s = table1(delay, 0.0);
+    let p = ModelMediatedParams {
+        prior_walls: if priors { s.walls.clone() } else { vec![] },
+        ..ModelMediatedParams::default()
+    };
+    model_mediated(&mut s, p);
+    s
+}
+
+#[test]
+fn a_contact_pida_handled_rebounds_as_the_identified_law_so_that_no_later_one_inherits_it() {
+    // Hunt-Crossley at 60 ms (pida's first contact 6 % slow, 29 % on the rear wall without a
+    // prior; every later contact inherited it), damped at 40 ms (pida 7-11 % fast, inherited)
+    let hunt = |k: f64, n: f64, c: f64, priors: bool| {
+        let mut s = table1_model_mediated(0.06, priors);
+        s.contact.model = ContactModelKind::HuntCrossley;
+        (s.contact.stiffness, s.contact.exponent, s.contact.damping) = (k, n, c);
+        s
+    };
+    let damped = |c: f64, priors: bool| {
+        let mut s = table1_model_mediated(0.04, priors);
+        s.contact.damping = c; // ζ = c / (2·√(k·μ)), μ = 279 kg
+        s
+    };
+    let cases = [
+        ("hunt-crossley n 1.7, priors", hunt(2.0e7, 1.7, 2.0e7, true)),
+        (
+            "hunt-crossley n 1.5, no prior",
+            hunt(6.2e6, 1.5, 3.1e7, false),
+        ),
+        ("hunt-crossley n 1.3, priors", hunt(1.5e6, 1.3, 1.0e7, true)),
+        ("ζ 0.084, priors", damped(1123.0, true)),
+        ("ζ 0.1, priors", damped(1403.0, true)),
+        ("ζ 0.1, no prior", damped(1403.0, false)),
+    ];
+    for (label, s) in cases {
+        let m = run(&s);
+        assert!(
+            m.lost_collisions.is_empty() && m.extra_collisions.is_empty(),
+            "{label}: {m:?}"
+        );
+        for c in &m.collisions {
+            // every collision's rebound, pida's too; the rendered ones' peak force
+            let (v, f) = (c.cov.unwrap(), c.cof.unwrap());
+            assert!(
+                (v - 1.0).abs() <= 0.01,
+                "{label}: collision {}: CoV {v:.4}",
+                c.collision.index
+            );
+            if c.collision.rendering == Some(Rendering::Model) {
+                assert!(
+                    f <= 1.02,
+                    "{label}: collision {}: CoF {f:.4}",
+                    c.collision.index
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn the_law_s_rebound_speed_keeps_an_undamped_contact_s_speed_and_never_gains() {
+    use hilcontact_core::compensator::rebound_speed;
+    let mut rng = Pcg64Mcg::seed_from_u64(5);
+    for _ in 0..200 {
+        let (mass, speed) = (rng.random_range(10.0..2000.0), rng.random_range(1e-3..0.2));
+        let k: f64 = rng.random_range(1e4..1e7);
+        let n = rng.random_range(1.0..2.0);
+        let elastic = [
+            ContactModel::Linear(LinearSpringDamper {
+                stiffness: k,
+                damping: 0.0,
+            }),
+            ContactModel::HuntCrossley(HuntCrossley {
+                stiffness: k * 1e3,
+                damping: 0.0,
+                exponent: n,
+            }),
+        ];
+        for law in elastic {
+            let v = rebound_speed(&law, mass, speed);
+            // RK4 over ~400 steps: far below a fitted law's own accuracy
+            assert!(
+                (v / speed - 1.0).abs() < 1e-5,
+                "{law:?}, {mass} kg, {speed} m/s: {v}"
+            );
+        }
+        // damped: slower, and slower the more damped
+        let zeta = rng.random_range(0.01..0.5);
+        let c = 2.0 * zeta * (k * mass).sqrt();
+        let law = |c: f64| {
+            ContactModel::Linear(LinearSpringDamper {
+                stiffness: k,
+                damping: c,
+            })
+        };
+        let (v1, v2) = (
+            rebound_speed(&law(c), mass, speed),
+            rebound_speed(&law(2.0 * c), mass, speed),
+        );
+        assert!(
+            0.0 <= v2 && v2 < v1 && v1 < speed,
+            "ζ {zeta}: {v1}, {v2} of {speed}"
+        );
+        // the classic restitution exp(−ζπ/√(1−ζ²)) bounds it from below (the law lets go
+        // before the penetration is back to 0, when the damping would pull)
+        let classic = (-zeta * std::f64::consts::PI / (1.0 - zeta * zeta).sqrt()).exp();
+        assert!(
+            v1 / speed >= classic - 1e-6,
+            "ζ {zeta}: {} < {classic}",
+            v1 / speed
+        );
+    }
+}
+
+#[test]
+fn a_rendered_contact_shorter_than_the_delay_is_no_phantom() {
+    // 8 Hz at 80 ms: the virtual contact (62 ms) is over before the robot reaches the wall.
+    // The contact then ends before the robot got there: its impulse is not taken back (that
+    // would send the virtual bodies into the wall again: an extra collision after each one)
+    for (noise, seed) in [(0.0, 1), (0.3, 2)] {
+        let mut s = table1_model_mediated(0.08, false);
+        s.contact.stiffness = 705100.0;
+        (s.facility.sensor_noise, s.facility.seed) = (noise, seed);
+        let m = run(&s);
+        assert!(
+            m.lost_collisions.is_empty() && m.extra_collisions.is_empty(),
+            "{noise} N: lost {:?}, extra {:?}",
+            m.lost_collisions,
+            m.extra_collisions
+        );
+        for c in &m.collisions[2..] {
+            let (v, f) = (c.cov.unwrap(), c.cof.unwrap());
+            assert!((v - 1.0).abs() <= 0.02 && f <= 1.05, "{noise} N: {c:?}");
         }
     }
 }

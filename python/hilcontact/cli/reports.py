@@ -57,6 +57,9 @@ def _report(console: Console, result: Run, folder: Path) -> None:
             console.print(_episode_table(result))
         if not result.collision_table()["complete"].all():
             console.print("*: still under way at the end of the run (no rebound, not compared)")
+        rendered = _rendered_by(result)
+        if rendered:
+            console.print(f"rendered by: {escape(rendered)}", soft_wrap=True)
     else:
         console.print("no collisions")
     if result.status == "ok":
@@ -75,6 +78,21 @@ def _report(console: Console, result: Run, folder: Path) -> None:
         )
     files = ", ".join(sorted(p.name for p in folder.iterdir()))
     console.print(f"saved to {escape(str(folder))}/ ({escape(files)})", soft_wrap=True)
+
+
+def _rendered_by(result: Run) -> str:
+    """How the collisions were handled, runs of the same grouped ("1-2 pida: no prior, 3-5
+    model"); empty for a compensator that does not report it (any but model-mediated)."""
+    table = result.collision_table()
+    if not (table["rendering"] != "-").any():
+        return ""
+    groups: list[list[Any]] = []  # [first, last, label]
+    for number, label in table["rendering"].items():
+        if groups and groups[-1][2] == label and groups[-1][1] == number - 1:
+            groups[-1][1] = number
+        else:
+            groups.append([number, number, label])
+    return ", ".join(f"{a} {label}" if a == b else f"{a}-{b} {label}" for a, b, label in groups)
 
 
 def _episode_table(result: Run) -> Table:

@@ -23,7 +23,9 @@ pub use dac::Dac;
 pub use delay::{ContactEstimator, ContactView};
 pub use energy::{DampingAmendment, EnergyController, EnergyObserver};
 pub use force::{compensate_force, CompensatedWrench};
-pub use model_mediated::{fit_contact, Fit, ModelMediated, Sample, Surface, MAX_SURFACES};
+pub use model_mediated::{
+    fit_contact, rebound_speed, Fit, ModelMediated, Sample, Surface, MAX_SURFACES,
+};
 pub use none::{NoParams, PassThrough};
 pub use params::{
     ControllerMode, DelayMode, LawForm, ModelMediatedParams, ModelParams, ObserverMode, TdpaParams,
@@ -60,6 +62,26 @@ pub struct CompensatorInput {
     /// compensators learn only from new records and count a held record's age as extra
     /// measurement delay ([`ContactEstimator`]); a simulation's records are all new.
     pub fresh: bool,
+}
+
+/// How a compensator that renders contacts from a model handled this tick's contact, and
+/// why (`model-mediated`'s per-collision report; every other compensator reports
+/// [`Rendering::Unreported`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Rendering {
+    /// Nothing to report: free flight, or a compensator without a model.
+    #[default]
+    Unreported,
+    /// Rendered from the model: a modelled surface and a known law.
+    Model,
+    /// Handled by `pida`: no modelled surface where the force came from.
+    PidaNoPrior,
+    /// Handled by `pida`: a modelled surface was there, and the contact contradicted it (the
+    /// robot felt the surface elsewhere, or not where the model rendered it).
+    PidaPriorContradicted,
+    /// Handled by `pida`: a modelled surface was there but no contact law is known yet.
+    PidaLawUnknown,
 }
 
 /// Identified contact parameters.
@@ -136,6 +158,10 @@ pub trait Compensator: Send {
     /// Whether `step` reads the input's `tip_mobility` (computed only then).
     fn uses_tip_mobility(&self) -> bool {
         false
+    }
+    /// How the contact of the last `step` was handled (no allocation).
+    fn rendering(&self) -> Rendering {
+        Rendering::Unreported
     }
 }
 

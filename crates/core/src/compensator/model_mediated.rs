@@ -36,6 +36,7 @@ use super::params::{LawForm, ModelMediatedParams};
 use super::pida::Pida;
 use super::{
     Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
+    Rendering,
 };
 use crate::calibration::CalibratedSurface;
 use crate::contact::{ContactLaw, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
@@ -51,6 +52,16 @@ pub const CALIBRATION_FLOOR: f64 = 5e-5;
 /// A contact's stiffness more than this share (plus the calibration's relative uncertainty
 /// times [`CALIBRATION_TRUST_SIGMAS`]) away from a calibrated law's contradicts it.
 pub const CALIBRATION_STIFFNESS_TOLERANCE: f64 = 0.1;
+
+/// A contact `pida` handled has its rebound set to the fitted law's only when the two
+/// changes of the normal velocity differ by at most this share of the law's (beyond it the
+/// contact is not the one-dimensional one the restoration accounts for).
+pub const RESTORE_LIMIT: f64 = 0.2;
+/// ... and only when the normal impulse turns the bodies little: `|K·n − (nᵀK·n)·n|` at most
+/// this share of `nᵀK·n`.
+pub const RESTORE_COUPLING: f64 = 0.05;
+/// ... and by more than this share (within it, `pida`'s rebound is as good as the fit's).
+pub const RESTORE_DEADBAND: f64 = 0.01;
 
 /// Most surfaces the compensator models.
 pub const MAX_SURFACES: usize = 8;
@@ -154,6 +165,26 @@ pub struct ModelMediated {
     hold_ticks: usize,
     /// Ticks since the virtual tip was last inside the model, in this contact.
     since_model: usize,
+    /// Impulse the model applied to the virtual dynamics in this contact, `Σ T·F` (on the
+    /// frame, `t`), N·s: taken back if the robot never felt the contact (a phantom).
+    model_impulse: Vector3<f64>,
+    /// An impulse to take back at this tick (N·s, on the frame), applied through the
+    /// velocity correction `K·J`.
+    undo: Option<Vector3<f64>>,
+    /// How far past the rendered surface the robot went in this contact (m, its penetration
+    /// less the surface's band: [`CALIBRATION_TRUST_SIGMAS`] σ plus [`CALIBRATION_FLOOR`]).
+    robot_past: f64,
+    /// Why `pida` has the current contact (in [`Mode::Fallback`]).
+    reason: Rendering,
+    /// Normals of the surfaces dropped as phantoms (a contact contradicted them).
+    contradicted: [Option<Vector3<f64>>; MAX_SURFACES],
+    /// Impulse `pida` applied to the virtual dynamics in this contact, `Σ T·F` (on the frame,
+    /// `t`), N·s.
+    fallback_impulse: Vector3<f64>,
+    /// A contact `pida` handled, fitted: its normal (into free space), the incoming speed
+    /// along it (m/s, the robot's at the contact's first sample), the fitted law and `pida`'s
+    /// impulse; the virtual rebound is set to the law's at this tick.
+    restore: Option<(Vector3<f64>, f64, ContactModel, Vector3<f64>)>,
 }
 
 impl ModelMediated {
@@ -195,7 +226,36 @@ impl ModelMediated {
                 _ => 0,
             },
             since_model: 0,
+            model_impulse: Vector3::zeros(),
+            undo: None,
+            robot_past: 0.0,
+            reason: Rendering::PidaNoPrior,
+            contradicted: [None; MAX_SURFACES],
+            fallback_impulse: Vector3::zeros(),
+            restore: None,
         }
+    }
+
+    /// Why a force that no surface explains (frame convention, at the robot's tip) is
+    /// `pida`'s: no surface faces it; one does but no law is known yet; or one does (or did,
+    /// until a contact contradicted it) but the robot met the force away from it.
+    fn fallback_reason(&self, force: &Vector3<f64>) -> Rendering {
+        let cos_max = self.params.match_angle.to_radians().cos();
+        let direction = -force.normalize();
+        let facing = |normal: &Vector3<f64>| direction.dot(normal) >= cos_max;
+        let mut reason = Rendering::PidaNoPrior;
+        for s in self.surfaces.iter().flatten() {
+            if facing(&s.wall.normal) {
+                if self.law_of(s).is_none() {
+                    return Rendering::PidaLawUnknown;
+                }
+                reason = Rendering::PidaPriorContradicted;
+            }
+        }
+        if self.contradicted.iter().flatten().any(facing) {
+            reason = Rendering::PidaPriorContradicted;
+        }
+        reason
     }
 
     /// The modelled surfaces (prior, identified or both).
@@ -272,8 +332,17 @@ impl ModelMediated {
         if self.physical_ticks == 0 {
             // the model rendered a contact the robot never felt: a phantom surface
             if let (Some(i), true) = (self.rendered, self.params.correct_priors) {
+                self.contradicted[i] = self.surfaces[i].map(|s| s.wall.normal);
                 self.surfaces[i] = None;
                 self.pending[i] = None;
+                // and, if the robot went past it and felt nothing, its impulse is taken back:
+                // the virtual bodies go on towards the real surface as if the phantom had not
+                // been rendered, the robot reaches it and that contact (pida's) corrects the
+                // model. A contact that ended before the robot got there (shorter than the
+                // loop's delay) is not judged so
+                if self.model_impulse != Vector3::zeros() && self.robot_past > 0.0 {
+                    self.undo = Some(self.model_impulse);
+                }
             }
         } else if self.samples.len() >= self.params.min_samples as usize {
             // with a calibration, `auto` fits the calibrated law's form (measured at leisure)
@@ -287,6 +356,16 @@ impl ModelMediated {
                 (form, _) => form,
             };
             if let Some(fit) = fit_contact(&self.samples, &self.force_sum, form) {
+                if self.mode == Mode::Fallback && self.params.correct_priors {
+                    // pida's rebound is not the contact's: the fitted law's is restored
+                    // the robot replays the virtual motion: its velocity at the first sample is
+                    // the virtual tip's when it met the surface
+                    let normal = fit.wall.normal;
+                    let speed_in = -self.samples[0].velocity.dot(&normal);
+                    if speed_in > 0.0 {
+                        self.restore = Some((normal, speed_in, fit.law, self.fallback_impulse));
+                    }
+                }
                 let n = self.samples.len() as f64;
                 let centre = self
                     .samples
@@ -301,6 +380,9 @@ impl ModelMediated {
         self.rendered = None;
         self.residual_energy = 0.0;
         self.previous = None;
+        self.model_impulse = Vector3::zeros();
+        self.fallback_impulse = Vector3::zeros();
+        self.robot_past = 0.0;
         self.mode = Mode::Free;
     }
 
@@ -531,6 +613,46 @@ fn blend_laws(a: &ContactModel, wa: f64, b: &ContactModel, wb: f64) -> ContactMo
         }
         (_, b) => *b,
     }
+}
+
+/// The rebound speed (m/s) of a mass `mass` (kg) meeting a surface of law `law` at
+/// `speed_in` (m/s, > 0) along its normal: `m·d̈ = −f(d, ḋ)` from `d = 0`, `ḋ = speed_in`,
+/// integrated (RK4, about 400 steps over the contact) until the surface lets go (`d ≤ 0`, or
+/// no force while moving out). At most `speed_in`: the laws never create energy.
+pub fn rebound_speed(law: &ContactModel, mass: f64, speed_in: f64) -> f64 {
+    if !(mass > 0.0 && speed_in > 0.0) {
+        return speed_in.max(0.0);
+    }
+    // time scale: the undamped penetration d_max = ((n+1)·m·v²/(2k))^(1/(n+1)) over v
+    let (k, n) = match law {
+        ContactModel::Linear(l) => (l.stiffness, 1.0),
+        ContactModel::HuntCrossley(h) => (h.stiffness, h.exponent),
+    };
+    if !(k > 0.0) {
+        return speed_in;
+    }
+    let d_max = ((n + 1.0) * mass * speed_in * speed_in / (2.0 * k)).powf(1.0 / (n + 1.0));
+    let dt = d_max / speed_in / 100.0;
+    let accel = |d: f64, rate: f64| -law.normal_force(d.max(0.0), rate) / mass;
+    let (mut d, mut rate) = (0.0, speed_in);
+    for _ in 0..20_000 {
+        let (k1d, k1v) = (rate, accel(d, rate));
+        let (k2d, k2v) = (
+            rate + 0.5 * dt * k1v,
+            accel(d + 0.5 * dt * k1d, rate + 0.5 * dt * k1v),
+        );
+        let (k3d, k3v) = (
+            rate + 0.5 * dt * k2v,
+            accel(d + 0.5 * dt * k2d, rate + 0.5 * dt * k2v),
+        );
+        let (k4d, k4v) = (rate + dt * k3v, accel(d + dt * k3d, rate + dt * k3v));
+        d += dt / 6.0 * (k1d + 2.0 * k2d + 2.0 * k3d + k4d);
+        rate += dt / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v);
+        if d <= 0.0 || (rate < 0.0 && law.normal_force(d, rate) == 0.0) {
+            break;
+        }
+    }
+    (-rate).clamp(0.0, speed_in)
 }
 
 /// Fits a plane and a law to one contact's samples: the normal is the mean reaction's
@@ -773,7 +895,10 @@ impl Compensator for ModelMediated {
             } else {
                 match self.explaining_surface(&f_mea, &p_then) {
                     Some(_) => Mode::Model,
-                    None => Mode::Fallback,
+                    None => {
+                        self.reason = self.fallback_reason(&f_mea);
+                        Mode::Fallback
+                    }
                 }
             };
         } else if self.mode != Mode::Free
@@ -793,8 +918,14 @@ impl Compensator for ModelMediated {
         {
             // a force that no surface explains (none there): `pida` takes the contact. A force
             // that a surface explains but at the wrong level stays with the model (handing a
-            // contact to `pida` midway loses more than it saves; see the doc page)
+            // contact to `pida` midway loses more than it saves; see the doc page). What the
+            // model applied so far was wrong: its impulse is taken back
             self.mode = Mode::Fallback;
+            self.reason = Rendering::PidaPriorContradicted;
+            if self.model_impulse != Vector3::zeros() {
+                self.undo = Some(self.model_impulse);
+                self.model_impulse = Vector3::zeros();
+            }
         }
 
         if self.mode != Mode::Free && physical {
@@ -811,11 +942,21 @@ impl Compensator for ModelMediated {
         if let Some(i) = surface_des {
             self.rendered.get_or_insert(i);
         }
+        if let Some(s) = self.rendered.and_then(|i| self.surfaces[i]) {
+            let band = s
+                .calibrated
+                .map_or(0.0, |c| CALIBRATION_TRUST_SIGMAS * c.sigma_at(&p_then))
+                + CALIBRATION_FLOOR;
+            self.robot_past = self.robot_past.max(s.wall.penetration(&p_then) - band);
+        }
 
         let applied = match self.mode {
             // free flight as pida has it: the measured force below the detection level passes
             Mode::Free => fallback.applied,
-            Mode::Fallback => fallback.applied,
+            Mode::Fallback => {
+                self.fallback_impulse += fallback.applied.force * self.period;
+                fallback.applied
+            }
             Mode::Model => {
                 let s = self.sensor_origin;
                 let f_model = -rod_des; // on the frame
@@ -849,6 +990,7 @@ impl Compensator for ModelMediated {
                 }
                 self.previous = Some((residual + damping, v_des));
                 let force = base + damping;
+                self.model_impulse += force * self.period;
                 // the measured moment that the measured force at the robot's tip does not make
                 let unexplained = m_mea - (p_then - s).cross(&f_mea);
                 let moment = if physical {
@@ -867,9 +1009,36 @@ impl Compensator for ModelMediated {
         } else {
             fallback.observed_energy
         };
+        // a phantom's impulse taken back by an impulse at the tip: Δv = K·J
+        let mut velocity_correction = self
+            .undo
+            .take()
+            .map_or_else(Vector3::zeros, |j| input.tip_mobility * j);
+        if let Some((n, speed_in, law, impulse)) = self.restore.take() {
+            // the law's change of the normal velocity, −u_in → u_out, against pida's,
+            // n·K·(−J): the difference is made up by an impulse j·n at the tip (Δv = K·n·j).
+            // Impulses, not velocities, are compared: the normal velocity also drifts in free
+            // flight when the bodies turn
+            let kn = input.tip_mobility * n;
+            let mobility = n.dot(&kn);
+            // the account holds where a normal impulse does not turn the bodies (`K·n ∥ n`):
+            // there pida's wrench is a force at the tip; elsewhere its moment changes the
+            // normal velocity too, and the contact is left as pida made it
+            let coupled = (kn - n * mobility).norm() > RESTORE_COUPLING * mobility;
+            if mobility > 0.0 && !coupled {
+                let ideal = rebound_speed(&law, 1.0 / mobility, speed_in) + speed_in;
+                let done = -n.dot(&(input.tip_mobility * impulse));
+                // a contact far from the law's (several bounces, the bodies turning much) is
+                // beyond this one-dimensional account: left as pida made it
+                let error = (ideal - done).abs();
+                if error > RESTORE_DEADBAND * ideal && error <= RESTORE_LIMIT * ideal {
+                    velocity_correction += input.tip_mobility * n * ((ideal - done) / mobility);
+                }
+            }
+        }
         CompensatorOutput {
             applied,
-            velocity_correction: Vector3::zeros(),
+            velocity_correction,
             estimate: self.estimate().or(fallback.estimate),
             observed_energy: observed,
         }
@@ -893,6 +1062,25 @@ impl Compensator for ModelMediated {
         self.residual_energy = 0.0;
         self.previous = None;
         self.since_model = 0;
+        self.model_impulse = Vector3::zeros();
+        self.undo = None;
+        self.robot_past = 0.0;
+        self.fallback_impulse = Vector3::zeros();
+        self.restore = None;
+        self.reason = Rendering::PidaNoPrior;
+        self.contradicted = [None; MAX_SURFACES];
+    }
+
+    fn rendering(&self) -> Rendering {
+        match self.mode {
+            Mode::Free => Rendering::Unreported,
+            Mode::Model => Rendering::Model,
+            Mode::Fallback => self.reason,
+        }
+    }
+
+    fn uses_tip_mobility(&self) -> bool {
+        true
     }
 
     fn estimates_contact(&self) -> bool {
