@@ -43,6 +43,7 @@ use nalgebra::Vector3;
 use serde::Serialize;
 use serde_json::Value;
 
+use hilcontact_core::compensator::Rendering;
 use hilcontact_core::facility::{FacilityLoop, Measurement};
 use hilcontact_core::frames::FrameWrench;
 use hilcontact_core::hil::HilRecord;
@@ -444,6 +445,7 @@ impl Truth {
                 stiffness_estimate: f64::NAN,
                 damping_estimate: f64::NAN,
                 observed_energy: f64::NAN,
+                rendering: Rendering::Unreported,
             },
             wake_latency: latency,
             sensor_age: 0.0,

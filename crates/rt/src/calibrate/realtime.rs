@@ -19,6 +19,7 @@ use std::time::Duration;
 use nalgebra::{UnitQuaternion, Vector3};
 use serde_json::{json, Value};
 
+use hilcontact_core::compensator::Rendering;
 use hilcontact_core::contact::ContactModel;
 use hilcontact_core::facility::Measurement;
 use hilcontact_core::hil::HilRecord;
@@ -169,6 +170,7 @@ impl RealtimeProcedure {
             stiffness_estimate: f64::NAN,
             damping_estimate: f64::NAN,
             observed_energy: f64::NAN,
+            rendering: Rendering::Unreported,
         };
         if !record.is_finite() {
             stop = Some(StopEvent::plain(StopKind::NonFinite, time));
