@@ -23,7 +23,7 @@ use hilcontact_core::compensator::Rendering;
 use hilcontact_core::contact::ContactModel;
 use hilcontact_core::facility::Measurement;
 use hilcontact_core::hil::HilRecord;
-use hilcontact_core::world::RelativeMotion;
+use hilcontact_core::world::{RelativeMotion, TwoBodySystem};
 use hilcontact_core::{Plan, Scenario};
 
 use super::{
@@ -32,6 +32,8 @@ use super::{
 };
 use crate::error::{Result, RtError};
 use crate::options::RuntimeOptions;
+use std::any::Any;
+
 use crate::runtime::driver::Driver;
 use crate::runtime::{LoopEnd, LoopHandle, StatusSnapshot};
 use crate::safety::{StopEvent, StopKind};
@@ -197,6 +199,40 @@ impl RealtimeProcedure {
     }
 }
 
+/// The loop's driver: the procedure's tick halves; a late tick's periods skipped, not caught
+/// up (a wall's fit may take a long tick at rest: caught up, the moves after it would be sent
+/// in a burst); the units check against the contact the probe detected, since the hardware is
+/// not where the scenario says; no virtual energy.
+impl Driver for RealtimeProcedure {
+    fn observe(&mut self, k: u64, m: &Measurement) -> (HilRecord, Option<StopEvent>) {
+        RealtimeProcedure::observe(self, k, m)
+    }
+
+    fn advance(&mut self, k: u64) -> std::result::Result<RelativeMotion, StopEvent> {
+        RealtimeProcedure::advance(self, k)
+    }
+
+    fn command(&self) -> RelativeMotion {
+        self.initial()
+    }
+
+    fn catches_up(&self) -> bool {
+        false
+    }
+
+    fn units_expected(&self, _system: &TwoBodySystem, actual: &RelativeMotion) -> f64 {
+        RealtimeProcedure::units_expected(self, actual)
+    }
+
+    fn energy(&self) -> f64 {
+        0.0
+    }
+
+    fn into_any(self: Box<Self>) -> Box<dyn Any + Send> {
+        self
+    }
+}
+
 /// A real-time calibration's end: the calibration (or why there is none) and the loop's stop.
 #[derive(Debug, Clone)]
 pub struct RealtimeCalibration {
@@ -245,7 +281,7 @@ impl CalibrationHandle {
             runtime,
             |plan| {
                 let (driver, ticks) = RealtimeProcedure::new(plan, options, force_limit, sender)?;
-                Ok((Driver::Calibrate(Box::new(driver)), ticks))
+                Ok((Box::new(driver) as Box<dyn Driver>, ticks))
             },
             false,
         )?;
@@ -306,7 +342,8 @@ impl CalibrationHandle {
             }
         };
         let _ = outputs.finish();
-        let Some(Driver::Calibrate(driver)) = driver else {
+        let Some(driver) = driver.and_then(|d| d.into_any().downcast::<RealtimeProcedure>().ok())
+        else {
             return Err(RtError::io_other("loop thread", "panicked"));
         };
         let stop = outcome.stop;

@@ -42,7 +42,7 @@ pub struct HilHandle {
 /// waits for both threads.
 pub(crate) struct LoopHandle {
     shared: Arc<SharedStatus>,
-    thread: Option<JoinHandle<(Result<RunOutcome>, Driver)>>,
+    thread: Option<JoinHandle<(Result<RunOutcome>, Box<dyn Driver>)>>,
     writer: Option<JoinHandle<(RunFolder, Outputs)>>,
 }
 
@@ -51,7 +51,7 @@ pub(crate) struct LoopEnd {
     /// The run's outcome, or why it never started.
     pub(crate) outcome: Result<RunOutcome>,
     /// The driver, as the last tick left it (None if the loop thread panicked).
-    pub(crate) driver: Option<Driver>,
+    pub(crate) driver: Option<Box<dyn Driver>>,
     /// The samples kept (none for a calibration).
     pub(crate) run_folder: RunFolder,
     /// The run's outputs, not yet finished.
@@ -110,7 +110,7 @@ impl HilHandle {
             plan.system.energy(&plan.initial),
             &reference_energy,
         );
-        let step = Driver::Hil(HilStep::new(&plan, energy_bound));
+        let step: Box<dyn Driver> = Box::new(HilStep::new(&plan, energy_bound));
         let ticks = plan.ticks as u64;
         let running = LoopHandle::spawn(&plan, options, sensor, robot, outputs, step, ticks, true)?;
         Ok(HilHandle {
@@ -183,7 +183,7 @@ impl LoopHandle {
     pub(crate) fn start(
         scenario: &Scenario,
         options: &RuntimeOptions,
-        driver: impl FnOnce(&Plan) -> Result<(Driver, u64)>,
+        driver: impl FnOnce(&Plan) -> Result<(Box<dyn Driver>, u64)>,
         keep_samples: bool,
     ) -> Result<(Plan, Self)> {
         let (plan, parsed) = validate(scenario, options)?;
@@ -224,7 +224,7 @@ impl LoopHandle {
         sensor: Box<dyn SensorLink>,
         robot: Box<dyn RobotLink>,
         outputs: Outputs,
-        step: Driver,
+        step: Box<dyn Driver>,
         ticks: u64,
         keep_samples: bool,
     ) -> Result<Self> {

@@ -32,7 +32,7 @@ pub const CONTACT_FREE_FORCE: f64 = 5.0;
 /// The loop thread's state: the virtual side, the two links and the timing statistics.
 pub(super) struct Loop {
     /// The virtual side of a tick: the core's one HIL step, or the calibration procedure.
-    pub(super) step: Driver,
+    pub(super) step: Box<dyn Driver>,
     pub(super) rod: Vector3<f64>,
     pub(super) period: f64,
     pub(super) period_ns: u64,
