@@ -125,6 +125,61 @@ pub const REALTIME_FIELDS: [Field<Sample>; 3] = [
     scalar("robot_age", "s", |s| s.robot_age),
 ];
 
+/// The loop's report of a run (`realtime` in `metrics.json`, and a calibration's): its
+/// period (s), ticks, `samples` kept, wall time (s), the stop (with `reason` and the command's
+/// `exit_code`), the timing statistics (µs), the links' counters and own facts (RDT:
+/// counts_per_force, counts_per_torque, sensor_units; RSI: rsi), the pacing, the sensor's
+/// offset, the loop thread's scheduling, the safety functions' report and the `options`.
+pub fn loop_report(
+    outcome: &RunOutcome,
+    period: f64,
+    samples: usize,
+    reason: Option<String>,
+    exit_code: i32,
+    options: &impl serde::Serialize,
+) -> Value {
+    let stop = &outcome.stop;
+    let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
+    let mut realtime = json!({
+        "period": period,
+        "ticks": outcome.ticks,
+        "samples": samples,
+        "wall_time": outcome.wall_time,
+        "stop": {
+            "kind": stop.kind,
+            "reason": reason,
+            "time": stop.time,
+            "value": finite(stop.value),
+            "limit": finite(stop.limit),
+            "safety_stop": stop.kind.is_safety_stop(),
+            "exit_code": exit_code,
+        },
+        "timing": {
+            "wake_latency_us": outcome.wake_latency,
+            "period_error_us": outcome.period_error,
+            "compute_us": outcome.compute,
+            "overruns": outcome.overruns,
+        },
+        "sensor": outcome.sensor,
+        "robot": outcome.robot,
+        "commands_sent": outcome.commands_sent,
+        "send_errors": outcome.send_errors,
+        "samples_dropped": outcome.samples_dropped,
+        "pacing": outcome.pacing,
+        "robot_address": outcome.robot_address.map(|a| a.to_string()),
+        "sensor_offset": outcome.sensor_offset,
+        "scheduling": outcome.scheduling,
+        "safety": outcome.safety,
+        "options": options,
+    });
+    if let Some(section) = realtime.as_object_mut() {
+        for (key, value) in outcome.sensor_report.iter().chain(&outcome.robot_report) {
+            section.insert(key.clone(), value.clone());
+        }
+    }
+    realtime
+}
+
 /// Builds the output of a run from its samples.
 pub fn build_output(
     plan: &Plan,
@@ -149,46 +204,14 @@ pub fn build_output(
     if let Some(reason) = stop.reason_naming(outcome.sensor_name, outcome.robot_name) {
         core.reason = Some(reason);
     }
-    let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
-    let reason = core.reason.clone();
-    let mut realtime = json!({
-        "period": plan.period,
-        "ticks": outcome.ticks,
-        "samples": samples.len(),
-        "wall_time": outcome.wall_time,
-        "stop": {
-            "kind": stop.kind,
-            "reason": reason,
-            "time": stop.time,
-            "value": finite(stop.value),
-            "limit": finite(stop.limit),
-            "safety_stop": stop.kind.is_safety_stop(),
-            "exit_code": stop.kind.exit_code(),
-        },
-        "timing": {
-            "wake_latency_us": outcome.wake_latency,
-            "period_error_us": outcome.period_error,
-            "compute_us": outcome.compute,
-            "overruns": outcome.overruns,
-        },
-        "sensor": outcome.sensor,
-        "robot": outcome.robot,
-        "commands_sent": outcome.commands_sent,
-        "send_errors": outcome.send_errors,
-        "samples_dropped": outcome.samples_dropped,
-        "pacing": outcome.pacing,
-        "robot_address": outcome.robot_address.map(|a| a.to_string()),
-        "sensor_offset": outcome.sensor_offset,
-        "scheduling": outcome.scheduling,
-        "safety": outcome.safety,
-        "options": options,
-    });
-    // the links' own facts (RDT: counts_per_force, counts_per_torque, sensor_units; RSI: rsi)
-    if let Some(section) = realtime.as_object_mut() {
-        for (key, value) in outcome.sensor_report.iter().chain(&outcome.robot_report) {
-            section.insert(key.clone(), value.clone());
-        }
-    }
+    let realtime = loop_report(
+        outcome,
+        plan.period,
+        samples.len(),
+        core.reason.clone(),
+        stop.kind.exit_code(),
+        options,
+    );
     let metrics = serde_json::to_value(RealtimeMetrics { core, realtime })
         .map_err(|e| RtError::io_other("metrics", e.to_string()))?;
     Ok(HilOutput {

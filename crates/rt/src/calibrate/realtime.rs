@@ -17,7 +17,7 @@ use std::sync::Mutex;
 use std::time::Duration;
 
 use nalgebra::{UnitQuaternion, Vector3};
-use serde_json::{json, Value};
+use serde_json::Value;
 
 use hilcontact_core::compensator::Rendering;
 use hilcontact_core::contact::ContactModel;
@@ -32,6 +32,7 @@ use super::{
 };
 use crate::error::{Result, RtError};
 use crate::options::RuntimeOptions;
+use crate::report::loop_report;
 use std::any::Any;
 
 use crate::runtime::driver::Driver;
@@ -258,6 +259,8 @@ pub struct CalibrationHandle {
     running: LoopHandle,
     plan: Plan,
     options: CalibrateOptions,
+    /// The runtime options it started with (in its loop report).
+    runtime: RuntimeOptions,
     force_limit: f64,
     measured_at: String,
     progress: Mutex<Receiver<String>>,
@@ -289,6 +292,7 @@ impl CalibrationHandle {
             running,
             plan,
             options: options.clone(),
+            runtime: runtime.clone(),
             force_limit,
             measured_at: measured_at.to_string(),
             progress: Mutex::new(progress),
@@ -391,32 +395,14 @@ impl CalibrationHandle {
         } else {
             0
         };
-        let realtime = json!({
-            "period": self.plan.period,
-            "ticks": outcome.ticks,
-            "wall_time": outcome.wall_time,
-            "stop": {
-                "kind": stop.kind,
-                "reason": stop_reason,
-                "time": stop.time,
-                "safety_stop": stop.kind.is_safety_stop(),
-                "exit_code": exit_code,
-            },
-            "timing": {
-                "wake_latency_us": outcome.wake_latency,
-                "period_error_us": outcome.period_error,
-                "compute_us": outcome.compute,
-                "overruns": outcome.overruns,
-            },
-            "sensor": outcome.sensor,
-            "robot": outcome.robot,
-            "commands_sent": outcome.commands_sent,
-            "send_errors": outcome.send_errors,
-            "pacing": outcome.pacing,
-            "robot_address": outcome.robot_address.map(|a| a.to_string()),
-            "scheduling": outcome.scheduling,
-            "safety": outcome.safety,
-        });
+        let realtime = loop_report(
+            &outcome,
+            self.plan.period,
+            0,
+            stop_reason.clone(),
+            exit_code,
+            &self.runtime,
+        );
         Ok(RealtimeCalibration {
             outcome: CalibrationOutcome {
                 file,
