@@ -374,15 +374,25 @@ def rotation_figure(run: RunData) -> Figure:
         ax_m, ts["time"].to_numpy(), applied_moment_in_t(run), ref["time"].to_numpy(),
         _vectors(ref, "contact_moment"), "M", hil_label="HIL (applied)",
     )
-    for ax in (ax_w, ax_m):
+    _finish_stacked(
+        run, (ax_w, "Servicer angular velocity relative to the target (t frame)", "angular velocity (mrad/s)"),
+        (ax_m, "Contact moment on the frame about the sensor origin (t frame)", "moment (N·m)"),
+    )
+    return figure
+
+
+def _finish_stacked(run: RunData, top: tuple[Axes, str, str], bottom: tuple[Axes, str, str]) -> None:
+    """Finish two panels stacked on one time axis, each given as (axes, title, y label): both
+    get the collisions shaded, a divergence marked and ``_finish``'s title and labels; the
+    run's header stays on the upper title only and the upper panel's time labels are hidden."""
+    for ax, title, ylabel in (top, bottom):
         _shade_collisions(ax, run)
         _mark_divergence(ax, run)
-    _finish(ax_w, "Servicer angular velocity relative to the target (t frame)", run, "angular velocity (mrad/s)")
-    _finish(ax_m, "Contact moment on the frame about the sensor origin (t frame)", run, "moment (N·m)")
-    ax_m.set_title(ax_m.get_title().split("\n")[0], fontsize=11)
-    ax_w.set_xlabel("")
-    ax_w.tick_params(axis="x", labelbottom=False)
-    return figure
+        _finish(ax, title, run, ylabel)
+    ax_top, ax_bottom = top[0], bottom[0]
+    ax_bottom.set_title(ax_bottom.get_title().split("\n")[0], fontsize=11)
+    ax_top.set_xlabel("")
+    ax_top.tick_params(axis="x", labelbottom=False)
 
 
 def _tracked_wall(run: RunData) -> int:
@@ -672,14 +682,10 @@ def normal_tangential_figure(run: RunData) -> Figure:
         time = frame["time"].to_numpy()
         _plot(ax_n, time, np.linalg.norm(force - tangential, axis=1), label=f"|F_n| {label}", **style)
         _plot(ax_t, time, np.linalg.norm(tangential, axis=1), label=f"|F_t| {label}", **style)
-    for ax in (ax_n, ax_t):
-        _shade_collisions(ax, run)
-        _mark_divergence(ax, run)
-    _finish(ax_n, "Contact force: normal part |F − F_t|", run, "normal force (N)")
-    _finish(ax_t, "Tangential (friction) part |F_t|", run, "tangential force (N)")
-    ax_t.set_title(ax_t.get_title().split("\n")[0], fontsize=11)
-    ax_n.set_xlabel("")
-    ax_n.tick_params(axis="x", labelbottom=False)
+    _finish_stacked(
+        run, (ax_n, "Contact force: normal part |F − F_t|", "normal force (N)"),
+        (ax_t, "Tangential (friction) part |F_t|", "tangential force (N)"),
+    )
     return figure
 
 
