@@ -312,10 +312,8 @@ impl Loop {
                 limit: self.limits.watchdog_ms,
             });
         }
-        for fault in [self.sensor.fault(), self.robot.fault()]
-            .into_iter()
-            .flatten()
-        {
+        // The sensor's fault first, then the robot's.
+        if let Some(fault) = self.sensor.fault().or_else(|| self.robot.fault()) {
             return Some(StopEvent {
                 kind: fault.kind,
                 time,
