@@ -447,6 +447,7 @@ MODEL_DEFAULTS = {
     "observer": "work",
     "controller": "normal",
     "force_ratio_max": 2.0,
+    "pull": False,
 }
 TDPA_DEFAULTS = {
     "contact_force": 3.0,
@@ -623,7 +624,9 @@ def test_switching_kind_by_override_works_on_every_preset(name, kind):
     assert "compensator" in raw_preset(name)
     s = hc.load_scenario(name, {"compensator.kind": kind})
     assert s.compensator.kind == kind
-    assert s.to_dict()["compensator"] == {"kind": kind, **DEFAULTS[kind]}
+    # the defaults, with the file's own parameters that the new kind has (the others dropped)
+    own = {k: v for k, v in raw_preset(name)["compensator"].items() if k in DEFAULTS[kind]}
+    assert s.to_dict()["compensator"] == {"kind": kind, **DEFAULTS[kind], **own}
     base = hc.load_scenario(name).to_dict()
     switched = s.to_dict()
     assert {k: v for k, v in switched.items() if k != "compensator"} == {

@@ -5,7 +5,7 @@
 //! Δp_err = (p_des − p_act)·e                  (23)
 //! Δv_err = (v_des − v_act)·e                  (24)
 //! F_err  = (k̂·Δp_err + ĉ·Δv_err)·e           (21)
-//! F_comp = F_act + F_err, never pulling       (22)
+//! F_comp = F_act + F_err, never pulling (22; `pic`'s `pull` option: unclamped)
 //! M_comp = M_act + (p_des − p_act) × F_comp + (p_act − p_s) × F_err   (27), (28)
 //! ```
 //! On a frictional surface ([`ContactView::frictional`]) the increments are taken along the
@@ -38,6 +38,26 @@ pub fn compensate_force(
     input: &CompensatorInput,
     sensor_origin: &Vector3<f64>,
 ) -> CompensatedWrench {
+    compensate(view, input, sensor_origin, false)
+}
+
+/// [`compensate_force`] without the no-pull clamp: `F_comp = F_act + F_err` as eq. (22) writes
+/// it, negative (pulling) when `F_err` outweighs `F_act` (`pic`'s `pull` option).
+pub fn compensate_force_pulling(
+    view: &ContactView,
+    input: &CompensatorInput,
+    sensor_origin: &Vector3<f64>,
+) -> CompensatedWrench {
+    compensate(view, input, sensor_origin, true)
+}
+
+/// Eqs. (21)-(24), (27), (28), clamped at zero along the contact direction unless `pull`.
+fn compensate(
+    view: &ContactView,
+    input: &CompensatorInput,
+    sensor_origin: &Vector3<f64>,
+    pull: bool,
+) -> CompensatedWrench {
     if !view.in_contact {
         return CompensatedWrench {
             force: view.force,
@@ -46,14 +66,14 @@ pub fn compensate_force(
         };
     }
     if view.frictional {
-        return compensate_frictional(view, input, sensor_origin);
+        return compensate_frictional(view, input, sensor_origin, pull);
     }
     let e = view.direction;
     let dp = input.tip_position_desired - input.tip_position_actual;
     let dp_err = dp.dot(&e); // (23)
     let dv_err = (input.tip_velocity_desired - input.tip_velocity_actual).dot(&e); // (24)
     let along = view.force.dot(&e) + view.stiffness * dp_err + view.damping * dv_err; // (21), (22)
-    let force = e * along.max(0.0);
+    let force = e * if pull { along } else { along.max(0.0) };
     let error = force - view.force;
     let moment =
         view.moment + dp.cross(&force) + (input.tip_position_actual - sensor_origin).cross(&error); // (27), (28)
@@ -70,6 +90,7 @@ fn compensate_frictional(
     view: &ContactView,
     input: &CompensatorInput,
     sensor_origin: &Vector3<f64>,
+    pull: bool,
 ) -> CompensatedWrench {
     let n = view.normal;
     let dp = input.tip_position_desired - input.tip_position_actual;
@@ -77,7 +98,7 @@ fn compensate_frictional(
     let f_n = view.force.dot(&n);
     let force = if f_n > 0.0 {
         let along = f_n + view.stiffness * dp.dot(&n) + view.damping * dv.dot(&n);
-        view.force * (along.max(0.0) / f_n)
+        view.force * (if pull { along } else { along.max(0.0) } / f_n)
     } else {
         view.force
     };

@@ -22,7 +22,7 @@ pub use akf::SageHusaFilter;
 pub use dac::Dac;
 pub use delay::{ContactEstimator, ContactView};
 pub use energy::{DampingAmendment, EnergyController, EnergyObserver};
-pub use force::{compensate_force, CompensatedWrench};
+pub use force::{compensate_force, compensate_force_pulling, CompensatedWrench};
 pub use model_mediated::{
     fit_contact, rebound_speed, Fit, ModelMediated, Sample, Surface, MAX_SURFACES,
 };

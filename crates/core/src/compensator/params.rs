@@ -86,6 +86,10 @@ pub struct ModelParams {
     /// dissipate in one tick is carried to the next.
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e6))]
     pub force_ratio_max: f64,
+    /// `pic` only: `F_comp = F_act + F_err` exactly as eq. (22) writes it, pulling the virtual
+    /// body when `F_err` outweighs `F_act` (the virtual rod tip has left the wall while the
+    /// lagging robot still presses); `false`, the default: clamped at zero, never pulling.
+    pub pull: bool,
 }
 
 impl Default for ModelParams {
@@ -105,6 +109,7 @@ impl Default for ModelParams {
             observer: ObserverMode::Work,
             controller: ControllerMode::Normal,
             force_ratio_max: 2.0,
+            pull: false,
         }
     }
 }

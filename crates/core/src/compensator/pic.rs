@@ -2,7 +2,7 @@
 //! straight into the dynamics. See docs/compensators/pic.md.
 
 use super::delay::ContactEstimator;
-use super::force::compensate_force;
+use super::force::{compensate_force, compensate_force_pulling};
 use super::params::ModelParams;
 use super::{
     Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
@@ -15,6 +15,8 @@ use nalgebra::Vector3;
 pub struct Pic {
     estimator: ContactEstimator,
     sensor_origin: Vector3<f64>,
+    /// Eq. (22) unclamped ([`ModelParams::pull`]).
+    pull: bool,
 }
 
 impl Pic {
@@ -23,6 +25,7 @@ impl Pic {
         Pic {
             estimator: ContactEstimator::new(p, context),
             sensor_origin: context.sensor_origin,
+            pull: p.pull,
         }
     }
 }
@@ -30,7 +33,11 @@ impl Pic {
 impl Compensator for Pic {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
         let view = self.estimator.step(input); // steps 1-4
-        let comp = compensate_force(&view, input, &self.sensor_origin); // steps 5-6
+        let comp = if self.pull {
+            compensate_force_pulling(&view, input, &self.sensor_origin) // steps 5-6, eq. (22) as written
+        } else {
+            compensate_force(&view, input, &self.sensor_origin) // steps 5-6
+        };
         CompensatorOutput {
             applied: FrameWrench {
                 force: comp.force,
