@@ -320,3 +320,59 @@ fn random_clean_corner_contacts_are_split_into_their_two_walls() {
 fn random_noisy_corner_contacts_are_split_into_their_two_walls() {
     check_corners(2222, 0.2, 0.0, 0.05, 0.05);
 }
+
+/// Random frictionless `oblique-6dof` scenes with both bodies spinning (±0.03 rad/s), the
+/// target drifting, the front wall tilted and the rod tip off the axis, 0.2 N noise and 5 ms
+/// sensor delay: per collision (identified offline by the online front end's code), whether it
+/// was classified frictional, μ̂ and the normal's angle to the wall's, degrees.
+fn spinning_frictionless(seed: u64, count: usize, mediated: bool) -> Vec<(bool, f64, f64)> {
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+    let mut out = Vec::new();
+    for _ in 0..count {
+        let spin = |rng: &mut rand_pcg::Pcg64Mcg| [0; 3].map(|_| rng.random_range(-0.03f64..0.03));
+        let spins = (spin(&mut rng), spin(&mut rng));
+        let drift = [0; 3].map(|_| rng.random_range(-0.003f64..0.003));
+        let tilt = [0; 2].map(|_| rng.random_range(-0.5f64..0.5));
+        let offset = [0; 2].map(|_| rng.random_range(-0.2f64..0.2));
+        let mut s = oblique_6dof(spins, drift, tilt, offset);
+        s.contact.friction = FrictionConfig::default();
+        s.facility.robot_delay = rng.random_range(10u32..=120) as f64 * 1e-3;
+        s.facility.sensor_noise = rng.random_range(0.0..0.5);
+        s.facility.sensor_delay = 0.003;
+        s.simulation.duration = 10.0;
+        s.compensator = if mediated {
+            CompensatorConfig::ModelMediated(hilcontact_core::compensator::ModelMediatedParams {
+                prior_walls: s.walls.clone(),
+                ..Default::default()
+            })
+        } else {
+            CompensatorConfig::from_kind("pida").expect("pida")
+        };
+        for (_, mu_hat, angle, frictional) in identified(&s) {
+            out.push((frictional, mu_hat, angle));
+        }
+    }
+    out
+}
+
+/// A frictionless contact on a spinning wall is frictionless: the tip slides over it (the
+/// spins), but the force stays along the normal, so no contact is classified frictional
+/// (`SurfaceFit::leans`) and μ̂ is 0.
+#[test]
+fn frictionless_contacts_on_spinning_walls_are_not_taken_as_frictional() {
+    let collisions = [false, true]
+        .iter()
+        .flat_map(|&m| spinning_frictionless(2203, 16, m))
+        .collect::<Vec<_>>();
+    assert!(collisions.len() >= 8, "{} collisions", collisions.len());
+    let flagged: Vec<_> = collisions.iter().filter(|c| c.0).collect();
+    for c in &collisions {
+        println!("frictional {} μ̂ {:.3} normal off by {:.3}°", c.0, c.1, c.2);
+    }
+    assert!(
+        flagged.is_empty(),
+        "{} of {} frictionless collisions taken as frictional: {flagged:?}",
+        flagged.len(),
+        collisions.len()
+    );
+}
