@@ -21,8 +21,9 @@
 //! resting on a plate touches at its four corners, a rod across an edge at one point); a
 //! cylinder's or a cone's side lying on a face touches at the two ends of its line
 //! (`side_line`), and a capsule's or a cylinder's line lying across a smaller box's face at the
-//! ends of that line clipped to the face (`face_clipped_line`). Each point gets the contact law along its own normal, and friction against
-//! its own sliding velocity ([`crate::contact::ContactGeometry`]).
+//! ends of that line clipped to the face (`face_clipped_line`). Each point gets the contact law
+//! along its own normal, and friction against its own sliding velocity
+//! ([`crate::contact::ContactGeometry`]).
 //!
 //! Cost: bounding boxes, a triangle's plane, the separating axis remembered from the last
 //! evaluation (`AxisCache`, temporal coherence: tested, never trusted, so the results do not
