@@ -815,6 +815,22 @@ fn core_contact(
     slot: usize,
     reach: f64,
 ) -> Option<Contact> {
+    core_contact_from(ps, pose_s, pt, slot, reach, None)
+}
+
+/// [`core_contact`] with GJK started from the direction `init` (`t`, from the servicer toward
+/// the target) instead of parry's own start (the direction between the cores' origins): a
+/// warm start. Not used by the contact: on curved cores (cylinders, cones) GJK's answer
+/// depends on where it starts (see the test `gjk_depends_on_its_start_on_curved_cores`), so
+/// a warm start would change results by more than the 1e-9 the presets allow.
+fn core_contact_from(
+    ps: &Piece,
+    pose_s: &Isometry3<f64>,
+    pt: &Piece,
+    slot: usize,
+    reach: f64,
+    init: Option<Vector3<f64>>,
+) -> Option<Contact> {
     if pt.core.as_halfspace().is_some() {
         // parry 0.22's (support map, half-space) order answers wrongly; its own order is right
         let c = query::contact(&pt.pose, &*pt.core, pose_s, &*ps.core, reach);
@@ -840,7 +856,7 @@ fn core_contact(
         g2,
         reach,
         &mut VoronoiSimplex::new(),
-        None,
+        init.map(|a| Unit::new_unchecked(pose_s.rotation.inverse_transform_vector(&a))),
     );
     match result {
         GJKResult::ClosestPoints(point1, point2_1, normal1) => {
@@ -1184,6 +1200,136 @@ fn piece_contacts(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// How much GJK's answer depends on where it starts (the question a warm start raises):
+    /// random pairs of cores (a box, a cylinder, a capsule's segment, a cone, at the preset's
+    /// scale) at random attitudes, placed within reach; the contact as the module computes it
+    /// (`core_contact`, parry's start) against GJK started from the normal tilted by 0.02 rad
+    /// (a warm start from the last evaluation) and from eight random directions.
+    /// Measured (seed 7, about 1 250 pairs per pair of kinds, printed with `--nocapture`):
+    /// pairs of flat cores (a box and a segment) agree to 1e-16 m whatever the start; with a
+    /// cylinder or a cone the distance changes with the start by up to 2.0e-5 m and the normal
+    /// by up to 5.3e-2 rad, and parry's start itself ends up to 2.0e-5 m above the best of the
+    /// ten starts: GJK stops on `max − min ≤ √(10·ε)·max` or on no progress, and on a curved
+    /// support map that can be far from the optimum. So a warm-started GJK cannot
+    /// agree with today's results to 1e-9, and today's are not that exact either.
+    #[test]
+    fn gjk_depends_on_its_start_on_curved_cores() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(7);
+        let core = |k: usize| -> (SharedShape, f64) {
+            match k {
+                0 => (
+                    SharedShape::new(Cuboid::new(Vector3::new(0.018, 0.058, 0.008))),
+                    0.002,
+                ),
+                1 => (SharedShape::new(Cylinder::new(0.148, 0.008)), 0.002),
+                2 => (
+                    SharedShape::new(Segment::new(
+                        Point3::new(0.0, 0.0, -0.1),
+                        Point3::new(0.0, 0.0, 0.1),
+                    )),
+                    0.01,
+                ),
+                _ => (SharedShape::new(Cone::new(0.05, 0.02)), 0.002),
+            }
+        };
+        let unit = |rng: &mut rand_pcg::Pcg64Mcg| {
+            Vector3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+            .normalize()
+        };
+        // per pair of kinds (servicer · 4 + target): worst change of the distance and of the
+        // normal with the start, worst excess of parry's start over the best start, pairs
+        let mut worst = [(0.0f64, 0.0f64, 0.0f64, 0usize); 16];
+        for _ in 0..20000 {
+            let (ks, kt) = (rng.random_range(0..4), rng.random_range(0..4));
+            if (ks == 0 && kt == 0) || (ks == 2 && kt == 2) {
+                continue; // parry's closed forms, no GJK
+            }
+            let ((cs, rs), (ct, rt)) = (core(ks), core(kt));
+            let reach = rs + rt;
+            let attitude = |rng: &mut rand_pcg::Pcg64Mcg| {
+                UnitQuaternion::from_scaled_axis(unit(rng) * rng.random_range(0.0..3.14))
+            };
+            let pose_t = Isometry3::from_parts(Translation3::identity(), attitude(&mut rng));
+            let (dir, rot_s) = (unit(&mut rng), attitude(&mut rng));
+            let ps = piece(cs, Isometry3::identity(), rs);
+            let fresh = || piece(ct.clone(), pose_t, rt);
+            // slide the servicer along `dir` until the cores are within reach
+            let mut d = 0.5;
+            let mut placed = None;
+            for _ in 0..60 {
+                let pose_s = Isometry3::from_parts(Translation3::from(dir * d), rot_s);
+                let gap = core_distance(&ps, &pose_s, &fresh());
+                if gap <= 0.0 {
+                    break;
+                }
+                if gap < reach {
+                    placed = Some(pose_s);
+                    break;
+                }
+                d -= 0.9 * (gap - 0.5 * reach);
+            }
+            let Some(pose_s) = placed else { continue };
+            let Some(cold) = core_contact(&ps, &pose_s, &fresh(), 0, reach) else {
+                continue;
+            };
+            let tilt = UnitQuaternion::from_scaled_axis(unit(&mut rng) * 0.02);
+            let warm = core_contact_from(
+                &ps,
+                &pose_s,
+                &fresh(),
+                0,
+                reach,
+                Some(tilt * cold.normal1.into_inner()),
+            )
+            .expect("in reach from any start");
+            let mut best = cold.dist.min(warm.dist);
+            for _ in 0..8 {
+                let start = Some(unit(&mut rng));
+                if let Some(c) = core_contact_from(&ps, &pose_s, &fresh(), 0, reach, start) {
+                    best = best.min(c.dist);
+                }
+            }
+            let w = &mut worst[ks * 4 + kt];
+            w.0 = w.0.max((warm.dist - cold.dist).abs());
+            w.1 = w.1.max(warm.normal1.angle(&cold.normal1));
+            w.2 = w.2.max(cold.dist - best);
+            w.3 += 1;
+        }
+        let names = ["box", "cylinder", "segment", "cone"];
+        for (k, (dd, dn, excess, n)) in worst.iter().enumerate() {
+            if *n == 0 {
+                continue;
+            }
+            let (ks, kt) = (k / 4, k % 4);
+            eprintln!(
+                "{} · {}: {n} pairs; with the start the distance changes by {dd:.2e} m, the \
+                 normal by {dn:.2e} rad; parry's start above the best by {excess:.2e} m",
+                names[ks], names[kt]
+            );
+            assert!(*n > 500, "{} · {}: {n} pairs", names[ks], names[kt]);
+            let flat = [ks, kt].iter().all(|&k| k == 0 || k == 2);
+            if flat {
+                // a box and a segment: GJK ends on the same features whatever the start
+                assert!(*dd < 1e-12 && *excess < 1e-12, "{dd} {excess}");
+            } else {
+                // curved cores: the start matters beyond 1e-9, within the measured bound
+                assert!(*excess < 1e-4, "{excess}");
+            }
+        }
+        let curved_changes = worst
+            .iter()
+            .enumerate()
+            .filter(|(k, w)| ![k / 4, k % 4].iter().all(|&i| i == 0 || i == 2) && w.3 > 0)
+            .filter(|(_, w)| w.0 > 1e-9)
+            .count();
+        assert!(curved_changes >= 6, "{curved_changes}");
+    }
 
     /// parry's contact of a support map and a half-space, in the order this module asks it.
     #[test]
