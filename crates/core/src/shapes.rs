@@ -1253,7 +1253,9 @@ mod tests {
             let ((cs, rs), (ct, rt)) = (core(ks), core(kt));
             let reach = rs + rt;
             let attitude = |rng: &mut rand_pcg::Pcg64Mcg| {
-                UnitQuaternion::from_scaled_axis(unit(rng) * rng.random_range(0.0..3.14))
+                UnitQuaternion::from_scaled_axis(
+                    unit(rng) * rng.random_range(0.0..std::f64::consts::PI),
+                )
             };
             let pose_t = Isometry3::from_parts(Translation3::identity(), attitude(&mut rng));
             let (dir, rot_s) = (unit(&mut rng), attitude(&mut rng));
