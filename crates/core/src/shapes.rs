@@ -20,8 +20,10 @@
 //! closest pair is a point too, for the depth beyond the deepest vertex's (so a box face
 //! resting on a plate touches at its four corners, a rod across an edge at one point); a
 //! cylinder's or a cone's side lying on a face touches at the two ends of its line
-//! (`side_line`). Each point gets the contact law along its own normal, and friction against
-//! its own sliding velocity ([`crate::contact::ContactGeometry`]).
+//! (`side_line`), and a capsule's or a cylinder's line lying across a smaller box's face at the
+//! ends of that line clipped to the face (`face_clipped_line`). Each point gets the contact law
+//! along its own normal, and friction against its own sliding velocity
+//! ([`crate::contact::ContactGeometry`]).
 //!
 //! Cost: bounding boxes, a triangle's plane, the separating axis remembered from the last
 //! evaluation (`AxisCache`, temporal coherence: tested, never trusted, so the results do not
@@ -813,6 +815,22 @@ fn core_contact(
     slot: usize,
     reach: f64,
 ) -> Option<Contact> {
+    core_contact_from(ps, pose_s, pt, slot, reach, None)
+}
+
+/// [`core_contact`] with GJK started from the direction `init` (`t`, from the servicer toward
+/// the target) instead of parry's own start (the direction between the cores' origins): a
+/// warm start. Not used by the contact: on curved cores (cylinders, cones) GJK's answer
+/// depends on where it starts (see the test `gjk_depends_on_its_start_on_curved_cores`), so
+/// a warm start would change results by more than the 1e-9 the presets allow.
+fn core_contact_from(
+    ps: &Piece,
+    pose_s: &Isometry3<f64>,
+    pt: &Piece,
+    slot: usize,
+    reach: f64,
+    init: Option<Vector3<f64>>,
+) -> Option<Contact> {
     if pt.core.as_halfspace().is_some() {
         // parry 0.22's (support map, half-space) order answers wrongly; its own order is right
         let c = query::contact(&pt.pose, &*pt.core, pose_s, &*ps.core, reach);
@@ -838,7 +856,7 @@ fn core_contact(
         g2,
         reach,
         &mut VoronoiSimplex::new(),
-        None,
+        init.map(|a| Unit::new_unchecked(pose_s.rotation.inverse_transform_vector(&a))),
     );
     match result {
         GJKResult::ClosestPoints(point1, point2_1, normal1) => {
@@ -950,6 +968,121 @@ fn side_line(core: &SharedShape, toward: &Vector3<f64>) -> SideLine {
     line
 }
 
+/// The line of a piece `line_piece` (at `line_pose`, `t`): a capsule's segment, or a
+/// cylinder's side line that faces the direction `toward_box` (`t`, from the line's piece
+/// toward the box) with its [`side_line`] weight; none on other cores.
+fn piece_line(
+    line_piece: &Piece,
+    line_pose: &Isometry3<f64>,
+    toward_box: &Vector3<f64>,
+) -> Option<([Point3<f64>; 2], f64)> {
+    if let Some(s) = line_piece.core.as_segment() {
+        return Some(([line_pose * s.a, line_pose * s.b], 1.0));
+    }
+    line_piece.core.as_cylinder()?;
+    let local = line_pose.rotation.inverse_transform_vector(toward_box);
+    let line = side_line(&line_piece.core, &local);
+    (line.n == 2 && line.weight > 0.0).then(|| {
+        (
+            [line_pose * line.ends[0], line_pose * line.ends[1]],
+            line.weight,
+        )
+    })
+}
+
+/// A larger piece's line lying across a smaller box's face (a 0.3 m capsule across a 0.1 m
+/// cube): the box's corners are off the line and the line's ends off the face, so, left to
+/// the cores' closest pair, the contact would be one point where the query puts it along the
+/// line, and the bodies would turn. The line (`onto`'s, [`piece_line`]) is clipped to the
+/// face of the box (`from`, its core's half extents `h`) that faces it (the box axis `i` with
+/// the largest `|toward_i|`, `toward` the direction from the box toward the line in the box's
+/// own frame), i.e. to `|x_j| ≤ h_j` for the two other axes `j`, and the clipped ends are
+/// points: symmetric where the contact is. Each end's depth `d_e` is weighted by how squarely
+/// the face faces the line, `w_f = clamp((|toward_i|/|toward| − cos 45°) / (cos 30° −
+/// cos 45°), 0, 1)` (0 where two faces tie, so the choice of face never makes the force
+/// jump), by how flat the line lies on it, `w_p = min(d_e) / max(d_e)` over the two ends (1
+/// where the line lies parallel to the face, 0 where one end is out of reach: a line crossing
+/// the face's edge at an angle touches the edge at one point, the cores' closest pair, with
+/// its own normal), and by the line's own weight `w_l` ([`side_line`] on a cylinder, 1 on a
+/// capsule); it enters beyond the deepest box corner's depth `d_v` (the corners already hold that
+/// much): `max(0, w_f·w_p·w_l·d_e − d_v)`, to `emit(on the box, on the line, the box's outward
+/// normal, depth, end)`. Returns the depth the ends cover, `max w_f·w_p·w_l·d_e` (0 where none),
+/// for the closest pair's excess.
+#[allow(clippy::too_many_arguments)]
+fn face_clipped_line(
+    from: &Piece,
+    from_pose: &Isometry3<f64>,
+    onto: &Piece,
+    onto_pose: &Isometry3<f64>,
+    toward: &Vector3<f64>,
+    box_to_line: &Vector3<f64>,
+    deepest_corner: f64,
+    reach: f64,
+    emit: &mut impl FnMut(Point3<f64>, Point3<f64>, Vector3<f64>, f64, u64),
+) -> f64 {
+    let Some(cuboid) = from.core.as_cuboid() else {
+        return 0.0;
+    };
+    let norm = toward.norm();
+    if !norm.is_finite() || norm <= 0.0 {
+        return 0.0;
+    }
+    let Some((ends, w_line)) = piece_line(onto, onto_pose, &-box_to_line) else {
+        return 0.0;
+    };
+    let i = toward.iamax();
+    let (c0, c1) = (std::f64::consts::FRAC_1_SQRT_2, 0.75f64.sqrt());
+    let w_face = ((toward[i].abs() / norm - c0) / (c1 - c0)).clamp(0.0, 1.0);
+    if w_face <= 0.0 {
+        return 0.0;
+    }
+    // the line in the box core's frame
+    let (a, b) = (
+        from_pose.inverse_transform_point(&ends[0]),
+        from_pose.inverse_transform_point(&ends[1]),
+    );
+    let w = w_face * w_line;
+    // clipped to the face's extent
+    let h = cuboid.half_extents;
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for j in (0..3).filter(|&j| j != i) {
+        let (p, dp) = (a[j], b[j] - a[j]);
+        if dp.abs() <= 1e-15 {
+            if p.abs() > h[j] {
+                return 0.0;
+            }
+            continue;
+        }
+        let (ta, tb) = ((-h[j] - p) / dp, (h[j] - p) / dp);
+        t0 = t0.max(ta.min(tb));
+        t1 = t1.min(ta.max(tb));
+    }
+    if t0 > t1 {
+        return 0.0;
+    }
+    let ends_on_box = [t0, t1].map(|t| {
+        let v = ends[0] + (ends[1] - ends[0]) * t;
+        let (on, dist, outward) = signed_distance(from, from_pose, &v, box_to_line);
+        (v, on, (reach - dist).max(0.0), outward)
+    });
+    let (d0, d1) = (ends_on_box[0].2, ends_on_box[1].2);
+    let w_parallel = if d0.max(d1) > 0.0 {
+        d0.min(d1) / d0.max(d1)
+    } else {
+        0.0
+    };
+    let mut covered: f64 = 0.0;
+    for (k, (v, on, d, outward)) in ends_on_box.into_iter().enumerate() {
+        let full = w * w_parallel * d;
+        covered = covered.max(full);
+        let depth = full - deepest_corner;
+        if depth > 0.0 {
+            emit(on, v, outward, depth, k as u64);
+        }
+    }
+    covered
+}
+
 /// The contact points of a servicer piece at `pose_s` (`t`) and a target piece (`r_s`, `r_t`
 /// their radii, `reach = r_s + r_t`), to `emit`.
 #[allow(clippy::too_many_arguments)]
@@ -1034,6 +1167,27 @@ fn piece_contacts(
             point(on_s, on_t, outward * side, depth, code + k as u64);
         }
     }
+    // a larger piece's line (a capsule's segment, a cylinder's side line) lying across a
+    // smaller box's face: the line clipped to the face ([`face_clipped_line`])
+    let covered = face_clipped_line(
+        from,
+        from_pose,
+        onto,
+        onto_pose,
+        &toward,
+        &(n * -side),
+        deepest_vertex,
+        reach,
+        &mut |on_from, on_line, outward, depth, k| {
+            let (on_s, on_t) = if servicer_vertices {
+                (on_from, on_line)
+            } else {
+                (on_line, on_from)
+            };
+            point(on_s, on_t, outward * -side, depth, 40 + k);
+        },
+    );
+    deepest_vertex = deepest_vertex.max(covered);
     // the cores' closest pair (an edge across an edge, a cylinder's rim between its fixed
     // points, a sphere) for the depth beyond the deepest vertex's: none when a vertex is the
     // closest point, all of it when no vertex is in reach, and no jump in between
@@ -1046,6 +1200,138 @@ fn piece_contacts(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// How much GJK's answer depends on where it starts (the question a warm start raises):
+    /// random pairs of cores (a box, a cylinder, a capsule's segment, a cone, at the preset's
+    /// scale) at random attitudes, placed within reach; the contact as the module computes it
+    /// (`core_contact`, parry's start) against GJK started from the normal tilted by 0.02 rad
+    /// (a warm start from the last evaluation) and from eight random directions.
+    /// Measured (seed 7, about 1 250 pairs per pair of kinds, printed with `--nocapture`):
+    /// pairs of flat cores (a box and a segment) agree to 1e-16 m whatever the start; with a
+    /// cylinder or a cone the distance changes with the start by up to 2.0e-5 m and the normal
+    /// by up to 5.3e-2 rad, and parry's start itself ends up to 2.0e-5 m above the best of the
+    /// ten starts: GJK stops on `max − min ≤ √(10·ε)·max` or on no progress, and on a curved
+    /// support map that can be far from the optimum. So a warm-started GJK cannot
+    /// agree with today's results to 1e-9, and today's are not that exact either.
+    #[test]
+    fn gjk_depends_on_its_start_on_curved_cores() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(7);
+        let core = |k: usize| -> (SharedShape, f64) {
+            match k {
+                0 => (
+                    SharedShape::new(Cuboid::new(Vector3::new(0.018, 0.058, 0.008))),
+                    0.002,
+                ),
+                1 => (SharedShape::new(Cylinder::new(0.148, 0.008)), 0.002),
+                2 => (
+                    SharedShape::new(Segment::new(
+                        Point3::new(0.0, 0.0, -0.1),
+                        Point3::new(0.0, 0.0, 0.1),
+                    )),
+                    0.01,
+                ),
+                _ => (SharedShape::new(Cone::new(0.05, 0.02)), 0.002),
+            }
+        };
+        let unit = |rng: &mut rand_pcg::Pcg64Mcg| {
+            Vector3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            )
+            .normalize()
+        };
+        // per pair of kinds (servicer · 4 + target): worst change of the distance and of the
+        // normal with the start, worst excess of parry's start over the best start, pairs
+        let mut worst = [(0.0f64, 0.0f64, 0.0f64, 0usize); 16];
+        for _ in 0..20000 {
+            let (ks, kt) = (rng.random_range(0..4), rng.random_range(0..4));
+            if (ks == 0 && kt == 0) || (ks == 2 && kt == 2) {
+                continue; // parry's closed forms, no GJK
+            }
+            let ((cs, rs), (ct, rt)) = (core(ks), core(kt));
+            let reach = rs + rt;
+            let attitude = |rng: &mut rand_pcg::Pcg64Mcg| {
+                UnitQuaternion::from_scaled_axis(
+                    unit(rng) * rng.random_range(0.0..std::f64::consts::PI),
+                )
+            };
+            let pose_t = Isometry3::from_parts(Translation3::identity(), attitude(&mut rng));
+            let (dir, rot_s) = (unit(&mut rng), attitude(&mut rng));
+            let ps = piece(cs, Isometry3::identity(), rs);
+            let fresh = || piece(ct.clone(), pose_t, rt);
+            // slide the servicer along `dir` until the cores are within reach
+            let mut d = 0.5;
+            let mut placed = None;
+            for _ in 0..60 {
+                let pose_s = Isometry3::from_parts(Translation3::from(dir * d), rot_s);
+                let gap = core_distance(&ps, &pose_s, &fresh());
+                if gap <= 0.0 {
+                    break;
+                }
+                if gap < reach {
+                    placed = Some(pose_s);
+                    break;
+                }
+                d -= 0.9 * (gap - 0.5 * reach);
+            }
+            let Some(pose_s) = placed else { continue };
+            let Some(cold) = core_contact(&ps, &pose_s, &fresh(), 0, reach) else {
+                continue;
+            };
+            let tilt = UnitQuaternion::from_scaled_axis(unit(&mut rng) * 0.02);
+            let warm = core_contact_from(
+                &ps,
+                &pose_s,
+                &fresh(),
+                0,
+                reach,
+                Some(tilt * cold.normal1.into_inner()),
+            )
+            .expect("in reach from any start");
+            let mut best = cold.dist.min(warm.dist);
+            for _ in 0..8 {
+                let start = Some(unit(&mut rng));
+                if let Some(c) = core_contact_from(&ps, &pose_s, &fresh(), 0, reach, start) {
+                    best = best.min(c.dist);
+                }
+            }
+            let w = &mut worst[ks * 4 + kt];
+            w.0 = w.0.max((warm.dist - cold.dist).abs());
+            w.1 = w.1.max(warm.normal1.angle(&cold.normal1));
+            w.2 = w.2.max(cold.dist - best);
+            w.3 += 1;
+        }
+        let names = ["box", "cylinder", "segment", "cone"];
+        for (k, (dd, dn, excess, n)) in worst.iter().enumerate() {
+            if *n == 0 {
+                continue;
+            }
+            let (ks, kt) = (k / 4, k % 4);
+            eprintln!(
+                "{} · {}: {n} pairs; with the start the distance changes by {dd:.2e} m, the \
+                 normal by {dn:.2e} rad; parry's start above the best by {excess:.2e} m",
+                names[ks], names[kt]
+            );
+            assert!(*n > 500, "{} · {}: {n} pairs", names[ks], names[kt]);
+            let flat = [ks, kt].iter().all(|&k| k == 0 || k == 2);
+            if flat {
+                // a box and a segment: GJK ends on the same features whatever the start
+                assert!(*dd < 1e-12 && *excess < 1e-12, "{dd} {excess}");
+            } else {
+                // curved cores: the start matters beyond 1e-9, within the measured bound
+                assert!(*excess < 1e-4, "{excess}");
+            }
+        }
+        let curved_changes = worst
+            .iter()
+            .enumerate()
+            .filter(|(k, w)| ![k / 4, k % 4].iter().all(|&i| i == 0 || i == 2) && w.3 > 0)
+            .filter(|(_, w)| w.0 > 1e-9)
+            .count();
+        assert!(curved_changes >= 6, "{curved_changes}");
+    }
 
     /// parry's contact of a support map and a half-space, in the order this module asks it.
     #[test]

@@ -212,7 +212,9 @@ fn corner_scene(half_angle: f64, yaw: f64, mu: f64, drift: f64) -> Scenario {
     };
     s.walls.truncate(1);
     s.walls[0].name = "corner-a".into();
-    s.walls[0].point = [0.010, 0.0, 0.0];
+    // the edge straight ahead of the tip, which `oblique_6dof` without an offset puts at
+    // (5, −50, 0) mm (the preset's own tip, (5, 100, 50) mm, is offset)
+    s.walls[0].point = [0.010, -0.05, 0.0];
     s.walls[0].normal = wall(1.0);
     let mut b = s.walls[0].clone();
     b.name = "corner-b".into();
@@ -228,6 +230,12 @@ fn corner_scene(half_angle: f64, yaw: f64, mu: f64, drift: f64) -> Scenario {
     s.facility.robot_delay = 0.001;
     s.simulation.duration = 2.0;
     s.compensator = CompensatorConfig::from_kind("pida").expect("pida");
+    // the tip starts in front of both walls (the servicer is not turned at the start)
+    let tip: [f64; 3] = std::array::from_fn(|i| s.servicer.position[i] + s.rod.tip[i]);
+    for w in &s.walls {
+        let gap: f64 = (0..3).map(|i| w.normal[i] * (tip[i] - w.point[i])).sum();
+        assert!(gap > 0.0, "the tip starts {gap} m behind {}", w.name);
+    }
     s
 }
 

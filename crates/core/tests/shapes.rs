@@ -600,7 +600,32 @@ fn a_parallel_line_or_face_contact_lands_without_turning() {
             edge(x),
         ),
         ("capsule on a plane", capsule.clone(), plane_at(x)),
-        ("capsule on a box face", capsule, slab(x)),
+        ("capsule on a box face", capsule.clone(), slab(x)),
+        (
+            "capsule across a smaller cube's face",
+            capsule.clone(),
+            shape(
+                json!({"kind": "box", "size": [0.1, 0.1, 0.1], "margin": m, "position": [x + 0.05, 0.0, 0.0]}),
+            ),
+        ),
+        (
+            "capsule across a smaller box's face, at an angle in the face",
+            capsule,
+            {
+                let q = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.4);
+                let mut s = shape(json!({"kind": "box", "size": [0.1, 0.12, 0.08], "margin": m}));
+                s.orientation = [q.w, q.i, q.j, q.k];
+                s.position = [x + 0.05, 0.0, 0.0];
+                s
+            },
+        ),
+        (
+            "cylinder side across a smaller cube's face, rolled 0.3 rad",
+            cylinder(0.3),
+            shape(
+                json!({"kind": "box", "size": [0.1, 0.1, 0.1], "margin": m, "position": [x + 0.05, 0.0, 0.0]}),
+            ),
+        ),
         ("cone side on a plane", cone, plane_at(cone_x)),
         (
             "cone side on a plane, rolled 0.3 rad",
