@@ -34,7 +34,7 @@ use nalgebra::{Matrix2, Matrix3, Matrix4, Vector2, Vector3, Vector4};
 use super::detect::ContactDetector;
 use super::params::{LawForm, ModelMediatedParams};
 use super::pida::Pida;
-use super::surface::SurfaceFit;
+use super::surface::{CornerFit, SurfaceFit};
 use super::{
     Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
     Rendering,
@@ -165,6 +165,9 @@ pub struct ModelMediated {
     mode: Mode,
     /// Ticks of this contact with the robot in physical contact.
     physical_ticks: usize,
+    /// The first two modelled surfaces the robot's tip was behind at once in this contact (a
+    /// corner, an edge): the contact is split between them ([`CornerFit`]).
+    corner: Option<(usize, usize)>,
     /// The surface the model rendered in this contact, if one.
     rendered: Option<usize>,
     /// Energy the residual (and its damping) put into the virtual motion in this contact, J.
@@ -222,7 +225,7 @@ impl ModelMediated {
             started: false,
             surfaces,
             shared_law: initial_law,
-            shared_friction: 0.0,
+            shared_friction: p.prior_friction,
             pending: [None; MAX_SURFACES],
             pending_law: None,
             pending_friction: None,
@@ -230,6 +233,7 @@ impl ModelMediated {
             force_sum: Vector3::zeros(),
             mode: Mode::Free,
             physical_ticks: 0,
+            corner: None,
             rendered: None,
             residual_energy: 0.0,
             previous: None,
@@ -389,7 +393,7 @@ impl ModelMediated {
                     self.undo = Some(self.model_impulse);
                 }
             }
-        } else if self.samples.len() >= self.params.min_samples as usize {
+        } else if self.samples.len() >= self.params.min_samples as usize && !self.split_corner() {
             // with a calibration, `auto` fits the calibrated law's form (measured at leisure)
             let form = match (self.params.law, self.initial_law) {
                 (LawForm::Auto, Some(ContactModel::Linear(_))) if self.calibrated => {
@@ -422,6 +426,7 @@ impl ModelMediated {
         self.samples.clear();
         self.force_sum = Vector3::zeros();
         self.physical_ticks = 0;
+        self.corner = None;
         self.rendered = None;
         self.residual_energy = 0.0;
         self.previous = None;
@@ -429,6 +434,67 @@ impl ModelMediated {
         self.fallback_impulse = Vector3::zeros();
         self.robot_past = 0.0;
         self.mode = Mode::Free;
+    }
+
+    /// A contact that pressed two modelled surfaces at once (`corner`): its samples split
+    /// between their laws and friction by [`CornerFit`] (their geometry kept: the prior's or
+    /// the identified one), each surface's update queued with its own linear law and μ̂, and
+    /// the first one's as the shared law. Returns whether it did (false: no corner, a
+    /// Hunt-Crossley law asked for, or the samples do not determine the split; the contact is
+    /// then fitted as one surface).
+    fn split_corner(&mut self) -> bool {
+        let Some((a, b)) = self.corner else {
+            return false;
+        };
+        if self.params.law == LawForm::HuntCrossley {
+            return false;
+        }
+        let (Some(sa), Some(sb)) = (
+            self.pending[a].or(self.surfaces[a]),
+            self.pending[b].or(self.surfaces[b]),
+        ) else {
+            return false;
+        };
+        let mut fit = CornerFit::new(
+            [-sa.wall.normal, -sb.wall.normal],
+            [sa.wall.point, sb.wall.point],
+        );
+        for x in &self.samples {
+            fit.add(&x.force, &x.position, &x.velocity);
+        }
+        let Some(split) = fit.fit() else {
+            return false;
+        };
+        if split
+            .iter()
+            .any(|w| !(w.stiffness > 0.0 && w.stiffness.is_finite()))
+        {
+            return false;
+        }
+        let law = |i: usize| {
+            ContactModel::Linear(LinearSpringDamper {
+                stiffness: split[i].stiffness,
+                damping: split[i].damping.max(0.0),
+            })
+        };
+        for (i, (slot, old)) in [(a, sa), (b, sb)].into_iter().enumerate() {
+            let friction = split[i].friction.max(0.0);
+            self.pending[slot] = Some(match old.calibrated {
+                // a calibrated surface keeps its law (measured at leisure) and learns its
+                // friction (a calibration has none)
+                Some(_) => Surface { friction, ..old },
+                None => Surface {
+                    law: Some(law(i)),
+                    friction,
+                    ..old
+                },
+            });
+        }
+        if sa.calibrated.is_none() {
+            self.pending_law = Some(law(0));
+        }
+        self.pending_friction = Some(split[0].friction.max(0.0));
+        true
     }
 
     /// Merges a contact's fit into the surface it belongs to (or a new one): queued, adopted
@@ -620,7 +686,7 @@ fn initial_model(
             wall: c.wall,
             law: Some(calibration.law),
             weight: 0.0,
-            friction: 0.0,
+            friction: p.prior_friction,
             calibrated: Some(*c),
         });
     }
@@ -1023,6 +1089,15 @@ impl Compensator for ModelMediated {
 
         if self.mode != Mode::Free && physical {
             self.physical_ticks += 1;
+            if self.corner.is_none() {
+                // two modelled surfaces pressed at once by the robot
+                let mut behind = (0..MAX_SURFACES).filter(|&i| {
+                    self.surfaces[i].is_some_and(|s| s.wall.penetration(&p_then) > 0.0)
+                });
+                if let (Some(a), Some(b)) = (behind.next(), behind.next()) {
+                    self.corner = Some((a, b));
+                }
+            }
             if self.samples.len() < self.samples.capacity() {
                 self.samples.push(Sample {
                     force: f_mea,
@@ -1145,7 +1220,7 @@ impl Compensator for ModelMediated {
         self.started = false;
         self.surfaces = self.initial_surfaces;
         self.shared_law = self.initial_law;
-        self.shared_friction = 0.0;
+        self.shared_friction = self.params.prior_friction;
         self.pending = [None; MAX_SURFACES];
         self.pending_law = None;
         self.pending_friction = None;
@@ -1153,6 +1228,7 @@ impl Compensator for ModelMediated {
         self.force_sum = Vector3::zeros();
         self.mode = Mode::Free;
         self.physical_ticks = 0;
+        self.corner = None;
         self.rendered = None;
         self.residual_energy = 0.0;
         self.previous = None;
