@@ -16,8 +16,9 @@ positive breaks passivity), and the run's status.
     python scripts/friction_tables.py --write         # update the pages' tables
     python scripts/friction_tables.py --kind model-mediated --delays 0.04   # other delays
 
-model-mediated runs at 40, 80 and 120 ms, each scene without and with its walls as prior
-geometry, and adds the worst over the collisions its model rendered (each surface's second
+model-mediated runs at 40, 80 and 120 ms, each scene without priors, with its walls as prior
+geometry, and with its walls and law as a calibration and its friction coefficient as
+``prior_friction``, and adds the worst over the collisions its model rendered (each surface's second
 contact on, or the first with a prior wall and a law known), the metrics' own per-collision
 errors.
 
@@ -98,10 +99,34 @@ def _vec(frame: Any, name: str, rows: Any) -> np.ndarray:
     return np.stack([frame[f"{name}_{a}"].to_numpy()[rows] for a in "xyz"], axis=1)
 
 
-def measure(raw: dict[str, Any], kind: str, delay: float, prior: bool = False) -> dict[str, Any]:
-    """One run's row (see the module doc); ``prior``: model-mediated with the scene's walls as
-    its prior geometry (``compensator.prior_walls``)."""
-    raw = {**raw, "compensator": {"kind": kind, **({"prior_walls": raw["walls"]} if prior else {})}}
+def _calibration(raw: dict[str, Any], delay: float) -> dict[str, Any]:
+    """A calibration of the scene's walls and law (exact, small stated uncertainties), as
+    ``hilcontact calibrate`` would write it."""
+    contact = raw["contact"]
+    return {
+        "walls": [
+            {"name": w["name"], "point": w["point"], "normal": w["normal"], "offset_sigma": 1e-5,
+             "angle_sigma": 0.02, "radius": 0.02, "probes": 9, "rms": 0.2}
+            for w in raw["walls"]
+        ],
+        "law": {"model": "linear", "stiffness": contact["stiffness"], "damping": contact["damping"],
+                "exponent": 1.0, "stiffness_sigma": 0.005 * contact["stiffness"], "damping_sigma": 5.0,
+                "exponent_sigma": 0.0},
+        "robot": {"delay": delay},
+    }
+
+
+def measure(raw: dict[str, Any], kind: str, delay: float, prior: str = "") -> dict[str, Any]:
+    """One run's row (see the module doc); ``prior`` (model-mediated): ``"walls"``, the scene's
+    walls as its prior geometry (``compensator.prior_walls``); ``"all"``, its walls and law as
+    a calibration and its friction coefficient as ``prior_friction``."""
+    compensator: dict[str, Any] = {"kind": kind}
+    if prior == "walls":
+        compensator["prior_walls"] = raw["walls"]
+    elif prior == "all":
+        compensator["calibration"] = _calibration(raw, delay)
+        compensator["prior_friction"] = raw["contact"]["friction"]["kinetic"]
+    raw = {**raw, "compensator": compensator}
     scenario = hc.load_scenario(raw, {**FACILITY, "facility.robot_delay": delay})
     run = hc.simulate(scenario)
     m = run.metrics
@@ -182,9 +207,10 @@ def table(kind: str, delays: tuple[float, ...] | None = None) -> list[str]:
     model = kind == "model-mediated"
     header = HEADER + MODEL_HEADER if model else HEADER
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
-    variants = [(label, raw, False) for label, raw in scenes()]
+    variants = [(label, raw, "") for label, raw in scenes()]
     if model:
-        variants += [(f"{label}, prior walls", raw, True) for label, raw in scenes()]
+        variants += [(f"{label}, prior walls", raw, "walls") for label, raw in scenes()]
+        variants += [(f"{label}, calibrated, prior μ", raw, "all") for label, raw in scenes()]
     for label, raw, prior in variants:
         for delay in delays or KIND_DELAYS.get(kind, DELAYS):
             row = measure(raw, kind, delay, prior)
