@@ -293,7 +293,7 @@ fn assert_faithful(label: &str, out: &SimulationOutput, v_max: f64, cof_max: f64
 /// known: every collision, the corner's (both walls pressed and slid on at once: the sum of
 /// their laws and friction) and the rear wall's, is rendered from the first at 40, 80 and
 /// 120 ms, rebound velocity vector within 3 %, CoF within 1.05, tangential impulse within
-/// 5 % (measured: 1.5 %, 1.014, 2.2 %); the contacts' split (CornerFit) keeps the walls'
+/// 5 % (measured: 1.48 %, 1.012, 2.2 %); the contacts' split (CornerFit) keeps the walls'
 /// laws and re-identifies their friction. Without the friction rendered, the first corner
 /// contact's rebound was 47 % off.
 #[test]
@@ -315,7 +315,7 @@ fn a_corner_with_its_geometry_law_and_friction_known_is_rendered_from_the_first_
 /// coefficient known: each surface's first contact is rendered from the model at 40, 80 and
 /// 120 ms, rebound velocity vector within 3 %, CoF within 1.05, tangential impulse within 5 %
 /// (measured: 0.02 %, 1.000, 0.08 %). A third collision at μ 0.3 (the front wall again) is
-/// printed, not asserted: 3.5 %, 1.0 % and 17.5 % at 40, 80, 120 ms.
+/// printed, not asserted: 2.9 %, 5.4 % and 11.7 % at 40, 80, 120 ms.
 #[test]
 fn oblique_frictional_contacts_with_a_calibration_and_prior_friction_are_rendered_faithfully() {
     for mu in [0.1, 0.3] {

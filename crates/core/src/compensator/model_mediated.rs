@@ -34,7 +34,7 @@ use nalgebra::{Matrix2, Matrix3, Matrix4, Vector2, Vector3, Vector4};
 use super::detect::ContactDetector;
 use super::params::{LawForm, ModelMediatedParams};
 use super::pida::Pida;
-use super::surface::{CornerFit, SurfaceFit};
+use super::surface::{CornerFit, SurfaceFit, SLIDE_SPEED};
 use super::{
     Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
     Rendering,
@@ -800,9 +800,10 @@ pub fn fit_contact(samples: &[Sample], force_sum: &Vector3<f64>, form: LawForm) 
     fit_along(samples, &normal, form).map(|fit| Fit { friction, ..fit })
 }
 
-/// Under friction, the contact's normal (into the wall) and friction coefficient, by
-/// [`SurfaceFit`]: the normal along which the law explains the samples best, and μ̂ by least
-/// squares over the sliding samples. `None` when the force does not lean from that normal
+/// Under friction, the contact's normal (into the wall) and friction coefficient: the normal
+/// by [`SurfaceFit`] (the one along which the law explains the samples best), and μ̂ by least
+/// squares over the samples sliding faster than [`SLIDE_SPEED`] against the law it is rendered
+/// with (`F_t·ŝ = μ·F_n·s/√(s² + v_ε²)`, `v_ε` = [`FRICTION_STICK_VELOCITY`]). `None` when the force does not lean from that normal
 /// ([`SurfaceFit::leans`]: a frictionless contact, whose fit is then exactly the mean force's).
 pub fn frictional_normal(samples: &[Sample]) -> Option<(Vector3<f64>, f64)> {
     let mut surface = SurfaceFit::default();
@@ -813,10 +814,23 @@ pub fn frictional_normal(samples: &[Sample]) -> Option<(Vector3<f64>, f64)> {
     if !surface.leans() {
         return None;
     }
+    // μ̂ by least squares against the law it is rendered with, the regularised Coulomb law:
+    // F_t·ŝ = μ·F_n·g(s), g(s) = s/√(s² + v_ε²), over the samples that slide and push
+    let (mut num, mut den) = (0.0, 0.0);
     for x in samples {
-        surface.add_friction(&x.force, &x.velocity, &normal);
+        let f_n = x.force.dot(&normal);
+        let v_t = x.velocity - normal * x.velocity.dot(&normal);
+        let speed = v_t.norm();
+        if f_n <= 0.0 || speed <= SLIDE_SPEED {
+            continue;
+        }
+        let g = speed / (speed * speed + FRICTION_STICK_VELOCITY * FRICTION_STICK_VELOCITY).sqrt();
+        let f_t = x.force - normal * f_n;
+        num += f_t.dot(&(v_t / speed)) * f_n * g;
+        den += (f_n * g).powi(2);
     }
-    Some((normal, surface.friction().0))
+    let mu = if den > 0.0 { (num / den).max(0.0) } else { 0.0 };
+    Some((normal, mu))
 }
 
 /// Fits the plane and the law along the given normal (into free space), friction 0.
