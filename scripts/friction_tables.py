@@ -14,6 +14,13 @@ positive breaks passivity), and the run's status.
     python scripts/friction_tables.py                 # print every table
     python scripts/friction_tables.py --kind pida     # one compensator
     python scripts/friction_tables.py --write         # update the pages' tables
+    python scripts/friction_tables.py --kind model-mediated --delays 0.04   # other delays
+
+model-mediated runs at 40, 80 and 120 ms, each scene without priors, with its walls as prior
+geometry, and with its walls and law as a calibration and its friction coefficient as
+``prior_friction``, and adds the worst over the collisions its model rendered (each surface's second
+contact on, or the first with a prior wall and a law known), the metrics' own per-collision
+errors.
 
 A page's table is the region between ``<!-- friction-tables: KIND -->`` and
 ``<!-- /friction-tables -->`` of docs/compensators/KIND.md.
@@ -36,7 +43,9 @@ import hilcontact as hc
 #: The facility of the tables: 0.2 N noise, 5 ms sensor delay.
 FACILITY = {"facility.sensor_noise": 0.2, "facility.sensor_delay": 0.005}
 DELAYS = (0.01, 0.02)
-KINDS = ("none", "pic", "dac", "pida", "tdpa-impedance", "tdpa-admittance")
+KINDS = ("none", "pic", "dac", "pida", "tdpa-impedance", "tdpa-admittance", "model-mediated")
+#: Delays per compensator where they differ from DELAYS: model-mediated is meant for long ones.
+KIND_DELAYS = {"model-mediated": (0.04, 0.08, 0.12)}
 
 
 def _oblique(mu: float) -> dict[str, Any]:
@@ -90,9 +99,35 @@ def _vec(frame: Any, name: str, rows: Any) -> np.ndarray:
     return np.stack([frame[f"{name}_{a}"].to_numpy()[rows] for a in "xyz"], axis=1)
 
 
-def measure(raw: dict[str, Any], kind: str, delay: float) -> dict[str, Any]:
-    """One run's row (see the module doc)."""
-    scenario = hc.load_scenario(raw, {**FACILITY, "facility.robot_delay": delay, "compensator.kind": kind})
+def _calibration(raw: dict[str, Any], delay: float) -> dict[str, Any]:
+    """A calibration of the scene's walls and law (exact, small stated uncertainties), as
+    ``hilcontact calibrate`` would write it."""
+    contact = raw["contact"]
+    return {
+        "walls": [
+            {"name": w["name"], "point": w["point"], "normal": w["normal"], "offset_sigma": 1e-5,
+             "angle_sigma": 0.02, "radius": 0.02, "probes": 9, "rms": 0.2}
+            for w in raw["walls"]
+        ],
+        "law": {"model": "linear", "stiffness": contact["stiffness"], "damping": contact["damping"],
+                "exponent": 1.0, "stiffness_sigma": 0.005 * contact["stiffness"], "damping_sigma": 5.0,
+                "exponent_sigma": 0.0},
+        "robot": {"delay": delay},
+    }
+
+
+def measure(raw: dict[str, Any], kind: str, delay: float, prior: str = "") -> dict[str, Any]:
+    """One run's row (see the module doc); ``prior`` (model-mediated): ``"walls"``, the scene's
+    walls as its prior geometry (``compensator.prior_walls``); ``"all"``, its walls and law as
+    a calibration and its friction coefficient as ``prior_friction``."""
+    compensator: dict[str, Any] = {"kind": kind}
+    if prior == "walls":
+        compensator["prior_walls"] = raw["walls"]
+    elif prior == "all":
+        compensator["calibration"] = _calibration(raw, delay)
+        compensator["prior_friction"] = raw["contact"]["friction"]["kinetic"]
+    raw = {**raw, "compensator": compensator}
+    scenario = hc.load_scenario(raw, {**FACILITY, "facility.robot_delay": delay})
     run = hc.simulate(scenario)
     m = run.metrics
     ts, ref = run.timeseries, run.reference
@@ -125,7 +160,19 @@ def measure(raw: dict[str, Any], kind: str, delay: float) -> dict[str, Any]:
             e_before = float(np.interp(c["start"] - 0.01, t_h, ts["energy"].to_numpy()))
             gain.append((e_h - e_before) / e_before)
     s = m.get("summary") or {}
+    # the collisions the identified model rendered (model-mediated: each surface's second
+    # contact on; the first is pida's)
+    modelled = [c for c in m.get("collisions") or [] if c.get("rendering") == "model" and c.get("reference") is not None]
+
+    def worst(key: str) -> float:
+        values = [c[key] for c in modelled if c.get(key) is not None]
+        return max(values) if values else float("nan")
+
     return {
+        "modelled": len(modelled),
+        "model_velocity_error": worst("velocity_error"),
+        "model_cof": worst("cof"),
+        "model_tangential": worst("tangential_impulse_error"),
         "status": m.get("status"),
         "lost": len(m.get("lost_collisions") or []),
         "extra": len(m.get("extra_collisions") or []),
@@ -149,17 +196,35 @@ HEADER = ("| scene | delay | lost/extra | v err % | CoF | tangential J err % | e
           "| energy gain % | status |")
 
 
-def table(kind: str) -> list[str]:
+#: Extra columns of a model-based compensator: the worst over the collisions the model rendered
+#: (their count; rebound velocity vector error, CoF and tangential impulse error, the metrics'
+#: own definitions).
+MODEL_HEADER = " model-rendered | its v err % | its CoF | its J_t err % |"
+
+
+def table(kind: str, delays: tuple[float, ...] | None = None) -> list[str]:
     """The Markdown table of one compensator."""
-    lines = [HEADER, "|---|---|---|---|---|---|---|---|---|"]
-    for label, raw in scenes():
-        for delay in DELAYS:
-            row = measure(raw, kind, delay)
-            lines.append(
+    model = kind == "model-mediated"
+    header = HEADER + MODEL_HEADER if model else HEADER
+    lines = [header, "|" + "---|" * (header.count("|") - 1)]
+    variants = [(label, raw, "") for label, raw in scenes()]
+    if model:
+        variants += [(f"{label}, prior walls", raw, "walls") for label, raw in scenes()]
+        variants += [(f"{label}, calibrated, prior μ", raw, "all") for label, raw in scenes()]
+    for label, raw, prior in variants:
+        for delay in delays or KIND_DELAYS.get(kind, DELAYS):
+            row = measure(raw, kind, delay, prior)
+            line = (
                 f"| {label} | {delay * 1e3:.0f} ms | {row['lost']}/{row['extra']} | {_pct(row['velocity_error'])} | "
                 f"{_num(row['cof'])} | {_pct(row['tangential'])} | {_pct(row['energy'])} | {_pct(row['gain'])} | "
                 f"{row['status']} |"
             )
+            if model:
+                line += (
+                    f" {row['modelled']} | {_pct(row['model_velocity_error'])} | {_num(row['model_cof'])} | "
+                    f"{_pct(row['model_tangential'])} |"
+                )
+            lines.append(line)
     return lines
 
 
@@ -180,9 +245,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--kind", action="append", choices=KINDS, help="compensator(s) (default: all)")
     parser.add_argument("--write", action="store_true", help="update the docs pages")
+    parser.add_argument("--delays", help="robot delays, s, comma-separated (default: 0.01,0.02; model-mediated 0.04,0.08,0.12)")
     args = parser.parse_args()
+    try:
+        delays = tuple(float(x) for x in args.delays.split(",")) if args.delays else None
+    except ValueError:
+        parser.error(f"--delays: not a list of numbers: {args.delays!r}")
+    if delays is not None and args.write:
+        parser.error("--write takes the default delays only")
     for kind in args.kind or KINDS:
-        lines = table(kind)
+        lines = table(kind, delays)
         print(f"### {kind}")
         print("\n".join(lines))
         print(flush=True)

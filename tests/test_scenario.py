@@ -467,6 +467,7 @@ DEFAULTS = {
         "law": "auto",
         "prior_walls": [],
         "correct_priors": True,
+        "prior_friction": 0.0,
         "match_angle": 30.0,
         "gap_tolerance": 1e-3,
         "min_samples": 20,

@@ -24,7 +24,8 @@ pub use delay::{ContactEstimator, ContactView};
 pub use energy::{DampingAmendment, EnergyController, EnergyObserver};
 pub use force::{compensate_force, compensate_force_pulling, CompensatedWrench};
 pub use model_mediated::{
-    fit_contact, rebound_speed, Fit, ModelMediated, Sample, Surface, MAX_SURFACES,
+    fit_contact, frictional_normal, rebound_speed, Fit, ModelMediated, Sample, Surface,
+    MAX_SURFACES,
 };
 pub use none::{NoParams, PassThrough};
 pub use params::{

@@ -34,12 +34,13 @@ use nalgebra::{Matrix2, Matrix3, Matrix4, Vector2, Vector3, Vector4};
 use super::detect::ContactDetector;
 use super::params::{LawForm, ModelMediatedParams};
 use super::pida::Pida;
+use super::surface::{CornerFit, SurfaceFit, SLIDE_SPEED};
 use super::{
     Compensator, CompensatorContext, CompensatorInput, CompensatorOutput, ContactEstimate,
     Rendering,
 };
 use crate::calibration::CalibratedSurface;
-use crate::contact::{ContactLaw, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
+use crate::contact::{ContactLaw, ContactModel, Friction, HuntCrossley, LinearSpringDamper, Wall};
 use crate::delay_line::DelayLine;
 use crate::frames::FrameWrench;
 
@@ -69,6 +70,11 @@ pub const MAX_SURFACES: usize = 8;
 pub const HUNT_CROSSLEY_SAMPLES: usize = 200;
 /// Most Levenberg-Marquardt iterations of the Hunt-Crossley fit.
 pub const HUNT_CROSSLEY_ITERATIONS: usize = 40;
+/// Newton iterations of a contact's normal fit under friction ([`SurfaceFit::fit`]).
+pub const NORMAL_FIT_ITERATIONS: usize = 20;
+/// Regularisation velocity of the rendered friction, m/s: the engine's default `v_ε`
+/// (`[contact.friction] stick_velocity`); below it the rendered friction is viscous.
+pub const FRICTION_STICK_VELOCITY: f64 = 1e-3;
 /// Hunt-Crossley is kept by `auto` when its RMS residual is below this share of the linear
 /// fit's.
 pub const HUNT_CROSSLEY_PREFERENCE: f64 = 0.7;
@@ -82,6 +88,9 @@ pub struct Surface {
     pub law: Option<ContactModel>,
     /// Contact samples behind the estimate (0 for a prior or a calibrated surface).
     pub weight: f64,
+    /// Identified Coulomb friction coefficient μ̂ (0: frictionless, or not identified),
+    /// rendered against the virtual tip's sliding velocity.
+    pub friction: f64,
     /// The calibration behind it and its uncertainty (`compensator.calibration`), until a
     /// contact contradicts it.
     pub calibrated: Option<CalibratedSurface>,
@@ -105,6 +114,9 @@ pub struct Fit {
     pub wall: Wall,
     /// The law.
     pub law: ContactModel,
+    /// Coulomb friction coefficient μ̂ of the sliding samples (0: the contact's force does not
+    /// lean from its normal, [`SurfaceFit::leans`]).
+    pub friction: f64,
     /// RMS of the force residual, N.
     pub rms: f64,
     /// Samples used.
@@ -137,10 +149,15 @@ pub struct ModelMediated {
     surfaces: [Option<Surface>; MAX_SURFACES],
     /// The law of the latest identified contact, for surfaces without their own.
     shared_law: Option<ContactModel>,
+    /// The friction coefficient of the latest identified contact, for surfaces without a law
+    /// of their own (the same materials as far as the model knows).
+    shared_friction: f64,
     /// Surface updates waiting for the virtual tip to leave the model.
     pending: [Option<Surface>; MAX_SURFACES],
     /// Shared-law update waiting likewise.
     pending_law: Option<ContactModel>,
+    /// Shared friction update waiting likewise.
+    pending_friction: Option<f64>,
     /// This contact's samples (capacity `max_samples`, allocated once).
     samples: Vec<Sample>,
     /// Sum of this contact's measured forces, N (its mean direction).
@@ -148,6 +165,9 @@ pub struct ModelMediated {
     mode: Mode,
     /// Ticks of this contact with the robot in physical contact.
     physical_ticks: usize,
+    /// The first two modelled surfaces the robot's tip was behind at once in this contact (a
+    /// corner, an edge): the contact is split between them ([`CornerFit`]).
+    corner: Option<(usize, usize)>,
     /// The surface the model rendered in this contact, if one.
     rendered: Option<usize>,
     /// Energy the residual (and its damping) put into the virtual motion in this contact, J.
@@ -205,12 +225,15 @@ impl ModelMediated {
             started: false,
             surfaces,
             shared_law: initial_law,
+            shared_friction: p.prior_friction,
             pending: [None; MAX_SURFACES],
             pending_law: None,
+            pending_friction: None,
             samples: Vec::with_capacity(p.max_samples as usize),
             force_sum: Vector3::zeros(),
             mode: Mode::Free,
             physical_ticks: 0,
+            corner: None,
             rendered: None,
             residual_energy: 0.0,
             previous: None,
@@ -268,8 +291,21 @@ impl ModelMediated {
         s.law.or(self.shared_law)
     }
 
-    /// Model force on the rod at a tip pose (`t`, N), and the index of the deepest surface
-    /// penetrated (any surface with a law whose plane the tip is behind).
+    /// The friction coefficient a surface is rendered with: its own with its own law, else
+    /// the shared one (the latest contact's).
+    fn friction_of(&self, s: &Surface) -> f64 {
+        if s.law.is_some() {
+            s.friction
+        } else {
+            self.shared_friction
+        }
+    }
+
+    /// Model force on the rod at a tip pose (`t`, N): the sum over the surfaces penetrated of
+    /// each one's normal law and its friction `μ̂` against the tip's sliding velocity
+    /// (`v_t = v − (v·n)·n`, regularised Coulomb as the engine's [`Friction`]); and the index
+    /// of the deepest surface penetrated (any surface with a law whose plane the tip is
+    /// behind).
     fn model_force(
         &self,
         tip: &Vector3<f64>,
@@ -282,7 +318,20 @@ impl ModelMediated {
             let Some(law) = self.law_of(s) else { continue };
             let d = s.wall.penetration(tip);
             if d > 0.0 {
-                force += s.wall.normal * law.normal_force(d, s.wall.penetration_rate(velocity));
+                let f_n = law.normal_force(d, s.wall.penetration_rate(velocity));
+                force += s.wall.normal * f_n;
+                let mu = self.friction_of(s);
+                if mu > 0.0 {
+                    // the engine's regularised Coulomb law against the sliding velocity
+                    let v_t = velocity - s.wall.normal * velocity.dot(&s.wall.normal);
+                    force += Friction {
+                        static_coefficient: mu,
+                        kinetic_coefficient: mu,
+                        stick_velocity: FRICTION_STICK_VELOCITY,
+                        stribeck_velocity: FRICTION_STICK_VELOCITY,
+                    }
+                    .force(f_n, &v_t);
+                }
                 if deepest.is_none_or(|(_, dd)| d > dd) {
                     deepest = Some((i, d));
                 }
@@ -344,7 +393,7 @@ impl ModelMediated {
                     self.undo = Some(self.model_impulse);
                 }
             }
-        } else if self.samples.len() >= self.params.min_samples as usize {
+        } else if self.samples.len() >= self.params.min_samples as usize && !self.split_corner() {
             // with a calibration, `auto` fits the calibrated law's form (measured at leisure)
             let form = match (self.params.law, self.initial_law) {
                 (LawForm::Auto, Some(ContactModel::Linear(_))) if self.calibrated => {
@@ -377,6 +426,7 @@ impl ModelMediated {
         self.samples.clear();
         self.force_sum = Vector3::zeros();
         self.physical_ticks = 0;
+        self.corner = None;
         self.rendered = None;
         self.residual_energy = 0.0;
         self.previous = None;
@@ -386,10 +436,72 @@ impl ModelMediated {
         self.mode = Mode::Free;
     }
 
+    /// A contact that pressed two modelled surfaces at once (`corner`): its samples split
+    /// between their laws and friction by [`CornerFit`] (their geometry kept: the prior's or
+    /// the identified one), each surface's update queued with its own linear law and μ̂, and
+    /// the first one's as the shared law. Returns whether it did (false: no corner, a
+    /// Hunt-Crossley law asked for, or the samples do not determine the split; the contact is
+    /// then fitted as one surface).
+    fn split_corner(&mut self) -> bool {
+        let Some((a, b)) = self.corner else {
+            return false;
+        };
+        if self.params.law == LawForm::HuntCrossley {
+            return false;
+        }
+        let (Some(sa), Some(sb)) = (
+            self.pending[a].or(self.surfaces[a]),
+            self.pending[b].or(self.surfaces[b]),
+        ) else {
+            return false;
+        };
+        let mut fit = CornerFit::new(
+            [-sa.wall.normal, -sb.wall.normal],
+            [sa.wall.point, sb.wall.point],
+        );
+        for x in &self.samples {
+            fit.add(&x.force, &x.position, &x.velocity);
+        }
+        let Some(split) = fit.fit() else {
+            return false;
+        };
+        if split
+            .iter()
+            .any(|w| !(w.stiffness > 0.0 && w.stiffness.is_finite()))
+        {
+            return false;
+        }
+        let law = |i: usize| {
+            ContactModel::Linear(LinearSpringDamper {
+                stiffness: split[i].stiffness,
+                damping: split[i].damping.max(0.0),
+            })
+        };
+        for (i, (slot, old)) in [(a, sa), (b, sb)].into_iter().enumerate() {
+            let friction = split[i].friction.max(0.0);
+            self.pending[slot] = Some(match old.calibrated {
+                // a calibrated surface keeps its law (measured at leisure) and learns its
+                // friction (a calibration has none)
+                Some(_) => Surface { friction, ..old },
+                None => Surface {
+                    law: Some(law(i)),
+                    friction,
+                    ..old
+                },
+            });
+        }
+        if sa.calibrated.is_none() {
+            self.pending_law = Some(law(0));
+        }
+        self.pending_friction = Some(split[0].friction.max(0.0));
+        true
+    }
+
     /// Merges a contact's fit into the surface it belongs to (or a new one): queued, adopted
     /// once the virtual tip is outside it.
     fn merge(&mut self, fit: Fit, centre: &Vector3<f64>) {
         self.pending_law = Some(fit.law);
+        self.pending_friction = Some(fit.friction);
         let cos_max = self.params.match_angle.to_radians().cos();
         let matched = (0..MAX_SURFACES)
             .filter_map(|i| {
@@ -399,10 +511,17 @@ impl ModelMediated {
             .filter(|(_, _, cos)| *cos >= cos_max)
             .max_by(|a, b| a.2.total_cmp(&b.2));
         let new_weight = fit.samples as f64;
-        if let Some((_, old, _)) = matched {
+        if let Some((i, old, _)) = matched {
             if let Some(calibrated) = old.calibrated {
                 if agrees(&calibrated, old.law.or(self.shared_law), &fit, centre) {
-                    // the calibration, measured at leisure, knows better than one contact
+                    // the calibration, measured at leisure, knows better than one contact;
+                    // its friction (a calibration has none) is the contacts'
+                    if fit.friction > 0.0 {
+                        self.pending[i] = Some(Surface {
+                            friction: fit.friction,
+                            ..old
+                        });
+                    }
                     return;
                 }
                 // contradicted: corrected by this contact below, as a prior is
@@ -410,9 +529,10 @@ impl ModelMediated {
         }
         if let (Some((i, old, _)), false) = (matched, self.params.correct_priors) {
             if old.weight == 0.0 {
-                // a prior kept as given: only its law is learned
+                // a prior kept as given: only its law (and friction) is learned
                 self.pending[i] = Some(Surface {
                     law: Some(fit.law),
+                    friction: fit.friction,
                     ..old
                 });
                 return;
@@ -437,6 +557,7 @@ impl ModelMediated {
                         (None, b) => b,
                     }),
                     weight: total,
+                    friction: (old.friction * w_old + fit.friction * new_weight) / total,
                     calibrated: None,
                 }
             }
@@ -445,6 +566,7 @@ impl ModelMediated {
                 wall: fit.wall,
                 law: Some(fit.law),
                 weight: new_weight,
+                friction: fit.friction,
                 calibrated: None,
             },
         };
@@ -467,7 +589,10 @@ impl ModelMediated {
     /// outside every modelled surface both before and after: the model then never changes
     /// under the virtual tip (no force step).
     fn adopt_pending(&mut self, tip: &Vector3<f64>) {
-        if self.pending.iter().all(Option::is_none) && self.pending_law.is_none() {
+        if self.pending.iter().all(Option::is_none)
+            && self.pending_law.is_none()
+            && self.pending_friction.is_none()
+        {
             return;
         }
         let inside = |surfaces: &[Option<Surface>; MAX_SURFACES], shared: Option<ContactModel>| {
@@ -486,8 +611,10 @@ impl ModelMediated {
         if !inside(&self.surfaces, self.shared_law) && !inside(&next, next_law) {
             self.surfaces = next;
             self.shared_law = next_law;
+            self.shared_friction = self.pending_friction.unwrap_or(self.shared_friction);
             self.pending = [None; MAX_SURFACES];
             self.pending_law = None;
+            self.pending_friction = None;
         }
     }
 
@@ -559,6 +686,7 @@ fn initial_model(
             wall: c.wall,
             law: Some(calibration.law),
             weight: 0.0,
+            friction: p.prior_friction,
             calibrated: Some(*c),
         });
     }
@@ -587,6 +715,7 @@ fn prior_surfaces(p: &ModelMediatedParams) -> [Option<Surface>; MAX_SURFACES] {
                 },
                 law: None,
                 weight: 0.0,
+                friction: 0.0,
                 calibrated: None,
             });
         }
@@ -656,14 +785,57 @@ pub fn rebound_speed(law: &ContactModel, mass: f64, speed_in: f64) -> f64 {
 }
 
 /// Fits a plane and a law to one contact's samples: the normal is the mean reaction's
-/// direction, `n̂ = −ΣF/|ΣF|`; along it `f = −F·n̂`, `s = p·n̂`, `ḋ = −v·n̂`, and the law's
+/// direction, `n̂ = −ΣF/|ΣF|`, unless friction leans the force from the surface's normal
+/// ([`frictional_normal`]: then the normal is the fitted one and μ̂ is fitted too); along it `f = −F·n̂`, `s = p·n̂`, `ḋ = −v·n̂`, and the law's
 /// parameters and the plane's offset `h` (penetration `d = h − s`) by least squares. `None`
 /// if the samples do not determine a law that pushes (k ≤ 0).
 pub fn fit_contact(samples: &[Sample], force_sum: &Vector3<f64>, form: LawForm) -> Option<Fit> {
     if samples.len() < 3 || force_sum.norm() == 0.0 {
         return None;
     }
-    let normal = -force_sum.normalize();
+    let (normal, friction) = match frictional_normal(samples) {
+        Some((n, mu)) => (-n, mu),
+        None => (-force_sum.normalize(), 0.0),
+    };
+    fit_along(samples, &normal, form).map(|fit| Fit { friction, ..fit })
+}
+
+/// Under friction, the contact's normal (into the wall) and friction coefficient: the normal
+/// by [`SurfaceFit`] (the one along which the law explains the samples best), and μ̂ by least
+/// squares over the samples sliding faster than [`SLIDE_SPEED`] against the law it is rendered
+/// with (`F_t·ŝ = μ·F_n·s/√(s² + v_ε²)`, `v_ε` = [`FRICTION_STICK_VELOCITY`]). `None` when the force does not lean from that normal
+/// ([`SurfaceFit::leans`]: a frictionless contact, whose fit is then exactly the mean force's).
+pub fn frictional_normal(samples: &[Sample]) -> Option<(Vector3<f64>, f64)> {
+    let mut surface = SurfaceFit::default();
+    for x in samples {
+        surface.add(&x.force, &x.position, &x.velocity);
+    }
+    let (normal, _) = surface.fit(NORMAL_FIT_ITERATIONS);
+    if !surface.leans() {
+        return None;
+    }
+    // μ̂ by least squares against the law it is rendered with, the regularised Coulomb law:
+    // F_t·ŝ = μ·F_n·g(s), g(s) = s/√(s² + v_ε²), over the samples that slide and push
+    let (mut num, mut den) = (0.0, 0.0);
+    for x in samples {
+        let f_n = x.force.dot(&normal);
+        let v_t = x.velocity - normal * x.velocity.dot(&normal);
+        let speed = v_t.norm();
+        if f_n <= 0.0 || speed <= SLIDE_SPEED {
+            continue;
+        }
+        let g = speed / (speed * speed + FRICTION_STICK_VELOCITY * FRICTION_STICK_VELOCITY).sqrt();
+        let f_t = x.force - normal * f_n;
+        num += f_t.dot(&(v_t / speed)) * f_n * g;
+        den += (f_n * g).powi(2);
+    }
+    let mu = if den > 0.0 { (num / den).max(0.0) } else { 0.0 };
+    Some((normal, mu))
+}
+
+/// Fits the plane and the law along the given normal (into free space), friction 0.
+fn fit_along(samples: &[Sample], normal: &Vector3<f64>, form: LawForm) -> Option<Fit> {
+    let normal = *normal;
     let linear = fit_linear(samples, &normal);
     match form {
         LawForm::Linear => linear,
@@ -742,6 +914,7 @@ fn finish_fit(samples: &[Sample], normal: &Vector3<f64>, h: f64, law: ContactMod
     Fit {
         wall,
         law,
+        friction: 0.0,
         rms: (sq / samples.len() as f64).sqrt(),
         samples: samples.len(),
     }
@@ -930,6 +1103,15 @@ impl Compensator for ModelMediated {
 
         if self.mode != Mode::Free && physical {
             self.physical_ticks += 1;
+            if self.corner.is_none() {
+                // two modelled surfaces pressed at once by the robot
+                let mut behind = (0..MAX_SURFACES).filter(|&i| {
+                    self.surfaces[i].is_some_and(|s| s.wall.penetration(&p_then) > 0.0)
+                });
+                if let (Some(a), Some(b)) = (behind.next(), behind.next()) {
+                    self.corner = Some((a, b));
+                }
+            }
             if self.samples.len() < self.samples.capacity() {
                 self.samples.push(Sample {
                     force: f_mea,
@@ -1052,12 +1234,15 @@ impl Compensator for ModelMediated {
         self.started = false;
         self.surfaces = self.initial_surfaces;
         self.shared_law = self.initial_law;
+        self.shared_friction = self.params.prior_friction;
         self.pending = [None; MAX_SURFACES];
         self.pending_law = None;
+        self.pending_friction = None;
         self.samples.clear();
         self.force_sum = Vector3::zeros();
         self.mode = Mode::Free;
         self.physical_ticks = 0;
+        self.corner = None;
         self.rendered = None;
         self.residual_energy = 0.0;
         self.previous = None;

@@ -178,6 +178,10 @@ pub struct ModelMediatedParams {
     /// Whether contacts correct the prior walls' geometry (true), or the priors are rendered as
     /// given (false; the law is identified all the same, and surfaces without a prior learned).
     pub correct_priors: bool,
+    /// Prior Coulomb friction coefficient (0 to 2; default 0: none): rendered on the prior and
+    /// calibrated surfaces until a contact identifies their own (a calibration has none).
+    #[schemars(range(min = 0.0, max = 2.0))]
+    pub prior_friction: f64,
     /// A calibration of the hardware (`hilcontact calibrate`, the calibration file's tables;
     /// `--calibration FILE`): its walls and law are rendered from the very first contact, trusted
     /// as far as their uncertainties say; a contact that contradicts them corrects them. Without
@@ -224,6 +228,7 @@ impl Default for ModelMediatedParams {
             law: LawForm::Auto,
             prior_walls: Vec::new(),
             correct_priors: true,
+            prior_friction: 0.0,
             calibration: crate::calibration::CalibrationFile::default(),
             match_angle: 30.0,
             gap_tolerance: 1e-3,
