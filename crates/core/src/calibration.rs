@@ -1117,6 +1117,8 @@ pub struct CalibratedSurface {
     pub radius: f64,
     /// Relative standard deviation of the law's stiffness.
     pub stiffness_relative_sigma: f64,
+    /// Standard deviation of the law's damping, N·s/m (N·s/mⁿ⁺¹ for Hunt-Crossley).
+    pub damping_sigma: f64,
 }
 
 impl CalibratedSurface {
@@ -1180,6 +1182,7 @@ impl CalibrationFile {
                 angle_sigma: w.angle_sigma.to_radians(),
                 radius: w.radius,
                 stiffness_relative_sigma: self.law.stiffness_sigma / self.law.stiffness,
+                damping_sigma: self.law.damping_sigma,
             });
         }
         if self.walls.is_empty() {
