@@ -100,3 +100,23 @@ def test_a_wall_not_where_the_scenario_says_stops_released_and_writes_nothing(tm
     line = one_error(result, 1, "'front' was not found", "the contact is released")
     assert "nothing written" in line
     assert not cal.exists()
+
+
+def test_the_calibrated_damped_law_is_unbiased_and_its_sigma_covers_the_error(tmp_path: Path):
+    # ζ ≈ 0.1 (c = 1403 N·s/m) over five seeds of the facility (its noise and the robot's drift):
+    # the fit of 2026-11-24 gave c 1270-1276 ± 2.5 (9 % low, ~50σ) and k 1 % low (~12σ)
+    k_true, c_true = 176275.0 * 1.07, 1403.0
+    covered = {"k": 0, "c": 0}
+    seeds = range(1, 6)
+    for seed in seeds:
+        cal = tmp_path / f"cal{seed}.toml"
+        result = invoke("calibrate", "paper-table1", "--simulate", "--out", str(cal), *FACILITY,
+                        "--set", "contact.damping=1403", "--set", f"facility.seed={seed}")
+        assert result.exit_code == 0, (result.output, result.stderr)
+        law = tomllib.loads(cal.read_text(encoding="utf-8"))["law"]
+        assert abs(law["stiffness"] / k_true - 1) <= 0.02, law
+        assert abs(law["damping"] - c_true) <= max(0.2 * c_true, 20.0), law
+        covered["k"] += abs(law["stiffness"] - k_true) <= 2 * law["stiffness_sigma"]
+        covered["c"] += abs(law["damping"] - c_true) <= 2 * law["damping_sigma"]
+    # a σ that covers the error: within 2σ in (at least) 4 of 5
+    assert covered["k"] >= 4 and covered["c"] >= 4, covered

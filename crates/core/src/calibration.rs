@@ -21,7 +21,7 @@ use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::contact::{ContactModel, HuntCrossley, LinearSpringDamper, Wall};
+use crate::contact::{ContactLaw, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
 
 /// Which contact law a calibration fits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -96,6 +96,13 @@ impl std::fmt::Display for FitError {
 
 impl std::error::Error for FitError {}
 
+/// Factor on the law's σ (k, c, n) from the fit's covariance (the larger of the white, the
+/// probe-clustered and the delete-one-probe jackknife one): over 20 synthetic calibrations
+/// with the robot's repeatability drift (crates/core/tests/calibration_law.rs) k spread 1.3–1.4
+/// times its clustered and jackknifed σ (with 17 probes, both are known to run low; the drift
+/// correlates neighbouring probes). Stated σ must cover the error, so they are widened.
+const LAW_SIGMA_FACTOR: f64 = 1.5;
+
 /// Iterations of the plane and law refit along the new normal.
 const PLANE_ITERATIONS: usize = 3;
 /// Most Levenberg-Marquardt iterations of the Hunt-Crossley fit.
@@ -121,7 +128,10 @@ pub fn fit_surface(
         .collect();
     let mut fit = None;
     for _ in 0..PLANE_ITERATIONS {
-        let (law, offsets, rms, used) = fit_law(probes, &selection, &normal, form)?;
+        let (mut law, offsets, rms, used) = fit_law(probes, &selection, &normal, form)?;
+        law.stiffness_sigma *= LAW_SIGMA_FACTOR;
+        law.damping_sigma *= LAW_SIGMA_FACTOR;
+        law.exponent_sigma *= LAW_SIGMA_FACTOR;
         // each probe's contact point: its mean lateral position on the plane p·n = h_i
         let mut points = Vec::with_capacity(probes.len());
         let mut point_sigmas = Vec::with_capacity(probes.len());
@@ -148,8 +158,10 @@ pub fn fit_surface(
             samples: used,
         });
         normal = plane.normal;
-        // select on position: in contact by more than `min_force` under the fitted law
-        let depth = min_force / law_stiffness_at(&law.law);
+        // select on the motion, not on the noisy force: the samples the fitted law, with its
+        // damping, puts in contact by more than `min_force`. A sample the law would make pull
+        // (a fast retreat: k·d + c·ḋ < 0) reads 0 N, not the law's force, and is left out;
+        // selected on the depth alone, such samples pulled c 9 % low (docs/calibration.md).
         let contact_points = &fit.as_ref().expect("set above").contact_points;
         selection = probes
             .iter()
@@ -157,25 +169,16 @@ pub fn fit_surface(
             .map(|(i, p)| {
                 let h = contact_points[i].dot(&normal);
                 p.iter()
-                    .map(|x| h - x.position.dot(&normal) > depth)
+                    .map(|x| {
+                        let d = h - x.position.dot(&normal);
+                        let rate = -x.velocity.dot(&normal);
+                        d > 0.0 && law.law.normal_force(d, rate) > min_force
+                    })
                     .collect()
             })
             .collect();
     }
     fit.ok_or_else(|| FitError::Degenerate("no fit".into()))
-}
-
-/// The stiffness that turns the selection force into a depth (`depth = min_force / this`):
-/// `k` for the linear law; for Hunt-Crossley the secant stiffness at 1 N.
-fn law_stiffness_at(law: &ContactModel) -> f64 {
-    match law {
-        ContactModel::Linear(l) => l.stiffness.max(f64::MIN_POSITIVE),
-        // depth d with k·dⁿ = 1 N gives the equivalent k = 1/d at 1 N
-        ContactModel::HuntCrossley(h) => {
-            let d1 = (1.0 / h.stiffness).powf(1.0 / h.exponent);
-            (1.0 / d1).max(f64::MIN_POSITIVE)
-        }
-    }
 }
 
 /// The joint law fit with an offset per probe: the law, each probe's offset `h_i` along
@@ -187,14 +190,15 @@ fn fit_law(
     normal: &Vector3<f64>,
     form: FitForm,
 ) -> Result<(LawFit, Vec<(f64, f64)>, f64, usize), FitError> {
-    // rows (probe, s, ḋ, f)
+    // rows (probe, s, ḋ, f), s from the reported velocity where it explains the positions
+    let positions = integrated_positions(probes, selection, normal);
     let mut rows = Vec::new();
     for (i, p) in probes.iter().enumerate() {
-        for (x, &chosen) in p.iter().zip(&selection[i]) {
+        for (j, (x, &chosen)) in p.iter().zip(&selection[i]).enumerate() {
             if chosen {
                 rows.push((
                     i,
-                    x.position.dot(normal),
+                    positions[i][j],
                     -x.velocity.dot(normal),
                     x.force.dot(normal),
                 ));
@@ -217,9 +221,128 @@ fn fit_law(
     }
 }
 
-/// Solves the least-squares problem `A·θ ≈ y`; returns θ and its covariance `σ²·(AᵀA)⁻¹` with
-/// `σ²` the residual variance, and the RMS residual.
-fn least_squares(a: &DMatrix<f64>, y: &DVector<f64>) -> Option<(DVector<f64>, DMatrix<f64>, f64)> {
+/// Share of the positions' variance within a probe that the integrated velocity must explain
+/// (`1 −` this) for [`integrated_positions`] to use it.
+const INTEGRATION_RESIDUAL_SHARE: f64 = 0.02;
+/// Below this share of their variance the reported positions' noise pulls k by less than
+/// 0.1 %: they are used as they are (integrating needs nothing, and gains nothing).
+const INTEGRATION_MIN_NOISE_SHARE: f64 = 1e-3;
+
+/// Each probe's positions along `normal` (`s = p·n`, m) for the law fit: the reported
+/// velocity integrated, `s_j = s̄_i + Δt·(U_j − Ū_i) + β·(v_j − v̄_i)` with
+/// `U_j = Σ_{m≤j} v_m·n`, the sample period `Δt` and the velocity's place in its period `β`
+/// fitted over all probes (least squares of the positions, each probe's mean removed), where
+/// that explains the reported positions (all but
+/// [`INTEGRATION_RESIDUAL_SHARE`] of their variance within the probes) and their noise is
+/// worth removing (at least [`INTEGRATION_MIN_NOISE_SHARE`] of their variance over the
+/// selected samples); else the reported
+/// positions as they are.
+///
+/// Why: the reported positions carry the robot's reporting noise (0.03 mm at 0.03 mm
+/// repeatability; a twelfth of it in variance once smoothed), which in the regressor `s` of
+/// `f = k·(h_i − s) + c·ḋ` pulls k low by `var(noise)/var(s)` (errors in variables: 0.2–0.4 %
+/// on paper-table1's probes, more than k's σ), and a smoothing window across the retreat's
+/// corner bends them by up to `1.2·v·T`. The reported velocity carries neither; its integral
+/// is the tracked motion up to a constant per probe, which `h_i` absorbs.
+fn integrated_positions(
+    probes: &[Vec<ProbeSample>],
+    selection: &[Vec<bool>],
+    normal: &Vector3<f64>,
+) -> Vec<Vec<f64>> {
+    let reported: Vec<Vec<f64>> = probes
+        .iter()
+        .map(|p| p.iter().map(|x| x.position.dot(normal)).collect())
+        .collect();
+    let sums: Vec<Vec<f64>> = probes
+        .iter()
+        .map(|p| {
+            let mut u = 0.0;
+            p.iter()
+                .map(|x| {
+                    u += x.velocity.dot(normal);
+                    u
+                })
+                .collect()
+        })
+        .collect();
+    let rates: Vec<Vec<f64>> = probes
+        .iter()
+        .map(|p| p.iter().map(|x| x.velocity.dot(normal)).collect())
+        .collect();
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    // s − s̄ = Δt·(U − Ū) + β·(v − v̄): β places the velocity within its period (−Δt/2 for
+    // an instantaneous one, 0 for the mean over the period ending at the sample)
+    let mut normal_matrix = nalgebra::Matrix2::zeros();
+    let mut right = nalgebra::Vector2::zeros();
+    let mut ss = 0.0;
+    for ((s, u), v) in reported.iter().zip(&sums).zip(&rates) {
+        let (s_mean, u_mean, v_mean) = (mean(s), mean(u), mean(v));
+        for ((a, b), c) in s.iter().zip(u).zip(v) {
+            let x = nalgebra::Vector2::new(b - u_mean, c - v_mean);
+            normal_matrix += x * x.transpose();
+            right += x * (a - s_mean);
+            ss += (a - s_mean) * (a - s_mean);
+        }
+    }
+    let Some(coefficients) = normal_matrix.try_inverse().map(|m| m * right) else {
+        return reported;
+    };
+    let (dt, beta) = (coefficients[0], coefficients[1]);
+    let residual = ss - coefficients.dot(&right);
+    // the noise's share of the positions' variance over the samples the law fit uses
+    let (mut noise, mut motion) = (0.0, 0.0);
+    for (((s, u), v), chosen) in reported.iter().zip(&sums).zip(&rates).zip(selection) {
+        let (u_mean, v_mean) = (mean(u), mean(v));
+        let picked: Vec<(f64, f64)> = s
+            .iter()
+            .zip(u)
+            .zip(v)
+            .zip(chosen)
+            .filter(|(_, &c)| c)
+            .map(|(((a, b), c), _)| (*a, a - dt * (b - u_mean) - beta * (c - v_mean)))
+            .collect();
+        let count = picked.len().max(1) as f64;
+        let (s_mean, e_mean) = picked.iter().fold((0.0, 0.0), |acc, x| {
+            (acc.0 + x.0 / count, acc.1 + x.1 / count)
+        });
+        for (a, e) in picked {
+            motion += (a - s_mean) * (a - s_mean);
+            noise += (e - e_mean) * (e - e_mean);
+        }
+    }
+    let useful = noise >= INTEGRATION_MIN_NOISE_SHARE * motion;
+    if !(useful
+        && dt > 0.0
+        && dt.is_finite()
+        && beta.is_finite()
+        && residual <= INTEGRATION_RESIDUAL_SHARE * ss)
+    {
+        return reported;
+    }
+    reported
+        .iter()
+        .zip(&sums)
+        .zip(&rates)
+        .map(|((s, u), v)| {
+            let (s_mean, u_mean, v_mean) = (mean(s), mean(u), mean(v));
+            u.iter()
+                .zip(v)
+                .map(|(b, c)| s_mean + dt * (b - u_mean) + beta * (c - v_mean))
+                .collect()
+        })
+        .collect()
+}
+
+/// Solves the least-squares problem `A·θ ≈ y`; returns θ, its covariance and the RMS
+/// residual. The covariance is the larger, parameter by parameter, of `σ²·(AᵀA)⁻¹` (`σ²` the
+/// residual variance: white residuals) and the probe-clustered one of [`clustered_covariance`]
+/// (`clusters[j]`: the probe of row `j`), which holds when the residuals are correlated
+/// within a probe.
+fn least_squares(
+    a: &DMatrix<f64>,
+    y: &DVector<f64>,
+    clusters: &[usize],
+) -> Option<(DVector<f64>, DMatrix<f64>, f64)> {
     let ata = a.transpose() * a;
     let aty = a.transpose() * y;
     let chol = ata.clone().cholesky()?;
@@ -228,12 +351,118 @@ fn least_squares(a: &DMatrix<f64>, y: &DVector<f64>) -> Option<(DVector<f64>, DM
     let (m, p) = (a.nrows() as f64, a.ncols() as f64);
     let dof = (m - p).max(1.0);
     let variance = residual.norm_squared() / dof;
-    let covariance = chol.inverse() * variance;
+    let inverse = chol.inverse();
+    let white = &inverse * variance;
+    let clustered = clustered_covariance(a, &residual, clusters, &inverse);
+    let jackknife = jackknife_covariance(a, y, clusters, &ata, &aty);
     let rms = (residual.norm_squared() / m).sqrt();
-    theta
-        .iter()
-        .all(|x| x.is_finite())
-        .then_some((theta, covariance, rms))
+    theta.iter().all(|x| x.is_finite()).then(|| {
+        let larger = larger_covariance(&white, &clustered);
+        (theta, larger_covariance(&larger, &jackknife), rms)
+    })
+}
+
+/// The delete-one-probe jackknife covariance of a least-squares fit:
+/// `(G−1)/G · Σ_g (θ₍g₎ − θ̄)(θ₍g₎ − θ̄)ᵀ`, `θ₍g₎` the fit without probe `g`'s rows (its own
+/// columns, which no other row uses, held at 0). With the 17 probes of a wall the clustered
+/// covariance alone understates the spread of k over repeated calibrations by about 1.4×
+/// (its known small-sample bias); the jackknife does not.
+fn jackknife_covariance(
+    a: &DMatrix<f64>,
+    y: &DVector<f64>,
+    clusters: &[usize],
+    ata: &DMatrix<f64>,
+    aty: &DVector<f64>,
+) -> DMatrix<f64> {
+    let p = a.ncols();
+    let groups = clusters.iter().copied().max().map_or(0, |g| g + 1);
+    let mut partial_ata = vec![DMatrix::<f64>::zeros(p, p); groups];
+    let mut partial_aty = vec![DVector::<f64>::zeros(p); groups];
+    for (j, &g) in clusters.iter().enumerate() {
+        let row = a.row(j).transpose();
+        partial_ata[g] += &row * row.transpose();
+        partial_aty[g] += row * y[j];
+    }
+    let mut estimates = Vec::with_capacity(groups);
+    for g in 0..groups {
+        let mut m = ata - &partial_ata[g];
+        let v = aty - &partial_aty[g];
+        for i in 0..p {
+            if m[(i, i)] <= 0.0 {
+                m[(i, i)] = 1.0;
+            }
+        }
+        if let Some(chol) = m.cholesky() {
+            estimates.push(chol.solve(&v));
+        }
+    }
+    let count = estimates.len() as f64;
+    if count < 3.0 {
+        return DMatrix::zeros(p, p);
+    }
+    let mean = estimates.iter().fold(DVector::zeros(p), |acc, e| acc + e) / count;
+    let mut cov = DMatrix::zeros(p, p);
+    for e in &estimates {
+        let d = e - &mean;
+        cov += &d * d.transpose();
+    }
+    // a probe's own columns (its offset) are not estimated without it: not jackknifed
+    for i in 0..p {
+        let own = partial_ata.iter().any(|m| m[(i, i)] >= ata[(i, i)]);
+        if own {
+            cov.row_mut(i).fill(0.0);
+            cov.column_mut(i).fill(0.0);
+        }
+    }
+    cov * ((count - 1.0) / count)
+}
+
+/// The cluster-robust ("sandwich") covariance of a least-squares fit with Jacobian `a`,
+/// residuals `residual` and `inverse = (AᵀA)⁻¹`, the rows grouped by `clusters` (a probe
+/// each):
+/// ```text
+/// V = G/(G−1) · (AᵀA)⁻¹ · Σ_g (A_gᵀ r_g)(A_gᵀ r_g)ᵀ · (AᵀA)⁻¹        G: the clusters
+/// ```
+/// The residuals within a probe are not independent: the robot's unreported repeatability
+/// error drifts over a probe (a correlation time of about a second), the smoothed positions'
+/// noise is correlated over the smoothing window, so `σ²·(AᵀA)⁻¹` understates the law's
+/// uncertainty many times over; the probes, seconds apart, are nearly independent.
+fn clustered_covariance(
+    a: &DMatrix<f64>,
+    residual: &DVector<f64>,
+    clusters: &[usize],
+    inverse: &DMatrix<f64>,
+) -> DMatrix<f64> {
+    let p = a.ncols();
+    let groups = clusters.iter().copied().max().map_or(0, |g| g + 1);
+    let mut scores = vec![DVector::<f64>::zeros(p); groups];
+    for (j, &g) in clusters.iter().enumerate() {
+        scores[g] += a.row(j).transpose() * residual[j];
+    }
+    let used = scores.iter().filter(|s| s.norm_squared() > 0.0).count() as f64;
+    let mut meat = DMatrix::zeros(p, p);
+    for s in &scores {
+        meat += s * s.transpose();
+    }
+    let correction = if used > 1.0 { used / (used - 1.0) } else { 1.0 };
+    inverse * meat * inverse * correction
+}
+
+/// `white` with each parameter's variance (and its covariances, scaled alike) raised to
+/// `clustered`'s where that is larger.
+fn larger_covariance(white: &DMatrix<f64>, clustered: &DMatrix<f64>) -> DMatrix<f64> {
+    let p = white.nrows();
+    let scale: Vec<f64> = (0..p)
+        .map(|i| {
+            let (w, c) = (white[(i, i)], clustered[(i, i)]);
+            if w > 0.0 && c > w {
+                (c / w).sqrt()
+            } else {
+                1.0
+            }
+        })
+        .collect();
+    DMatrix::from_fn(p, p, |i, j| white[(i, j)] * scale[i] * scale[j])
 }
 
 /// Linear law: `f = a_i − k·s + c·ḋ` with `a_i = k·h_i`; a negative `c` is refitted with `c = 0`.
@@ -252,6 +481,7 @@ fn fit_linear_rows(
     for i in 0..np {
         s_mean[i] /= count[i];
     }
+    let clusters: Vec<usize> = rows.iter().map(|r| r.0).collect();
     let solve = |with_damping: bool| {
         let cols = np + 1 + usize::from(with_damping);
         let mut a = DMatrix::zeros(rows.len(), cols);
@@ -264,7 +494,7 @@ fn fit_linear_rows(
             }
             y[j] = r.3;
         }
-        least_squares(&a, &y)
+        least_squares(&a, &y, &clusters)
     };
     let full = solve(true);
     // a negative c (noise about a small damping) is refitted with c = 0; its uncertainty
@@ -419,9 +649,14 @@ fn fit_hunt_crossley_rows(
     let j = jacobian(&theta);
     let m = rows.len() as f64;
     let variance = current / (m - p as f64).max(1.0);
+    let residual = DVector::from_iterator(rows.len(), rows.iter().map(|r| r.3 - model(&theta, r)));
+    let clusters: Vec<usize> = rows.iter().map(|r| r.0).collect();
     let cov = (j.transpose() * &j)
         .try_inverse()
-        .map(|inv| inv * variance)
+        .map(|inv| {
+            let clustered = clustered_covariance(&j, &residual, &clusters, &inv);
+            larger_covariance(&(inv * variance), &clustered)
+        })
         .unwrap_or_else(|| DMatrix::from_element(p, p, f64::INFINITY));
     let (k, n, c) = (theta[np].exp(), theta[np + 1], theta[np + 2].max(0.0));
     if !(k.is_finite() && k > 0.0 && n.is_finite()) {
@@ -882,6 +1117,8 @@ pub struct CalibratedSurface {
     pub radius: f64,
     /// Relative standard deviation of the law's stiffness.
     pub stiffness_relative_sigma: f64,
+    /// Standard deviation of the law's damping, N·s/m (N·s/mⁿ⁺¹ for Hunt-Crossley).
+    pub damping_sigma: f64,
 }
 
 impl CalibratedSurface {
@@ -945,6 +1182,7 @@ impl CalibrationFile {
                 angle_sigma: w.angle_sigma.to_radians(),
                 radius: w.radius,
                 stiffness_relative_sigma: self.law.stiffness_sigma / self.law.stiffness,
+                damping_sigma: self.law.damping_sigma,
             });
         }
         if self.walls.is_empty() {

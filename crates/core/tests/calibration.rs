@@ -614,3 +614,41 @@ fn a_calibration_renders_damped_and_hunt_crossley_contacts_from_the_first_at_any
         }
     }
 }
+
+#[test]
+fn a_calibration_whose_damping_a_contact_contradicts_is_corrected_after_its_first_contact() {
+    // ζ ≈ 0.1 (c = 1403 N·s/m) calibrated as undamped: the plane and k are right, c is not.
+    // Each wall's first contact is rendered with c = 0 (it rebounds about 34 % fast); its
+    // fit's damping contradicts the calibration, so that wall's later contacts use the fit's
+    // law: their own rebound is the reference's (the CoV of a collision compounds the earlier
+    // ones' errors, so each is compared with the one before it). Kept, the calibration would
+    // have every contact rebound 34 % fast.
+    for delay in [0.04, 0.12] {
+        let mut s = preset("paper-table1");
+        s.facility.robot_delay = delay;
+        s.contact.damping = 1403.0;
+        let plan = s.resolve().unwrap();
+        let mut calibration = calibration_of(&plan, 0.0, 1.0);
+        calibration.law.damping = 0.0;
+        model_mediated(&mut s, calibration);
+        let out = hilcontact_core::simulate(&s).unwrap();
+        let cov: Vec<f64> = out
+            .metrics
+            .collisions
+            .iter()
+            .filter(|c| c.collision.complete)
+            .filter_map(|c| c.cov)
+            .collect();
+        assert!(cov.len() >= 3, "{delay}: {cov:?}");
+        // the first contacts of the two walls: rendered with c = 0, fast
+        assert!(cov[0] > 1.2, "{delay}: {cov:?}");
+        // each wall's later contacts: corrected
+        for i in 2..cov.len() {
+            assert!(
+                (cov[i] / cov[i - 1] - 1.0).abs() <= 0.02,
+                "{delay}: collision {}: CoV {cov:?}",
+                i + 1
+            );
+        }
+    }
+}

@@ -53,6 +53,17 @@ pub const CALIBRATION_FLOOR: f64 = 5e-5;
 /// A contact's stiffness more than this share (plus the calibration's relative uncertainty
 /// times [`CALIBRATION_TRUST_SIGMAS`]) away from a calibrated law's contradicts it.
 pub const CALIBRATION_STIFFNESS_TOLERANCE: f64 = 0.1;
+/// A contact's damping time `c/k` (s) more than this share of the calibrated law's (plus
+/// [`CALIBRATION_DAMPING_FLOOR`] and the calibration's σ of c times
+/// [`CALIBRATION_TRUST_SIGMAS`], over k) away from it contradicts the calibration.
+pub const CALIBRATION_DAMPING_TOLERANCE: f64 = 0.2;
+/// The online fit's own accuracy of the damping time `c/k` of the linear law, s (2 ms: 377
+/// N·s/m on paper-table1's 188 N/mm, a damping ratio of 0.025; with 0.25 ms a single contact's
+/// fit under 0.2 N of noise contradicted paper-exp-1.93hz's calibrated c = 130 N·s/m, and
+/// its own law rendered the later contacts 2–6 % slow).
+pub const CALIBRATION_DAMPING_FLOOR: f64 = 2e-3;
+/// The same for Hunt-Crossley's `c/k`, s/m (0.5 s/m: 1 % of the force at 20 mm/s).
+pub const CALIBRATION_DAMPING_FLOOR_HUNT_CROSSLEY: f64 = 0.5;
 
 /// A contact `pida` handled has its rebound set to the fitted law's only when the two
 /// changes of the normal velocity differ by at most this share of the law's (beyond it the
@@ -641,7 +652,10 @@ impl ModelMediated {
 /// Whether a contact's fit agrees with a calibrated surface: its plane within
 /// [`CALIBRATION_TRUST_SIGMAS`] standard deviations plus [`CALIBRATION_FLOOR`] of the
 /// calibrated one at the contact (`centre`, m), and its stiffness (a law of the same form)
-/// within [`CALIBRATION_STIFFNESS_TOLERANCE`] plus the calibration's own uncertainty.
+/// within [`CALIBRATION_STIFFNESS_TOLERANCE`] plus the calibration's own uncertainty, and its
+/// damping time `c/k` within [`CALIBRATION_DAMPING_TOLERANCE`] plus
+/// [`CALIBRATION_DAMPING_FLOOR`] (linear; [`CALIBRATION_DAMPING_FLOOR_HUNT_CROSSLEY`]) plus the
+/// calibration's own uncertainty.
 fn agrees(
     calibrated: &CalibratedSurface,
     law: Option<ContactModel>,
@@ -653,17 +667,27 @@ fn agrees(
     let offset = calibrated.wall.signed_distance(&on_fit);
     let tolerance = CALIBRATION_TRUST_SIGMAS * calibrated.sigma_at(centre) + CALIBRATION_FLOOR;
     let stiffness = |l: &ContactModel| match l {
-        ContactModel::Linear(l) => (l.stiffness, 1.0),
-        ContactModel::HuntCrossley(h) => (h.stiffness, h.exponent),
+        ContactModel::Linear(l) => (l.stiffness, 1.0, l.damping),
+        ContactModel::HuntCrossley(h) => (h.stiffness, h.exponent, h.damping),
     };
     let law_agrees = match law {
         Some(l) => {
-            let ((k_cal, n_cal), (k_fit, n_fit)) = (stiffness(&l), stiffness(&fit.law));
+            let ((k_cal, n_cal, c_cal), (k_fit, n_fit, c_fit)) =
+                (stiffness(&l), stiffness(&fit.law));
+            let damping_time = c_cal / k_cal;
+            let floor = match l {
+                ContactModel::Linear(_) => CALIBRATION_DAMPING_FLOOR,
+                ContactModel::HuntCrossley(_) => CALIBRATION_DAMPING_FLOOR_HUNT_CROSSLEY,
+            };
             // laws of different forms are compared at the contact's scale only by the plane
             (n_cal - n_fit).abs() > 0.25
-                || (k_fit / k_cal - 1.0).abs()
+                || ((k_fit / k_cal - 1.0).abs()
                     <= CALIBRATION_STIFFNESS_TOLERANCE
                         + CALIBRATION_TRUST_SIGMAS * calibrated.stiffness_relative_sigma
+                    && (c_fit / k_fit - damping_time).abs()
+                        <= CALIBRATION_DAMPING_TOLERANCE * damping_time
+                            + floor
+                            + CALIBRATION_TRUST_SIGMAS * calibrated.damping_sigma / k_cal)
         }
         None => true,
     };
