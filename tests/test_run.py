@@ -203,7 +203,12 @@ def test_optional_columns_keep_their_order(monkeypatch):
             columns = {name: [0.0] * n for name in ["observed_energy", "damping_estimate", "stiffness_estimate"]}
             columns.update({name: [0.0] * n for name in reversed(TIMESERIES_COLUMNS)})
             reference = {name: [0.0] * n for name in REFERENCE_COLUMNS}
-            return {"timeseries": columns, "reference": reference, "metrics": json.dumps({"status": "ok"})}
+
+            class Tables:  # `_core.Tables`: the tables made when asked
+                timeseries = staticmethod(lambda: columns)
+                reference = staticmethod(lambda: reference)
+
+            return {"tables": Tables, "metrics": json.dumps({"status": "ok"})}
 
     monkeypatch.setattr(run_module, "_core", lambda: FakeCore)
     run = hc.simulate(hc.load_scenario("paper-table1"))

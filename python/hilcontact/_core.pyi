@@ -11,8 +11,9 @@ def simulate(scenario_json: str, outputs: str | None = None) -> dict[str, Any]:
     """Run one HIL simulation and its ideal reference.
 
     ``scenario_json`` is the fully resolved scenario as JSON (``Scenario.to_json()``).
-    Returns ``{"timeseries": {column: float64 array}, "reference": {column: float64 array},
-    "metrics": str}`` where ``metrics`` is JSON text (the core's ``Metrics``; every field is
+    Returns ``{"tables": Tables, "metrics": str}``: ``tables.timeseries()`` and
+    ``tables.reference()`` make the HIL loop's and the reference's ``{column: float64 array}``
+    when called (the run's records are kept until then); ``metrics`` is JSON text (the core's ``Metrics``; every field is
     described in docs/model.md, "Metrics"). The columns and their units: :func:`table_columns`.
     Each of ``metrics["collisions"]`` (and ``"reference_collisions"``) is a contact episode:
     ``normal_impulse``, ``tangential_impulse`` (N s), ``peak_moment`` (N m, about the sensor
@@ -49,8 +50,9 @@ def simulate_facility(scenario_json: str, engine: Any) -> dict[str, Any]:
     out (force on the rod, force on the frame, its moment about the sensor origin, the friction
     part of the force on the rod, ``t``); e.g.
     ``hilcontact.mujoco.facility.MujocoContact``), the robot and the sensor as the facility
-    model's. Returns what :func:`simulate` returns without outputs; an error raised by the
-    engine stops the run and is raised again."""
+    model's. Returns ``{"timeseries": {column: float64 array}, "reference": {column: float64
+    array}, "metrics": str}`` (the tables of :func:`simulate`, made at once); an error raised
+    by the engine stops the run and is raised again."""
 
 def contact_frequency(scenario_json: str) -> float:
     """Undamped contact frequency of a linear contact, Hz (``sqrt(k/μ)/2π``, μ the reduced
@@ -111,6 +113,15 @@ class RealtimeError(HilContactError, OSError):
 class RealtimeOptionError(RealtimeError, ValueError):
     """An invalid real-time option; the message names it."""
 
+
+class Tables:
+    """The tables of a :func:`simulate` run, made when asked (each call makes new arrays)."""
+
+    def timeseries(self) -> dict[str, Any]:
+        """The HIL loop's ``{column: float64 array}``."""
+
+    def reference(self) -> dict[str, Any]:
+        """The ideal reference's ``{column: float64 array}``."""
 
 class HilHandle:
     """A running real-time HIL loop (from :func:`start_hil`). The loop runs in Rust threads."""

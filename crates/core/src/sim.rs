@@ -341,13 +341,21 @@ pub fn simulate_plan_until(plan: &Plan, stop: &AtomicBool) -> (SimulationOutput,
         reference,
         hil,
         metrics,
-    } = run_with(plan, true, None, stop);
+    } = simulate_plan_records_until(plan, stop);
     let output = SimulationOutput {
         timeseries: hil_table(&hil.rows, hil.estimates_contact, hil.observes_energy),
         reference: reference_table(&reference),
         metrics,
     };
     (output, hil.rows)
+}
+
+/// [`simulate_plan_until`] without its tables: the records of both loops and the metrics, the
+/// tables to be made from them only if they are read ([`Runs::timeseries`],
+/// [`Runs::reference_table`]; the same tables, to the bit). Building them cost a `paper-table1`
+/// run about 0.8 ms, an eighth of the run.
+pub fn simulate_plan_records_until(plan: &Plan, stop: &AtomicBool) -> Runs {
+    run_with(plan, true, None, stop)
 }
 
 /// How a table's field reads a record: one value, or a vector (three columns `_x`, `_y`, `_z`).
@@ -520,10 +528,27 @@ pub fn reference_table(reference: &[ReferenceRecord]) -> Table {
 }
 
 /// The records and metrics of a run.
-struct Runs {
-    reference: Vec<ReferenceRecord>,
-    hil: HilRun,
-    metrics: Metrics,
+#[derive(Debug, Clone)]
+pub struct Runs {
+    /// The ideal reference, one record per tick (empty when the records were not kept).
+    pub reference: Vec<ReferenceRecord>,
+    /// The HIL loop (its records when kept).
+    pub hil: HilRun,
+    /// The metrics.
+    pub metrics: Metrics,
+}
+
+impl Runs {
+    /// The HIL loop's table ([`hil_table`]).
+    pub fn timeseries(&self) -> Table {
+        let hil = &self.hil;
+        hil_table(&hil.rows, hil.estimates_contact, hil.observes_energy)
+    }
+
+    /// The reference's table ([`reference_table`]).
+    pub fn reference_table(&self) -> Table {
+        reference_table(&self.reference)
+    }
 }
 
 /// [`simulate_plan_with_records`] with a compensator built outside the core (e.g. one written
