@@ -28,6 +28,16 @@ impl RelativeMotion {
     pub fn point_velocity(&self, r_body: &Vector3<f64>) -> Vector3<f64> {
         self.velocity + self.angular_velocity.cross(&(self.orientation * r_body))
     }
+
+    /// [`RelativeMotion::point`] and [`RelativeMotion::point_velocity`] of one point (m, m/s),
+    /// the point rotated once: the same arithmetic, bit for bit.
+    pub fn point_and_velocity(&self, r_body: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+        let r = self.orientation * r_body;
+        (
+            self.position + r,
+            self.velocity + self.angular_velocity.cross(&r),
+        )
+    }
 }
 
 /// A wrench on the target's collision frame: force (N) and moment about the sensor origin

@@ -238,12 +238,10 @@ impl TwoBodySystem {
     /// own losses, `facility.dissipation`; 0 for the true system): the rod tip against the
     /// walls, then every contact point of the shapes ([`crate::shapes`]). Allocation-free.
     pub fn contact_at(&self, rel: &RelativeMotion, added_damping: f64) -> Contact {
-        let tip = rel.point(&self.rod_tip);
-        let p = self.contact.force_with_added_damping(
-            &tip,
-            &rel.point_velocity(&self.rod_tip),
-            added_damping,
-        );
+        let (tip, tip_velocity) = rel.point_and_velocity(&self.rod_tip);
+        let p = self
+            .contact
+            .force_with_added_damping(&tip, &tip_velocity, added_damping);
         let mut c = Contact {
             force: p.force,
             friction_force: p.friction_force,
@@ -339,10 +337,8 @@ impl TwoBodySystem {
 
     /// [`TwoBodySystem::active_set`] for a relative motion of the servicer.
     pub fn active_set_at(&self, rel: &RelativeMotion) -> u64 {
-        let mut set = self.contact.active_set(
-            &rel.point(&self.rod_tip),
-            &rel.point_velocity(&self.rod_tip),
-        );
+        let (tip, tip_velocity) = rel.point_and_velocity(&self.rod_tip);
+        let mut set = self.contact.active_set(&tip, &tip_velocity);
         self.for_each_shape_contact(rel, |point| {
             let v = rel.velocity + rel.angular_velocity.cross(&(point.point - rel.position));
             if self
