@@ -4,15 +4,32 @@
 //! the target frame `t` (`/tf`, `tf2_msgs/msg/TFMessage`), encoded as CDR with
 //! [`Cdr`] like every channel of the MCAP recording, at [`SCENE_RATE`] of run time.
 //!
+//! **Shapes' contact points.** A scenario with shapes touches at several points at once, which
+//! a record does not carry (it has the total force). The scene computes them itself, off the
+//! loop's thread, at each scene message only: every contact point of the shapes at the record's
+//! *actual* servicer motion ([`TwoBodySystem::for_each_shape_contact_force`]), each drawn as a
+//! point with its own normal-force arrow and friction arrow; the rod-tip arrow then carries the
+//! rod tip's part against the walls only (zero without walls), so the arrows add up to the
+//! contact. Which system ([`ContactSource`]): a simulation's and an emulated facility's scene
+//! uses the hardware as it really is ([`Plan::system`], with `facility.dissipation`), so its
+//! arrows sum to the recorded contact force; a real-time run's (`hil`, `demo-rt`) uses what the
+//! loop knows, the scenario's shapes and law ([`Plan::nominal`], no added damping): the points
+//! and forces the model predicts at the robot's measured pose, not measured ones. At most
+//! [`MAX_SCENE_POINTS`] points per message (the slots are preallocated); more are counted in
+//! [`Scene::points_dropped`]. A scenario without shapes draws exactly as before.
+//!
 //! Frames: `t` the target (mockup) frame; `servicer` the commanded servicer body (its origin
 //! `p_tip − R·r_tip`, `R` its attitude relative to `t`, `r_tip` the rod tip in its frame);
 //! `servicer_actual` the robot's actual one.
 
 use nalgebra::{UnitQuaternion, Vector3};
 
+use hilcontact_core::frames::RelativeMotion;
+use hilcontact_core::world::TwoBodySystem;
 use hilcontact_core::Plan;
 
 use super::mcap::{schema_text, Cdr, ChannelScope, ChannelSpec, FRAME_TARGET};
+use super::RunInfo;
 use crate::report::Sample;
 
 /// Scene messages per second of run time (at most one per tick), Hz.
@@ -34,7 +51,7 @@ pub const SCENE_CHANNELS: [ChannelSpec; 2] = [
         schema: "visualization_msgs/msg/MarkerArray",
         frame: FRAME_TARGET,
         scope: ChannelScope::Always,
-        doc: "walls (grey), the virtual rod (blue) and the actual rod (orange), the contact point and the contact force arrow (red, 1 mm/N), at 30 Hz of run time",
+        doc: "walls (grey), the virtual rod (blue) and the actual rod (orange), the contact point and the contact force arrow (red, 1 mm/N); with shapes, each contact point (red) with its normal force (red) and friction (green) arrows, at 30 Hz of run time",
     },
     ChannelSpec {
         topic: "/tf",
@@ -51,6 +68,13 @@ const ROD_ACTUAL: i32 = 1;
 const CONTACT: i32 = 2;
 const FORCE: i32 = 3;
 const WALLS: i32 = 10;
+/// Shapes' contact point `i`: its point `POINTS + 3i`, normal arrow `+ 1`, friction arrow `+ 2`.
+const POINTS: i32 = 1000;
+
+/// Most shapes' contact points one scene message draws (each a point and two arrows, always
+/// sent: unused ones transparent); more are counted ([`Scene::points_dropped`]). 16 is twice
+/// the most points the shipped shape presets touch at once.
+pub const MAX_SCENE_POINTS: usize = 16;
 
 /// `visualization_msgs/Marker` types used.
 const ARROW: i32 = 0;
@@ -63,6 +87,49 @@ const GREY: [f32; 4] = [0.6, 0.6, 0.6, 0.5];
 const BLUE: [f32; 4] = [0.12, 0.47, 0.71, 1.0];
 const ORANGE: [f32; 4] = [1.0, 0.5, 0.05, 1.0];
 const RED: [f32; 4] = [0.84, 0.15, 0.16, 1.0];
+const GREEN: [f32; 4] = [0.17, 0.63, 0.17, 1.0];
+
+/// Which system the shapes' contact points are drawn from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ContactSource {
+    /// The hardware as it really is ([`Plan::system`], with `facility.dissipation`): a
+    /// simulation's and an emulated facility's scene.
+    Truth,
+    /// What the loop knows ([`Plan::nominal`], no added damping): a real-time run's scene.
+    Model,
+}
+
+impl ContactSource {
+    /// A real-time run's ([`RunInfo::realtime`]): the model; a simulation's and a facility's:
+    /// the truth.
+    pub fn of(info: &RunInfo) -> Self {
+        if info.realtime() {
+            ContactSource::Model
+        } else {
+            ContactSource::Truth
+        }
+    }
+}
+
+/// One shapes' contact point as drawn: where, and the normal and friction parts of the force
+/// on the servicer there (`t` frame, m and N).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ScenePoint {
+    /// The contact point, m.
+    pub point: Vector3<f64>,
+    /// The normal part of the force, N.
+    pub normal_force: Vector3<f64>,
+    /// The friction part of the force, N.
+    pub friction_force: Vector3<f64>,
+}
+
+/// The shapes' contact, for a scenario with shapes.
+struct Shapes {
+    system: TwoBodySystem,
+    added_damping: f64,
+    points: [ScenePoint; MAX_SCENE_POINTS],
+    n: usize,
+}
 
 /// What the scene is drawn from: the plan's walls and rod, and the encoder.
 pub struct Scene {
@@ -73,12 +140,18 @@ pub struct Scene {
     /// Ticks between two scene messages (>= 1).
     pub every: u64,
     cdr: Cdr,
+    /// The shapes' contact (None: no shapes, the rod tip only).
+    shapes: Option<Box<Shapes>>,
+    /// Shapes' contact points beyond [`MAX_SCENE_POINTS`] in a message, not drawn (summed
+    /// over messages).
+    pub points_dropped: u64,
 }
 
 impl Scene {
     /// The scene of `plan`: each wall a thin square plate (side 4 × the rod's length, at least
-    /// 0.2 m) centred on its point, normal to its normal.
-    pub fn new(plan: &Plan) -> Self {
+    /// 0.2 m) centred on its point, normal to its normal; with shapes, their contact points
+    /// from `source`.
+    pub fn new(plan: &Plan, source: ContactSource) -> Self {
         let rod_tip = plan.system.rod_tip;
         let walls = plan
             .system
@@ -99,7 +172,77 @@ impl Scene {
             contact_threshold: plan.contact_threshold,
             every: ((1.0 / (SCENE_RATE * plan.period)).round() as u64).max(1),
             cdr: Cdr::new(),
+            shapes: (!plan.system.contact.shapes.servicer.is_empty()).then(|| {
+                let (system, added_damping) = match source {
+                    ContactSource::Truth => (plan.system.clone(), plan.facility.dissipation),
+                    ContactSource::Model => (plan.nominal.clone(), 0.0),
+                };
+                Box::new(Shapes {
+                    system,
+                    added_damping,
+                    points: [ScenePoint::default(); MAX_SCENE_POINTS],
+                    n: 0,
+                })
+            }),
+            points_dropped: 0,
         }
+    }
+
+    /// The shapes' contact points of the newest [`Scene::markers`] message (empty without
+    /// shapes).
+    pub fn points(&self) -> &[ScenePoint] {
+        self.shapes.as_ref().map_or(&[], |s| &s.points[..s.n])
+    }
+
+    /// The servicer's relative motion that a record's actual tip, attitude and rates give.
+    fn actual_motion(&self, s: &Sample) -> RelativeMotion {
+        let r = &s.record;
+        let arm = r.actual_orientation * self.rod_tip;
+        RelativeMotion {
+            position: r.actual_tip_position - arm,
+            orientation: r.actual_orientation,
+            velocity: r.actual_tip_velocity - r.actual_angular_velocity.cross(&arm),
+            angular_velocity: r.actual_angular_velocity,
+        }
+    }
+
+    /// With shapes: their contact points at the sample's actual motion into the slots (beyond
+    /// them counted), and the rod tip's force against the walls, N. Without: the record's
+    /// contact force.
+    fn contact(&mut self, s: &Sample) -> Vector3<f64> {
+        let rel = self.actual_motion(s);
+        let Some(shapes) = self.shapes.as_deref_mut() else {
+            return s.record.contact_force;
+        };
+        let Shapes {
+            system,
+            added_damping,
+            points,
+            n,
+        } = shapes;
+        *n = 0;
+        let mut dropped = 0;
+        system.for_each_shape_contact_force(&rel, *added_damping, |p, f| {
+            if *n < MAX_SCENE_POINTS {
+                points[*n] = ScenePoint {
+                    point: p.point,
+                    normal_force: f.force - f.friction_force,
+                    friction_force: f.friction_force,
+                };
+                *n += 1;
+            } else {
+                dropped += 1;
+            }
+        });
+        self.points_dropped += dropped;
+        system
+            .contact
+            .force_with_added_damping(
+                &rel.point(&self.rod_tip),
+                &rel.point_velocity(&self.rod_tip),
+                *added_damping,
+            )
+            .force
     }
 
     /// Whether tick `k` carries a scene message.
@@ -117,12 +260,18 @@ impl Scene {
         let r = &s.record;
         let base = self.origin(&r.tip_position, &r.orientation);
         let base_actual = self.origin(&r.actual_tip_position, &r.actual_orientation);
-        let force = r.contact_force;
+        let force = self.contact(s);
         let in_contact = force.norm() > self.contact_threshold;
         let walls = std::mem::take(&mut self.walls);
         let size = self.wall_size;
+        let shapes = self.shapes.take();
+        let slots = if shapes.is_some() {
+            MAX_SCENE_POINTS
+        } else {
+            0
+        };
         let c = self.cdr.begin();
-        c.u32(4 + walls.len() as u32);
+        c.u32((4 + walls.len() + 3 * slots) as u32);
         let none = UnitQuaternion::identity();
         let zero = Vector3::zeros();
         marker(
@@ -186,6 +335,36 @@ impl Scene {
                 &[],
             );
         }
+        if let Some(shapes) = &shapes {
+            for i in 0..MAX_SCENE_POINTS {
+                let (p, shown) = match shapes.points[..shapes.n].get(i) {
+                    Some(p) => (*p, 1.0),
+                    None => (ScenePoint::default(), 0.0),
+                };
+                let id = POINTS + 3 * i as i32;
+                let alpha = |mut colour: [f32; 4]| {
+                    colour[3] = shown;
+                    colour
+                };
+                let at = p.point;
+                marker(c, t_ns, id, SPHERE, &at, &none, [0.01; 3], alpha(RED), &[]);
+                let ends = [(p.normal_force, RED), (p.friction_force, GREEN)];
+                for (j, (f, colour)) in ends.into_iter().enumerate() {
+                    marker(
+                        c,
+                        t_ns,
+                        id + 1 + j as i32,
+                        ARROW,
+                        &zero,
+                        &none,
+                        [0.003, 0.006, 0.006],
+                        alpha(colour),
+                        &[at, at + f * FORCE_ARROW_SCALE],
+                    );
+                }
+            }
+        }
+        self.shapes = shapes;
         self.walls = walls;
         self.cdr.bytes()
     }
@@ -295,7 +474,7 @@ mod tests {
     #[test]
     fn the_servicer_origin_puts_the_rod_tip_where_the_record_says() {
         let plan = plan();
-        let scene = Scene::new(&plan);
+        let scene = Scene::new(&plan, ContactSource::Truth);
         let q = UnitQuaternion::from_euler_angles(0.3, -0.2, 1.1);
         let tip = Vector3::new(0.1, -0.4, 0.25);
         let origin = scene.origin(&tip, &q);
@@ -333,7 +512,7 @@ mod tests {
     #[test]
     fn transforms_decode_to_both_servicer_frames_in_t() {
         let plan = plan();
-        let mut scene = Scene::new(&plan);
+        let mut scene = Scene::new(&plan, ContactSource::Truth);
         let mut s = Sample::default();
         s.record.tip_position = Vector3::new(0.3, 0.1, -0.2);
         s.record.orientation = UnitQuaternion::from_euler_angles(0.1, 0.2, 0.3);
@@ -367,7 +546,7 @@ mod tests {
     #[test]
     fn the_force_arrow_is_the_contact_force_at_the_actual_tip() {
         let plan = plan();
-        let mut scene = Scene::new(&plan);
+        let mut scene = Scene::new(&plan, ContactSource::Truth);
         let mut s = Sample::default();
         s.record.actual_tip_position = Vector3::new(0.2, 0.0, 0.1);
         s.record.contact_force = Vector3::new(-150.0, 20.0, 0.0);

@@ -1,0 +1,232 @@
+//! The scene in a recording of a shape scenario: every contact point of the shapes drawn with
+//! its own normal and friction arrows where the core puts the contact points, the arrows adding
+//! up to the contact force the simulated facility recorded; a walls scenario drawn as before.
+
+use std::collections::BTreeMap;
+
+use nalgebra::{UnitQuaternion, Vector3};
+
+use hilcontact_core::frames::RelativeMotion;
+use hilcontact_core::hil::HilRecord;
+use hilcontact_core::Plan;
+use hilcontact_rt::output::mcap::{McapOptions, McapRecorder};
+use hilcontact_rt::output::scene::{FORCE_ARROW_SCALE, MAX_SCENE_POINTS};
+use hilcontact_rt::output::RunInfo;
+
+fn plan(preset: &str) -> Plan {
+    let path = format!(
+        "{}/../../python/hilcontact/scenarios/{preset}.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let scenario: hilcontact_core::Scenario =
+        toml::from_str(&std::fs::read_to_string(path).expect("preset")).expect("toml");
+    scenario.resolve().expect("plan")
+}
+
+/// A reader of the CDR layout (alignment relative to the 4-byte header).
+struct Reader<'a>(&'a [u8], usize);
+
+impl Reader<'_> {
+    fn take(&mut self, n: usize) -> &[u8] {
+        while !(self.1 - 4).is_multiple_of(n.min(8)) {
+            self.1 += 1;
+        }
+        self.1 += n;
+        &self.0[self.1 - n..self.1]
+    }
+    fn u32(&mut self) -> u32 {
+        u32::from_le_bytes(self.take(4).try_into().unwrap())
+    }
+    fn f32(&mut self) -> f32 {
+        f32::from_le_bytes(self.take(4).try_into().unwrap())
+    }
+    fn f64(&mut self) -> f64 {
+        f64::from_le_bytes(self.take(8).try_into().unwrap())
+    }
+    fn v3(&mut self) -> Vector3<f64> {
+        Vector3::new(self.f64(), self.f64(), self.f64())
+    }
+    fn string(&mut self) -> String {
+        let n = self.u32() as usize;
+        self.1 += n;
+        String::from_utf8(self.0[self.1 - n..self.1 - 1].to_vec()).unwrap()
+    }
+}
+
+/// One decoded marker: id, type, position, alpha, points.
+#[derive(Debug)]
+struct Marker {
+    kind: i32,
+    position: Vector3<f64>,
+    alpha: f32,
+    points: Vec<Vector3<f64>>,
+}
+
+/// A `/hil/scene` message: its stamp (ns) and markers by id.
+fn decode(bytes: &[u8]) -> (u64, BTreeMap<i32, Marker>) {
+    let mut r = Reader(bytes, 4);
+    let n = r.u32();
+    let mut markers = BTreeMap::new();
+    let mut stamp = 0;
+    for _ in 0..n {
+        let (sec, nsec) = (r.u32() as u64, r.u32() as u64);
+        stamp = sec * 1_000_000_000 + nsec;
+        r.string();
+        assert_eq!(r.string(), "hilcontact");
+        let (id, kind, _action) = (r.u32() as i32, r.u32() as i32, r.u32());
+        let position = r.v3();
+        let _q = [r.f64(), r.f64(), r.f64(), r.f64()];
+        let _scale = r.v3();
+        let rgba = [r.f32(), r.f32(), r.f32(), r.f32()];
+        r.u32();
+        r.u32();
+        r.take(1);
+        let points = (0..r.u32()).map(|_| r.v3()).collect();
+        assert_eq!(r.u32(), 0);
+        r.string();
+        r.string();
+        r.take(1);
+        let old = markers.insert(
+            id,
+            Marker {
+                kind,
+                position,
+                alpha: rgba[3],
+                points,
+            },
+        );
+        assert!(old.is_none(), "marker id {id} twice");
+    }
+    assert_eq!(r.1, bytes.len(), "every marker read");
+    (stamp, markers)
+}
+
+/// Records `plan`'s simulation as MCAP with the scene; returns the records, the scene
+/// messages and the recording's report.
+fn record(plan: &Plan, name: &str) -> (Vec<HilRecord>, Vec<Vec<u8>>, serde_json::Value) {
+    let (out, records) = hilcontact_core::sim::simulate_plan_with_records(plan);
+    let path = std::env::temp_dir().join(format!(
+        "hilcontact-live-scene-{name}-{}.mcap",
+        std::process::id()
+    ));
+    let info = RunInfo::new(plan, false);
+    let stats = McapRecorder::create_with_scene(&McapOptions::new(&path), &info, plan)
+        .expect("create")
+        .record_run(&records, &out.metrics);
+    let bytes = std::fs::read(&path).expect("recorded");
+    let _ = std::fs::remove_file(&path);
+    let scenes = mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| m.unwrap())
+        .filter(|m| m.channel.topic == "/hil/scene")
+        .map(|m| m.data.to_vec())
+        .collect();
+    (records, scenes, serde_json::to_value(stats).unwrap())
+}
+
+/// The servicer's relative motion a record's actual tip, attitude and rates give.
+fn actual(plan: &Plan, r: &HilRecord) -> RelativeMotion {
+    let q: UnitQuaternion<f64> = r.actual_orientation;
+    let arm = q * plan.system.rod_tip;
+    RelativeMotion {
+        position: r.actual_tip_position - arm,
+        orientation: q,
+        velocity: r.actual_tip_velocity - r.actual_angular_velocity.cross(&arm),
+        angular_velocity: r.actual_angular_velocity,
+    }
+}
+
+#[test]
+fn a_shape_scene_draws_every_contact_point_with_its_own_normal_and_friction_arrows() {
+    let plan = plan("rod-in-frame");
+    let walls = plan.system.contact.walls.len() as i32;
+    let (records, scenes, stats) = record(&plan, "rod-in-frame");
+    assert_eq!(stats["scene_points_dropped"], 0, "{stats}");
+    assert!(scenes.len() > 50, "{} scene messages", scenes.len());
+    let (mut touching, mut most, mut with_friction) = (0, 0, 0);
+    for bytes in &scenes {
+        let (stamp, markers) = decode(bytes);
+        assert_eq!(
+            markers.len() as i32,
+            4 + walls + 3 * MAX_SCENE_POINTS as i32
+        );
+        let k = (stamp as f64 * 1e-9 / plan.period).round() as usize;
+        let r = &records[k];
+        // the core's contact points of the hardware at the record's actual motion
+        let mut expected = Vec::new();
+        plan.system
+            .for_each_shape_contact(&actual(&plan, r), |p| expected.push(*p));
+        let shown: Vec<i32> = (0..MAX_SCENE_POINTS as i32)
+            .filter(|i| markers[&(1000 + 3 * i)].alpha == 1.0)
+            .collect();
+        assert_eq!(shown.len(), expected.len(), "t = {}", r.time);
+        let mut total = markers[&3].points[1] - markers[&3].points[0];
+        for (i, p) in shown.iter().zip(&expected) {
+            let id = 1000 + 3 * i;
+            let (point, normal, friction) =
+                (&markers[&id], &markers[&(id + 1)], &markers[&(id + 2)]);
+            assert_eq!(point.kind, 2, "a sphere");
+            assert_eq!((normal.kind, friction.kind), (0, 0), "arrows");
+            assert!((point.position - p.point).norm() < 1e-9, "t = {}", r.time);
+            for arrow in [normal, friction] {
+                assert!(
+                    (arrow.points[0] - p.point).norm() < 1e-9,
+                    "arrows start there"
+                );
+            }
+            let f_n = (normal.points[1] - normal.points[0]) / FORCE_ARROW_SCALE;
+            let f_t = (friction.points[1] - friction.points[0]) / FORCE_ARROW_SCALE;
+            // the normal part along the point's normal, pushing; the friction part across it
+            assert!(f_n.dot(&p.normal) >= 0.0);
+            assert!((f_n - p.normal * f_n.dot(&p.normal)).norm() <= 1e-6 * (1.0 + f_n.norm()));
+            assert!(f_t.dot(&p.normal).abs() <= 1e-6 * (1.0 + f_t.norm()));
+            with_friction += usize::from(f_t.norm() > 1e-3);
+            total +=
+                (normal.points[1] - normal.points[0]) + (friction.points[1] - friction.points[0]);
+        }
+        // the arrows add up to the contact force the facility recorded
+        let total = total / FORCE_ARROW_SCALE;
+        assert!(
+            (total - r.contact_force).norm() <= 1e-6 * (1.0 + r.contact_force.norm()),
+            "t = {}: arrows {total:?}, recorded {:?}",
+            r.time,
+            r.contact_force
+        );
+        // unused slots are transparent
+        for i in shown.len()..MAX_SCENE_POINTS {
+            assert_eq!(markers[&(1000 + 3 * i as i32)].alpha, 0.0);
+        }
+        touching += usize::from(!expected.is_empty());
+        most = most.max(expected.len());
+    }
+    // the run touches (the edge, then the corner on two bars) and slides
+    assert!(touching > 10, "{touching} scene messages in contact");
+    assert!(most >= 2, "at most {most} points at once");
+    assert!(with_friction > 0);
+}
+
+#[test]
+fn a_walls_scene_draws_the_contact_force_at_the_actual_tip_as_before() {
+    let plan = plan("paper-table1");
+    let walls = plan.system.contact.walls.len();
+    let (records, scenes, stats) = record(&plan, "paper-table1");
+    assert_eq!(stats["scene_points_dropped"], 0, "{stats}");
+    let mut touching = 0;
+    for bytes in &scenes {
+        let (stamp, markers) = decode(bytes);
+        // rods, contact point, force arrow and the walls: no point slots
+        assert_eq!(markers.len(), 4 + walls);
+        assert!(markers.keys().all(|id| *id < 1000));
+        let r = &records[(stamp as f64 * 1e-9 / plan.period).round() as usize];
+        let tip = r.actual_tip_position;
+        assert_eq!(markers[&2].position, tip);
+        assert_eq!(
+            markers[&3].points,
+            vec![tip, tip + r.contact_force * FORCE_ARROW_SCALE]
+        );
+        let in_contact = r.contact_force.norm() > plan.contact_threshold;
+        assert_eq!(markers[&3].alpha, if in_contact { 1.0 } else { 0.0 });
+        touching += usize::from(in_contact);
+    }
+    assert!(touching > 0);
+}
