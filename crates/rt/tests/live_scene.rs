@@ -18,8 +18,43 @@ fn plan(preset: &str) -> Plan {
         "{}/../../python/hilcontact/scenarios/{preset}.toml",
         env!("CARGO_MANIFEST_DIR")
     );
-    let scenario: hilcontact_core::Scenario =
-        toml::from_str(&std::fs::read_to_string(path).expect("preset")).expect("toml");
+    let mut raw: toml::Table =
+        toml::from_str(&std::fs::read_to_string(&path).expect("preset")).expect("toml");
+    // a mesh's `file` (an OBJ beside the preset) read into its `vertices` and `triangles`, as
+    // hilcontact.load_scenario does
+    for body in ["servicer", "target"] {
+        let shapes = raw
+            .get_mut(body)
+            .and_then(|b| b.get_mut("shapes"))
+            .and_then(|s| s.as_array_mut());
+        for shape in shapes.into_iter().flatten() {
+            let Some(file) = shape.get("file").and_then(|f| f.as_str()).map(String::from) else {
+                continue;
+            };
+            let obj = std::path::Path::new(&path).with_file_name(file);
+            let (mut vertices, mut triangles) = (Vec::new(), Vec::new());
+            for line in std::fs::read_to_string(obj).expect("mesh").lines() {
+                let mut words = line.split_whitespace();
+                let numbers = |w: std::str::SplitWhitespace| -> Vec<f64> {
+                    w.map(|x| x.split('/').next().unwrap().parse().unwrap())
+                        .collect()
+                };
+                match words.next() {
+                    Some("v") => vertices.push(toml::Value::try_from(numbers(words)).unwrap()),
+                    Some("f") => {
+                        let f: Vec<i64> = numbers(words).iter().map(|i| *i as i64 - 1).collect();
+                        triangles.push(toml::Value::try_from(f).unwrap());
+                    }
+                    _ => {}
+                }
+            }
+            let shape = shape.as_table_mut().unwrap();
+            shape.remove("file");
+            shape.insert("vertices".into(), toml::Value::Array(vertices));
+            shape.insert("triangles".into(), toml::Value::Array(triangles));
+        }
+    }
+    let scenario: hilcontact_core::Scenario = raw.try_into().expect("scenario");
     scenario.resolve().expect("plan")
 }
 
@@ -229,4 +264,27 @@ fn a_walls_scene_draws_the_contact_force_at_the_actual_tip_as_before() {
         touching += usize::from(in_contact);
     }
     assert!(touching > 0);
+}
+
+#[test]
+fn the_shipped_shape_presets_touch_at_fewer_points_than_a_scene_draws() {
+    for preset in ["rod-in-frame", "probe-drogue"] {
+        let plan = plan(preset);
+        let (records, scenes, stats) = record(&plan, preset);
+        assert_eq!(stats["scene_points_dropped"], 0, "{preset}: {stats}");
+        assert!(!scenes.is_empty());
+        // the most points at once over every tick of the run, not only the scene's
+        let most = records
+            .iter()
+            .map(|r| {
+                let mut n = 0;
+                plan.system
+                    .for_each_shape_contact(&actual(&plan, r), |_| n += 1);
+                n
+            })
+            .max()
+            .unwrap();
+        println!("{preset}: at most {most} contact points at once");
+        assert!(most >= 1 && most <= MAX_SCENE_POINTS, "{preset}: {most}");
+    }
 }

@@ -72,8 +72,8 @@ const WALLS: i32 = 10;
 const POINTS: i32 = 1000;
 
 /// Most shapes' contact points one scene message draws (each a point and two arrows, always
-/// sent: unused ones transparent); more are counted ([`Scene::points_dropped`]). 16 is twice
-/// the most points the shipped shape presets touch at once.
+/// sent: unused ones transparent); more are counted ([`Scene::points_dropped`]). The shipped
+/// shape presets touch at 2 points at most (`tests/live_scene.rs`); a box flat on a face at 4.
 pub const MAX_SCENE_POINTS: usize = 16;
 
 /// `visualization_msgs/Marker` types used.
