@@ -4,16 +4,22 @@
 
 use std::collections::BTreeMap;
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use hilcontact_core::frames::RelativeMotion;
 use hilcontact_core::hil::HilRecord;
+use hilcontact_core::shapes::{BodyShape, ShapeGeometry};
 use hilcontact_core::Plan;
 use hilcontact_rt::output::mcap::{McapOptions, McapRecorder};
-use hilcontact_rt::output::scene::{FORCE_ARROW_SCALE, MAX_SCENE_POINTS};
+use hilcontact_rt::output::scene::{FORCE_ARROW_SCALE, MAX_SCENE_POINTS, SHAPES};
 use hilcontact_rt::output::RunInfo;
 
 fn plan(preset: &str) -> Plan {
+    scenario(preset, |_| {}).resolve().expect("plan")
+}
+
+/// The preset's scenario, its raw table changed by `edit` first.
+fn scenario(preset: &str, edit: impl FnOnce(&mut toml::Table)) -> hilcontact_core::Scenario {
     let path = format!(
         "{}/../../python/hilcontact/scenarios/{preset}.toml",
         env!("CARGO_MANIFEST_DIR")
@@ -54,8 +60,8 @@ fn plan(preset: &str) -> Plan {
             shape.insert("triangles".into(), toml::Value::Array(triangles));
         }
     }
-    let scenario: hilcontact_core::Scenario = raw.try_into().expect("scenario");
-    scenario.resolve().expect("plan")
+    edit(&mut raw);
+    raw.try_into().expect("scenario")
 }
 
 /// A reader of the CDR layout (alignment relative to the 4-byte header).
@@ -88,11 +94,14 @@ impl Reader<'_> {
     }
 }
 
-/// One decoded marker: id, type, position, alpha, points.
+/// One decoded marker: id, type, pose, scale, colour, points.
 #[derive(Debug)]
 struct Marker {
     kind: i32,
     position: Vector3<f64>,
+    attitude: [f64; 4],
+    scale: Vector3<f64>,
+    rgba: [f32; 4],
     alpha: f32,
     points: Vec<Vector3<f64>>,
 }
@@ -110,8 +119,8 @@ fn decode(bytes: &[u8]) -> (u64, BTreeMap<i32, Marker>) {
         assert_eq!(r.string(), "hilcontact");
         let (id, kind, _action) = (r.u32() as i32, r.u32() as i32, r.u32());
         let position = r.v3();
-        let _q = [r.f64(), r.f64(), r.f64(), r.f64()];
-        let _scale = r.v3();
+        let attitude = [r.f64(), r.f64(), r.f64(), r.f64()];
+        let scale = r.v3();
         let rgba = [r.f32(), r.f32(), r.f32(), r.f32()];
         r.u32();
         r.u32();
@@ -126,6 +135,9 @@ fn decode(bytes: &[u8]) -> (u64, BTreeMap<i32, Marker>) {
             Marker {
                 kind,
                 position,
+                attitude,
+                scale,
+                rgba,
                 alpha: rgba[3],
                 points,
             },
@@ -181,8 +193,9 @@ fn a_shape_scene_draws_every_contact_point_with_its_own_normal_and_friction_arro
     let (mut touching, mut most, mut with_friction) = (0, 0, 0);
     for bytes in &scenes {
         let (stamp, markers) = decode(bytes);
+        // (the shapes' own markers after them: the next test)
         assert_eq!(
-            markers.len() as i32,
+            markers.keys().filter(|id| **id < SHAPES).count() as i32,
             4 + walls + 3 * MAX_SCENE_POINTS as i32
         );
         let k = (stamp as f64 * 1e-9 / plan.period).round() as usize;
@@ -287,4 +300,116 @@ fn the_shipped_shape_presets_touch_at_fewer_points_than_a_scene_draws() {
         println!("{preset}: at most {most} contact points at once");
         assert!(most >= 1 && most <= MAX_SCENE_POINTS, "{preset}: {most}");
     }
+}
+
+/// Whether a marker's pose is `pose` (the quaternion up to its sign) within 1e-9.
+fn posed_at(m: &Marker, pose: &Isometry3<f64>) -> bool {
+    let q = pose.rotation;
+    let [x, y, z, w] = m.attitude;
+    let dot = x * q.i + y * q.j + z * q.k + w * q.w;
+    (m.position - pose.translation.vector).norm() < 1e-9 && (dot.abs() - 1.0).abs() < 1e-9
+}
+
+/// Checks every scene message of `scenario`'s run: one marker (a capsule three) per shape of
+/// both bodies at body pose ∘ shape pose (the servicer's at the record's actual motion, the
+/// target's at the hardware's mounting) with the shape's dimensions; returns the messages.
+fn check_shapes(scenario: &hilcontact_core::Scenario, name: &str) -> usize {
+    let plan = scenario.resolve().expect("plan");
+    let mount = hilcontact_core::plan::mount_pose(&plan.nominal.contact, &scenario.facility);
+    let walls = plan.system.contact.walls.len();
+    // its own file name: the other tests record the same presets at once
+    let (records, scenes, stats) = record(&plan, &format!("{name}-shapes"));
+    assert_eq!(stats["scene_meshes_boxed"], 0, "{stats}");
+    let shapes = &plan.nominal.contact.shapes;
+    let all: Vec<(bool, &BodyShape)> = (shapes.servicer.iter().map(|s| (true, s)))
+        .chain(shapes.target.iter().map(|s| (false, s)))
+        .collect();
+    let capsules = all
+        .iter()
+        .filter(|(_, s)| matches!(s.geometry, ShapeGeometry::Capsule { .. }))
+        .count();
+    for bytes in &scenes {
+        let (stamp, markers) = decode(bytes);
+        let r = &records[(stamp as f64 * 1e-9 / plan.period).round() as usize];
+        assert_eq!(
+            markers.len(),
+            4 + walls + 3 * MAX_SCENE_POINTS + all.len() + 2 * capsules
+        );
+        let rel = actual(&plan, r);
+        let body = Isometry3::from_parts(Translation3::from(rel.position), rel.orientation);
+        let mut colours = [None, None];
+        for (j, (servicer, shape)) in all.iter().enumerate() {
+            let id = SHAPES + 3 * j as i32;
+            let pose = if *servicer { body } else { mount } * shape.pose;
+            let m = &markers[&id];
+            assert!(
+                posed_at(m, &pose),
+                "{name} {}: {m:?} at {pose:?}",
+                shape.name
+            );
+            // semi-transparent, one colour per body
+            assert!(m.alpha > 0.0 && m.alpha < 1.0);
+            let colour = colours[usize::from(*servicer)].get_or_insert(m.rgba);
+            assert_eq!(*colour, m.rgba);
+            match &shape.geometry {
+                ShapeGeometry::Box { size, .. } => {
+                    assert_eq!((m.kind, m.scale), (1, Vector3::from(*size)))
+                }
+                ShapeGeometry::Cylinder { radius, length, .. } => {
+                    assert_eq!(m.kind, 3);
+                    assert_eq!(m.scale, Vector3::new(2.0 * radius, 2.0 * radius, *length));
+                }
+                ShapeGeometry::Capsule { radius, length } => {
+                    assert_eq!(m.kind, 3);
+                    assert_eq!(m.scale, Vector3::new(2.0 * radius, 2.0 * radius, *length));
+                    for (k, z) in [(1, -0.5 * length), (2, 0.5 * length)] {
+                        let end = &markers[&(id + k)];
+                        let at = pose * Translation3::new(0.0, 0.0, z);
+                        assert!(posed_at(end, &at), "{name}: the capsule's end {k}");
+                        assert_eq!((end.kind, end.scale), (2, Vector3::repeat(2.0 * radius)));
+                        assert_eq!(end.rgba, m.rgba);
+                    }
+                }
+                ShapeGeometry::Mesh {
+                    vertices,
+                    triangles,
+                } => {
+                    assert_eq!((m.kind, m.scale), (11, Vector3::repeat(1.0)));
+                    let expected: Vec<Vector3<f64>> = triangles
+                        .iter()
+                        .flat_map(|t| t.map(|i| Vector3::from(vertices[i as usize])))
+                        .collect();
+                    assert_eq!(m.points, expected, "{name}: the mesh's triangles");
+                }
+                other => panic!("{name}: a {other:?} in a shipped preset"),
+            }
+        }
+        assert_ne!(colours[0], colours[1], "the bodies' colours differ");
+    }
+    scenes.len()
+}
+
+#[test]
+fn a_shape_scene_draws_every_shape_at_body_pose_times_shape_pose() {
+    for preset in ["rod-in-frame", "probe-drogue"] {
+        let n = check_shapes(&scenario(preset, |_| {}), preset);
+        assert!(n > 50, "{preset}: {n} scene messages");
+    }
+    // the target's shapes where the hardware is mounted, not where the scenario puts them
+    let mounted = scenario("rod-in-frame", |raw| {
+        let f = raw
+            .entry("facility")
+            .or_insert(toml::Value::Table(Default::default()))
+            .as_table_mut()
+            .unwrap();
+        f.insert(
+            "mount_offset".into(),
+            toml::Value::try_from([0.002, -0.001, 0.0]).unwrap(),
+        );
+        f.insert(
+            "mount_rotation".into(),
+            toml::Value::try_from([0.0, 0.5, 1.0]).unwrap(),
+        );
+    });
+    assert!(check_shapes(&mounted, "rod-in-frame-mounted") > 50);
 }

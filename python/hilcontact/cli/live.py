@@ -97,6 +97,8 @@ def live_report_line(report: dict[str, Any] | None) -> str | None:
         line += f"; {report['events_dropped']} operator events dropped (more than 64 waiting)"
     if report.get("scene_points_dropped"):
         line += f"; {report['scene_points_dropped']} contact points not drawn (more than 16 at once)"
+    if report.get("scene_meshes_boxed"):
+        line += f"; {report['scene_meshes_boxed']} meshes drawn as their bounding box (over 1024 triangles)"
     return line
 
 

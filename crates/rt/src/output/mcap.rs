@@ -268,6 +268,9 @@ pub struct RecordingStats {
     /// Shapes' contact points the scene did not draw (beyond
     /// [`super::scene::MAX_SCENE_POINTS`] in a message), summed over its messages.
     pub scene_points_dropped: u64,
+    /// Meshes the scene draws as their bounding box (over
+    /// [`super::scene::MAX_MESH_TRIANGLES`] triangles).
+    pub scene_meshes_boxed: u64,
 }
 
 /// Encodes CDR (XCDR1, little endian), the encoding of ROS 2 messages: a 4-byte encapsulation
@@ -918,6 +921,7 @@ impl McapRecorder {
     pub fn finish(mut self) -> RecordingStats {
         if let Some(scene) = &self.scene {
             self.stats.scene_points_dropped = scene.points_dropped;
+            self.stats.scene_meshes_boxed = scene.meshes_boxed;
         }
         self.write_out_chunk();
         let Some(mut writer) = self.writer.take() else {

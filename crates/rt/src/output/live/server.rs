@@ -101,6 +101,9 @@ pub struct LiveReport {
     /// Shapes' contact points the scene did not draw (beyond
     /// [`crate::output::scene::MAX_SCENE_POINTS`] in a message), summed over its messages.
     pub scene_points_dropped: u64,
+    /// Meshes the scene draws as their bounding box (over
+    /// [`crate::output::scene::MAX_MESH_TRIANGLES`] triangles).
+    pub scene_meshes_boxed: u64,
     /// Clients that connected.
     pub connections: u64,
     /// Most clients connected at once.
@@ -355,6 +358,7 @@ impl LiveSink {
         r.refused_calls = c.refused_calls.load(Ordering::Relaxed);
         r.events_dropped = self.control.events_dropped();
         r.scene_points_dropped = self.scene.points_dropped;
+        r.scene_meshes_boxed = self.scene.meshes_boxed;
         r.addresses_known = clients::addresses_known();
         r.invalid_messages = self.clients.invalid_messages.load(Ordering::Relaxed);
         r.failed_handshakes = self.clients.failed_handshakes.load(Ordering::Relaxed);
