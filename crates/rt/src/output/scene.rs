@@ -783,19 +783,18 @@ mod tests {
         assert!(text.contains("MSG: std_msgs/ColorRGBA\n"));
     }
 
-    /// Decodes a `/hil/scene` message: per marker its id, type, position, attitude, scale
-    /// and points.
-    #[allow(clippy::type_complexity)]
-    fn decode(
-        bytes: &[u8],
-    ) -> Vec<(
+    /// A decoded marker: id, type, position, attitude (x, y, z, w), scale, points.
+    type Decoded = (
         i32,
         i32,
         Vector3<f64>,
         [f64; 4],
         Vector3<f64>,
         Vec<Vector3<f64>>,
-    )> {
+    );
+
+    /// Decodes a `/hil/scene` message's markers.
+    fn decode(bytes: &[u8]) -> Vec<Decoded> {
         let mut r = Reader(bytes, 4);
         let v3 = |r: &mut Reader| Vector3::new(r.f64(), r.f64(), r.f64());
         let out = (0..r.u32())
@@ -875,15 +874,7 @@ mod tests {
         let shapes: Vec<_> = markers.iter().filter(|m| m.0 >= SHAPES).collect();
         let ids: Vec<i32> = shapes.iter().map(|m| m.0).collect();
         assert_eq!(ids, [SHAPES, SHAPES + 3, SHAPES + 6, SHAPES + 9]);
-        let at = |m: &(
-            i32,
-            i32,
-            Vector3<f64>,
-            [f64; 4],
-            Vector3<f64>,
-            Vec<Vector3<f64>>,
-        ),
-                  p: &Isometry3<f64>| {
+        let at = |m: &Decoded, p: &Isometry3<f64>| {
             let q = p.rotation;
             let dot = m.3[0] * q.i + m.3[1] * q.j + m.3[2] * q.k + m.3[3] * q.w;
             (m.2 - p.translation.vector).norm() < 1e-12 && (dot.abs() - 1.0).abs() < 1e-12
