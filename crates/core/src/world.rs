@@ -249,32 +249,46 @@ impl TwoBodySystem {
             friction_power: p.friction_power,
             tip,
         };
-        if !self.contact.shapes.is_empty() {
-            self.contact
-                .shapes
-                .for_each_point(&servicer_pose(rel), |point| {
-                    let v =
-                        rel.velocity + rel.angular_velocity.cross(&(point.point - rel.position));
-                    let friction = self
-                        .contact
-                        .friction_between(point.servicer_shape, point.target_shape);
-                    let f = self.contact.point_force(
-                        point.depth,
-                        &point.normal,
-                        &v,
-                        added_damping,
-                        friction,
-                    );
-                    let w =
-                        FrameWrench::from_rod_force(&f.force, &point.point, &self.sensor_origin);
-                    c.force += f.force;
-                    c.friction_force += f.friction_force;
-                    c.friction_power += f.friction_power;
-                    c.wrench.force += w.force;
-                    c.wrench.moment += w.moment;
-                });
-        }
+        self.for_each_shape_contact_force(rel, added_damping, |point, f| {
+            let w = FrameWrench::from_rod_force(&f.force, &point.point, &self.sensor_origin);
+            c.force += f.force;
+            c.friction_force += f.friction_force;
+            c.friction_power += f.friction_power;
+            c.wrench.force += w.force;
+            c.wrench.moment += w.moment;
+        });
         c
+    }
+
+    /// Calls `f` with every contact point of the shapes for a relative motion of the servicer
+    /// (`t` frame) and the force on the servicer there (N, with its friction part), with
+    /// `added_damping` as in [`TwoBodySystem::contact_at`] (whose shapes' part is the sum of
+    /// these forces; the rod tip against the walls is not among them). Allocation-free.
+    pub fn for_each_shape_contact_force(
+        &self,
+        rel: &RelativeMotion,
+        added_damping: f64,
+        mut f: impl FnMut(&crate::shapes::ContactPoint, &crate::contact::PointForce),
+    ) {
+        if self.contact.shapes.is_empty() {
+            return;
+        }
+        self.contact
+            .shapes
+            .for_each_point(&servicer_pose(rel), |point| {
+                let v = rel.velocity + rel.angular_velocity.cross(&(point.point - rel.position));
+                let friction = self
+                    .contact
+                    .friction_between(point.servicer_shape, point.target_shape);
+                let force = self.contact.point_force(
+                    point.depth,
+                    &point.normal,
+                    &v,
+                    added_damping,
+                    friction,
+                );
+                f(point, &force);
+            });
     }
 
     /// Calls `f` with every contact point of the shapes for a relative motion of the servicer

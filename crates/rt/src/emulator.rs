@@ -20,7 +20,8 @@
 //!
 //! Every datagram and socket error of both endpoints is counted in their [`LinkStats`]
 //! ([`FacilityStatus::sensor`], [`FacilityStatus::robot`]); nothing is dropped uncounted. Each
-//! control period never allocates after start-up.
+//! control period never allocates after start-up, with the live view on too
+//! (`tests/no_alloc.rs`, `tests/no_alloc_facility_live.rs`).
 //!
 //! **Live view** ([`EmulatorOptions::live`], `hilcontact facility --live`): the facility's
 //! physical truth, as a [`Sample`] per period (the commanded pose it received as the record's

@@ -93,6 +93,12 @@ def live_report_line(report: dict[str, Any] | None) -> str | None:
     if report.get("outbox_full_reports"):
         line += (f"; clients fell behind and lost their oldest messages: "
                  f"{', '.join(report.get('lossy_clients') or []) or 'unknown'}")
+    if report.get("events_dropped"):
+        line += f"; {report['events_dropped']} operator events dropped (more than 64 waiting)"
+    if report.get("scene_points_dropped"):
+        line += f"; {report['scene_points_dropped']} contact points not drawn (more than 16 at once)"
+    if report.get("scene_meshes_boxed"):
+        line += f"; {report['scene_meshes_boxed']} meshes drawn as their bounding box (over 1024 triangles)"
     return line
 
 

@@ -45,7 +45,7 @@ use hilcontact_core::hil::HilRecord;
 use hilcontact_core::metrics::Metrics;
 use hilcontact_core::Plan;
 
-use super::scene::{scene_schema_text, Scene, SCENE_CHANNELS};
+use super::scene::{scene_schema_text, ContactSource, Scene, SCENE_CHANNELS};
 use super::{feed_simulation, time_ns, Event, EventLevel, RunInfo, Sink, SinkContext};
 use crate::error::{Result, RtError};
 use crate::report::Sample;
@@ -265,6 +265,12 @@ pub struct RecordingStats {
     pub error: Option<String>,
     /// Whether the summary and footer were written (the file is complete).
     pub complete: bool,
+    /// Shapes' contact points the scene did not draw (beyond
+    /// [`super::scene::MAX_SCENE_POINTS`] in a message), summed over its messages.
+    pub scene_points_dropped: u64,
+    /// Meshes the scene draws as their bounding box (over
+    /// [`super::scene::MAX_MESH_TRIANGLES`] triangles).
+    pub scene_meshes_boxed: u64,
 }
 
 /// Encodes CDR (XCDR1, little endian), the encoding of ROS 2 messages: a 4-byte encapsulation
@@ -621,7 +627,11 @@ impl McapRecorder {
     /// `/hil/scene` and `/tf` at [`super::scene::SCENE_RATE`] of run time), as the live view
     /// draws it: what a run's `mcap` output records.
     pub fn create_with_scene(options: &McapOptions, info: &RunInfo, plan: &Plan) -> Result<Self> {
-        Self::create_with(options, info, Some(Scene::new(plan)))
+        Self::create_with(
+            options,
+            info,
+            Some(Scene::new(plan, ContactSource::of(info))),
+        )
     }
 
     fn create_with(options: &McapOptions, info: &RunInfo, scene: Option<Scene>) -> Result<Self> {
@@ -909,6 +919,10 @@ impl McapRecorder {
     /// Writes the last chunk, the summary and the footer, syncs the file, and returns what was
     /// written (`complete` false, with the error, if that failed).
     pub fn finish(mut self) -> RecordingStats {
+        if let Some(scene) = &self.scene {
+            self.stats.scene_points_dropped = scene.points_dropped;
+            self.stats.scene_meshes_boxed = scene.meshes_boxed;
+        }
         self.write_out_chunk();
         let Some(mut writer) = self.writer.take() else {
             return self.stats;
@@ -1151,8 +1165,8 @@ mod tests {
         let plan = plan("pida");
         let info = RunInfo::new(&plan, false);
         let path = temp("scene.mcap");
-        let mut recorder =
-            McapRecorder::create_with_scene(&McapOptions::new(&path), &info, &plan).expect("create");
+        let mut recorder = McapRecorder::create_with_scene(&McapOptions::new(&path), &info, &plan)
+            .expect("create");
         let n = 100;
         for s in samples(n, plan.period) {
             recorder.sample(&s);
@@ -1161,7 +1175,7 @@ mod tests {
         assert!(stats.complete, "{stats:?}");
         let (seen, summary) = counts(&path);
         // 30 Hz of run time at 1 ms: ticks 0, 33, 66, 99, on both scene channels
-        let every = Scene::new(&plan).every;
+        let every = Scene::new(&plan, ContactSource::Truth).every;
         assert_eq!(every, 33);
         let expected = (n as u64 - 1) / every + 1;
         for spec in SCENE_CHANNELS {

@@ -43,7 +43,7 @@ pub mod run_folder;
 pub mod scene;
 
 use std::collections::VecDeque;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 use nalgebra::{UnitQuaternion, Vector3};
@@ -185,10 +185,12 @@ pub struct RunControl {
     /// Events from a sink's threads (an operator's mark, a refused call), for every sink.
     events: Mutex<VecDeque<(EventLevel, String)>>,
     has_events: AtomicBool,
+    /// Events refused because [`MAX_PENDING_EVENTS`] were waiting already.
+    events_dropped: AtomicU64,
 }
 
-/// Most events [`RunControl`] holds until the writer takes them (more are dropped: a client
-/// calling in a loop cannot grow the memory).
+/// Most events [`RunControl`] holds until the writer takes them (more are dropped and counted,
+/// [`RunControl::events_dropped`]: a client calling in a loop cannot grow the memory).
 pub const MAX_PENDING_EVENTS: usize = 64;
 
 impl RunControl {
@@ -198,14 +200,25 @@ impl RunControl {
     }
 
     /// An event for every sink of the run (given at the newest sample's time); dropped when
-    /// [`MAX_PENDING_EVENTS`] wait already.
+    /// [`MAX_PENDING_EVENTS`] wait already (counted: [`RunControl::events_dropped`]).
     pub fn push_event(&self, level: EventLevel, text: String) {
-        if let Ok(mut events) = self.events.lock() {
-            if events.len() < MAX_PENDING_EVENTS {
+        let kept = match self.events.lock() {
+            Ok(mut events) if events.len() < MAX_PENDING_EVENTS => {
                 events.push_back((level, text));
                 self.has_events.store(true, Ordering::Release);
+                true
             }
+            _ => false,
+        };
+        if !kept {
+            self.events_dropped.fetch_add(1, Ordering::Relaxed);
         }
+    }
+
+    /// Events [`RunControl::push_event`] dropped so far (the queue was full, or its lock
+    /// poisoned).
+    pub fn events_dropped(&self) -> u64 {
+        self.events_dropped.load(Ordering::Relaxed)
     }
 
     /// The events pushed since the last call (none: nothing is locked).
@@ -500,6 +513,27 @@ mod tests {
             *log.lock().unwrap(),
             ["e 0 start", "s 0", "s 0.5", "s 1", "e 1 late"]
         );
+    }
+
+    #[test]
+    fn events_beyond_the_pending_ones_are_dropped_and_counted() {
+        let control = RunControl::default();
+        let extra = 37;
+        for i in 0..MAX_PENDING_EVENTS + extra {
+            control.push_event(EventLevel::Info, format!("mark {i}"));
+        }
+        assert_eq!(control.events_dropped(), extra as u64);
+        let taken = control.take_events();
+        assert_eq!(taken.len(), MAX_PENDING_EVENTS);
+        assert_eq!(
+            taken[0].1, "mark 0",
+            "the oldest are kept, the newest dropped"
+        );
+        // the queue has room again: nothing more is dropped
+        control.push_event(EventLevel::Warn, "again".into());
+        assert_eq!(control.events_dropped(), extra as u64);
+        assert_eq!(control.take_events().len(), 1);
+        assert!(control.take_events().is_empty());
     }
 
     #[test]

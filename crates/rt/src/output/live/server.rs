@@ -19,7 +19,7 @@ use super::clients::{self, ClientLog};
 use super::{LiveOptions, FACILITY_ABSENT, FACILITY_CHANNELS, FACILITY_RUN};
 use crate::error::{Result, RtError};
 use crate::output::mcap::{schema_text, Cdr, ChannelScope, CHANNELS, FRAME_SENSOR, FRAME_TARGET};
-use crate::output::scene::{scene_schema_text, Scene, SCENE_CHANNELS};
+use crate::output::scene::{scene_schema_text, ContactSource, Scene, SCENE_CHANNELS};
 use crate::output::{time_ns, Event, EventLevel, RunControl, RunInfo, Sink, SinkContext};
 use crate::report::Sample;
 
@@ -98,6 +98,12 @@ pub struct LiveReport {
     pub messages: u64,
     /// Scene messages among them (`/hil/scene` and `/tf`).
     pub scene_messages: u64,
+    /// Shapes' contact points the scene did not draw (beyond
+    /// [`crate::output::scene::MAX_SCENE_POINTS`] in a message), summed over its messages.
+    pub scene_points_dropped: u64,
+    /// Meshes the scene draws as their bounding box (over
+    /// [`crate::output::scene::MAX_MESH_TRIANGLES`] triangles).
+    pub scene_meshes_boxed: u64,
     /// Clients that connected.
     pub connections: u64,
     /// Most clients connected at once.
@@ -118,6 +124,10 @@ pub struct LiveReport {
     pub mark_calls: u64,
     /// Calls refused (no `--live-control`).
     pub refused_calls: u64,
+    /// Events of the live view (marks, calls, connections) dropped because
+    /// [`crate::output::MAX_PENDING_EVENTS`] were waiting for the writer already
+    /// ([`RunControl::events_dropped`]): they reached no output.
+    pub events_dropped: u64,
     /// Whether clients are known by address (the SDK's log is read: [`clients`]); else the
     /// connections and calls are logged by the SDK's client id.
     pub addresses_known: bool,
@@ -271,7 +281,7 @@ impl LiveSink {
             channels,
             scene_channels,
             facility_channels,
-            scene: Scene::new(context.plan),
+            scene: Scene::new(context.plan, ContactSource::of(&info)),
             cdr: Cdr::new(),
             info,
             control,
@@ -346,6 +356,9 @@ impl LiveSink {
         r.stop_calls = c.stop_calls.load(Ordering::Relaxed);
         r.mark_calls = c.mark_calls.load(Ordering::Relaxed);
         r.refused_calls = c.refused_calls.load(Ordering::Relaxed);
+        r.events_dropped = self.control.events_dropped();
+        r.scene_points_dropped = self.scene.points_dropped;
+        r.scene_meshes_boxed = self.scene.meshes_boxed;
         r.addresses_known = clients::addresses_known();
         r.invalid_messages = self.clients.invalid_messages.load(Ordering::Relaxed);
         r.failed_handshakes = self.clients.failed_handshakes.load(Ordering::Relaxed);
