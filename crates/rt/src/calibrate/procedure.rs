@@ -36,8 +36,10 @@ use super::options::CalibrateOptions;
 
 /// Seconds at rest before the excitation.
 const SETTLE: f64 = 0.3;
-/// Half-width of the quadratic smoothing of the reported positions, ticks.
-const SMOOTHING: usize = 12;
+/// Half-width of the quadratic smoothing of the reported positions, s (12 samples at a 1 ms
+/// loop, 3 at RSI's 4 ms): a time, so that the smoothing keeps the dwell's oscillation
+/// (`ω·SMOOTHING = 0.6` at 8 Hz: 0.4 % off) at any loop period.
+const SMOOTHING: f64 = 0.012;
 
 /// What one tick of the procedure asks.
 #[derive(Debug, Clone, PartialEq)]
@@ -751,6 +753,11 @@ impl Procedure {
         self.fit_wall();
     }
 
+    /// [`SMOOTHING`] in samples of this loop's period (at least 1).
+    fn smoothing_half_width(&self) -> usize {
+        ((SMOOTHING / self.period).round() as usize).max(1)
+    }
+
     fn law_depth(&self, f: f64) -> f64 {
         match self.law {
             ContactModel::Linear(l) => f / l.stiffness,
@@ -768,7 +775,7 @@ impl Procedure {
             .zip(&self.windows)
             .map(|(p, &(from, to))| {
                 let positions: Vec<_> = p.iter().map(|s| s.position).collect();
-                let smoothed = smooth(&positions, SMOOTHING);
+                let smoothed = smooth(&positions, self.smoothing_half_width());
                 let (from, to) = (from.min(p.len()), to.min(p.len()));
                 p[from..to]
                     .iter()
