@@ -98,5 +98,54 @@ fn at_a_4_ms_loop_the_simulated_calibration_meets_the_targets() {
     assert!(k.abs() <= 0.02, "k off by {} %", k * 1e2);
     assert!(c <= 20.0, "c {c}");
     assert!(delay.abs() <= 0.002, "delay off by {} ms", delay * 1e3);
-    assert!(out.wall_seconds.iter().all(|&t| t <= 60.0), "{:?}", out.wall_seconds);
+    assert!(
+        out.wall_seconds.iter().all(|&t| t <= 60.0),
+        "{:?}",
+        out.wall_seconds
+    );
+}
+
+#[test]
+fn a_real_time_calibration_over_rsi_meets_the_targets() {
+    // paper-table1's front wall alone, a 20 ms robot delay; the shortened procedure (a 2 × 2
+    // grid and its centre)
+    let mut s = off_nominal_at_4_ms("paper-table1", 0.02, 31);
+    s.walls.truncate(1);
+    let options = CalibrateOptions {
+        points_per_side: 2,
+        ..CalibrateOptions::default()
+    };
+    let (emu, rt) = rsi_loopback_options();
+    let facility = FacilityHandle::start(&s, &emu).unwrap();
+    let handle = CalibrationHandle::start(&s, &rt, &options, "now").unwrap();
+    // a generous wall-clock bound: a loaded machine runs the same procedure, only later
+    let start = std::time::Instant::now();
+    while !handle.wait(Duration::from_millis(200)) {
+        assert!(start.elapsed() < Duration::from_secs(240), "took too long");
+    }
+    let out = handle.finish().unwrap();
+    drop(facility);
+    for line in &out.outcome.progress {
+        println!("{line}");
+    }
+    assert_eq!(out.exit_code, 0, "{:?}", out.outcome.error);
+    let file = out.outcome.file.clone().expect("a calibration");
+    file.check().unwrap();
+    assert!(
+        file.measured.facility.contains("RSI"),
+        "{}",
+        file.measured.facility
+    );
+    let (walls, k, c, delay) = errors(&s, &file);
+    // the bounds, but the normal's from 5 probes 20 mm apart (0.2°, as the EGM test)
+    // and k's (3 %: five probes, one run)
+    let (offset, angle) = walls[0];
+    assert!(offset.abs() <= 2e-5, "plane off by {} mm", offset * 1e3);
+    assert!(angle <= 0.2, "normal off by {angle}°");
+    assert!(k.abs() <= 0.03, "k off by {} %", k * 1e2);
+    assert!(c <= 20.0, "c {c}");
+    assert!(delay.abs() <= 0.002, "delay off by {} ms", delay * 1e3);
+    assert!(out.outcome.wall_seconds.iter().all(|&t| t <= 60.0));
+    assert!(out.outcome.peak_force <= options.abort_force(FORCE_LIMIT));
+    assert!(out.outcome.final_force < 5.0, "{}", out.outcome.final_force);
 }

@@ -115,12 +115,19 @@ pub struct Procedure {
     probe: usize,
     grid: Vec<Vector3<f64>>,
     probes: Vec<Vec<ProbeSample>>,
+    /// The tick of each probe's samples' poses (indices into `poses`).
+    sample_ticks: Vec<Vec<usize>>,
     /// Each probe's samples that the law fit uses: from the robot's arrival at the pressed
     /// point (a loop delay after the dwell starts) to its leaving (a loop delay after the
-    /// retreat starts), sample indices.
+    /// retreat starts), ticks (indices into `poses`).
     windows: Vec<(usize, usize)>,
     recording: bool,
     poses: Vec<(Vector3<f64>, Vector3<f64>)>,
+    /// Whether each tick's pose is a new robot feedback (not one held or extrapolated
+    /// between the robot's messages).
+    fresh: Vec<bool>,
+    /// Whether the coming tick's pose is new feedback ([`Procedure::set_robot_fresh`]).
+    robot_fresh: bool,
     forces: Vec<Vector3<f64>>,
     contact_points: Vec<Vector3<f64>>,
     /// A second leg after the current move: to this point, then approach.
@@ -231,9 +238,12 @@ impl Procedure {
             probe: 0,
             grid: Vec::new(),
             probes: Vec::new(),
+            sample_ticks: Vec::new(),
             windows: Vec::new(),
             recording: false,
             poses: Vec::new(),
+            fresh: Vec::new(),
+            robot_fresh: true,
             forces: Vec::new(),
             contact_points: Vec::new(),
             pending_leg: None,
@@ -390,12 +400,23 @@ impl Procedure {
         self.enter(Phase::Abort);
     }
 
+    /// Whether the coming tick's measured pose is a new robot feedback (true, the default, at
+    /// every tick of the simulated facility), or held or extrapolated between the robot's
+    /// messages (EGM's 4 ms feedback in a 1 ms loop). The law fit takes the new ones only: an
+    /// extrapolated pose carries the reported noise of the last poses amplified and
+    /// correlated over the robot's cycle, which the smoothing does not average down, and the
+    /// noise in the regressor biases k low (errors in variables).
+    pub fn set_robot_fresh(&mut self, fresh: bool) {
+        self.robot_fresh = fresh;
+    }
+
     /// One tick: the measurement of this tick in, the next command out.
     pub fn step(&mut self, m: &Measurement) -> Step {
         let force = -(self.sensor_orientation * m.force) - self.bias; // on the rod, t
         let tip = m.actual.point(&self.rod);
         let tip_velocity = m.actual.point_velocity(&self.rod);
         self.poses.push((tip, tip_velocity));
+        self.fresh.push(self.robot_fresh);
         self.forces.push(force);
         self.tick += 1;
         // the safety line: the measured force
@@ -477,6 +498,7 @@ impl Procedure {
                     if next == Phase::Approach {
                         self.recording = true;
                         self.probes.push(Vec::new());
+                        self.sample_ticks.push(Vec::new());
                         self.windows.push((usize::MAX, usize::MAX));
                     }
                     Vector3::zeros()
@@ -622,10 +644,10 @@ impl Procedure {
     }
 
     /// Marks the start (`end = 0`) or the end (`1`) of the current probe's fit window: the
-    /// sample a loop delay from now.
+    /// pose a loop delay after the next one the samples take (tick index).
     fn mark_window(&mut self, end: usize) {
         let delay = (self.hold_time() / self.period).round() as usize;
-        let n = self.probes.last().map_or(0, Vec::len);
+        let n = self.poses.len().saturating_sub(self.sensor_delay_ticks);
         if let Some(w) = self.windows.last_mut() {
             if end == 0 {
                 w.0 = n + delay;
@@ -635,7 +657,8 @@ impl Procedure {
         }
     }
 
-    /// Records this tick's sample: the force with the pose `τ_p` earlier.
+    /// Records this tick's sample: the force with the pose `τ_p` earlier, when that pose was
+    /// new robot feedback ([`Procedure::set_robot_fresh`]).
     fn record(&mut self) {
         if !self.recording {
             return;
@@ -644,14 +667,19 @@ impl Procedure {
         if n <= self.sensor_delay_ticks {
             return;
         }
-        let (position, velocity) = self.poses[n - 1 - self.sensor_delay_ticks];
+        let i = n - 1 - self.sensor_delay_ticks;
+        if !self.fresh[i] {
+            return;
+        }
+        let (position, velocity) = self.poses[i];
         let force = self.forces[n - 1];
-        if let Some(p) = self.probes.last_mut() {
+        if let (Some(p), Some(ticks)) = (self.probes.last_mut(), self.sample_ticks.last_mut()) {
             p.push(ProbeSample {
                 position,
                 velocity,
                 force,
             });
+            ticks.push(i);
         }
     }
 
@@ -702,6 +730,7 @@ impl Procedure {
         self.probe = 0;
         self.grid = self.grid_of(i);
         self.probes.clear();
+        self.sample_ticks.clear();
         self.windows.clear();
         self.contact_points.clear();
         self.wall_started = self.tick;
@@ -753,9 +782,9 @@ impl Procedure {
         self.fit_wall();
     }
 
-    /// [`SMOOTHING`] in samples of this loop's period (at least 1).
-    fn smoothing_half_width(&self) -> usize {
-        ((SMOOTHING / self.period).round() as usize).max(1)
+    /// [`SMOOTHING`] in samples `spacing` ticks apart (at least 1).
+    fn smoothing_half_width(&self, spacing: f64) -> usize {
+        ((SMOOTHING / (spacing * self.period)).round() as usize).max(1)
     }
 
     fn law_depth(&self, f: f64) -> f64 {
@@ -772,11 +801,22 @@ impl Procedure {
         let probes: Vec<Vec<ProbeSample>> = self
             .probes
             .iter()
+            .zip(&self.sample_ticks)
             .zip(&self.windows)
-            .map(|(p, &(from, to))| {
+            .map(|((p, ticks), &(from, to))| {
                 let positions: Vec<_> = p.iter().map(|s| s.position).collect();
-                let smoothed = smooth(&positions, self.smoothing_half_width());
-                let (from, to) = (from.min(p.len()), to.min(p.len()));
+                // the samples' mean spacing, ticks (1 with new feedback at every tick; the
+                // robot's cycle over the loop's period with slower feedback)
+                let spacing = match (ticks.first(), ticks.last()) {
+                    (Some(&a), Some(&b)) if ticks.len() > 1 => {
+                        (b - a) as f64 / (ticks.len() - 1) as f64
+                    }
+                    _ => 1.0,
+                };
+                let smoothed = smooth(&positions, self.smoothing_half_width(spacing));
+                // the window's ticks as sample indices
+                let from = ticks.partition_point(|&t| t < from);
+                let to = ticks.partition_point(|&t| t < to);
                 p[from..to]
                     .iter()
                     .zip(&smoothed[from..to])

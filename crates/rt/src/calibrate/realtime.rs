@@ -205,6 +205,10 @@ impl RealtimeProcedure {
 /// in a burst); the units check against the contact the probe detected, since the hardware is
 /// not where the scenario says; no virtual energy.
 impl Driver for RealtimeProcedure {
+    fn set_robot_fresh(&mut self, fresh: bool) {
+        self.procedure.set_robot_fresh(fresh)
+    }
+
     fn observe(&mut self, k: u64, m: &Measurement) -> (HilRecord, Option<StopEvent>) {
         RealtimeProcedure::observe(self, k, m)
     }
