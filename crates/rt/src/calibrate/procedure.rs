@@ -24,8 +24,8 @@
 use nalgebra::{UnitQuaternion, Vector3};
 
 use hilcontact_core::calibration::{
-    fit_plane, fit_robot_response, fit_surface, smooth, FitForm, ProbeSample, RobotResponse,
-    SurfaceFit,
+    fit_plane, fit_robot_response, fit_surface, smooth, FitError, FitForm, ProbeSample,
+    RobotResponse, SurfaceFit,
 };
 use hilcontact_core::contact::{ContactModel, Wall};
 use hilcontact_core::facility::Measurement;
@@ -69,6 +69,8 @@ enum Phase {
     Press,
     Dwell,
     Retreat,
+    /// Holding at rest, out of contact, while the wall's fit runs ([`Procedure::take_fit_job`]).
+    Fitting,
     /// Backing out after a stop, then done.
     Abort,
     Done,
@@ -136,6 +138,8 @@ pub struct Procedure {
     detect_tip: Vector3<f64>,
     dwell_centre: Vector3<f64>,
     wall_started: u64,
+    /// The current wall's fit, once its probes are done, until taken.
+    fit_job: Option<FitJob>,
     /// The fitted walls.
     pub fits: Vec<SurfaceFit>,
     events: Vec<Progress>,
@@ -250,6 +254,7 @@ impl Procedure {
             detect_tip: start_tip,
             dwell_centre: start_tip,
             wall_started: 0,
+            fit_job: None,
             fits: Vec::new(),
             events: Vec::new(),
             error: None,
@@ -616,7 +621,7 @@ impl Procedure {
                 }
                 v
             }
-            Phase::Done => Vector3::zeros(),
+            Phase::Fitting | Phase::Done => Vector3::zeros(),
         }
     }
 
@@ -782,11 +787,6 @@ impl Procedure {
         self.fit_wall();
     }
 
-    /// [`SMOOTHING`] in samples `spacing` ticks apart (at least 1).
-    fn smoothing_half_width(&self, spacing: f64) -> usize {
-        ((SMOOTHING / (spacing * self.period)).round() as usize).max(1)
-    }
-
     fn law_depth(&self, f: f64) -> f64 {
         match self.law {
             ContactModel::Linear(l) => f / l.stiffness,
@@ -794,8 +794,80 @@ impl Procedure {
         }
     }
 
+    /// The current wall's probes are done: its fit becomes a job ([`Procedure::take_fit_job`])
+    /// and the procedure holds at rest until the result is delivered.
     fn fit_wall(&mut self) {
-        let (name, wall) = self.walls[self.wall].clone();
+        let wall = self.walls[self.wall].1;
+        self.fit_job = Some(FitJob {
+            probes: std::mem::take(&mut self.probes),
+            sample_ticks: std::mem::take(&mut self.sample_ticks),
+            windows: std::mem::take(&mut self.windows),
+            normal: wall.normal,
+            form: self.form,
+            detect_force: self.detect_force,
+            period: self.period,
+        });
+        self.enter(Phase::Fitting);
+    }
+
+    /// The current wall's fit, once its probes are done (then the procedure holds at rest
+    /// until [`Procedure::deliver_fit`]); None otherwise. The caller runs it ([`FitJob::run`])
+    /// where it likes: inline, or off the real-time loop's thread.
+    pub fn take_fit_job(&mut self) -> Option<FitJob> {
+        self.fit_job.take()
+    }
+
+    /// The result of the job [`Procedure::take_fit_job`] gave: the wall is measured and the
+    /// next begins, or the procedure stops. Ignored unless the procedure waits for it (a stop
+    /// while it ran).
+    pub fn deliver_fit(&mut self, result: Result<SurfaceFit, FitError>) {
+        if self.phase != Phase::Fitting {
+            return;
+        }
+        let name = self.walls[self.wall].0.clone();
+        match result {
+            Ok(fit) => {
+                let spent = (self.tick - self.wall_started) as f64 * self.period;
+                self.events
+                    .push(Progress::Wall(self.wall, name, fit.clone(), spent));
+                self.fits.push(fit);
+                let next = self.wall + 1;
+                self.start_wall(next);
+            }
+            Err(e) => self.abort(format!(
+                "wall '{name}': the probes could not be fitted: {e}"
+            )),
+        }
+    }
+
+    /// Runs a pending fit at once, in this thread ([`super::simulate`]).
+    pub fn fit_inline(&mut self) {
+        if let Some(job) = self.take_fit_job() {
+            let result = job.run();
+            self.deliver_fit(result);
+        }
+    }
+}
+
+/// A wall's fit, to run off the real-time loop's thread: each probe's samples with their
+/// poses' ticks and its fit window (ticks), and what the fit needs.
+pub struct FitJob {
+    probes: Vec<Vec<ProbeSample>>,
+    sample_ticks: Vec<Vec<usize>>,
+    windows: Vec<(usize, usize)>,
+    /// The wall's nominal normal (unit, `t`).
+    normal: Vector3<f64>,
+    form: FitForm,
+    /// Smallest force that counts as contact, N.
+    detect_force: f64,
+    /// The loop's period, s.
+    period: f64,
+}
+
+impl FitJob {
+    /// The wall's fit: each probe's positions smoothed ([`SMOOTHING`]), its window's samples,
+    /// then [`fit_surface`]. Allocates and takes up to ~0.1 s: never in a real-time tick.
+    pub fn run(self) -> Result<SurfaceFit, FitError> {
         // the reported positions' white noise averaged down, probe by probe; the fit takes the
         // samples of each probe's window (the robot at the pressed point and oscillating)
         let probes: Vec<Vec<ProbeSample>> = self
@@ -813,7 +885,8 @@ impl Procedure {
                     }
                     _ => 1.0,
                 };
-                let smoothed = smooth(&positions, self.smoothing_half_width(spacing));
+                let half_width = ((SMOOTHING / (spacing * self.period)).round() as usize).max(1);
+                let smoothed = smooth(&positions, half_width);
                 // the window's ticks as sample indices
                 let from = ticks.partition_point(|&t| t < from);
                 let to = ticks.partition_point(|&t| t < to);
@@ -824,19 +897,7 @@ impl Procedure {
                     .collect()
             })
             .collect();
-        match fit_surface(&probes, &wall.normal, self.form, self.detect_force) {
-            Ok(fit) => {
-                let spent = (self.tick - self.wall_started) as f64 * self.period;
-                self.events
-                    .push(Progress::Wall(self.wall, name, fit.clone(), spent));
-                self.fits.push(fit);
-                let next = self.wall + 1;
-                self.start_wall(next);
-            }
-            Err(e) => self.abort(format!(
-                "wall '{name}': the probes could not be fitted: {e}"
-            )),
-        }
+        fit_surface(&probes, &self.normal, self.form, self.detect_force)
     }
 }
 
