@@ -75,6 +75,7 @@ pub fn simulate(
         peak_force = peak_force.max(facility.contact_force().norm());
         ticks += 1;
         let step = procedure.step(&m);
+        procedure.fit_inline();
         for event in procedure.take_events() {
             if let Progress::Wall(_, _, _, spent) = &event {
                 wall_seconds.push(*spent);

@@ -24,8 +24,8 @@
 use nalgebra::{UnitQuaternion, Vector3};
 
 use hilcontact_core::calibration::{
-    fit_plane, fit_robot_response, fit_surface, smooth, FitForm, ProbeSample, RobotResponse,
-    SurfaceFit,
+    fit_plane, fit_robot_response, fit_surface, smooth, FitError, FitForm, ProbeSample,
+    RobotResponse, SurfaceFit,
 };
 use hilcontact_core::contact::{ContactModel, Wall};
 use hilcontact_core::facility::Measurement;
@@ -36,8 +36,10 @@ use super::options::CalibrateOptions;
 
 /// Seconds at rest before the excitation.
 const SETTLE: f64 = 0.3;
-/// Half-width of the quadratic smoothing of the reported positions, ticks.
-const SMOOTHING: usize = 12;
+/// Half-width of the quadratic smoothing of the reported positions, s (12 samples at a 1 ms
+/// loop, 3 at RSI's 4 ms): a time, so that the smoothing keeps the dwell's oscillation
+/// (`ω·SMOOTHING = 0.6` at 8 Hz: 0.4 % off) at any loop period.
+const SMOOTHING: f64 = 0.012;
 
 /// What one tick of the procedure asks.
 #[derive(Debug, Clone, PartialEq)]
@@ -67,6 +69,8 @@ enum Phase {
     Press,
     Dwell,
     Retreat,
+    /// Holding at rest, out of contact, while the wall's fit runs ([`Procedure::take_fit_job`]).
+    Fitting,
     /// Backing out after a stop, then done.
     Abort,
     Done,
@@ -113,12 +117,19 @@ pub struct Procedure {
     probe: usize,
     grid: Vec<Vector3<f64>>,
     probes: Vec<Vec<ProbeSample>>,
+    /// The tick of each probe's samples' poses (indices into `poses`).
+    sample_ticks: Vec<Vec<usize>>,
     /// Each probe's samples that the law fit uses: from the robot's arrival at the pressed
     /// point (a loop delay after the dwell starts) to its leaving (a loop delay after the
-    /// retreat starts), sample indices.
+    /// retreat starts), ticks (indices into `poses`).
     windows: Vec<(usize, usize)>,
     recording: bool,
     poses: Vec<(Vector3<f64>, Vector3<f64>)>,
+    /// Whether each tick's pose is a new robot feedback (not one held or extrapolated
+    /// between the robot's messages).
+    fresh: Vec<bool>,
+    /// Whether the coming tick's pose is new feedback ([`Procedure::set_robot_fresh`]).
+    robot_fresh: bool,
     forces: Vec<Vector3<f64>>,
     contact_points: Vec<Vector3<f64>>,
     /// A second leg after the current move: to this point, then approach.
@@ -127,6 +138,8 @@ pub struct Procedure {
     detect_tip: Vector3<f64>,
     dwell_centre: Vector3<f64>,
     wall_started: u64,
+    /// The current wall's fit, once its probes are done, until taken.
+    fit_job: Option<FitJob>,
     /// The fitted walls.
     pub fits: Vec<SurfaceFit>,
     events: Vec<Progress>,
@@ -229,15 +242,19 @@ impl Procedure {
             probe: 0,
             grid: Vec::new(),
             probes: Vec::new(),
+            sample_ticks: Vec::new(),
             windows: Vec::new(),
             recording: false,
             poses: Vec::new(),
+            fresh: Vec::new(),
+            robot_fresh: true,
             forces: Vec::new(),
             contact_points: Vec::new(),
             pending_leg: None,
             detect_tip: start_tip,
             dwell_centre: start_tip,
             wall_started: 0,
+            fit_job: None,
             fits: Vec::new(),
             events: Vec::new(),
             error: None,
@@ -388,12 +405,23 @@ impl Procedure {
         self.enter(Phase::Abort);
     }
 
+    /// Whether the coming tick's measured pose is a new robot feedback (true, the default, at
+    /// every tick of the simulated facility), or held or extrapolated between the robot's
+    /// messages (EGM's 4 ms feedback in a 1 ms loop). The law fit takes the new ones only: an
+    /// extrapolated pose carries the reported noise of the last poses amplified and
+    /// correlated over the robot's cycle, which the smoothing does not average down, and the
+    /// noise in the regressor biases k low (errors in variables).
+    pub fn set_robot_fresh(&mut self, fresh: bool) {
+        self.robot_fresh = fresh;
+    }
+
     /// One tick: the measurement of this tick in, the next command out.
     pub fn step(&mut self, m: &Measurement) -> Step {
         let force = -(self.sensor_orientation * m.force) - self.bias; // on the rod, t
         let tip = m.actual.point(&self.rod);
         let tip_velocity = m.actual.point_velocity(&self.rod);
         self.poses.push((tip, tip_velocity));
+        self.fresh.push(self.robot_fresh);
         self.forces.push(force);
         self.tick += 1;
         // the safety line: the measured force
@@ -475,6 +503,7 @@ impl Procedure {
                     if next == Phase::Approach {
                         self.recording = true;
                         self.probes.push(Vec::new());
+                        self.sample_ticks.push(Vec::new());
                         self.windows.push((usize::MAX, usize::MAX));
                     }
                     Vector3::zeros()
@@ -592,7 +621,7 @@ impl Procedure {
                 }
                 v
             }
-            Phase::Done => Vector3::zeros(),
+            Phase::Fitting | Phase::Done => Vector3::zeros(),
         }
     }
 
@@ -620,10 +649,10 @@ impl Procedure {
     }
 
     /// Marks the start (`end = 0`) or the end (`1`) of the current probe's fit window: the
-    /// sample a loop delay from now.
+    /// pose a loop delay after the next one the samples take (tick index).
     fn mark_window(&mut self, end: usize) {
         let delay = (self.hold_time() / self.period).round() as usize;
-        let n = self.probes.last().map_or(0, Vec::len);
+        let n = self.poses.len().saturating_sub(self.sensor_delay_ticks);
         if let Some(w) = self.windows.last_mut() {
             if end == 0 {
                 w.0 = n + delay;
@@ -633,7 +662,8 @@ impl Procedure {
         }
     }
 
-    /// Records this tick's sample: the force with the pose `τ_p` earlier.
+    /// Records this tick's sample: the force with the pose `τ_p` earlier, when that pose was
+    /// new robot feedback ([`Procedure::set_robot_fresh`]).
     fn record(&mut self) {
         if !self.recording {
             return;
@@ -642,14 +672,19 @@ impl Procedure {
         if n <= self.sensor_delay_ticks {
             return;
         }
-        let (position, velocity) = self.poses[n - 1 - self.sensor_delay_ticks];
+        let i = n - 1 - self.sensor_delay_ticks;
+        if !self.fresh[i] {
+            return;
+        }
+        let (position, velocity) = self.poses[i];
         let force = self.forces[n - 1];
-        if let Some(p) = self.probes.last_mut() {
+        if let (Some(p), Some(ticks)) = (self.probes.last_mut(), self.sample_ticks.last_mut()) {
             p.push(ProbeSample {
                 position,
                 velocity,
                 force,
             });
+            ticks.push(i);
         }
     }
 
@@ -700,6 +735,7 @@ impl Procedure {
         self.probe = 0;
         self.grid = self.grid_of(i);
         self.probes.clear();
+        self.sample_ticks.clear();
         self.windows.clear();
         self.contact_points.clear();
         self.wall_started = self.tick;
@@ -758,26 +794,38 @@ impl Procedure {
         }
     }
 
+    /// The current wall's probes are done: its fit becomes a job ([`Procedure::take_fit_job`])
+    /// and the procedure holds at rest until the result is delivered.
     fn fit_wall(&mut self) {
-        let (name, wall) = self.walls[self.wall].clone();
-        // the reported positions' white noise averaged down, probe by probe; the fit takes the
-        // samples of each probe's window (the robot at the pressed point and oscillating)
-        let probes: Vec<Vec<ProbeSample>> = self
-            .probes
-            .iter()
-            .zip(&self.windows)
-            .map(|(p, &(from, to))| {
-                let positions: Vec<_> = p.iter().map(|s| s.position).collect();
-                let smoothed = smooth(&positions, SMOOTHING);
-                let (from, to) = (from.min(p.len()), to.min(p.len()));
-                p[from..to]
-                    .iter()
-                    .zip(&smoothed[from..to])
-                    .map(|(s, &position)| ProbeSample { position, ..*s })
-                    .collect()
-            })
-            .collect();
-        match fit_surface(&probes, &wall.normal, self.form, self.detect_force) {
+        let wall = self.walls[self.wall].1;
+        self.fit_job = Some(FitJob {
+            probes: std::mem::take(&mut self.probes),
+            sample_ticks: std::mem::take(&mut self.sample_ticks),
+            windows: std::mem::take(&mut self.windows),
+            normal: wall.normal,
+            form: self.form,
+            detect_force: self.detect_force,
+            period: self.period,
+        });
+        self.enter(Phase::Fitting);
+    }
+
+    /// The current wall's fit, once its probes are done (then the procedure holds at rest
+    /// until [`Procedure::deliver_fit`]); None otherwise. The caller runs it ([`FitJob::run`])
+    /// where it likes: inline, or off the real-time loop's thread.
+    pub fn take_fit_job(&mut self) -> Option<FitJob> {
+        self.fit_job.take()
+    }
+
+    /// The result of the job [`Procedure::take_fit_job`] gave: the wall is measured and the
+    /// next begins, or the procedure stops. Ignored unless the procedure waits for it (a stop
+    /// while it ran).
+    pub fn deliver_fit(&mut self, result: Result<SurfaceFit, FitError>) {
+        if self.phase != Phase::Fitting {
+            return;
+        }
+        let name = self.walls[self.wall].0.clone();
+        match result {
             Ok(fit) => {
                 let spent = (self.tick - self.wall_started) as f64 * self.period;
                 self.events
@@ -790,6 +838,66 @@ impl Procedure {
                 "wall '{name}': the probes could not be fitted: {e}"
             )),
         }
+    }
+
+    /// Runs a pending fit at once, in this thread ([`super::simulate`]).
+    pub fn fit_inline(&mut self) {
+        if let Some(job) = self.take_fit_job() {
+            let result = job.run();
+            self.deliver_fit(result);
+        }
+    }
+}
+
+/// A wall's fit, to run off the real-time loop's thread: each probe's samples with their
+/// poses' ticks and its fit window (ticks), and what the fit needs.
+pub struct FitJob {
+    probes: Vec<Vec<ProbeSample>>,
+    sample_ticks: Vec<Vec<usize>>,
+    windows: Vec<(usize, usize)>,
+    /// The wall's nominal normal (unit, `t`).
+    normal: Vector3<f64>,
+    form: FitForm,
+    /// Smallest force that counts as contact, N.
+    detect_force: f64,
+    /// The loop's period, s.
+    period: f64,
+}
+
+impl FitJob {
+    /// The wall's fit: each probe's positions smoothed ([`SMOOTHING`]), its window's samples,
+    /// then [`fit_surface`]. Allocates and takes up to ~0.1 s: never in a real-time tick.
+    pub fn run(self) -> Result<SurfaceFit, FitError> {
+        // the reported positions' white noise averaged down, probe by probe; the fit takes the
+        // samples of each probe's window (the robot at the pressed point and oscillating)
+        let probes: Vec<Vec<ProbeSample>> = self
+            .probes
+            .iter()
+            .zip(&self.sample_ticks)
+            .zip(&self.windows)
+            .map(|((p, ticks), &(from, to))| {
+                let positions: Vec<_> = p.iter().map(|s| s.position).collect();
+                // the samples' mean spacing, ticks (1 with new feedback at every tick; the
+                // robot's cycle over the loop's period with slower feedback)
+                let spacing = match (ticks.first(), ticks.last()) {
+                    (Some(&a), Some(&b)) if ticks.len() > 1 => {
+                        (b - a) as f64 / (ticks.len() - 1) as f64
+                    }
+                    _ => 1.0,
+                };
+                let half_width = ((SMOOTHING / (spacing * self.period)).round() as usize).max(1);
+                let smoothed = smooth(&positions, half_width);
+                // the window's ticks as sample indices
+                let from = ticks.partition_point(|&t| t < from);
+                let to = ticks.partition_point(|&t| t < to);
+                p[from..to]
+                    .iter()
+                    .zip(&smoothed[from..to])
+                    .map(|(s, &position)| ProbeSample { position, ..*s })
+                    .collect()
+            })
+            .collect();
+        fit_surface(&probes, &self.normal, self.form, self.detect_force)
     }
 }
 

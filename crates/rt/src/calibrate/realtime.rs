@@ -8,17 +8,20 @@
 //! lines, surface by surface, as they come; [`CalibrationHandle::finish`] waits for the end
 //! and builds the calibration file when every wall was measured.
 //!
-//! The procedure's ticks are not allocation-free as `hil`'s are (its sample logs grow, and a
-//! wall's fit runs at its last tick); each tick's time is measured and reported like `hil`'s
-//! (overruns).
+//! Each wall's fit runs on a thread of its own (`calibration fit`), off the loop's: the
+//! procedure holds at rest, out of contact, and each tick polls for the result. The
+//! procedure's ticks are not allocation-free as `hil`'s are (its sample logs grow, and the
+//! progress lines are formatted in the tick that ends a wall); each tick's time is measured
+//! and reported like `hil`'s (overruns).
 
-use std::sync::mpsc::{channel, Receiver, Sender};
+use std::sync::mpsc::{channel, sync_channel, Receiver, Sender, SyncSender, TrySendError};
 use std::sync::Mutex;
 use std::time::Duration;
 
 use nalgebra::{UnitQuaternion, Vector3};
 use serde_json::Value;
 
+use hilcontact_core::calibration::{FitError, SurfaceFit};
 use hilcontact_core::compensator::Rendering;
 use hilcontact_core::contact::ContactModel;
 use hilcontact_core::facility::Measurement;
@@ -26,6 +29,7 @@ use hilcontact_core::hil::HilRecord;
 use hilcontact_core::world::{RelativeMotion, TwoBodySystem};
 use hilcontact_core::{Plan, Scenario};
 
+use super::procedure::FitJob;
 use super::{
     calibration_file, describe, CalibrateOptions, CalibrationOutcome, Procedure, Progress, Step,
     MAX_SECONDS_PER_WALL,
@@ -62,6 +66,10 @@ pub struct RealtimeProcedure {
     wall_seconds: Vec<f64>,
     /// Every progress line, in order.
     lines: Vec<String>,
+    /// A wall's fit to the fitting thread (one at a time: the procedure holds until its
+    /// result), and its result back.
+    jobs: SyncSender<FitJob>,
+    results: Receiver<std::result::Result<SurfaceFit, FitError>>,
 }
 
 impl RealtimeProcedure {
@@ -85,6 +93,20 @@ impl RealtimeProcedure {
             + 10.0
             + MAX_SECONDS_PER_WALL * plan.nominal.contact.walls.len() as f64;
         let ticks = (seconds / plan.period).ceil() as u64;
+        // the walls' fits run on their own thread, off the loop's: the loop holds at rest and
+        // polls for the result (a fit takes up to ~0.1 s; in a tick it stalled the loop)
+        let (jobs, job_queue) = sync_channel::<FitJob>(1);
+        let (result_sender, results) = sync_channel(1);
+        std::thread::Builder::new()
+            .name("calibration fit".into())
+            .spawn(move || {
+                for job in job_queue {
+                    if result_sender.send(job.run()).is_err() {
+                        break;
+                    }
+                }
+            })
+            .map_err(|e| RtError::io_other("calibration fit thread", e.to_string()))?;
         Ok((
             RealtimeProcedure {
                 procedure,
@@ -99,6 +121,8 @@ impl RealtimeProcedure {
                 progress,
                 wall_seconds: Vec::new(),
                 lines: Vec::new(),
+                jobs,
+                results,
             },
             ticks,
         ))
@@ -131,6 +155,18 @@ impl RealtimeProcedure {
         let time = k as f64 * self.period;
         let desired = self.command;
         let step = self.procedure.step(m);
+        if let Some(job) = self.procedure.take_fit_job() {
+            // one job at a time: a full queue or a thread gone cannot happen while the
+            // procedure waits; if either did, the fit runs here rather than never
+            if let Err(TrySendError::Full(job) | TrySendError::Disconnected(job)) =
+                self.jobs.try_send(job)
+            {
+                self.procedure.deliver_fit(job.run());
+            }
+        }
+        if let Ok(result) = self.results.try_recv() {
+            self.procedure.deliver_fit(result);
+        }
         for event in self.procedure.take_events() {
             if let Progress::Wall(_, _, _, spent) = &event {
                 self.wall_seconds.push(*spent);
@@ -201,10 +237,13 @@ impl RealtimeProcedure {
 }
 
 /// The loop's driver: the procedure's tick halves; a late tick's periods skipped, not caught
-/// up (a wall's fit may take a long tick at rest: caught up, the moves after it would be sent
-/// in a burst); the units check against the contact the probe detected, since the hardware is
+/// up (caught up, the moves after a long tick would be sent in a burst); the units check against the contact the probe detected, since the hardware is
 /// not where the scenario says; no virtual energy.
 impl Driver for RealtimeProcedure {
+    fn set_robot_fresh(&mut self, fresh: bool) {
+        self.procedure.set_robot_fresh(fresh)
+    }
+
     fn observe(&mut self, k: u64, m: &Measurement) -> (HilRecord, Option<StopEvent>) {
         RealtimeProcedure::observe(self, k, m)
     }

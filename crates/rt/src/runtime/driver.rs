@@ -19,6 +19,10 @@ pub(crate) trait Driver: Send {
     /// Whether the coming measurements are new sensor records or the last one held.
     fn set_sensor_fresh(&mut self, _fresh: bool) {}
 
+    /// Whether the coming measurement's pose is a new robot feedback or one held or
+    /// extrapolated between the robot's messages (the calibration fits new ones only).
+    fn set_robot_fresh(&mut self, _fresh: bool) {}
+
     /// Tick `k`'s first half: the measurement `m` in; the tick's record and the stop it calls
     /// for (the end of the run or of the procedure, divergence, a non-finite record).
     fn observe(&mut self, k: u64, m: &Measurement) -> (HilRecord, Option<StopEvent>);

@@ -286,6 +286,7 @@ impl LoopHandle {
             moment: Vector3::zeros(),
             robot,
             last_robot_ns: 0,
+            previous_robot_ns: 0,
             estimator: {
                 let mut e = FeedbackEstimator::new(o.extrapolation);
                 e.measure_cycle(feedback_period, o.limits.cycle_tolerance);

@@ -68,6 +68,8 @@ pub(super) struct Loop {
     pub(super) moment: Vector3<f64>,
     pub(super) robot: Box<dyn RobotLink>,
     pub(super) last_robot_ns: u64,
+    /// `last_robot_ns` at the previous tick (a new robot message since: a fresh pose).
+    pub(super) previous_robot_ns: u64,
     pub(super) estimator: FeedbackEstimator,
     /// The last command sent (it passed every check), m and rad in `t`.
     pub(super) last_command: Option<RelativeMotion>,
@@ -259,6 +261,8 @@ impl Loop {
         if !new_record {
             self.sensor.stats_mut().late += 1;
         }
+        let new_pose = self.last_robot_ns != self.previous_robot_ns;
+        self.previous_robot_ns = self.last_robot_ns;
         if let Some(pose) = self.estimator.last_pose() {
             let expected = predicted_wrench(&self.system, &pose).0;
             if self.force.norm() < CONTACT_FREE_FORCE && expected < CONTACT_FREE_FORCE {
@@ -282,6 +286,7 @@ impl Loop {
             // a record is new at the first step after it came; held otherwise (the
             // compensators' identification learns only from new ones)
             self.step.set_sensor_fresh(new_record && j == 0);
+            self.step.set_robot_fresh(new_pose && j == 0);
             match self.virtual_step(kk, &m, wake, latency) {
                 Ok(c) => command = Some(c),
                 Err(stop) => return Some(stop),
