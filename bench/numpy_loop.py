@@ -49,11 +49,14 @@ import json
 import math
 import os
 import statistics
-import time
+import sys
 
 import numpy as np
 
 import hilcontact as hc
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from python_path import _timings  # noqa: E402
 
 #: Largest difference allowed between the loop and ``hc.simulate``, as a fraction of the approach
 #: speed (velocities) or of the run's peak force (forces).
@@ -303,15 +306,10 @@ def check(loop: dict[str, np.ndarray], core: dict[str, np.ndarray], approach: fl
 
 
 def _medians(fn, n: int) -> tuple[float, float]:
-    """Median wall and CPU time (s) of ``n`` calls after one to warm up: on a machine shared with
-    other jobs the wall time measures them too, the CPU time of the process much less."""
-    fn()  # warm up
-    wall, cpu = [], []
-    for _ in range(n):
-        start, cpu_start = time.perf_counter(), time.process_time()
-        fn()
-        wall.append(time.perf_counter() - start)
-        cpu.append(time.process_time() - cpu_start)
+    """Median wall and CPU time (s) of ``n`` calls after one to warm up (python_path.py's
+    ``_timings``): on a machine shared with other jobs the wall time measures them too, the CPU
+    time of the process much less."""
+    wall, cpu = _timings(fn, n)
     return statistics.median(wall), statistics.median(cpu)
 
 
