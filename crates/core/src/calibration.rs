@@ -21,7 +21,9 @@ use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::contact::{ContactLaw, ContactModel, HuntCrossley, LinearSpringDamper, Wall};
+use crate::contact::{
+    ContactLaw, ContactModel, ContactModelKind, HuntCrossley, LinearSpringDamper, Wall,
+};
 
 /// Which contact law a calibration fits.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -1020,22 +1022,12 @@ pub struct CalibratedWall {
     pub rms: f64,
 }
 
-/// Which law a calibration gives.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
-#[serde(rename_all = "kebab-case")]
-pub enum CalibratedLawKind {
-    /// `f = k·d + c·ḋ`.
-    Linear,
-    /// `f = dⁿ·(k + c·ḋ)`.
-    HuntCrossley,
-}
-
 /// The contact law measured, with its standard deviations.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CalibratedLaw {
     /// `"linear"` or `"hunt-crossley"`.
-    pub model: CalibratedLawKind,
+    pub model: ContactModelKind,
     /// k: N/m (linear) or N/mⁿ (Hunt-Crossley), > 0, <= 1e15.
     #[schemars(extend("exclusiveMinimum" = 0.0), range(max = 1e15))]
     pub stiffness: f64,
@@ -1067,7 +1059,7 @@ fn one() -> f64 {
 impl Default for CalibratedLaw {
     fn default() -> Self {
         CalibratedLaw {
-            model: CalibratedLawKind::Linear,
+            model: ContactModelKind::Linear,
             stiffness: 1.0,
             damping: 0.0,
             exponent: 1.0,
@@ -1189,17 +1181,7 @@ impl CalibrationFile {
             problems.push(("walls".into(), "at least one wall is required".into()));
         }
         let l = &self.law;
-        let law = match l.model {
-            CalibratedLawKind::Linear => ContactModel::Linear(LinearSpringDamper {
-                stiffness: l.stiffness,
-                damping: l.damping,
-            }),
-            CalibratedLawKind::HuntCrossley => ContactModel::HuntCrossley(HuntCrossley {
-                stiffness: l.stiffness,
-                damping: l.damping,
-                exponent: l.exponent,
-            }),
-        };
+        let law = ContactModel::new(l.model, l.stiffness, l.damping, l.exponent);
         if !(l.stiffness > 0.0 && l.stiffness.is_finite()) {
             problems.push((
                 "law.stiffness".into(),

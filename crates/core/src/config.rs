@@ -8,7 +8,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::compensator::CompensatorConfig;
-pub use crate::contact::WallConfig;
+pub use crate::contact::{ContactModelKind, WallConfig};
 use crate::metrics::Tolerances;
 
 /// Longest scenario name, characters (it names the output folder).
@@ -239,17 +239,6 @@ pub struct RodConfig {
     /// Rod tip (the contact point) in the servicer body frame, m.
     #[schemars(extend("x-value" = "vec3", "x-magnitude" = 1e3))]
     pub tip: [f64; 3],
-}
-
-/// Which contact law.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, JsonSchema)]
-#[serde(rename_all = "kebab-case")]
-pub enum ContactModelKind {
-    /// Linear spring-damper, eq. (5).
-    #[default]
-    Linear,
-    /// Hunt-Crossley: `F = k·d^n + c·d^n·ḋ`.
-    HuntCrossley,
 }
 
 /// Contact law parameters.

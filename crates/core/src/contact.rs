@@ -57,6 +57,17 @@ impl ContactLaw for HuntCrossley {
     }
 }
 
+/// Which contact law: a scenario's `[contact] model` and a calibration's `[law] model`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum ContactModelKind {
+    /// Linear spring-damper, eq. (5).
+    #[default]
+    Linear,
+    /// Hunt-Crossley: `F = k·d^n + c·d^n·ḋ`.
+    HuntCrossley,
+}
+
 /// The contact law chosen by a scenario (static dispatch, no allocation).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ContactModel {
@@ -64,6 +75,23 @@ pub enum ContactModel {
     Linear(LinearSpringDamper),
     /// Hunt-Crossley.
     HuntCrossley(HuntCrossley),
+}
+
+impl ContactModel {
+    /// The law of `kind` with stiffness k (N/m linear, N/mⁿ Hunt-Crossley), damping c (N·s/m
+    /// linear, N·s/mⁿ⁺¹ Hunt-Crossley) and exponent n (Hunt-Crossley only).
+    pub fn new(kind: ContactModelKind, stiffness: f64, damping: f64, exponent: f64) -> Self {
+        match kind {
+            ContactModelKind::Linear => {
+                ContactModel::Linear(LinearSpringDamper { stiffness, damping })
+            }
+            ContactModelKind::HuntCrossley => ContactModel::HuntCrossley(HuntCrossley {
+                stiffness,
+                damping,
+                exponent,
+            }),
+        }
+    }
 }
 
 impl ContactLaw for ContactModel {

@@ -236,17 +236,7 @@ impl Plan {
         }
 
         let c = &r.contact;
-        let law = match c.model {
-            ContactModelKind::Linear => ContactModel::Linear(LinearSpringDamper {
-                stiffness: c.stiffness,
-                damping: c.damping,
-            }),
-            ContactModelKind::HuntCrossley => ContactModel::HuntCrossley(HuntCrossley {
-                stiffness: c.stiffness,
-                damping: c.damping,
-                exponent: c.exponent,
-            }),
-        };
+        let law = ContactModel::new(c.model, c.stiffness, c.damping, c.exponent);
 
         let friction = c.friction.friction().unwrap_or_else(|message| {
             issues.push("contact.friction.static", message);

@@ -460,8 +460,9 @@ fn calibration_of(
     k_factor: f64,
 ) -> hilcontact_core::calibration::CalibrationFile {
     use hilcontact_core::calibration::{
-        CalibratedLaw, CalibratedLawKind, CalibratedRobot, CalibratedWall, CalibrationFile,
+        CalibratedLaw, CalibratedRobot, CalibratedWall, CalibrationFile,
     };
+    use hilcontact_core::contact::ContactModelKind;
     let truth = &plan.system.contact;
     let walls = truth
         .walls
@@ -478,9 +479,9 @@ fn calibration_of(
         })
         .collect();
     let (model, k, c, n) = match truth.law {
-        ContactModel::Linear(l) => (CalibratedLawKind::Linear, l.stiffness, l.damping, 1.0),
+        ContactModel::Linear(l) => (ContactModelKind::Linear, l.stiffness, l.damping, 1.0),
         ContactModel::HuntCrossley(h) => (
-            CalibratedLawKind::HuntCrossley,
+            ContactModelKind::HuntCrossley,
             h.stiffness,
             h.damping,
             h.exponent,

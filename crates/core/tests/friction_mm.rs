@@ -215,8 +215,9 @@ fn corner_mm(mu: f64, drift: f64, robot_delay: f64) -> Scenario {
 /// friction: a calibration has none).
 fn calibrated(mut s: Scenario) -> Scenario {
     use hilcontact_core::calibration::{
-        CalibratedLaw, CalibratedLawKind, CalibratedRobot, CalibratedWall, CalibrationFile,
+        CalibratedLaw, CalibratedRobot, CalibratedWall, CalibrationFile,
     };
+    use hilcontact_core::contact::ContactModelKind;
     let file = CalibrationFile {
         walls: s
             .walls
@@ -233,7 +234,7 @@ fn calibrated(mut s: Scenario) -> Scenario {
             })
             .collect(),
         law: CalibratedLaw {
-            model: CalibratedLawKind::Linear,
+            model: ContactModelKind::Linear,
             stiffness: s.contact.stiffness,
             damping: s.contact.damping,
             exponent: 1.0,

@@ -15,10 +15,10 @@ pub mod procedure;
 pub mod realtime;
 
 use hilcontact_core::calibration::{
-    CalibratedLaw, CalibratedLawKind, CalibratedRobot, CalibratedWall, CalibrationFile,
-    CalibrationInfo, FitForm, SurfaceFit,
+    CalibratedLaw, CalibratedRobot, CalibratedWall, CalibrationFile, CalibrationInfo, FitForm,
+    SurfaceFit,
 };
-use hilcontact_core::contact::ContactModel;
+use hilcontact_core::contact::{ContactModel, ContactModelKind};
 use hilcontact_core::facility::FacilityLoop;
 use hilcontact_core::Plan;
 
@@ -239,8 +239,8 @@ pub fn calibration_file(
         walls,
         law: CalibratedLaw {
             model: match procedure.form() {
-                FitForm::Linear => CalibratedLawKind::Linear,
-                FitForm::HuntCrossley => CalibratedLawKind::HuntCrossley,
+                FitForm::Linear => ContactModelKind::Linear,
+                FitForm::HuntCrossley => ContactModelKind::HuntCrossley,
             },
             stiffness: k,
             damping: c.max(0.0),
