@@ -1083,6 +1083,58 @@ fn face_clipped_line(
     covered
 }
 
+/// The point of a rim circle (the circle through the core-frame point `start` about the
+/// core's axis `y`) nearest another piece's core `onto` (the rim's deepest point), near
+/// `start`: the root of `d dist/dθ = outward · ∂p/∂θ` by secant steps in the angle θ about
+/// the axis (each at most 0.2 rad), from `start`'s angle; `start` where that does not come
+/// closer. At the root the point's depth changes with the pose as a fixed point's would, so
+/// its force is the gradient of its potential (a point following the contact normal instead
+/// would slide along the rim and gain or lose energy).
+fn deepest_on_rim(
+    start: &Point3<f64>,
+    pose: &Isometry3<f64>,
+    onto: &Piece,
+    onto_pose: &Isometry3<f64>,
+    fallback: &Vector3<f64>,
+) -> Point3<f64> {
+    let radius = (start.x * start.x + start.z * start.z).sqrt();
+    let at = |theta: f64| Point3::new(radius * theta.cos(), start.y, radius * theta.sin());
+    // the distance and its derivative in θ
+    let slope = |theta: f64| {
+        let p = at(theta);
+        let (_, dist, outward) = signed_distance(onto, onto_pose, &(pose * p), fallback);
+        let tangent = Vector3::new(-radius * theta.sin(), 0.0, radius * theta.cos());
+        (dist, outward.dot(&(pose.rotation * tangent)))
+    };
+    if radius <= 0.0 {
+        return *start;
+    }
+    let theta0 = start.z.atan2(start.x);
+    let (dist0, g0) = slope(theta0);
+    let (mut t_prev, mut g_prev) = (theta0, g0);
+    let mut t = theta0 - (1e-3f64).copysign(g0);
+    for _ in 0..30 {
+        let (_, g) = slope(t);
+        let dg = g - g_prev;
+        if dg.abs() <= 1e-300 {
+            break;
+        }
+        let step = (-g * (t - t_prev) / dg).clamp(-0.2, 0.2);
+        t_prev = t;
+        g_prev = g;
+        t += step;
+        if step.abs() <= 1e-13 {
+            break;
+        }
+    }
+    let (dist, _) = slope(t);
+    if dist.is_finite() && dist <= dist0 && (t - theta0).abs() <= std::f64::consts::FRAC_PI_2 {
+        at(t)
+    } else {
+        *start
+    }
+}
+
 /// The contact points of a servicer piece at `pose_s` (`t`) and a target piece (`r_s`, `r_t`
 /// their radii, `reach = r_s + r_t`), to `emit`.
 #[allow(clippy::too_many_arguments)]
@@ -1150,12 +1202,29 @@ fn piece_contacts(
         (p, if rim { 1.0 - line.weight } else { 1.0 })
     });
     let moving = line.ends[..line.n].iter().map(|p| (p, line.weight));
+    let n_fixed = from.vertices().len();
     for (k, (local, weight)) in fixed.chain(moving).enumerate() {
         if weight <= 0.0 {
             continue;
         }
+        // out of the other piece's reach by its bounding box: no need to project (a side
+        // line's end may move by up to its rim's diameter below)
+        let slack = if k >= n_fixed {
+            2.0 * (local.x * local.x + local.z * local.z).sqrt()
+        } else {
+            0.0
+        };
+        if onto_box.is_some_and(|b| aabb_point_distance(b, &(from_pose * local)) >= r_from + slack)
+        {
+            continue;
+        }
+        // a side line's end: the deepest point of its rim ([`deepest_on_rim`])
+        let local = if k >= n_fixed {
+            deepest_on_rim(local, from_pose, onto, onto_pose, &(n * side))
+        } else {
+            *local
+        };
         let v = from_pose * local;
-        // out of the other piece's reach by its bounding box: no need to project
         if onto_box.is_some_and(|b| aabb_point_distance(b, &v) >= r_from) {
             continue;
         }
