@@ -23,7 +23,7 @@ use hilcontact_core::facility::FacilityLoop;
 use hilcontact_core::Plan;
 
 pub use options::CalibrateOptions;
-pub use procedure::{Procedure, Progress, Step};
+pub use procedure::{FitDone, FitJob, Procedure, Progress, Step, WallSummary};
 pub use realtime::{CalibrationHandle, RealtimeCalibration};
 
 /// Longest a calibration may take per wall, s, beyond the excitation (a bound of the
@@ -70,20 +70,21 @@ pub fn simulate(
     let mut wall_seconds = Vec::new();
     let mut peak_force: f64 = 0.0;
     let mut ticks = 0u64;
+    let names = procedure.wall_names();
     loop {
         let m = facility.tick(&command);
         peak_force = peak_force.max(facility.contact_force().norm());
         ticks += 1;
         let step = procedure.step(&m);
         procedure.fit_inline();
-        for event in procedure.take_events() {
-            if let Progress::Wall(_, _, _, spent) = &event {
-                wall_seconds.push(*spent);
+        procedure.drain_events(|event| {
+            if let Progress::Wall { spent, .. } = event {
+                wall_seconds.push(spent);
             }
-            let line = describe(&event, &procedure);
+            let line = describe(&event, &names);
             on_progress(&line);
             progress.push(line);
-        }
+        });
         match step {
             Step::Command(c) => command = c,
             Step::Done => break,
@@ -120,10 +121,14 @@ pub fn simulate(
     })
 }
 
-/// One progress line.
-pub fn describe(event: &Progress, procedure: &Procedure) -> String {
+/// One progress line; `names`: the walls' names, in the scenario's order.
+pub fn describe(event: &Progress, names: &[String]) -> String {
     match event {
-        Progress::Robot(r) => {
+        Progress::Robot {
+            response: r,
+            noise,
+            detect_force: detect,
+        } => {
             let servo = if r.servo_frequency > 0.0 {
                 format!(
                     ", servo lag {:.1} Hz (ζ {:.2})",
@@ -132,7 +137,6 @@ pub fn describe(event: &Progress, procedure: &Procedure) -> String {
             } else {
                 String::new()
             };
-            let (noise, detect) = procedure.noise();
             format!(
                 "robot: delay {:.1} ms{servo}; sensor noise {:.3} N, contact detected above {:.2} N",
                 r.delay * 1e3,
@@ -140,12 +144,17 @@ pub fn describe(event: &Progress, procedure: &Procedure) -> String {
                 detect
             )
         }
-        Progress::Wall(i, name, fit, spent) => {
+        Progress::Wall {
+            index: i,
+            fit,
+            spent,
+        } => {
+            let name = names.get(*i).map_or("?", String::as_str);
             let (k, c) = law_numbers(&fit.law.law);
             format!(
                 "wall {} '{name}': {} probes in {:.1} s; point [{:.4}, {:.4}, {:.4}] mm, normal [{:.5}, {:.5}, {:.5}] (±{:.4} mm, ±{:.3}°); k {:.5e} ± {:.2e}, c {:.4} ± {:.2}",
                 i + 1,
-                fit.contact_points.len(),
+                fit.probes,
                 spent,
                 fit.point.x * 1e3,
                 fit.point.y * 1e3,

@@ -24,7 +24,7 @@
 use nalgebra::{UnitQuaternion, Vector3};
 
 use hilcontact_core::calibration::{
-    fit_plane, fit_robot_response, fit_surface, smooth, FitError, FitForm, ProbeSample,
+    fit_plane, fit_robot_response, fit_surface, smooth, FitError, FitForm, LawFit, ProbeSample,
     RobotResponse, SurfaceFit,
 };
 use hilcontact_core::contact::{ContactModel, Wall};
@@ -40,6 +40,8 @@ const SETTLE: f64 = 0.3;
 /// loop, 3 at RSI's 4 ms): a time, so that the smoothing keeps the dwell's oscillation
 /// (`ω·SMOOTHING = 0.6` at 8 Hz: 0.4 % off) at any loop period.
 const SMOOTHING: f64 = 0.012;
+/// Capacity of the undrained progress events (one comes per tick at most, drained each tick).
+const EVENTS: usize = 4;
 
 /// What one tick of the procedure asks.
 #[derive(Debug, Clone, PartialEq)]
@@ -50,13 +52,61 @@ pub enum Step {
     Done,
 }
 
-/// A progress event, surface by surface.
-#[derive(Debug, Clone, PartialEq)]
+/// A progress event, surface by surface: a fixed-size message (no heap), so that the
+/// real-time loop hands it on without allocating and its line is formatted elsewhere
+/// ([`super::describe`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Progress {
-    /// The robot's response was measured.
-    Robot(RobotResponse),
-    /// A wall was fitted: its index, name, fit, and the time spent on it (s).
-    Wall(usize, String, SurfaceFit, f64),
+    /// The robot's response was measured, with the sensor noise (N, std per axis) and the
+    /// detection force (N) measured with it.
+    Robot {
+        /// The robot's delay and servo lag.
+        response: RobotResponse,
+        /// Sensor noise, N (std per axis).
+        noise: f64,
+        /// The force that counts as contact, N.
+        detect_force: f64,
+    },
+    /// Wall `index` (the scenario's order) was fitted, in `spent` s.
+    Wall {
+        /// The wall's index in the scenario.
+        index: usize,
+        /// The fit's numbers.
+        fit: WallSummary,
+        /// Time spent on the wall, s.
+        spent: f64,
+    },
+}
+
+/// A wall's fit without its contact points (a fixed-size progress message).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WallSummary {
+    /// Probes fitted.
+    pub probes: usize,
+    /// A point of the plane, `t`, m.
+    pub point: Vector3<f64>,
+    /// Unit normal into free space, `t`.
+    pub normal: Vector3<f64>,
+    /// Standard deviation of the plane's offset, m.
+    pub offset_sigma: f64,
+    /// Standard deviation of the normal's direction, rad.
+    pub angle_sigma: f64,
+    /// The law and its uncertainties.
+    pub law: LawFit,
+}
+
+impl WallSummary {
+    /// The summary of a fit.
+    pub fn of(fit: &SurfaceFit) -> Self {
+        WallSummary {
+            probes: fit.contact_points.len(),
+            point: fit.point,
+            normal: fit.normal,
+            offset_sigma: fit.offset_sigma,
+            angle_sigma: fit.angle_sigma,
+            law: fit.law,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -69,6 +119,8 @@ enum Phase {
     Press,
     Dwell,
     Retreat,
+    /// Holding at rest while the robot's response is fitted ([`Procedure::take_fit_job`]).
+    RobotFit,
     /// Holding at rest, out of contact, while the wall's fit runs ([`Procedure::take_fit_job`]).
     Fitting,
     /// Backing out after a stop, then done.
@@ -104,9 +156,15 @@ pub struct Procedure {
     move_speed: f64,
     after_move: Phase,
     excite_direction: Vector3<f64>,
+    /// The excitation's logs: the commanded and the reported tip, the free-space force, one
+    /// entry per excitation tick; preallocated for `excitation_duration / period + 2` entries
+    /// (the excitation's ticks and rounding), which the excitation never passes (past it the
+    /// procedure stops rather than grow them).
     commanded: Vec<Vector3<f64>>,
     reported: Vec<Vector3<f64>>,
     free_forces: Vec<Vector3<f64>>,
+    /// What sizes the probes' logs once the robot's response is known.
+    sizing: Sizing,
     bias: Vector3<f64>,
     noise: f64,
     robot: Option<RobotResponse>,
@@ -115,33 +173,38 @@ pub struct Procedure {
     /// The current wall and probe.
     wall: usize,
     probe: usize,
-    grid: Vec<Vector3<f64>>,
-    probes: Vec<Vec<ProbeSample>>,
-    /// The tick of each probe's samples' poses (indices into `poses`).
-    sample_ticks: Vec<Vec<usize>>,
-    /// Each probe's samples that the law fit uses: from the robot's arrival at the pressed
-    /// point (a loop delay after the dwell starts) to its leaving (a loop delay after the
-    /// retreat starts), ticks (indices into `poses`).
-    windows: Vec<(usize, usize)>,
+    /// Each wall's probe points (computed once: a wall's start allocates nothing).
+    grids: Vec<Vec<Vector3<f64>>>,
+    /// The probes' logs, one slot per probe of a wall, sized when the robot's response is
+    /// known (on the fitting thread) and handed back and forth with each wall's fit.
+    logs: ProbeLogs,
     recording: bool,
+    /// The last ticks' poses (tip position and velocity, `t`), forces on the rod (`t`, N) and
+    /// whether each pose was new robot feedback (not held or extrapolated between the robot's
+    /// messages): rings of `sensor_delay_ticks + 2` entries (a sample pairs a force with the
+    /// pose `sensor_delay_ticks` older), indexed by the tick count `ticks_logged`.
     poses: Vec<(Vector3<f64>, Vector3<f64>)>,
-    /// Whether each tick's pose is a new robot feedback (not one held or extrapolated
-    /// between the robot's messages).
     fresh: Vec<bool>,
     /// Whether the coming tick's pose is new feedback ([`Procedure::set_robot_fresh`]).
     robot_fresh: bool,
     forces: Vec<Vector3<f64>>,
+    /// Ticks logged into the rings so far.
+    ticks_logged: usize,
+    /// The current wall's probes' contact points (capacity: a wall's probes).
     contact_points: Vec<Vector3<f64>>,
+    /// Their standard deviations for the predicted plane, m (one per probe, preallocated).
+    point_sigmas: Vec<f64>,
     /// A second leg after the current move: to this point, then approach.
     pending_leg: Option<Vector3<f64>>,
     /// The commanded tip when the contact was detected.
     detect_tip: Vector3<f64>,
     dwell_centre: Vector3<f64>,
     wall_started: u64,
-    /// The current wall's fit, once its probes are done, until taken.
+    /// The pending fit (the robot's response, or the current wall's), until taken.
     fit_job: Option<FitJob>,
-    /// The fitted walls.
+    /// The fitted walls (capacity: the scenario's walls).
     pub fits: Vec<SurfaceFit>,
+    /// Progress events not yet drained (capacity [`EVENTS`]; at most one comes per tick).
     events: Vec<Progress>,
     error: Option<String>,
 }
@@ -206,6 +269,9 @@ impl Procedure {
                 touch - w.normal * w.signed_distance(&touch)
             })
             .collect();
+        let ring = plan.sensor.delay_ticks + 2;
+        let excitation = (options.excitation_duration / plan.period).ceil() as usize + 2;
+        let walls_count = walls.len();
         let mut procedure = Procedure {
             options: options.clone(),
             period: plan.period,
@@ -230,9 +296,17 @@ impl Procedure {
             move_speed: options.move_speed,
             after_move: Phase::Done,
             excite_direction,
-            commanded: Vec::new(),
-            reported: Vec::new(),
-            free_forces: Vec::new(),
+            commanded: Vec::with_capacity(excitation),
+            reported: Vec::with_capacity(excitation),
+            free_forces: Vec::with_capacity(excitation),
+            sizing: Sizing {
+                options: options.clone(),
+                sensor_delay_ticks: plan.sensor.delay_ticks,
+                period: plan.period,
+                press: 0.0,
+                stiffness: 0.0,
+                probes: 0,
+            },
             bias: Vector3::zeros(),
             noise: 0.0,
             robot: None,
@@ -240,25 +314,32 @@ impl Procedure {
             detect_force: 1.0,
             wall: 0,
             probe: 0,
-            grid: Vec::new(),
-            probes: Vec::new(),
-            sample_ticks: Vec::new(),
-            windows: Vec::new(),
+            grids: Vec::new(),
+            logs: ProbeLogs::default(),
             recording: false,
-            poses: Vec::new(),
-            fresh: Vec::new(),
+            poses: vec![(Vector3::zeros(), Vector3::zeros()); ring],
+            fresh: vec![false; ring],
             robot_fresh: true,
-            forces: Vec::new(),
+            forces: vec![Vector3::zeros(); ring],
+            ticks_logged: 0,
             contact_points: Vec::new(),
+            point_sigmas: Vec::new(),
             pending_leg: None,
             detect_tip: start_tip,
             dwell_centre: start_tip,
             wall_started: 0,
             fit_job: None,
-            fits: Vec::new(),
-            events: Vec::new(),
+            fits: Vec::with_capacity(walls_count),
+            events: Vec::with_capacity(EVENTS),
             error: None,
         };
+        procedure.grids = (0..walls_count).map(|i| procedure.grid_of(i)).collect();
+        let probes = procedure.grids.iter().map(Vec::len).max().unwrap_or(0);
+        procedure.contact_points = Vec::with_capacity(probes);
+        procedure.point_sigmas = vec![1e-5; probes];
+        procedure.sizing.probes = probes;
+        procedure.sizing.press = options.press_force(force_limit);
+        procedure.sizing.stiffness = procedure.sizing.press / procedure.press_depth();
         // the excitation's amplitude stays well inside the free space
         procedure.options.excitation_amplitude =
             options.excitation_amplitude.min(0.3 * clearance.max(0.0));
@@ -319,9 +400,24 @@ impl Procedure {
         }
     }
 
-    /// The events since the last call (progress, surface by surface).
-    pub fn take_events(&mut self) -> Vec<Progress> {
-        std::mem::take(&mut self.events)
+    /// Hands the events since the last call (progress, surface by surface) to `f`, in
+    /// order; allocates nothing.
+    pub fn drain_events(&mut self, mut f: impl FnMut(Progress)) {
+        for event in self.events.drain(..) {
+            f(event);
+        }
+    }
+
+    /// Queues a progress event (drained each tick: never past its capacity).
+    fn event(&mut self, event: Progress) {
+        if self.events.len() < self.events.capacity() {
+            self.events.push(event);
+        }
+    }
+
+    /// The pose and velocity of the tip logged at tick index `i` (one of the ring's last).
+    fn pose(&self, i: usize) -> (Vector3<f64>, Vector3<f64>) {
+        self.poses[i % self.poses.len()]
     }
 
     /// Why the procedure stopped, if it did not finish.
@@ -343,7 +439,10 @@ impl Procedure {
             self.probe + 1,
             self.tip.as_slice(),
             self.detect_tip.as_slice(),
-            self.forces.last().map(|f| [f.x, f.y, f.z])
+            self.ticks_logged
+                .checked_sub(1)
+                .map(|i| self.forces[i % self.forces.len()])
+                .map(|f| [f.x, f.y, f.z])
         )
     }
 
@@ -420,9 +519,11 @@ impl Procedure {
         let force = -(self.sensor_orientation * m.force) - self.bias; // on the rod, t
         let tip = m.actual.point(&self.rod);
         let tip_velocity = m.actual.point_velocity(&self.rod);
-        self.poses.push((tip, tip_velocity));
-        self.fresh.push(self.robot_fresh);
-        self.forces.push(force);
+        let slot = self.ticks_logged % self.poses.len();
+        self.poses[slot] = (tip, tip_velocity);
+        self.fresh[slot] = self.robot_fresh;
+        self.forces[slot] = force;
+        self.ticks_logged += 1;
         self.tick += 1;
         // the safety line: the measured force
         if force.norm() > self.options.abort_force(self.force_limit)
@@ -474,8 +575,15 @@ impl Procedure {
                     },
                 );
                 self.tip = self.start_tip + self.excite_direction * (a * fade * x);
+                if self.commanded.len() == self.commanded.capacity() {
+                    self.abort(format!(
+                        "the excitation outgrew its log ({} ticks)",
+                        self.commanded.capacity()
+                    ));
+                    return Vector3::zeros();
+                }
                 self.commanded.push(self.tip);
-                self.reported.push(self.poses[self.poses.len() - 1].0);
+                self.reported.push(self.pose(self.ticks_logged - 1).0);
                 self.free_forces.push(force);
                 if s >= self.options.excitation_duration {
                     self.finish_excitation();
@@ -501,10 +609,10 @@ impl Procedure {
                     let next = self.after_move;
                     self.enter(next);
                     if next == Phase::Approach {
-                        self.recording = true;
-                        self.probes.push(Vec::new());
-                        self.sample_ticks.push(Vec::new());
-                        self.windows.push((usize::MAX, usize::MAX));
+                        self.recording = self.logs.start(self.probe);
+                        if !self.recording {
+                            self.abort("the probes' logs were not sized".into());
+                        }
                     }
                     Vector3::zeros()
                 } else {
@@ -535,7 +643,7 @@ impl Procedure {
                         "wall '{name}' was not found where the scenario says: no contact within {:.2} mm beyond its nominal plane (probe {} of {}); check the scenario's [[walls]] against the hardware, or raise the option search_depth",
                         self.options.search_depth * 1e3,
                         self.probe + 1,
-                        self.grid.len()
+                        self.grids[self.wall].len()
                     ));
                     return Vector3::zeros();
                 }
@@ -621,22 +729,14 @@ impl Procedure {
                 }
                 v
             }
-            Phase::Fitting | Phase::Done => Vector3::zeros(),
+            Phase::RobotFit | Phase::Fitting | Phase::Done => Vector3::zeros(),
         }
     }
 
     /// The loop's delay from a command to its force: robot delay (and servo lag), sensor
     /// delay, and two ticks.
     fn hold_time(&self) -> f64 {
-        let robot = self.robot.map_or(0.0, |r| {
-            r.delay
-                + if r.servo_frequency > 0.0 {
-                    2.0 * r.servo_damping / (2.0 * std::f64::consts::PI * r.servo_frequency)
-                } else {
-                    0.0
-                }
-        });
-        robot + (self.sensor_delay_ticks as f64 + 2.0) * self.period + 0.05
+        hold_time_of(self.robot, self.sensor_delay_ticks, self.period)
     }
 
     /// The nominal law's penetration at the press force, m.
@@ -652,8 +752,8 @@ impl Procedure {
     /// pose a loop delay after the next one the samples take (tick index).
     fn mark_window(&mut self, end: usize) {
         let delay = (self.hold_time() / self.period).round() as usize;
-        let n = self.poses.len().saturating_sub(self.sensor_delay_ticks);
-        if let Some(w) = self.windows.last_mut() {
+        let n = self.ticks_logged.saturating_sub(self.sensor_delay_ticks);
+        if let Some(w) = self.logs.windows.get_mut(self.probe) {
             if end == 0 {
                 w.0 = n + delay;
             } else {
@@ -668,23 +768,29 @@ impl Procedure {
         if !self.recording {
             return;
         }
-        let n = self.poses.len();
+        let n = self.ticks_logged;
         if n <= self.sensor_delay_ticks {
             return;
         }
         let i = n - 1 - self.sensor_delay_ticks;
-        if !self.fresh[i] {
+        let ring = self.poses.len();
+        if !self.fresh[i % ring] {
             return;
         }
-        let (position, velocity) = self.poses[i];
-        let force = self.forces[n - 1];
-        if let (Some(p), Some(ticks)) = (self.probes.last_mut(), self.sample_ticks.last_mut()) {
-            p.push(ProbeSample {
-                position,
-                velocity,
-                force,
-            });
-            ticks.push(i);
+        let (position, velocity) = self.pose(i);
+        let force = self.forces[(n - 1) % ring];
+        let sample = ProbeSample {
+            position,
+            velocity,
+            force,
+        };
+        if !self.logs.push(self.probe, sample, i) {
+            let name = self.walls[self.wall].0.clone();
+            self.abort(format!(
+                "wall '{name}': probe {} took more than its {} samples' log (a probe's travel at the approach speed, its dwell and retreat): the procedure stops rather than grow it",
+                self.probe + 1,
+                self.logs.capacity
+            ));
         }
     }
 
@@ -700,29 +806,31 @@ impl Procedure {
         self.bias = mean;
         self.noise = var.sqrt();
         self.detect_force = self.options.detect_force.max(6.0 * self.noise);
-        match fit_robot_response(
-            &self.commanded,
-            &self.reported,
-            self.period,
-            self.options.max_delay,
-        ) {
-            Some(r) => {
-                self.robot = Some(r);
-                self.events.push(Progress::Robot(r));
-            }
-            None => {
-                self.abort("the robot did not follow the excitation: no delay could be fitted (is the robot feedback live?)".into());
-                return;
-            }
-        }
-        // approach speed: the force overshoot over the loop's delay at most a quarter of the
-        // press force under the nominal law
-        let press = self.options.press_force(self.force_limit);
-        let stiffness = press / self.press_depth();
-        self.approach_speed = self
-            .options
-            .max_approach_speed
-            .min(0.25 * press / (stiffness * self.hold_time()));
+        // the robot's response is fitted off the loop's thread ([`Procedure::take_fit_job`]),
+        // the probes' logs sized there; the procedure holds at rest until then
+        self.fit_job = Some(FitJob::Robot(RobotJob {
+            commanded: std::mem::take(&mut self.commanded),
+            reported: std::mem::take(&mut self.reported),
+            max_delay: self.options.max_delay,
+            sizing: self.sizing.clone(),
+        }));
+        self.enter(Phase::RobotFit);
+    }
+
+    /// The robot's response fitted: the approach speed, the probes' logs, the first wall.
+    fn deliver_robot(&mut self, response: Option<RobotResponse>, logs: Option<ProbeLogs>) {
+        let (Some(r), Some(logs)) = (response, logs) else {
+            self.abort("the robot did not follow the excitation: no delay could be fitted (is the robot feedback live?)".into());
+            return;
+        };
+        self.robot = Some(r);
+        self.logs = logs;
+        self.event(Progress::Robot {
+            response: r,
+            noise: self.noise,
+            detect_force: self.detect_force,
+        });
+        self.approach_speed = self.sizing.approach_speed(Some(r));
         self.start_wall(0);
     }
 
@@ -733,10 +841,6 @@ impl Procedure {
         }
         self.wall = i;
         self.probe = 0;
-        self.grid = self.grid_of(i);
-        self.probes.clear();
-        self.sample_ticks.clear();
-        self.windows.clear();
         self.contact_points.clear();
         self.wall_started = self.tick;
         // two legs: the start tip, then the first probe's start
@@ -748,12 +852,12 @@ impl Procedure {
     /// (the first), outside the plane the probes so far predict by `margin` (the others).
     fn probe_start(&self, j: usize) -> Vector3<f64> {
         let wall = self.walls[self.wall].1;
-        let g = self.grid[j];
+        let g = self.grids[self.wall][j];
         if self.contact_points.is_empty() {
             return g + wall.normal * self.options.standoff;
         }
-        let sigmas = vec![1e-5; self.contact_points.len()];
-        let plane = fit_plane(&self.contact_points, &sigmas, &wall.normal);
+        let sigmas = &self.point_sigmas[..self.contact_points.len()];
+        let plane = fit_plane(&self.contact_points, sigmas, &wall.normal);
         let h = plane.normal.dot(&(g - plane.point)) / plane.normal.dot(&wall.normal).max(0.5);
         // g moved along the nominal normal to the predicted plane, then out by the margin
         g - wall.normal * h + wall.normal * self.options.margin
@@ -763,20 +867,21 @@ impl Procedure {
         // the contact point of this probe from its samples (for the next probes' starts)
         let wall = self.walls[self.wall].1;
         self.recording = false;
-        if let Some(samples) = self.probes.last() {
-            let pressed: Vec<&ProbeSample> = samples
+        if let Some(samples) = self.logs.probes.get(self.probe) {
+            let first = samples
                 .iter()
-                .filter(|s| s.force.dot(&wall.normal) > self.detect_force)
-                .collect();
-            if let Some(first) = pressed.first() {
+                .find(|s| s.force.dot(&wall.normal) > self.detect_force);
+            if let Some(first) = first {
                 // corrected for the force at detection through the nominal law
                 let f = first.force.dot(&wall.normal);
                 let d = self.law_depth(f);
-                self.contact_points.push(first.position + wall.normal * d);
+                if self.contact_points.len() < self.contact_points.capacity() {
+                    self.contact_points.push(first.position + wall.normal * d);
+                }
             }
         }
         self.probe += 1;
-        if self.probe < self.grid.len() {
+        if self.probe < self.grids[self.wall].len() {
             let start = self.probe_start(self.probe);
             // out along the normal, then across
             let out = self.tip.max_by_normal(&wall.normal, &start);
@@ -798,63 +903,233 @@ impl Procedure {
     /// and the procedure holds at rest until the result is delivered.
     fn fit_wall(&mut self) {
         let wall = self.walls[self.wall].1;
-        self.fit_job = Some(FitJob {
-            probes: std::mem::take(&mut self.probes),
-            sample_ticks: std::mem::take(&mut self.sample_ticks),
-            windows: std::mem::take(&mut self.windows),
+        self.fit_job = Some(FitJob::Wall(WallJob {
+            logs: std::mem::take(&mut self.logs),
+            probes: self.grids[self.wall].len(),
             normal: wall.normal,
             form: self.form,
             detect_force: self.detect_force,
             period: self.period,
-        });
+        }));
         self.enter(Phase::Fitting);
     }
 
-    /// The current wall's fit, once its probes are done (then the procedure holds at rest
-    /// until [`Procedure::deliver_fit`]); None otherwise. The caller runs it ([`FitJob::run`])
-    /// where it likes: inline, or off the real-time loop's thread.
+    /// The pending fit, once due (the robot's response after the excitation, a wall's after
+    /// its probes; the procedure holds at rest until [`Procedure::deliver_fit`]); None
+    /// otherwise. The caller runs it ([`FitJob::run`]) where it likes: inline, or off the
+    /// real-time loop's thread.
     pub fn take_fit_job(&mut self) -> Option<FitJob> {
         self.fit_job.take()
     }
 
-    /// The result of the job [`Procedure::take_fit_job`] gave: the wall is measured and the
-    /// next begins, or the procedure stops. Ignored unless the procedure waits for it (a stop
-    /// while it ran).
-    pub fn deliver_fit(&mut self, result: Result<SurfaceFit, FitError>) {
-        if self.phase != Phase::Fitting {
-            return;
-        }
-        let name = self.walls[self.wall].0.clone();
-        match result {
-            Ok(fit) => {
-                let spent = (self.tick - self.wall_started) as f64 * self.period;
-                self.events
-                    .push(Progress::Wall(self.wall, name, fit.clone(), spent));
-                self.fits.push(fit);
-                let next = self.wall + 1;
-                self.start_wall(next);
+    /// The result of the job [`Procedure::take_fit_job`] gave: the robot's response (the
+    /// walls begin), or a wall's fit (the wall is measured and the next begins), or the
+    /// procedure stops. The logs it carries come back into use. Ignored unless the procedure
+    /// waits for it (a stop while it ran).
+    pub fn deliver_fit(&mut self, done: FitDone) {
+        match (done, self.phase) {
+            (FitDone::Robot { response, logs }, Phase::RobotFit) => {
+                self.deliver_robot(response, logs)
             }
-            Err(e) => self.abort(format!(
-                "wall '{name}': the probes could not be fitted: {e}"
-            )),
+            (FitDone::Wall { result, logs }, Phase::Fitting) => {
+                self.logs = logs;
+                match result {
+                    Ok(fit) => {
+                        let spent = (self.tick - self.wall_started) as f64 * self.period;
+                        self.event(Progress::Wall {
+                            index: self.wall,
+                            fit: WallSummary::of(&fit),
+                            spent,
+                        });
+                        if self.fits.len() < self.fits.capacity() {
+                            self.fits.push(fit);
+                        }
+                        let next = self.wall + 1;
+                        self.start_wall(next);
+                    }
+                    Err(e) => {
+                        let name = self.walls[self.wall].0.clone();
+                        self.abort(format!(
+                            "wall '{name}': the probes could not be fitted: {e}"
+                        ))
+                    }
+                }
+            }
+            _ => {}
         }
     }
 
     /// Runs a pending fit at once, in this thread ([`super::simulate`]).
     pub fn fit_inline(&mut self) {
         if let Some(job) = self.take_fit_job() {
-            let result = job.run();
-            self.deliver_fit(result);
+            let done = job.run();
+            self.deliver_fit(done);
         }
     }
 }
 
-/// A wall's fit, to run off the real-time loop's thread: each probe's samples with their
-/// poses' ticks and its fit window (ticks), and what the fit needs.
-pub struct FitJob {
+/// The loop's delay from a command to its force, s: robot delay (and servo lag), sensor
+/// delay, and two ticks.
+fn hold_time_of(robot: Option<RobotResponse>, sensor_delay_ticks: usize, period: f64) -> f64 {
+    let robot = robot.map_or(0.0, |r| {
+        r.delay
+            + if r.servo_frequency > 0.0 {
+                2.0 * r.servo_damping / (2.0 * std::f64::consts::PI * r.servo_frequency)
+            } else {
+                0.0
+            }
+    });
+    robot + (sensor_delay_ticks as f64 + 2.0) * period + 0.05
+}
+
+/// What sizes the probes' logs: the options, the loop, the press force and the nominal
+/// law's secant stiffness at it.
+#[derive(Debug, Clone)]
+struct Sizing {
+    options: CalibrateOptions,
+    sensor_delay_ticks: usize,
+    /// The loop's period, s.
+    period: f64,
+    /// The force each probe presses to, N.
+    press: f64,
+    /// The nominal law's secant stiffness at `press`, N/m.
+    stiffness: f64,
+    /// Probes per wall (the largest grid).
+    probes: usize,
+}
+
+impl Sizing {
+    /// The approach speed, m/s: the force overshoot over the loop's delay at most a quarter
+    /// of the press force under the nominal law, at most `max_approach_speed`.
+    fn approach_speed(&self, robot: Option<RobotResponse>) -> f64 {
+        let hold = hold_time_of(robot, self.sensor_delay_ticks, self.period);
+        self.options
+            .max_approach_speed
+            .min(0.25 * self.press / (self.stiffness * hold))
+    }
+
+    /// The most samples one probe records (from its approach to the end of its retreat),
+    /// a tick each at most: `T_p / period + 64`, with the probe's longest time
+    ///
+    /// `T_p = (standoff + margin + 2·search_depth + probe_depth + retreat_distance) / v_a
+    ///        + 2·τ_h + dwell_cycles / dwell_frequency + (v_a·τ_h + 2·margin) / move_speed`,
+    ///
+    /// `v_a` the approach speed and `τ_h` the loop's delay (the hold time): the approach's
+    /// travel to the deepest search (from the standoff or the predicted plane plus the
+    /// margin), the press to `probe_depth`, the hold and the oscillation of the dwell, the
+    /// retreat out past the first contact at the moves' speed, its settling, and its slow
+    /// backing out up to `retreat_distance`. A probe past it stops the procedure.
+    fn samples_per_probe(&self, robot: Option<RobotResponse>) -> usize {
+        let o = &self.options;
+        let v = self.approach_speed(robot);
+        let hold = hold_time_of(robot, self.sensor_delay_ticks, self.period);
+        let seconds =
+            (o.standoff + o.margin + 2.0 * o.search_depth + o.probe_depth + o.retreat_distance) / v
+                + 2.0 * hold
+                + o.dwell_cycles as f64 / o.dwell_frequency
+                + (v * hold + 2.0 * o.margin) / o.move_speed;
+        (seconds / self.period).ceil() as usize + 64
+    }
+}
+
+/// The probes' logs of one wall: for each probe its samples, the tick of each sample's pose
+/// and its fit window (ticks). Allocated once (on the fitting thread, when the robot's
+/// response sizes them: [`Sizing::samples_per_probe`] samples per probe), then handed to each
+/// wall's fit and back, never grown.
+#[derive(Debug, Default)]
+pub struct ProbeLogs {
     probes: Vec<Vec<ProbeSample>>,
+    /// The tick of each probe's samples' poses.
     sample_ticks: Vec<Vec<usize>>,
+    /// Each probe's samples that the law fit uses: from the robot's arrival at the pressed
+    /// point (a loop delay after the dwell starts) to its leaving (a loop delay after the
+    /// retreat starts), ticks.
     windows: Vec<(usize, usize)>,
+    /// Samples each probe's log holds.
+    capacity: usize,
+}
+
+impl ProbeLogs {
+    /// Logs for `probes` probes of `capacity` samples each.
+    fn new(probes: usize, capacity: usize) -> Self {
+        ProbeLogs {
+            probes: (0..probes).map(|_| Vec::with_capacity(capacity)).collect(),
+            sample_ticks: (0..probes).map(|_| Vec::with_capacity(capacity)).collect(),
+            windows: vec![(usize::MAX, usize::MAX); probes],
+            capacity,
+        }
+    }
+
+    /// Empties probe `j`'s log for its start; false when there is no such slot.
+    fn start(&mut self, j: usize) -> bool {
+        match (self.probes.get_mut(j), self.sample_ticks.get_mut(j)) {
+            (Some(p), Some(t)) => {
+                p.clear();
+                t.clear();
+                self.windows[j] = (usize::MAX, usize::MAX);
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Logs a sample of probe `j` whose pose is of tick `tick`; false (nothing logged) when
+    /// its log is full.
+    fn push(&mut self, j: usize, sample: ProbeSample, tick: usize) -> bool {
+        match (self.probes.get_mut(j), self.sample_ticks.get_mut(j)) {
+            (Some(p), Some(t)) if p.len() < self.capacity => {
+                p.push(sample);
+                t.push(tick);
+                true
+            }
+            _ => false,
+        }
+    }
+}
+
+/// A fit to run off the real-time loop's thread (it allocates and takes up to ~0.1 s).
+pub enum FitJob {
+    /// The robot's response from the excitation; sizes the probes' logs.
+    Robot(RobotJob),
+    /// A wall's surface and law from its probes.
+    Wall(WallJob),
+}
+
+/// A fit's result, with the logs it hands back to the procedure.
+pub enum FitDone {
+    /// The robot's response (None: no delay could be fitted) and the probes' logs sized for
+    /// it.
+    Robot {
+        /// The response.
+        response: Option<RobotResponse>,
+        /// The probes' logs.
+        logs: Option<ProbeLogs>,
+    },
+    /// A wall's fit and its logs back, emptied of nothing (each probe's start clears its
+    /// own).
+    Wall {
+        /// The fit.
+        result: Result<SurfaceFit, FitError>,
+        /// The logs.
+        logs: ProbeLogs,
+    },
+}
+
+/// The robot's response fit: the excitation's commanded and reported tip, m.
+pub struct RobotJob {
+    commanded: Vec<Vector3<f64>>,
+    reported: Vec<Vector3<f64>>,
+    /// Longest delay looked for, s.
+    max_delay: f64,
+    sizing: Sizing,
+}
+
+/// A wall's fit: each probe's samples with their poses' ticks and its fit window (ticks), and
+/// what the fit needs.
+pub struct WallJob {
+    logs: ProbeLogs,
+    /// The wall's probes (the first `probes` slots of the logs).
+    probes: usize,
     /// The wall's nominal normal (unit, `t`).
     normal: Vector3<f64>,
     form: FitForm,
@@ -865,16 +1140,45 @@ pub struct FitJob {
 }
 
 impl FitJob {
+    /// Runs the fit. Allocates and takes up to ~0.1 s: never in a real-time tick.
+    pub fn run(self) -> FitDone {
+        match self {
+            FitJob::Robot(job) => {
+                let response = fit_robot_response(
+                    &job.commanded,
+                    &job.reported,
+                    job.sizing.period,
+                    job.max_delay,
+                );
+                let logs = response.map(|r| {
+                    ProbeLogs::new(job.sizing.probes, job.sizing.samples_per_probe(Some(r)))
+                });
+                FitDone::Robot { response, logs }
+            }
+            FitJob::Wall(job) => {
+                let result = job.fit();
+                FitDone::Wall {
+                    result,
+                    logs: job.logs,
+                }
+            }
+        }
+    }
+}
+
+impl WallJob {
     /// The wall's fit: each probe's positions smoothed ([`SMOOTHING`]), its window's samples,
-    /// then [`fit_surface`]. Allocates and takes up to ~0.1 s: never in a real-time tick.
-    pub fn run(self) -> Result<SurfaceFit, FitError> {
+    /// then [`fit_surface`].
+    fn fit(&self) -> Result<SurfaceFit, FitError> {
+        let logs = &self.logs;
         // the reported positions' white noise averaged down, probe by probe; the fit takes the
         // samples of each probe's window (the robot at the pressed point and oscillating)
-        let probes: Vec<Vec<ProbeSample>> = self
+        let probes: Vec<Vec<ProbeSample>> = logs
             .probes
             .iter()
-            .zip(&self.sample_ticks)
-            .zip(&self.windows)
+            .zip(&logs.sample_ticks)
+            .zip(&logs.windows)
+            .take(self.probes)
             .map(|((p, ticks), &(from, to))| {
                 let positions: Vec<_> = p.iter().map(|s| s.position).collect();
                 // the samples' mean spacing, ticks (1 with new feedback at every tick; the

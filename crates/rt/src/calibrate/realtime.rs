@@ -8,20 +8,23 @@
 //! lines, surface by surface, as they come; [`CalibrationHandle::finish`] waits for the end
 //! and builds the calibration file when every wall was measured.
 //!
-//! Each wall's fit runs on a thread of its own (`calibration fit`), off the loop's: the
-//! procedure holds at rest, out of contact, and each tick polls for the result. The
-//! procedure's ticks are not allocation-free as `hil`'s are (its sample logs grow, and the
-//! progress lines are formatted in the tick that ends a wall); each tick's time is measured
-//! and reported like `hil`'s (overruns).
+//! The loop's tick allocates nothing, as `hil`'s (`tests/no_alloc_calibrate.rs`): the
+//! procedure's logs are preallocated and bounded ([`Procedure`]); the robot's response and
+//! each wall's fit run on a thread of their own (`calibration fit`), off the loop's, with the
+//! probes' logs handed there and back (the procedure holds at rest, out of contact, and each
+//! tick polls for the result); progress goes out as fixed-size messages ([`Progress`]) to a
+//! thread of its own (`calibration progress`) that formats the lines. Only a stop of the
+//! procedure formats its reason in the tick. Each tick's time is measured and reported like
+//! `hil`'s (overruns).
 
 use std::sync::mpsc::{channel, sync_channel, Receiver, Sender, SyncSender, TrySendError};
 use std::sync::Mutex;
+use std::thread::JoinHandle;
 use std::time::Duration;
 
 use nalgebra::{UnitQuaternion, Vector3};
 use serde_json::Value;
 
-use hilcontact_core::calibration::{FitError, SurfaceFit};
 use hilcontact_core::compensator::Rendering;
 use hilcontact_core::contact::ContactModel;
 use hilcontact_core::facility::Measurement;
@@ -29,7 +32,7 @@ use hilcontact_core::hil::HilRecord;
 use hilcontact_core::world::{RelativeMotion, TwoBodySystem};
 use hilcontact_core::{Plan, Scenario};
 
-use super::procedure::FitJob;
+use super::procedure::{FitDone, FitJob};
 use super::{
     calibration_file, describe, CalibrateOptions, CalibrationOutcome, Procedure, Progress, Step,
     MAX_SECONDS_PER_WALL,
@@ -61,15 +64,16 @@ pub struct RealtimeProcedure {
     command: RelativeMotion,
     /// Whether the procedure reached its end (finished or stopped by itself).
     done: bool,
-    progress: Sender<String>,
-    /// Time spent on each wall measured, s.
-    wall_seconds: Vec<f64>,
-    /// Every progress line, in order.
-    lines: Vec<String>,
-    /// A wall's fit to the fitting thread (one at a time: the procedure holds until its
-    /// result), and its result back.
+    /// Progress events to the formatting thread (room for every event of a calibration: the
+    /// robot's and one per wall, so a send never finds it full); None once finished.
+    progress: Option<SyncSender<Progress>>,
+    /// The formatting thread: every progress line in order and the time spent on each wall
+    /// measured (s), once `progress` is dropped.
+    formatter: Option<JoinHandle<(Vec<String>, Vec<f64>)>>,
+    /// A fit to the fitting thread (one at a time: the procedure holds until its result),
+    /// and its result back.
     jobs: SyncSender<FitJob>,
-    results: Receiver<std::result::Result<SurfaceFit, FitError>>,
+    results: Receiver<FitDone>,
 }
 
 impl RealtimeProcedure {
@@ -96,7 +100,7 @@ impl RealtimeProcedure {
         // the walls' fits run on their own thread, off the loop's: the loop holds at rest and
         // polls for the result (a fit takes up to ~0.1 s; in a tick it stalled the loop)
         let (jobs, job_queue) = sync_channel::<FitJob>(1);
-        let (result_sender, results) = sync_channel(1);
+        let (result_sender, results) = sync_channel::<FitDone>(1);
         std::thread::Builder::new()
             .name("calibration fit".into())
             .spawn(move || {
@@ -107,6 +111,26 @@ impl RealtimeProcedure {
                 }
             })
             .map_err(|e| RtError::io_other("calibration fit thread", e.to_string()))?;
+        // the progress lines are formatted off the loop's thread, sent to the handle as they
+        // come and kept
+        let names = procedure.wall_names();
+        let (events, event_queue) = sync_channel::<Progress>(names.len() + 2);
+        let formatter = std::thread::Builder::new()
+            .name("calibration progress".into())
+            .spawn(move || {
+                let (mut lines, mut wall_seconds) = (Vec::new(), Vec::new());
+                for event in event_queue {
+                    if let Progress::Wall { spent, .. } = event {
+                        wall_seconds.push(spent);
+                    }
+                    let line = describe(&event, &names);
+                    // the handle may be gone (dropped): the lines are kept here as well
+                    let _ = progress.send(line.clone());
+                    lines.push(line);
+                }
+                (lines, wall_seconds)
+            })
+            .map_err(|e| RtError::io_other("calibration progress thread", e.to_string()))?;
         Ok((
             RealtimeProcedure {
                 procedure,
@@ -118,9 +142,8 @@ impl RealtimeProcedure {
                 initial,
                 command: initial,
                 done: false,
-                progress,
-                wall_seconds: Vec::new(),
-                lines: Vec::new(),
+                progress: Some(events),
+                formatter: Some(formatter),
                 jobs,
                 results,
             },
@@ -167,14 +190,11 @@ impl RealtimeProcedure {
         if let Ok(result) = self.results.try_recv() {
             self.procedure.deliver_fit(result);
         }
-        for event in self.procedure.take_events() {
-            if let Progress::Wall(_, _, _, spent) = &event {
-                self.wall_seconds.push(*spent);
-            }
-            let line = describe(&event, &self.procedure);
-            // the handle may be gone (dropped): the lines are kept here as well
-            let _ = self.progress.send(line.clone());
-            self.lines.push(line);
+        if let Some(progress) = &self.progress {
+            // room for every event of the calibration: never full, never allocating
+            self.procedure.drain_events(|event| {
+                let _ = progress.try_send(event);
+            });
         }
         let mut stop = None;
         match step {
@@ -385,9 +405,16 @@ impl CalibrationHandle {
             }
         };
         let _ = outputs.finish();
-        let Some(driver) = driver.and_then(|d| d.into_any().downcast::<RealtimeProcedure>().ok())
+        let Some(mut driver) =
+            driver.and_then(|d| d.into_any().downcast::<RealtimeProcedure>().ok())
         else {
             return Err(RtError::io_other("loop thread", "panicked"));
+        };
+        // the progress thread ends with its queue, with every line
+        driver.progress = None;
+        let (lines, wall_seconds) = match driver.formatter.take().map(JoinHandle::join) {
+            Some(Ok(formatted)) => formatted,
+            _ => return Err(RtError::io_other("calibration progress thread", "panicked")),
         };
         let stop = outcome.stop;
         let stop_reason = stop.reason_naming(outcome.sensor_name, outcome.robot_name);
@@ -446,9 +473,9 @@ impl CalibrationHandle {
             outcome: CalibrationOutcome {
                 file,
                 error,
-                progress: driver.lines.clone(),
+                progress: lines,
                 duration: outcome.wall_time,
-                wall_seconds: driver.wall_seconds.clone(),
+                wall_seconds,
                 peak_force: outcome.safety.measured_peak_force,
                 final_force: last_force,
             },
