@@ -10,58 +10,16 @@
 #![cfg(target_os = "linux")]
 
 mod common;
+mod thread_alloc;
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU64, Ordering};
+use thread_alloc::{threads_named, ALLOCATIONS, ARMED, WATCHED_TID};
+
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use common::{loopback_options, preset};
 use hilcontact_rt::calibrate::{CalibrateOptions, CalibrationHandle};
 use hilcontact_rt::FacilityHandle;
-
-struct Counting;
-
-static ARMED: AtomicBool = AtomicBool::new(false);
-/// Kernel thread id of the calibration's loop thread (0: not yet known).
-static LOOP_TID: AtomicI32 = AtomicI32::new(0);
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-fn count() {
-    if ARMED.load(Ordering::Relaxed)
-        && unsafe { libc::gettid() } == LOOP_TID.load(Ordering::Relaxed)
-    {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    }
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
-/// The kernel ids of this process's threads named `name`.
-fn threads_named(name: &str) -> Vec<i32> {
-    std::fs::read_dir("/proc/self/task")
-        .unwrap()
-        .filter_map(|e| {
-            let path = e.ok()?.path();
-            let comm = std::fs::read_to_string(path.join("comm")).ok()?;
-            (comm.trim_end() == name).then(|| path.file_name()?.to_str()?.parse().ok())?
-        })
-        .collect()
-}
 
 #[test]
 fn the_real_time_calibration_s_loop_does_not_allocate_over_a_wall() {
@@ -96,7 +54,7 @@ fn the_real_time_calibration_s_loop_does_not_allocate_over_a_wall() {
         std::thread::sleep(Duration::from_millis(1));
     };
     assert_eq!(tids.len(), 1, "one loop thread: {tids:?}");
-    LOOP_TID.store(tids[0], Ordering::SeqCst);
+    WATCHED_TID.store(tids[0], Ordering::SeqCst);
     while handle.status().phase != "running" {
         assert!(
             begun.elapsed() < Duration::from_secs(60),

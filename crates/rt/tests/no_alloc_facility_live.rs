@@ -7,10 +7,12 @@
 #![cfg(all(feature = "live", target_os = "linux"))]
 
 mod common;
+mod thread_alloc;
 
-use std::alloc::{GlobalAlloc, Layout, System};
+use thread_alloc::{threads_named, ALLOCATIONS, ARMED, WATCHED_TID};
+
 use std::net::{SocketAddr, TcpStream};
-use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU64, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use common::{delayed, free_tcp_port, loopback_options, start_both};
@@ -19,50 +21,6 @@ use hilcontact_rt::output::live::LiveOptions;
 use serde_json::{json, Value};
 use tungstenite::client::IntoClientRequest;
 use tungstenite::Message;
-
-struct Counting;
-
-static ARMED: AtomicBool = AtomicBool::new(false);
-/// Kernel thread id of the facility's real-time thread (0: not yet known).
-static FACILITY_TID: AtomicI32 = AtomicI32::new(0);
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-fn count() {
-    if ARMED.load(Ordering::Relaxed)
-        && unsafe { libc::gettid() } == FACILITY_TID.load(Ordering::Relaxed)
-    {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-    }
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
-/// The kernel ids of this process's threads named `name`.
-fn threads_named(name: &str) -> Vec<i32> {
-    std::fs::read_dir("/proc/self/task")
-        .unwrap()
-        .filter_map(|e| {
-            let path = e.ok()?.path();
-            let comm = std::fs::read_to_string(path.join("comm")).ok()?;
-            (comm.trim_end() == name).then(|| path.file_name()?.to_str()?.parse().ok())?
-        })
-        .collect()
-}
 
 /// A viewer that subscribes to every channel and reads until the server closes; returns the
 /// messages it received.
@@ -132,7 +90,7 @@ fn the_facility_s_thread_does_not_allocate_with_its_live_view_on() {
     let (facility, hil) = start_both(&s, &emu, &rt);
     let tids = threads_named("hil-facility");
     assert_eq!(tids.len(), 1, "one facility thread: {tids:?}");
-    FACILITY_TID.store(tids[0], Ordering::SeqCst);
+    WATCHED_TID.store(tids[0], Ordering::SeqCst);
     while hil.status().phase != "running" {
         std::thread::sleep(Duration::from_micros(20));
     }
