@@ -423,12 +423,15 @@ impl PyFacilityHandle {
     }
 
     /// Stops the emulator, waits for it (GIL released) and returns its final counters, with
-    /// `live`: the live view's report (None without `--live`).
+    /// `live`: the live view's report (None without `--live`) and `scheduling`: what the OS
+    /// granted the facility's thread.
     fn join<'py>(&mut self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let handle = self.0.take()?;
+        let scheduling = serde_json::to_value(handle.scheduling()).unwrap_or_default();
         let (status, live) = py.allow_threads(move || handle.join_with_live());
         let mut value = serde_json::to_value(status).unwrap_or_default();
         value["live"] = live.unwrap_or_default();
+        value["scheduling"] = scheduling;
         json_to_py(py, &value)
     }
 }

@@ -51,7 +51,9 @@ use hilcontact_core::hil::HilRecord;
 use hilcontact_core::world::RelativeMotion;
 use hilcontact_core::{Plan, Scenario};
 
-use crate::clock::{now_ns, sleep_until_ns, tighten_timer_slack};
+use crate::clock::{
+    now_ns, request_realtime, sleep_until_ns, tighten_timer_slack, SchedulingReport,
+};
 use crate::devices::{
     open_robot_endpoint, open_sensor_endpoint, EndpointContext, LinkStats, RobotEndpoint,
     SensorEndpoint, Wrench,
@@ -162,9 +164,15 @@ pub struct FacilityHandle {
     addresses: FacilityAddresses,
     protocols: (&'static str, &'static str),
     period: f64,
+    scheduling: SchedulingReport,
 }
 
 impl FacilityHandle {
+    /// What the OS granted the facility's thread of [`EmulatorOptions::scheduling`].
+    pub fn scheduling(&self) -> &SchedulingReport {
+        &self.scheduling
+    }
+
     /// Starts the emulated facility of a scenario: opens the endpoints of `options` (binds the
     /// sockets; errors here, e.g. a port in use, keep their errno) and starts the real-time
     /// thread.
@@ -221,17 +229,27 @@ impl FacilityHandle {
             truth: Truth::new(&plan),
             last_command: 0,
         };
+        let scheduling = o.scheduling;
+        let (told, granted) = std::sync::mpsc::sync_channel(1);
         let thread = std::thread::Builder::new()
             .name("hil-facility".into())
             .spawn(move || {
                 tighten_timer_slack();
+                // the start waits for this before it returns
+                let _ = told.send(request_realtime(&scheduling));
                 state.run();
                 state.publish();
                 state.live = None; // the ring abandoned: the live view drains it and ends
                 state.shared.finished.store(true, Ordering::Release);
             })
             .map_err(|e| RtError::io("emulator thread", &e))?;
+        // the thread sends before its loop; a thread that died before it sent is a closed
+        // channel, reported as normal scheduling
+        let scheduling = granted
+            .recv()
+            .unwrap_or_else(|_| SchedulingReport::normal());
         Ok(FacilityHandle {
+            scheduling,
             shared,
             thread: Some(thread),
             live_thread,

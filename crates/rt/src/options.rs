@@ -175,6 +175,11 @@ pub struct EmulatorOptions {
     /// [HOST:]PORT`, [`crate::output::live`]): None, or the server's options; its operator
     /// stop ends the facility (it stops serving).
     pub live: Option<LiveOptions>,
+    /// Real-time scheduling of the facility's thread (`[scheduling]`, the loop's defaults):
+    /// the emulator stands in for hardware, which a busy PC never starves. A starved facility
+    /// thread stops moving the robot while the loop, at `SCHED_FIFO`, goes on. What the OS
+    /// refuses is kept in [`crate::FacilityHandle::scheduling`] and the facility goes on.
+    pub scheduling: SchedulingOptions,
 }
 
 /// The unit an emulated sensor reports in ([`EmulatorOptions::sensor_unit`]).
@@ -237,6 +242,7 @@ impl EmulatorOptions {
         if let Some(live) = &o.live {
             live.validate()?;
         }
+        o.scheduling.validate()?;
         let parsed = ParsedFacility {
             sensor: o.sensor.parse()?,
             robot: o.robot.parse()?,

@@ -386,37 +386,50 @@ impl CycleMeter {
 /// scenario's stiffness is the hardware's).
 ///
 /// Both peaks are followed from the first tick the expected force passes `threshold`
-/// (`0.1·force_limit`); the check decides once the expected force has fallen below half its
-/// peak (the contact's first peak is past and the sensor, one delay later, has seen it), or
-/// when a force or moment stop comes first: the ratio of the peaks, measured / expected, must
-/// be within `1/factor ..= factor`; else the run stops ([`StopKind::Units`]) with the likely
-/// unit named ([`hilcontact_core::stop::likely_unit`]).
+/// (`0.1·force_limit`); the check decides once the contact's first peak is past on both
+/// sides: the expected force has stayed below half its peak since it first fell there, and
+/// the measured force, one loop delay later, has fallen below half its own peak too. A dip of
+/// the expected force that does not last (a late or jumping robot feedback under load) is no
+/// decision: the peaks go on being followed. A measured force that never comes down (a stuck
+/// sensor) is decided `patience` after the expected dip, and a force or moment stop decides
+/// at once with what was seen. The ratio of the peaks, measured / expected, must be within
+/// `1/factor ..= factor`; else the run stops ([`StopKind::Units`]) with the likely unit named
+/// ([`hilcontact_core::stop::likely_unit`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct UnitsCheck {
     /// Allowed factor either way (> 1).
     pub factor: f64,
     /// Expected force from which the contact counts, N.
     pub threshold: f64,
+    /// Longest wait, after the expected force's dip, for the measured force to come down, s
+    /// (`limits.tracking_window`: longer than the loop's delay).
+    pub patience: f64,
     peak_expected: f64,
     peak_measured: f64,
+    /// When the expected force fell below half its peak and has stayed there since, s.
+    dip_since: Option<f64>,
     /// The ratio of the peaks, once decided.
     pub ratio: Option<f64>,
 }
 
 impl UnitsCheck {
-    /// A check with `limits.units_check_factor` from `0.1·limits.force_limit` on.
+    /// A check with `limits.units_check_factor` from `0.1·limits.force_limit` on, waiting at
+    /// most `limits.tracking_window` for the measured force's peak.
     pub fn new(limits: &SafetyLimits) -> Self {
         UnitsCheck {
             factor: limits.units_check_factor,
             threshold: 0.1 * limits.force_limit,
+            patience: limits.tracking_window,
             peak_expected: 0.0,
             peak_measured: 0.0,
+            dip_since: None,
             ratio: None,
         }
     }
 
     /// Takes one tick's expected (N, from the law at the fed-back pose) and measured force
-    /// magnitudes; returns a stop when the check decides against the units. Never allocates.
+    /// magnitudes at `time` (s); returns a stop when the check decides against the units.
+    /// Never allocates.
     pub fn push(&mut self, expected: f64, measured: f64, time: f64) -> Option<StopEvent> {
         if self.ratio.is_some() {
             return None;
@@ -426,7 +439,13 @@ impl UnitsCheck {
         }
         self.peak_expected = self.peak_expected.max(expected);
         self.peak_measured = self.peak_measured.max(measured);
-        if expected < 0.5 * self.peak_expected {
+        if expected >= 0.5 * self.peak_expected {
+            // still in the first peak, or a dip that did not last
+            self.dip_since = None;
+            return None;
+        }
+        let since = *self.dip_since.get_or_insert(time);
+        if measured < 0.5 * self.peak_measured || time - since >= self.patience {
             return self.decide(time);
         }
         None
@@ -719,6 +738,62 @@ mod tests {
         let mut check = UnitsCheck::new(&limits);
         assert!(check.push(40.0, 4.0, 0.0).is_none() && check.decide(0.0).is_none());
         assert!(check.ratio.is_none());
+    }
+
+    #[test]
+    fn an_early_dip_of_the_expected_force_is_no_decision() {
+        // A 180 N half sine expected; the sensor (in N) lags 10 ms. At 61 N on the rise the
+        // robot's feedback comes late for 3 ticks and the expected force dips to 20 N (the
+        // case a busy machine produced: ratio 0.344 from deciding on the dip).
+        let limits = SafetyLimits::default();
+        let f = |t: f64| (180.0 * (t * std::f64::consts::PI / 0.25).sin()).max(0.0);
+        let mut check = UnitsCheck::new(&limits);
+        let rise = (61.0f64 / 180.0).asin() * 0.25 / std::f64::consts::PI;
+        let mut decided_at = None;
+        for k in 0..600 {
+            let t = k as f64 * 0.001;
+            let glitch = t >= rise && t < rise + 0.003;
+            let expected = if glitch { 20.0 } else { f(t) };
+            assert!(check.push(expected, f(t - 0.010), t).is_none());
+            if check.ratio.is_some() && decided_at.is_none() {
+                decided_at = Some(t);
+            }
+        }
+        let ratio = check.ratio.expect("decided");
+        assert!((ratio - 1.0).abs() < 0.01, "{ratio}");
+        // decided once the measured force (peak at 0.135 s) fell below half: 0.2083 s + 10 ms
+        let t = decided_at.unwrap();
+        assert!(t > 0.218 && t < 0.221, "{t}");
+    }
+
+    #[test]
+    fn a_measured_force_that_never_comes_down_is_decided_after_the_patience() {
+        let limits = SafetyLimits::default();
+        // one contact, then nothing
+        let f = |t: f64| {
+            if t < 0.25 {
+                (400.0 * (t * std::f64::consts::PI / 0.25).sin()).max(0.0)
+            } else {
+                0.0
+            }
+        };
+        let mut check = UnitsCheck::new(&limits);
+        let mut stop = None;
+        for k in 0..2000 {
+            let t = k as f64 * 0.001;
+            // a stuck sensor: 41 N from the contact's start on (400 N in kgf, frozen)
+            let measured = if f(t) > 0.0 || t > 0.1 { 40.8 } else { 0.0 };
+            if let Some(s) = check.push(f(t), measured, t) {
+                stop = Some((s, t));
+                break;
+            }
+        }
+        let (s, t) = stop.expect("a stop");
+        assert_eq!(s.kind, StopKind::Units);
+        // the expected force fell below 200 N at 0.2083 s; decided one patience later
+        let dip = 0.25 - (0.5f64).asin() * 0.25 / std::f64::consts::PI;
+        assert!((t - (dip + limits.tracking_window)).abs() < 0.0025, "{t}");
+        assert!(s.reason().unwrap().contains("kgf"), "{:?}", s.reason());
     }
 
     #[test]

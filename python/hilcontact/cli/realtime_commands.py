@@ -205,6 +205,8 @@ def facility_command(scenario: str, sets: tuple[str, ...], duration: float | Non
         click.echo(live_summary)
     if final.get("live_samples_dropped"):
         click.echo(f"live view: {final['live_samples_dropped']} periods not shown (its thread fell behind)")
+    for refused in (final.get("scheduling") or {}).get("refused", []):
+        click.echo(f"facility thread scheduling: {refused}")
     if final.get("operator_stop"):
         click.echo("stop: operator (live view): the facility stopped serving")
         raise click.exceptions.Exit(3)
