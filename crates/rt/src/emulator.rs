@@ -236,7 +236,11 @@ impl FacilityHandle {
             .spawn(move || {
                 tighten_timer_slack();
                 // the start waits for this before it returns
-                let _ = told.send(request_realtime(&scheduling));
+                let report = match &scheduling {
+                    Some(asked) => request_realtime(asked),
+                    None => SchedulingReport::normal(),
+                };
+                let _ = told.send(report);
                 state.run();
                 state.publish();
                 state.live = None; // the ring abandoned: the live view drains it and ends

@@ -15,6 +15,9 @@ fn run(unit: ReportedUnit, compensator: CompensatorConfig) -> (serde_json::Value
     let s = delayed(compensator, 4.0);
     let (mut emu, rt) = loopback_options();
     emu.sensor_unit = unit;
+    // the emulated hardware at the loop's priority: starved on a busy machine, its robot
+    // stopped short of the wall while the loop went on (a predicted-limit stop, no contact)
+    emu.scheduling = Some(rt.scheduling);
     let (out, status) = run_both(&s, &(emu, rt), Duration::from_secs(30));
     let m = out.metrics;
     print_metrics(&m);
