@@ -1175,6 +1175,10 @@ fn piece_contacts(
     // the direction and make the force jump; each enters at depth 0; one side only, so that a
     // contact of two ends is not counted from both)
     let mut deepest_vertex: f64 = 0.0;
+    // the vertices' points, held back until the closest pair's excess is known (see below)
+    let mut held = [(Point3::origin(), Point3::origin(), Vector3::zeros(), 0.0, 0u64, 0.0); 10];
+    let mut n_held = 0;
+    let mut deepest_held = None;
     // the vertices' piece and the piece they are projected onto, with the side the latter is
     // on (+1: the target, whose outward normal is the contact normal; −1: the servicer)
     let servicer_vertices = ps.size <= pt.size;
@@ -1231,13 +1235,18 @@ fn piece_contacts(
         let (on, dist, outward) = signed_distance(onto, onto_pose, &v, &(n * side));
         if dist < reach {
             let depth = weight * (reach - dist);
-            deepest_vertex = deepest_vertex.max(depth);
             let (on_s, on_t) = if servicer_vertices { (v, on) } else { (on, v) };
-            point(on_s, on_t, outward * side, depth, code + k as u64);
+            if depth > deepest_vertex {
+                deepest_held = Some(n_held);
+            }
+            deepest_vertex = deepest_vertex.max(depth);
+            held[n_held] = (on_s, on_t, outward * side, depth, code + k as u64, weight);
+            n_held += 1;
         }
     }
     // a larger piece's line (a capsule's segment, a cylinder's side line) lying across a
     // smaller box's face: the line clipped to the face ([`face_clipped_line`])
+    let mut clipped = 0.0;
     let covered = face_clipped_line(
         from,
         from_pose,
@@ -1253,16 +1262,38 @@ fn piece_contacts(
             } else {
                 (on_line, on_from)
             };
+            clipped += depth;
             point(on_s, on_t, outward * -side, depth, 40 + k);
         },
     );
-    deepest_vertex = deepest_vertex.max(covered);
     // the cores' closest pair (an edge across an edge, a cylinder's rim between its fixed
     // points, a sphere) for the depth beyond the deepest vertex's: none when a vertex is the
     // closest point, all of it when no vertex is in reach, and no jump in between
-    let excess = deepest - deepest_vertex;
-    if excess > 1e-12 * reach.max(1e-3) {
+    let excess = deepest - deepest_vertex.max(covered);
+    let excess = if excess > 1e-12 * reach.max(1e-3) {
         point(c.point1, c.point2, n, excess, 33);
+        excess
+    } else {
+        0.0
+    };
+    // Depths measured beyond the deepest vertex's, `e − d_v` (the closest pair's, the clipped
+    // line's ends), have `−∇d_v` in their gradient too: a force `k·e·w` at that vertex against
+    // its normal (`w` its weight), here taken off the vertex's own depth (a point of its own,
+    // pulling, where they exceed it). Without it the force at the pair does work its potential
+    // does not count (a pair and a vertex apart: the pair's depth changes as the vertex's does
+    // not), and a frictionless impact can gain energy.
+    let against = clipped + if covered <= deepest_vertex { excess } else { 0.0 };
+    for (k, &(on_s, on_t, normal, depth, code, weight)) in held[..n_held].iter().enumerate() {
+        let depth = if Some(k) == deepest_held {
+            depth - against * weight
+        } else {
+            depth
+        };
+        if depth > 0.0 {
+            point(on_s, on_t, normal, depth, code);
+        } else if depth < 0.0 {
+            point(on_s, on_t, -normal, -depth, 34);
+        }
     }
 }
 
