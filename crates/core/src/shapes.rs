@@ -1176,7 +1176,14 @@ fn piece_contacts(
     // contact of two ends is not counted from both)
     let mut deepest_vertex: f64 = 0.0;
     // the vertices' points, held back until the closest pair's excess is known (see below)
-    let mut held = [(Point3::origin(), Point3::origin(), Vector3::zeros(), 0.0, 0u64, 0.0); 10];
+    let mut held = [(
+        Point3::origin(),
+        Point3::origin(),
+        Vector3::zeros(),
+        0.0,
+        0u64,
+        0.0,
+    ); 10];
     let mut n_held = 0;
     let mut deepest_held = None;
     // the vertices' piece and the piece they are projected onto, with the side the latter is
@@ -1282,7 +1289,12 @@ fn piece_contacts(
     // pulling, where they exceed it). Without it the force at the pair does work its potential
     // does not count (a pair and a vertex apart: the pair's depth changes as the vertex's does
     // not), and a frictionless impact can gain energy.
-    let against = clipped + if covered <= deepest_vertex { excess } else { 0.0 };
+    let against = clipped
+        + if covered <= deepest_vertex {
+            excess
+        } else {
+            0.0
+        };
     for (k, &(on_s, on_t, normal, depth, code, weight)) in held[..n_held].iter().enumerate() {
         let depth = if Some(k) == deepest_held {
             depth - against * weight
