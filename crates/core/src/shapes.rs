@@ -1135,6 +1135,44 @@ fn deepest_on_rim(
     }
 }
 
+/// Most alternating projections [`exact_pair`] makes.
+const PAIR_ITERATIONS: usize = 200;
+
+/// GJK's closest pair of two separated cores `c` made exact where a cylinder or a cone is one of
+/// them, by alternating projections: `p_t ← proj_t(p_s)`, `p_s ← proj_s(p_t)` (each core's own
+/// closed-form projection), from GJK's pair, until neither moves by more than 1e-15 m (at most
+/// [`PAIR_ITERATIONS`]). On a curved core GJK stops up to 2e-5 m (and 2e-2 rad) off the true
+/// pair, by an error that changes with the pose without being the gradient of anything: the
+/// closest pair's force then does work its potential does not count (a frictionless box on a
+/// cylinder gained 4.3e-5 of its energy, a cylinder on a cone 6.9e-6, a capsule on a cone
+/// 1.6e-6; now within ±3e-7). Between two convex sets the projections never move away from the
+/// closest pair; the result is kept only where it is not farther apart than GJK's.
+fn exact_pair(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece, c: &mut Contact) {
+    let curved = |p: &Piece| p.core.as_cylinder().is_some() || p.core.as_cone().is_some();
+    if !(curved(ps) || curved(pt)) || c.dist <= 1e-9 {
+        return;
+    }
+    let (mut p_s, mut p_t) = (c.point1, c.point2);
+    for _ in 0..PAIR_ITERATIONS {
+        let q_t = pt.core.project_point(&pt.pose, &p_s, false).point;
+        let q_s = ps.core.project_point(pose_s, &q_t, false).point;
+        let moved = (q_s - p_s).norm() + (q_t - p_t).norm();
+        (p_s, p_t) = (q_s, q_t);
+        if moved <= 1e-15 {
+            break;
+        }
+    }
+    let d = p_s - p_t;
+    let dist = d.norm();
+    if dist.is_finite() && dist > 0.0 && dist <= c.dist + 1e-12 {
+        c.point1 = p_s;
+        c.point2 = p_t;
+        c.normal2 = Unit::new_unchecked(d / dist);
+        c.normal1 = -c.normal2;
+        c.dist = dist;
+    }
+}
+
 /// The contact points of a servicer piece at `pose_s` (`t`) and a target piece (`r_s`, `r_t`
 /// their radii, `reach = r_s + r_t`), to `emit`.
 #[allow(clippy::too_many_arguments)]
@@ -1150,9 +1188,10 @@ fn piece_contacts(
     id: u64,
     emit: &mut impl FnMut(&ContactPoint),
 ) {
-    let Some(c) = core_contact(ps, pose_s, pt, slot, reach) else {
+    let Some(mut c) = core_contact(ps, pose_s, pt, slot, reach) else {
         return;
     };
+    exact_pair(ps, pose_s, pt, &mut c);
     if c.dist >= reach {
         return;
     }
