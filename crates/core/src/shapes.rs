@@ -1292,7 +1292,14 @@ fn piece_contacts(
     }
     // a larger piece's line (a capsule's segment, a cylinder's side line) lying across a
     // smaller box's face: the line clipped to the face ([`face_clipped_line`])
-    let mut clipped = 0.0;
+    let mut ends = [(
+        Point3::origin(),
+        Point3::origin(),
+        Vector3::zeros(),
+        0.0,
+        0u64,
+    ); 2];
+    let mut n_ends = 0;
     let covered = face_clipped_line(
         from,
         from_pose,
@@ -1308,8 +1315,8 @@ fn piece_contacts(
             } else {
                 (on_line, on_from)
             };
-            clipped += depth;
-            point(on_s, on_t, outward * -side, depth, 40 + k);
+            ends[n_ends] = (on_s, on_t, outward * -side, depth, 40 + k);
+            n_ends += 1;
         },
     );
     // the cores' closest pair (an edge across an edge, a cylinder's rim between its fixed
@@ -1317,7 +1324,6 @@ fn piece_contacts(
     // closest point, all of it when no vertex is in reach, and no jump in between
     let excess = deepest - deepest_vertex.max(covered);
     let excess = if excess > 1e-12 * reach.max(1e-3) {
-        point(c.point1, c.point2, n, excess, 33);
         excess
     } else {
         0.0
@@ -1327,7 +1333,18 @@ fn piece_contacts(
     // its normal (`w` its weight), here taken off the vertex's own depth (a point of its own,
     // pulling, where they exceed it). Without it the force at the pair does work its potential
     // does not count (a pair and a vertex apart: the pair's depth changes as the vertex's does
-    // not), and a frictionless impact can gain energy.
+    // not), and a frictionless impact can gain energy. (Where the pair is the deepest vertex's
+    // own point, it is that point, one point: neither the pair nor its counter-force.)
+    let at = |on_s: Point3<f64>, on_t: Point3<f64>, normal: Vector3<f64>| {
+        0.5 * ((on_s.coords - normal * r_s) + (on_t.coords + normal * r_t))
+    };
+    let pair_is_vertex = deepest_held.is_some_and(|k| {
+        let (on_s, on_t, normal, ..) = held[k];
+        (at(on_s, on_t, normal) - at(c.point1, c.point2, n)).norm_squared()
+            < SAME_POINT * SAME_POINT
+    });
+    let excess = if pair_is_vertex { 0.0 } else { excess };
+    let clipped: f64 = ends[..n_ends].iter().map(|e| e.3).sum();
     let against = clipped
         + if covered <= deepest_vertex {
             excess
@@ -1345,6 +1362,12 @@ fn piece_contacts(
         } else if depth < 0.0 {
             point(on_s, on_t, -normal, -depth, 34);
         }
+    }
+    for &(on_s, on_t, normal, depth, code) in &ends[..n_ends] {
+        point(on_s, on_t, normal, depth, code);
+    }
+    if excess > 0.0 {
+        point(c.point1, c.point2, n, excess, 33);
     }
 }
 
