@@ -1334,7 +1334,9 @@ fn piece_contacts(
     // pulling, where they exceed it). Without it the force at the pair does work its potential
     // does not count (a pair and a vertex apart: the pair's depth changes as the vertex's does
     // not), and a frictionless impact can gain energy. (Where the pair is the deepest vertex's
-    // own point, it is that point, one point: neither the pair nor its counter-force.)
+    // own point, the two are one point of the pair's whole depth `D`, an exact distance: a
+    // weighted vertex, `w·d` with `w < 1`, would leave the pair `(1 − w)·d` there, and the two
+    // forces are no potential's gradient.)
     let at = |on_s: Point3<f64>, on_t: Point3<f64>, normal: Vector3<f64>| {
         0.5 * ((on_s.coords - normal * r_s) + (on_t.coords + normal * r_t))
     };
@@ -1343,17 +1345,16 @@ fn piece_contacts(
         (at(on_s, on_t, normal) - at(c.point1, c.point2, n)).norm_squared()
             < SAME_POINT * SAME_POINT
     });
-    let excess = if pair_is_vertex { 0.0 } else { excess };
     let clipped: f64 = ends[..n_ends].iter().map(|e| e.3).sum();
     let against = clipped
-        + if covered <= deepest_vertex {
+        + if covered <= deepest_vertex && !pair_is_vertex {
             excess
         } else {
             0.0
         };
     for (k, &(on_s, on_t, normal, depth, code, weight)) in held[..n_held].iter().enumerate() {
         let depth = if Some(k) == deepest_held {
-            depth - against * weight
+            depth - against * weight + if pair_is_vertex { excess } else { 0.0 }
         } else {
             depth
         };
@@ -1366,7 +1367,7 @@ fn piece_contacts(
     for &(on_s, on_t, normal, depth, code) in &ends[..n_ends] {
         point(on_s, on_t, normal, depth, code);
     }
-    if excess > 0.0 {
+    if excess > 0.0 && !pair_is_vertex {
         point(c.point1, c.point2, n, excess, 33);
     }
 }
