@@ -385,12 +385,15 @@ fn random_shape(kind: usize, size: f64, q: [f64; 4], position: [f64; 3]) -> Shap
 }
 
 proptest! {
-    // A fixed seed: frictionless pairs of curved shapes exist that still gain energy (cylinder
-    // on cone +0.68 %, capsule on capsule +9.3 %, capsule on cone +7.6 %, box on cylinder
-    // +4.3e-5; docs/model.md "Shapes", limits), so a random draw could fail a run for a known
-    // defect. The 24 draws of this seed pass; the defect is open (issue 21).
+    // A fixed seed: a frictionless cylinder or cone tilted 30-45° from the contact normal
+    // (where its side line's ends and fixed rim points are blended by weights that change with
+    // the pose) or a cylinder's line clipped to a box's face still gains energy, up to 4.1 % in
+    // draws with μ = 0 (docs/model.md "Shapes", limits), so a random draw with little friction
+    // could fail a run for a known defect. The draws of this seed pass, and so did 1 800 random
+    // draws of this test as it stands (6 runs of PROPTEST_CASES=300); the defect is open
+    // (issue 21). `PROPTEST_CASES` sets the number of draws.
     #![proptest_config(ProptestConfig {
-        cases: 24,
+        cases: std::env::var("PROPTEST_CASES").ok().and_then(|c| c.parse().ok()).unwrap_or(24),
         rng_seed: proptest::test_runner::RngSeed::Fixed(0x5eed_0021),
         ..ProptestConfig::default()
     })]
