@@ -23,7 +23,7 @@ use hilcontact_core::facility::FacilityLoop;
 use hilcontact_core::Plan;
 
 pub use options::CalibrateOptions;
-pub use procedure::{FitDone, FitJob, Procedure, Progress, Step, WallSummary};
+pub use procedure::{FitDone, FitJob, Procedure, Progress, Step, StopReason, WallSummary};
 pub use realtime::{CalibrationHandle, RealtimeCalibration};
 
 /// Longest a calibration may take per wall, s, beyond the excitation (a bound of the
@@ -112,7 +112,7 @@ pub fn simulate(
     };
     Ok(CalibrationOutcome {
         file,
-        error: procedure.error().map(str::to_string),
+        error: procedure.error(),
         progress,
         duration,
         wall_seconds,

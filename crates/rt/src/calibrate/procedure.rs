@@ -109,6 +109,78 @@ impl WallSummary {
     }
 }
 
+/// Why the procedure stopped itself: its numbers only, held without allocating in the tick
+/// that stops (a wall by its index, a failed fit with the error the fitting thread made); the
+/// message is formatted when asked ([`Procedure::error`]), after the loop ended, the tip
+/// backed out and the robot holding.
+#[derive(Debug, Clone, PartialEq)]
+pub enum StopReason {
+    /// The measured force (N) passed the calibration's bound (N).
+    ForceBound {
+        /// The measured force's magnitude, N.
+        force: f64,
+        /// The bound, N.
+        bound: f64,
+    },
+    /// A command left the procedure's workspace.
+    Workspace,
+    /// The excitation outgrew its preallocated log (capacity, ticks).
+    ExcitationLog(usize),
+    /// The probes' logs were not sized (no robot response delivered).
+    LogsNotSized,
+    /// The robot did not follow the excitation: no delay could be fitted.
+    RobotNotFollowing,
+    /// Wall `wall` was not found within `search_depth` (m) beyond its nominal plane, at probe
+    /// `probe` (from 0) of `probes`.
+    NotFound {
+        /// The wall's index.
+        wall: usize,
+        /// The search depth, m.
+        search_depth: f64,
+        /// The probe, from 0.
+        probe: usize,
+        /// The wall's probes.
+        probes: usize,
+    },
+    /// Wall `wall` pressed `probe_depth` (m) past the first contact without reaching
+    /// `press_force` (N), at probe `probe`.
+    TooSoft {
+        /// The wall's index.
+        wall: usize,
+        /// The probe depth, m.
+        probe_depth: f64,
+        /// The press force, N.
+        press_force: f64,
+        /// The probe, from 0.
+        probe: usize,
+    },
+    /// Wall `wall` still in contact `retreat_distance` (m) out from the pressed point.
+    StillInContact {
+        /// The wall's index.
+        wall: usize,
+        /// The retreat distance, m.
+        retreat_distance: f64,
+        /// The probe, from 0.
+        probe: usize,
+    },
+    /// A probe of wall `wall` outgrew its samples' log (capacity, samples).
+    ProbeLog {
+        /// The wall's index.
+        wall: usize,
+        /// The probe, from 0.
+        probe: usize,
+        /// The log's capacity, samples.
+        capacity: usize,
+    },
+    /// Wall `wall`'s probes could not be fitted.
+    Fit {
+        /// The wall's index.
+        wall: usize,
+        /// The fit's error.
+        error: FitError,
+    },
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Phase {
     Settle,
@@ -187,6 +259,15 @@ pub struct Procedure {
     fresh: Vec<bool>,
     /// Whether the coming tick's pose is new feedback ([`Procedure::set_robot_fresh`]).
     robot_fresh: bool,
+    /// Whether the coming tick's force is a new sensor record ([`Procedure::set_sensor_fresh`]).
+    sensor_fresh: bool,
+    /// Samples in contact whose force was a held sensor record (not logged), and all samples
+    /// in contact with a new pose, over the calibration ([`Procedure::held_forces`]).
+    held_forces: (u64, u64),
+    /// The rod tip of the newest pose that was new robot feedback (`t`, m; None before the
+    /// first): what the real-time loop's units check measures the penetration from
+    /// ([`Procedure::fed_back_tip`]).
+    fresh_tip: Option<Vector3<f64>>,
     forces: Vec<Vector3<f64>>,
     /// Ticks logged into the rings so far.
     ticks_logged: usize,
@@ -206,7 +287,7 @@ pub struct Procedure {
     pub fits: Vec<SurfaceFit>,
     /// Progress events not yet drained (capacity [`EVENTS`]; at most one comes per tick).
     events: Vec<Progress>,
-    error: Option<String>,
+    error: Option<StopReason>,
 }
 
 impl Procedure {
@@ -320,6 +401,9 @@ impl Procedure {
             poses: vec![(Vector3::zeros(), Vector3::zeros()); ring],
             fresh: vec![false; ring],
             robot_fresh: true,
+            sensor_fresh: true,
+            held_forces: (0, 0),
+            fresh_tip: None,
             forces: vec![Vector3::zeros(); ring],
             ticks_logged: 0,
             contact_points: Vec::new(),
@@ -420,9 +504,52 @@ impl Procedure {
         self.poses[i % self.poses.len()]
     }
 
-    /// Why the procedure stopped, if it did not finish.
-    pub fn error(&self) -> Option<&str> {
-        self.error.as_deref()
+    /// Why the procedure stopped, if it did not finish: the message, formatted here (it
+    /// allocates: never in a tick).
+    pub fn error(&self) -> Option<String> {
+        let name = |w: &usize| self.walls.get(*w).map_or("?", |(n, _)| n.as_str());
+        self.error.as_ref().map(|reason| match reason {
+            StopReason::ForceBound { force, bound } => format!(
+                "the measured force {force:.1} N passed the calibration's bound {bound:.1} N"
+            ),
+            StopReason::Workspace => "a command left the workspace".into(),
+            StopReason::ExcitationLog(capacity) => {
+                format!("the excitation outgrew its log ({capacity} ticks)")
+            }
+            StopReason::LogsNotSized => "the probes' logs were not sized".into(),
+            StopReason::RobotNotFollowing => "the robot did not follow the excitation: no delay could be fitted (is the robot feedback live?)".into(),
+            StopReason::NotFound { wall, search_depth, probe, probes } => format!(
+                "wall '{}' was not found where the scenario says: no contact within {:.2} mm beyond its nominal plane (probe {} of {probes}); check the scenario's [[walls]] against the hardware, or raise the option search_depth",
+                name(wall),
+                search_depth * 1e3,
+                probe + 1,
+            ),
+            StopReason::TooSoft { wall, probe_depth, press_force, probe } => format!(
+                "wall '{}': pressed {:.2} mm past the first contact without reaching {press_force:.1} N (probe {}): the contact is softer than the scenario says, or raise the option probe_depth",
+                name(wall),
+                probe_depth * 1e3,
+                probe + 1
+            ),
+            StopReason::StillInContact { wall, retreat_distance, probe } => format!(
+                "wall '{}': still in contact {:.1} mm out from the pressed point (probe {})",
+                name(wall),
+                retreat_distance * 1e3,
+                probe + 1
+            ),
+            StopReason::ProbeLog { wall, probe, capacity } => format!(
+                "wall '{}': probe {} took more than its {capacity} samples' log (a probe's travel at the approach speed, its dwell and retreat): the procedure stops rather than grow it",
+                name(wall),
+                probe + 1,
+            ),
+            StopReason::Fit { wall, error } => {
+                format!("wall '{}': the probes could not be fitted: {error}", name(wall))
+            }
+        })
+    }
+
+    /// Why the procedure stopped itself, if it did (its numbers, unformatted).
+    pub fn stop_reason(&self) -> Option<&StopReason> {
+        self.error.as_ref()
     }
 
     /// The robot's response measured.
@@ -466,6 +593,18 @@ impl Procedure {
         self.form
     }
 
+    /// The rod tip of the newest pose that was new robot feedback, as reported (`t`, m; None
+    /// before the first): not extrapolated between the robot's messages. Over EGM the loop
+    /// extrapolates its pose quadratically from the last three 4 ms reports, which multiplies
+    /// their reporting noise about 4.4 times (0.13 mm at a 0.03 mm repeatability, 25 N at
+    /// this stiffness): the units check's expected force, taken at that pose, spiked up to
+    /// 70 N over the law early in a press and read the measured force 0.43–0.97 times the
+    /// law in 17 runs of `calibrate_realtime`, so that a spike early enough would stop the
+    /// calibration for its units (`1/3`).
+    pub fn fed_back_tip(&self) -> Option<Vector3<f64>> {
+        self.fresh_tip
+    }
+
     /// Where the current probe first felt its wall: the commanded tip at the detection (m,
     /// `t`) and the wall's nominal normal, while the probe presses, dwells or retreats; None
     /// otherwise (for the real-time loop's units check).
@@ -490,10 +629,11 @@ impl Procedure {
         self.enter(Phase::Move);
     }
 
-    /// Stops: backs out of contact along the current wall's normal, then holds.
-    fn abort(&mut self, message: String) {
+    /// Stops: backs out of contact along the current wall's normal, then holds. Allocates
+    /// nothing (the reason is formatted once the loop has ended: [`Procedure::error`]).
+    fn abort(&mut self, reason: StopReason) {
         if self.error.is_none() {
-            self.error = Some(message);
+            self.error = Some(reason);
         }
         let normal = self
             .walls
@@ -514,6 +654,21 @@ impl Procedure {
         self.robot_fresh = fresh;
     }
 
+    /// Whether the coming tick's force is a new sensor record (true, the default, at every
+    /// tick of the simulated facility) or the last one held because the record of this
+    /// period had not arrived yet (the loop counts those `late`). A held force is one period
+    /// older than the poses it would be paired with: a sample is taken only with a new one
+    /// (at k ≈ 1.9e5 N/m a pairing 0.1 ms late on average reads as 19 N·s/m of damping).
+    pub fn set_sensor_fresh(&mut self, fresh: bool) {
+        self.sensor_fresh = fresh;
+    }
+
+    /// Samples with a new robot pose whose force was a held sensor record (left out), and all
+    /// samples with a new robot pose, over the calibration so far.
+    pub fn held_forces(&self) -> (u64, u64) {
+        self.held_forces
+    }
+
     /// One tick: the measurement of this tick in, the next command out.
     pub fn step(&mut self, m: &Measurement) -> Step {
         let force = -(self.sensor_orientation * m.force) - self.bias; // on the rod, t
@@ -522,6 +677,9 @@ impl Procedure {
         let slot = self.ticks_logged % self.poses.len();
         self.poses[slot] = (tip, tip_velocity);
         self.fresh[slot] = self.robot_fresh;
+        if self.robot_fresh {
+            self.fresh_tip = Some(tip);
+        }
         self.forces[slot] = force;
         self.ticks_logged += 1;
         self.tick += 1;
@@ -529,17 +687,16 @@ impl Procedure {
         if force.norm() > self.options.abort_force(self.force_limit)
             && !matches!(self.phase, Phase::Abort | Phase::Done)
         {
-            self.abort(format!(
-                "the measured force {:.1} N passed the calibration's bound {:.1} N",
-                force.norm(),
-                self.options.abort_force(self.force_limit)
-            ));
+            self.abort(StopReason::ForceBound {
+                force: force.norm(),
+                bound: self.options.abort_force(self.force_limit),
+            });
         }
         let velocity = self.advance(force);
         if (self.tip - self.start_tip).norm() > self.options.workspace
             && !matches!(self.phase, Phase::Abort | Phase::Done)
         {
-            self.abort("a command left the workspace".into());
+            self.abort(StopReason::Workspace);
         }
         match self.phase {
             Phase::Done => Step::Done,
@@ -576,10 +733,7 @@ impl Procedure {
                 );
                 self.tip = self.start_tip + self.excite_direction * (a * fade * x);
                 if self.commanded.len() == self.commanded.capacity() {
-                    self.abort(format!(
-                        "the excitation outgrew its log ({} ticks)",
-                        self.commanded.capacity()
-                    ));
+                    self.abort(StopReason::ExcitationLog(self.commanded.capacity()));
                     return Vector3::zeros();
                 }
                 self.commanded.push(self.tip);
@@ -611,7 +765,7 @@ impl Procedure {
                     if next == Phase::Approach {
                         self.recording = self.logs.start(self.probe);
                         if !self.recording {
-                            self.abort("the probes' logs were not sized".into());
+                            self.abort(StopReason::LogsNotSized);
                         }
                     }
                     Vector3::zeros()
@@ -631,32 +785,30 @@ impl Procedure {
                 }
                 if self.phase == Phase::Press && f >= self.options.press_force(self.force_limit) {
                     self.dwell_centre = self.tip;
-                    self.mark_window(0);
+                    self.mark_window_start();
                     self.enter(Phase::Dwell);
                     return Vector3::zeros();
                 }
                 // beyond the nominal plane by more than the search depth: not found
                 let depth = -wall.signed_distance(&self.tip);
                 if self.phase == Phase::Approach && depth > self.options.search_depth {
-                    let name = self.walls[self.wall].0.clone();
-                    self.abort(format!(
-                        "wall '{name}' was not found where the scenario says: no contact within {:.2} mm beyond its nominal plane (probe {} of {}); check the scenario's [[walls]] against the hardware, or raise the option search_depth",
-                        self.options.search_depth * 1e3,
-                        self.probe + 1,
-                        self.grids[self.wall].len()
-                    ));
+                    self.abort(StopReason::NotFound {
+                        wall: self.wall,
+                        search_depth: self.options.search_depth,
+                        probe: self.probe,
+                        probes: self.grids[self.wall].len(),
+                    });
                     return Vector3::zeros();
                 }
                 if self.phase == Phase::Press
                     && (self.detect_tip - self.tip).dot(&wall.normal) > self.options.probe_depth
                 {
-                    let name = self.walls[self.wall].0.clone();
-                    self.abort(format!(
-                        "wall '{name}': pressed {:.2} mm past the first contact without reaching {:.1} N (probe {}): the contact is softer than the scenario says, or raise the option probe_depth",
-                        self.options.probe_depth * 1e3,
-                        self.options.press_force(self.force_limit),
-                        self.probe + 1
-                    ));
+                    self.abort(StopReason::TooSoft {
+                        wall: self.wall,
+                        probe_depth: self.options.probe_depth,
+                        press_force: self.options.press_force(self.force_limit),
+                        probe: self.probe,
+                    });
                     return Vector3::zeros();
                 }
                 let v = -wall.normal * self.approach_speed;
@@ -676,7 +828,7 @@ impl Procedure {
                 let length = if oscillate { hold + cycles / hz } else { hold };
                 if s >= length {
                     self.tip = self.dwell_centre;
-                    self.mark_window(1);
+                    self.mark_window_end();
                     self.enter(Phase::Retreat);
                     return Vector3::zeros();
                 }
@@ -714,12 +866,11 @@ impl Procedure {
                 };
                 if (self.tip - self.dwell_centre).dot(&wall.normal) > self.options.retreat_distance
                 {
-                    let name = self.walls[self.wall].0.clone();
-                    self.abort(format!(
-                        "wall '{name}': still in contact {:.1} mm out from the pressed point (probe {})",
-                        self.options.retreat_distance * 1e3,
-                        self.probe + 1
-                    ));
+                    self.abort(StopReason::StillInContact {
+                        wall: self.wall,
+                        retreat_distance: self.options.retreat_distance,
+                        probe: self.probe,
+                    });
                     return Vector3::zeros();
                 }
                 self.tip += v * t;
@@ -748,22 +899,39 @@ impl Procedure {
         }
     }
 
-    /// Marks the start (`end = 0`) or the end (`1`) of the current probe's fit window: the
-    /// pose a loop delay after the next one the samples take (tick index).
-    fn mark_window(&mut self, end: usize) {
+    /// Marks the start of the current probe's fit window as the press reaches its force: the
+    /// pose a loop delay ([`Procedure::hold_time`], with its 50 ms of settling) after the next
+    /// one the samples take (tick index), once the robot is at the pressed point.
+    fn mark_window_start(&mut self) {
         let delay = (self.hold_time() / self.period).round() as usize;
         let n = self.ticks_logged.saturating_sub(self.sensor_delay_ticks);
         if let Some(w) = self.logs.windows.get_mut(self.probe) {
-            if end == 0 {
-                w.0 = n + delay;
-            } else {
-                w.1 = n + delay;
-            }
+            w.0 = n + delay;
+        }
+    }
+
+    /// Marks the end (exclusive) of the current probe's fit window as the dwell ends (this
+    /// tick commands the dwell's last point, the next one the first step of the retreat): the
+    /// last pose before the robot can answer the retreat. The retreat's first command (tick
+    /// `T + 1`, `T` this tick's pose index) reaches the reported poses the measured robot
+    /// delay `τ_r` later; the smoothing ([`SMOOTHING`]) reaches that far forward, and two
+    /// ticks more cover the delay's own error (σ 0.3 ms over EGM, 1.2 ms over RSI's 4 ms
+    /// cycle): the window ends at `T + 1 + ⌊(τ_r − SMOOTHING)/period⌋ − 2`, never before it
+    /// starts. Ended a loop delay and 50 ms into the retreat instead, as it was, it took
+    /// samples the fast retreat pulled out of contact (`k·d + c·ḋ < 0` while the tip is still
+    /// inside the plane, the force reads 0): they pulled c 9 % low.
+    fn mark_window_end(&mut self) {
+        let now = self.ticks_logged as f64; // T + 1
+        let delay = self.robot.map_or(0.0, |r| r.delay);
+        let end = now + ((delay - SMOOTHING) / self.period).floor() - 2.0;
+        if let Some(w) = self.logs.windows.get_mut(self.probe) {
+            w.1 = (end.max(0.0) as usize).max(w.0);
         }
     }
 
     /// Records this tick's sample: the force with the pose `τ_p` earlier, when that pose was
-    /// new robot feedback ([`Procedure::set_robot_fresh`]).
+    /// new robot feedback ([`Procedure::set_robot_fresh`]) and the force a new sensor record
+    /// ([`Procedure::set_sensor_fresh`]).
     fn record(&mut self) {
         if !self.recording {
             return;
@@ -777,6 +945,11 @@ impl Procedure {
         if !self.fresh[i % ring] {
             return;
         }
+        self.held_forces.1 += 1;
+        if !self.sensor_fresh {
+            self.held_forces.0 += 1;
+            return;
+        }
         let (position, velocity) = self.pose(i);
         let force = self.forces[(n - 1) % ring];
         let sample = ProbeSample {
@@ -785,12 +958,11 @@ impl Procedure {
             force,
         };
         if !self.logs.push(self.probe, sample, i) {
-            let name = self.walls[self.wall].0.clone();
-            self.abort(format!(
-                "wall '{name}': probe {} took more than its {} samples' log (a probe's travel at the approach speed, its dwell and retreat): the procedure stops rather than grow it",
-                self.probe + 1,
-                self.logs.capacity
-            ));
+            self.abort(StopReason::ProbeLog {
+                wall: self.wall,
+                probe: self.probe,
+                capacity: self.logs.capacity,
+            });
         }
     }
 
@@ -820,7 +992,7 @@ impl Procedure {
     /// The robot's response fitted: the approach speed, the probes' logs, the first wall.
     fn deliver_robot(&mut self, response: Option<RobotResponse>, logs: Option<ProbeLogs>) {
         let (Some(r), Some(logs)) = (response, logs) else {
-            self.abort("the robot did not follow the excitation: no delay could be fitted (is the robot feedback live?)".into());
+            self.abort(StopReason::RobotNotFollowing);
             return;
         };
         self.robot = Some(r);
@@ -947,12 +1119,10 @@ impl Procedure {
                         let next = self.wall + 1;
                         self.start_wall(next);
                     }
-                    Err(e) => {
-                        let name = self.walls[self.wall].0.clone();
-                        self.abort(format!(
-                            "wall '{name}': the probes could not be fitted: {e}"
-                        ))
-                    }
+                    Err(error) => self.abort(StopReason::Fit {
+                        wall: self.wall,
+                        error,
+                    }),
                 }
             }
             _ => {}
@@ -1042,8 +1212,9 @@ pub struct ProbeLogs {
     /// The tick of each probe's samples' poses.
     sample_ticks: Vec<Vec<usize>>,
     /// Each probe's samples that the law fit uses: from the robot's arrival at the pressed
-    /// point (a loop delay after the dwell starts) to its leaving (a loop delay after the
-    /// retreat starts), ticks.
+    /// point (a loop delay after the dwell starts) to the last pose before the robot can
+    /// answer the retreat ([`Procedure::mark_window_end`]), ticks (pose indices, the end
+    /// exclusive).
     windows: Vec<(usize, usize)>,
     /// Samples each probe's log holds.
     capacity: usize,
@@ -1214,5 +1385,93 @@ impl MaxByNormal for Vector3<f64> {
     fn max_by_normal(&self, normal: &Vector3<f64>, other: &Vector3<f64>) -> Vector3<f64> {
         let lift = (other - self).dot(normal).max(0.0);
         self + normal * lift
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hilcontact_core::facility::FacilityLoop;
+    use hilcontact_core::Scenario;
+
+    /// paper-table1's front wall, damped (ζ ≈ 0.1, c = 1403 N·s/m), on the honest facility at
+    /// an 80 ms robot delay (docs/calibration.md, "Measured, simulated").
+    fn damped_wall() -> Scenario {
+        let path = format!(
+            "{}/../../python/hilcontact/scenarios/paper-table1.toml",
+            env!("CARGO_MANIFEST_DIR")
+        );
+        let mut s: Scenario = toml::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        s.walls.truncate(1);
+        s.contact.damping = 1403.0;
+        let f = &mut s.facility;
+        f.robot_delay = 0.08;
+        f.sensor_delay = 0.005;
+        f.sensor_noise = 0.2;
+        f.robot_repeatability = 3e-5;
+        f.mount_offset = [0.0003, -0.0004, 0.0];
+        f.mount_rotation = [0.0, 0.3, 0.4];
+        f.stiffness_error = 1.07;
+        f.seed = 3;
+        s
+    }
+
+    #[test]
+    fn each_probe_s_fit_window_ends_before_the_retreat_moves_the_robot() {
+        let plan = damped_wall().resolve().unwrap();
+        let options = CalibrateOptions {
+            points_per_side: 2,
+            ..CalibrateOptions::default()
+        };
+        let mut procedure = Procedure::new(&plan, &options, 500.0).unwrap();
+        let mut facility = FacilityLoop::new(&plan);
+        let mut command = plan.nominal.relative_motion(&plan.initial);
+        // up to the wall's fit job (the robot's response fitted inline)
+        let job = loop {
+            let m = facility.tick(&command);
+            match procedure.step(&m) {
+                Step::Command(c) => command = c,
+                Step::Done => panic!("stopped: {:?}", procedure.error()),
+            }
+            match procedure.take_fit_job() {
+                Some(FitJob::Wall(job)) => break job,
+                Some(robot) => procedure.deliver_fit(robot.run()),
+                None => {}
+            }
+        };
+        let normal = job.normal;
+        let oscillation = 2.0
+            * std::f64::consts::PI
+            * options.dwell_frequency
+            * options.dwell_amplitude
+            * procedure.press_depth();
+        let logs = &job.logs;
+        for (j, ((samples, ticks), &(from, to))) in logs
+            .probes
+            .iter()
+            .zip(&logs.sample_ticks)
+            .zip(&logs.windows)
+            .take(job.probes)
+            .enumerate()
+        {
+            let (from, to) = (
+                ticks.partition_point(|&t| t < from),
+                ticks.partition_point(|&t| t < to),
+            );
+            assert!(to - from > 500, "probe {j}: {} samples", to - from);
+            // every sample of the window in contact (the retreat at move_speed, ten times the
+            // oscillation's speed, takes the tip out of contact within ~10 ms: a window that
+            // reached into it took samples at 0 N), and moving no faster than the oscillation
+            // (plus the robot's repeatability noise)
+            for s in &samples[from..to] {
+                let f = s.force.dot(&normal);
+                assert!(f > procedure.detect_force, "probe {j}: {f} N in the window");
+                let v = s.velocity.dot(&normal);
+                assert!(
+                    v <= 1.5 * oscillation + 0.002,
+                    "probe {j}: {v} m/s outwards in the window (the oscillation's peak {oscillation})"
+                );
+            }
+        }
     }
 }

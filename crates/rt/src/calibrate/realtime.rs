@@ -151,14 +151,20 @@ impl RealtimeProcedure {
         ))
     }
 
-    /// The force the loop's units check expects at the fed-back pose `actual`, N: the
-    /// scenario's (static) law at the penetration past the contact the current probe detected,
-    /// 0 while no probe is in contact.
+    /// The force the loop's units check expects at the fed-back pose, N: the scenario's
+    /// (static) law at the penetration past the contact the current probe detected, 0 while
+    /// no probe is in contact. The pose is the newest one the robot reported
+    /// ([`Procedure::fed_back_tip`]), not the loop's estimate `actual` extrapolated between
+    /// its messages (whose amplified reporting noise made the expected force spike).
     pub(crate) fn units_expected(&self, actual: &RelativeMotion) -> f64 {
         let Some((point, normal)) = self.procedure.contact_reference() else {
             return 0.0;
         };
-        let depth = (point - actual.point(&self.rod)).dot(&normal).max(0.0);
+        let tip = self
+            .procedure
+            .fed_back_tip()
+            .unwrap_or_else(|| actual.point(&self.rod));
+        let depth = (point - tip).dot(&normal).max(0.0);
         match self.law {
             ContactModel::Linear(l) => l.stiffness * depth,
             ContactModel::HuntCrossley(h) => h.stiffness * depth.powf(h.exponent),
@@ -262,6 +268,10 @@ impl RealtimeProcedure {
 impl Driver for RealtimeProcedure {
     fn set_robot_fresh(&mut self, fresh: bool) {
         self.procedure.set_robot_fresh(fresh)
+    }
+
+    fn set_sensor_fresh(&mut self, fresh: bool) {
+        self.procedure.set_sensor_fresh(fresh)
     }
 
     fn observe(&mut self, k: u64, m: &Measurement) -> (HilRecord, Option<StopEvent>) {
@@ -422,7 +432,7 @@ impl CalibrationHandle {
         let error = if let Some(reason) = &stop_reason {
             Some(format!("the loop stopped: {reason}"))
         } else if let Some(e) = procedure.error() {
-            Some(e.to_string())
+            Some(e)
         } else if !driver.done {
             Some(format!(
                 "the calibration did not finish in its time bound ({})",
@@ -461,7 +471,7 @@ impl CalibrationHandle {
         } else {
             0
         };
-        let realtime = loop_report(
+        let mut realtime = loop_report(
             &outcome,
             self.plan.period,
             0,
@@ -469,6 +479,18 @@ impl CalibrationHandle {
             exit_code,
             &self.runtime,
         );
+        // how the law's samples were paired: those with a new robot pose, and those of them
+        // left out because the force was a held sensor record (one period older)
+        let (held, with_pose) = procedure.held_forces();
+        if let Some(map) = realtime.as_object_mut() {
+            map.insert(
+                "pairing".into(),
+                serde_json::json!({
+                    "samples_with_new_pose": with_pose,
+                    "held_forces_left_out": held,
+                }),
+            );
+        }
         Ok(RealtimeCalibration {
             outcome: CalibrationOutcome {
                 file,
