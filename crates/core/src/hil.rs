@@ -31,6 +31,7 @@ pub fn compensator_context(plan: &Plan) -> CompensatorContext {
         sensor_delay_ticks: plan.sensor.delay_ticks,
         sensor_origin: plan.system.sensor_origin,
         reduced_mass: plan.system.reduced_mass(),
+        geometry: plan.geometry_prior(),
     }
 }
 

@@ -518,3 +518,74 @@ impl TwoBodySystem {
 fn servicer_pose(rel: &RelativeMotion) -> Isometry3<f64> {
     Isometry3::from_parts(Translation3::from(rel.position), rel.orientation)
 }
+
+/// Most surfaces a [`GeometryPrior`] query returns.
+pub const PRIOR_SURFACES: usize = 4;
+
+/// The scenario's nominal contact geometry as the compensators' prior for a contact's normal
+/// (issue 22): what the scenario states (its walls and shapes, [`crate::plan::Plan::nominal`]),
+/// not the facility's true mounting. Built once at plan time; its query is read-only and
+/// allocation-free.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GeometryPrior {
+    /// The nominal system (walls, shapes, rod tip).
+    pub system: TwoBodySystem,
+    /// The servicer's attitude relative to `t` (servicer to `t`) assumed for the shapes: the
+    /// scenario's initial one (the measured tip position places it).
+    pub orientation: nalgebra::UnitQuaternion<f64>,
+    /// Largest nominal clearance (m) at which a wall still counts as touched (the facility's
+    /// mounting and the robot's tracking put the measured tip off the nominal wall).
+    pub wall_margin: f64,
+    /// The nominal friction coefficient (the largest of the scenario's kinetic and static
+    /// ones): the cone about a prior normal within which a measured force agrees with it.
+    pub friction: f64,
+}
+
+impl GeometryPrior {
+    /// The nominal contact normals (into the target, unit, `t`) for the rod tip at `tip`
+    /// (`t`, m), one per surface: each wall the tip is behind (or within
+    /// [`GeometryPrior::wall_margin`] of), and the shapes' contact points (the servicer placed
+    /// by `tip` and [`GeometryPrior::orientation`]) merged within 10° and force-weighted
+    /// (the nominal law at the point's depth, no velocity). Writes up to [`PRIOR_SURFACES`]
+    /// normals into `out` and returns how many. Allocation-free.
+    pub fn normals(&self, tip: &Vector3<f64>, out: &mut [Vector3<f64>; PRIOR_SURFACES]) -> usize {
+        let mut sums = [Vector3::zeros(); PRIOR_SURFACES];
+        let mut count = 0;
+        let mut add = |n: Vector3<f64>, w: f64, sums: &mut [Vector3<f64>; PRIOR_SURFACES]| {
+            if let Some(s) = sums[..count]
+                .iter_mut()
+                .find(|s| s.normalize().dot(&n) > 10f64.to_radians().cos())
+            {
+                *s += n * w;
+            } else if count < PRIOR_SURFACES {
+                sums[count] = n * w;
+                count += 1;
+            }
+        };
+        for wall in &self.system.contact.walls {
+            let distance = wall.signed_distance(tip);
+            if distance < self.wall_margin {
+                add(-wall.normal, self.wall_margin - distance, &mut sums);
+            }
+        }
+        if !self.system.contact.shapes.is_empty() {
+            let rel = RelativeMotion {
+                position: tip - self.orientation * self.system.rod_tip,
+                orientation: self.orientation,
+                velocity: Vector3::zeros(),
+                angular_velocity: Vector3::zeros(),
+            };
+            self.system
+                .for_each_shape_contact_force(&rel, 0.0, |point, force| {
+                    let w = force.force.dot(&point.normal);
+                    if w > 0.0 {
+                        add(-point.normal, w, &mut sums);
+                    }
+                });
+        }
+        for i in 0..count {
+            out[i] = sums[i].normalize();
+        }
+        count
+    }
+}

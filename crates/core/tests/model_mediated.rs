@@ -50,6 +50,7 @@ fn one_contact(
         sensor_delay_ticks: sensor_ticks,
         sensor_origin: Vector3::new(0.0, 0.0, -0.15),
         reduced_mass: 279.0,
+        geometry: None,
     };
     let mut c = ModelMediated::new(params, &context);
     let n = wall.normal;

@@ -28,6 +28,11 @@ use super::params::{DelayMode, ModelParams};
 use super::surface::{SurfaceFit, MIN_FIT_SAMPLES};
 use super::{CompensatorContext, CompensatorInput};
 use crate::delay_line::DelayLine;
+use crate::world::{GeometryPrior, PRIOR_SURFACES};
+
+/// Angle (rad) added to the nominal friction cone within which a measured force agrees with
+/// the geometry's normal ([`ContactEstimator`]'s prior): the noise's and the mounting's.
+pub const PRIOR_CONE_MARGIN: f64 = 0.05;
 
 /// What the identification front end makes of a tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -145,6 +150,10 @@ pub struct ContactEstimator {
     relawed: bool,
     /// Contacts ended so far (whose law the filter has learnt).
     contacts: usize,
+    /// The scenario's nominal geometry ([`CompensatorContext::geometry`]).
+    geometry: Option<std::sync::Arc<GeometryPrior>>,
+    /// Whether the current contact's normal is the geometry's prior (its own not yet fitted).
+    geometric: bool,
 }
 
 impl ContactEstimator {
@@ -188,6 +197,8 @@ impl ContactEstimator {
             reseeded: false,
             relawed: false,
             contacts: 0,
+            geometry: context.geometry.clone(),
+            geometric: false,
         }
     }
 
@@ -214,6 +225,7 @@ impl ContactEstimator {
         self.fit.reset();
         self.reseeded = false;
         self.relawed = false;
+        self.geometric = false;
         let e = force.normalize();
         self.surface = self
             .surfaces
@@ -235,13 +247,20 @@ impl ContactEstimator {
         if self.fit.samples() >= MIN_FIT_SAMPLES {
             self.fit.fit(2);
             if self.fit.is_determined() {
-                let was_frictional = self.surface.frictional;
+                // the geometry's prior was not the contact's own identification
+                let was_frictional = self.surface.frictional && !self.geometric;
+                self.geometric = false;
                 self.surface.frictional = self.fit.leans();
                 self.surface.normal = self.fit.normal().0;
                 if self.surface.frictional && !was_frictional && !self.reseeded {
                     self.reseed();
                 }
             }
+        }
+        // a surface not met before (none remembered matched its first force)
+        let new_surface = self.surface.normal == Vector3::zeros();
+        if !self.fit.is_determined() && (self.geometric || new_surface) {
+            self.geometry_prior(sample);
         }
         if self.surface.frictional
             && !self.relawed
@@ -258,6 +277,42 @@ impl ContactEstimator {
                 self.surface.friction = mu;
                 self.surface.weight = weight;
             }
+        }
+    }
+
+    /// Before a contact's own normal is fitted (its [`MIN_FIT_SAMPLES`]-th sample of a contact of
+    /// 53-120 on the frictional presets), the force's direction, which friction leans by
+    /// `atan μ`, would be the normal: the scenario's nominal geometry
+    /// ([`GeometryPrior::normals`] at the sample's tip) gives it instead, the surface whose
+    /// normal is nearest the force's direction, when the force lies within the nominal
+    /// friction cone about it (plus [`PRIOR_CONE_MARGIN`]: the geometry agrees with the
+    /// measurement). The surface is then taken as frictional along that normal (friction
+    /// follows the normal force) until the contact's own fit replaces it. No geometry (a
+    /// frictionless scenario): nothing changes.
+    fn geometry_prior(&mut self, sample: &Sample) {
+        let Some(geometry) = self.geometry.as_deref() else {
+            return;
+        };
+        let mut normals = [Vector3::zeros(); PRIOR_SURFACES];
+        let count = geometry.normals(&sample.position, &mut normals);
+        let e = sample.force.normalize();
+        let cone = (geometry.friction.atan() + PRIOR_CONE_MARGIN).cos();
+        match normals[..count]
+            .iter()
+            .filter(|n| n.dot(&e) >= cone)
+            .max_by(|a, b| a.dot(&e).total_cmp(&b.dot(&e)))
+        {
+            Some(n) => {
+                self.surface.normal = *n;
+                self.surface.frictional = true;
+                self.geometric = true;
+            }
+            None if self.geometric => {
+                // the geometry no longer agrees: back to the force's direction
+                self.surface = KnownSurface::default();
+                self.geometric = false;
+            }
+            None => {}
         }
     }
 
@@ -355,6 +410,7 @@ impl ContactEstimator {
         self.reseeded = false;
         self.relawed = false;
         self.contacts = 0;
+        self.geometric = false;
     }
 
     /// One tick: delay compensation, identification, contact direction. Allocation-free.
@@ -522,6 +578,7 @@ mod tests {
             sensor_delay_ticks: 0,
             sensor_origin: Vector3::zeros(),
             reduced_mass: 280.0,
+            geometry: None,
         };
         let mut estimator = ContactEstimator::new(&ModelParams::default(), &context);
         let n = Vector3::new(1.0, 0.3, -0.2).normalize(); // into the wall

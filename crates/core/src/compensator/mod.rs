@@ -122,7 +122,7 @@ impl CompensatorOutput {
 }
 
 /// Fixed facts a compensator may use.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct CompensatorContext {
     /// Control period T, s.
     pub period: f64,
@@ -133,6 +133,10 @@ pub struct CompensatorContext {
     /// Reduced mass of the virtual satellites μ = m_s m_t/(m_s + m_t), kg (the virtual model
     /// is software, so its masses are known).
     pub reduced_mass: f64,
+    /// The scenario's nominal contact geometry, the prior for a contact's normal before the
+    /// contact's own is fitted ([`crate::world::GeometryPrior`]; `None`: frictionless scenario
+    /// or none given). Read-only, its query allocation-free.
+    pub geometry: Option<std::sync::Arc<crate::world::GeometryPrior>>,
 }
 
 impl CompensatorContext {
