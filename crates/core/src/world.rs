@@ -583,8 +583,8 @@ impl GeometryPrior {
                     }
                 });
         }
-        for i in 0..count {
-            out[i] = sums[i].normalize();
+        for (o, s) in out.iter_mut().zip(&sums).take(count) {
+            *o = s.normalize();
         }
         count
     }

@@ -150,7 +150,8 @@ pub struct ContactEstimator {
     relawed: bool,
     /// Contacts ended so far (whose law the filter has learnt).
     contacts: usize,
-    /// The scenario's nominal geometry ([`CompensatorContext::geometry`]).
+    /// The scenario's nominal geometry ([`CompensatorContext::geometry`]; only `pida`'s,
+    /// [`ContactEstimator::with_geometry`]).
     geometry: Option<std::sync::Arc<GeometryPrior>>,
     /// Whether the current contact's normal is the geometry's prior (its own not yet fitted).
     geometric: bool,
@@ -197,9 +198,17 @@ impl ContactEstimator {
             reseeded: false,
             relawed: false,
             contacts: 0,
-            geometry: context.geometry.clone(),
+            geometry: None,
             geometric: false,
         }
+    }
+
+    /// The scenario's nominal geometry as the prior for a new surface's normal before the
+    /// contact's own is fitted ([`CompensatorContext::geometry`]; `pida` sets it, the other
+    /// users of the front end do not).
+    pub fn with_geometry(mut self, geometry: Option<std::sync::Arc<GeometryPrior>>) -> Self {
+        self.geometry = geometry;
+        self
     }
 
     /// The current (or last) contact's surface: its normal fit ([`SurfaceFit`]) and the

@@ -21,7 +21,7 @@ impl Pida {
     /// A PIDA compensator.
     pub fn new(p: &ModelParams, context: &CompensatorContext) -> Self {
         Pida {
-            estimator: ContactEstimator::new(p, context),
+            estimator: ContactEstimator::new(p, context).with_geometry(context.geometry.clone()),
             amendment: DampingAmendment::new(p, context),
             sensor_origin: context.sensor_origin,
         }
