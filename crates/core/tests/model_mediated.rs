@@ -94,6 +94,7 @@ fn one_contact(
             },
             tip_position_actual: p_act,
             tip_velocity_actual: v_act,
+            orientation_actual: None,
             tip_position_desired: p_des,
             tip_velocity_desired: v_des,
             tip_mobility: nalgebra::Matrix3::zeros(), // not read by model-mediated

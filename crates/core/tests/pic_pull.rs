@@ -37,6 +37,7 @@ fn input(
         measured: FrameWrench::default(),
         tip_position_actual: p_act,
         tip_velocity_actual: v_act,
+        orientation_actual: None,
         tip_position_desired: p_act + lag,
         tip_velocity_desired: v_act + dv,
         tip_mobility: Matrix3::zeros(),
