@@ -24,6 +24,7 @@ fn view(force: Vector3<f64>, stiffness: f64, damping: f64) -> ContactView {
         normal: e,
         frictional: false,
         friction: 0.0,
+        corner: false,
     }
 }
 

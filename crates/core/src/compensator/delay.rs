@@ -70,6 +70,10 @@ pub struct ContactView {
     /// Identified friction coefficient μ̂ (0 on a frictionless surface or before a sliding
     /// sample).
     pub friction: f64,
+    /// Whether the contact presses several surfaces at once by the scenario's geometry (a
+    /// corner, an edge; [`crate::world::GeometryPrior::contact_normal`]): `normal` is the
+    /// direction of their summed normal force.
+    pub corner: bool,
 }
 
 /// A surface met before: its identified normal and friction, for the next contact's first
@@ -169,6 +173,8 @@ pub struct ContactEstimator {
     geometry: Option<std::sync::Arc<GeometryPrior>>,
     /// Whether the current contact's normal is the geometry's prior.
     geometric: bool,
+    /// Whether the geometry's prior presses several surfaces at once (a corner, an edge).
+    corner: bool,
 }
 
 impl ContactEstimator {
@@ -215,6 +221,7 @@ impl ContactEstimator {
             contacts: 0,
             geometry: None,
             geometric: false,
+            corner: false,
         }
     }
 
@@ -250,6 +257,7 @@ impl ContactEstimator {
         self.reseeded = false;
         self.relawed = false;
         self.geometric = false;
+        self.corner = false;
         let e = force.normalize();
         self.surface = self
             .surfaces
@@ -345,6 +353,7 @@ impl ContactEstimator {
                 self.surface.normal = n;
                 self.surface.frictional = true;
                 self.geometric = true;
+                self.corner = surfaces > 1;
                 true
             }
             _ => {
@@ -357,6 +366,7 @@ impl ContactEstimator {
                     };
                     self.geometric = false;
                 }
+                self.corner = false;
                 false
             }
         }
@@ -458,6 +468,7 @@ impl ContactEstimator {
         self.relawed = false;
         self.contacts = 0;
         self.geometric = false;
+        self.corner = false;
     }
 
     /// One tick: delay compensation, identification, contact direction. Allocation-free.
@@ -612,6 +623,7 @@ impl ContactEstimator {
                 direction
             },
             frictional,
+            corner: frictional && self.corner,
             friction: if frictional {
                 self.surface.friction
             } else {

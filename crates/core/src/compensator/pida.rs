@@ -100,7 +100,7 @@ impl Compensator for Pida {
             );
         }
         let alpha = self.amendment.step(&view, &comp.force, input); // steps 7-10
-        if friction {
+        if friction && !view.corner {
             comp = net_friction(
                 &comp,
                 &alpha,
