@@ -31,6 +31,7 @@ pub fn compensator_context(plan: &Plan) -> CompensatorContext {
         sensor_delay_ticks: plan.sensor.delay_ticks,
         sensor_origin: plan.system.sensor_origin,
         reduced_mass: plan.system.reduced_mass(),
+        geometry: plan.geometry_prior(),
     }
 }
 
@@ -139,6 +140,7 @@ impl VirtualDynamics {
             },
             tip_position_actual: m.actual.point(rod),
             tip_velocity_actual: m.actual.point_velocity(rod),
+            orientation_actual: Some(m.actual.orientation),
             tip_position_desired: desired.point(rod),
             tip_velocity_desired: desired.point_velocity(rod),
             tip_mobility: if self.mobility {

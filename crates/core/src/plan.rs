@@ -33,7 +33,7 @@ use crate::error::{CoreError, Issues, Result};
 use crate::metrics::Tolerances;
 use crate::schema::check_ranges;
 use crate::shapes::{BodyShape, ShapeGeometry, ShapePairs};
-use crate::world::{TwoBodyState, TwoBodySystem};
+use crate::world::{GeometryPrior, TwoBodyState, TwoBodySystem};
 
 /// The F/T sensor as the HIL loop knows it, whatever stands in for the hardware (a facility
 /// engine or the real devices): its attitude on the frame and its delay, which the loop, the
@@ -378,6 +378,31 @@ impl Plan {
         };
         plan.check_shapes_apart()?;
         Ok(plan)
+    }
+
+    /// The scenario's nominal geometry as the compensators' prior for a contact's normal
+    /// ([`GeometryPrior`], issue 22), when the scenario has friction (`None` when frictionless:
+    /// the force's direction is then the normal, and frictionless runs keep their numbers).
+    /// Built from [`Plan::nominal`] only (not the facility's true mounting), the servicer's
+    /// initial attitude relative to `t`, a 2 mm wall margin. Allocates once, here.
+    pub fn geometry_prior(&self) -> Option<std::sync::Arc<GeometryPrior>> {
+        let c = &self.nominal.contact;
+        let friction = c
+            .friction
+            .iter()
+            .chain(c.shape_friction.iter().flatten())
+            .map(|f| f.kinetic_coefficient.max(f.static_coefficient))
+            .fold(0.0, f64::max);
+        if friction <= 0.0 || (c.walls.is_empty() && c.shapes.is_empty()) {
+            return None;
+        }
+        let orientation = self.nominal.relative_motion(&self.initial).orientation;
+        Some(std::sync::Arc::new(GeometryPrior {
+            system: self.nominal.clone(),
+            orientation,
+            wall_margin: 2e-3,
+            friction,
+        }))
     }
 
     /// Refuses shapes that start interpenetrating: the first pair of shapes in contact at the

@@ -184,6 +184,8 @@ impl<'a> Recording<'a> {
             },
             tip_position_actual: actual_position,
             tip_velocity_actual: actual_velocity,
+            // a recording has no attitude column
+            orientation_actual: None,
             tip_position_desired: self
                 .tip_position
                 .map_or(actual_position, |c| Self::at(&c, k)),

@@ -518,3 +518,130 @@ impl TwoBodySystem {
 fn servicer_pose(rel: &RelativeMotion) -> Isometry3<f64> {
     Isometry3::from_parts(Translation3::from(rel.position), rel.orientation)
 }
+
+/// Most surfaces a [`GeometryPrior`] query returns.
+pub const PRIOR_SURFACES: usize = 4;
+
+/// The scenario's nominal contact geometry as the compensators' prior for a contact's normal
+/// (issue 22): what the scenario states (its walls and shapes, [`crate::plan::Plan::nominal`]),
+/// not the facility's true mounting. Built once at plan time; its query is read-only and
+/// allocation-free.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GeometryPrior {
+    /// The nominal system (walls, shapes, rod tip).
+    pub system: TwoBodySystem,
+    /// The servicer's attitude relative to `t` (servicer to `t`) assumed for the shapes where
+    /// the robot's measured one is not known ([`GeometryPrior::normals`]; a recording without
+    /// it): the scenario's initial one.
+    pub orientation: nalgebra::UnitQuaternion<f64>,
+    /// Largest nominal clearance (m) at which a wall still counts as touched (the facility's
+    /// mounting and the robot's tracking put the measured tip off the nominal wall).
+    pub wall_margin: f64,
+    /// The nominal friction coefficient (the largest of the scenario's kinetic and static
+    /// ones): the cone about a prior normal within which a measured force agrees with it.
+    pub friction: f64,
+}
+
+impl GeometryPrior {
+    /// The nominal contact normals (into the target, unit, `t`) for the rod tip at `tip`
+    /// (`t`, m), one per surface, the servicer at [`GeometryPrior::orientation`]
+    /// ([`GeometryPrior::normals_at`]). Writes up to [`PRIOR_SURFACES`] normals into `out` and
+    /// returns how many. Allocation-free.
+    pub fn normals(&self, tip: &Vector3<f64>, out: &mut [Vector3<f64>; PRIOR_SURFACES]) -> usize {
+        self.normals_at(tip, &self.orientation, out)
+    }
+
+    /// The nominal contact normals (into the target, unit, `t`) for the rod tip at `tip`
+    /// (`t`, m) and the servicer at `orientation` (servicer to `t`: the robot's measured
+    /// attitude), one per surface: each wall the tip is behind (or within
+    /// [`GeometryPrior::wall_margin`] of), and the shapes' contact points (the servicer placed
+    /// by `tip` and `orientation`) merged within 10° and force-weighted (the nominal law at the
+    /// point's depth, no velocity). Writes up to [`PRIOR_SURFACES`] normals into `out` and
+    /// returns how many. Allocation-free.
+    pub fn normals_at(
+        &self,
+        tip: &Vector3<f64>,
+        orientation: &nalgebra::UnitQuaternion<f64>,
+        out: &mut [Vector3<f64>; PRIOR_SURFACES],
+    ) -> usize {
+        let mut sums = [Vector3::zeros(); PRIOR_SURFACES];
+        let count = self.weighted_normals(tip, orientation, &mut sums);
+        for (o, s) in out.iter_mut().zip(&sums).take(count) {
+            *o = s.normalize();
+        }
+        count
+    }
+
+    /// The nominal direction of the whole contact's normal force (into the target, unit, `t`)
+    /// for the rod tip at `tip` (`t`, m) and the servicer at `orientation` (servicer to `t`):
+    /// the weighted sum of every surface's normal ([`GeometryPrior::normals_at`]'s weights), so
+    /// that a corner pressing two surfaces gives the direction of their summed normal force, and
+    /// how many surfaces (normals more than 10° apart) it sums; `None` where the tip touches no
+    /// nominal surface. Allocation-free.
+    pub fn contact_normal(
+        &self,
+        tip: &Vector3<f64>,
+        orientation: &nalgebra::UnitQuaternion<f64>,
+    ) -> Option<(Vector3<f64>, usize)> {
+        let mut sums = [Vector3::zeros(); PRIOR_SURFACES];
+        let count = self.weighted_normals(tip, orientation, &mut sums);
+        let total: Vector3<f64> = sums[..count].iter().sum();
+        (count > 0 && total.norm() > 0.0).then(|| (total.normalize(), count))
+    }
+
+    /// The surfaces' normals times their weights (walls: the nominal depth of the tip behind
+    /// them, or, when it is behind none, `wall_margin` less its clearance; shapes: the nominal
+    /// normal force), merged within 10°, into `sums`; returns how many. Allocation-free.
+    fn weighted_normals(
+        &self,
+        tip: &Vector3<f64>,
+        orientation: &nalgebra::UnitQuaternion<f64>,
+        sums: &mut [Vector3<f64>; PRIOR_SURFACES],
+    ) -> usize {
+        let mut count = 0;
+        let mut add = |n: Vector3<f64>, w: f64, sums: &mut [Vector3<f64>; PRIOR_SURFACES]| {
+            if let Some(s) = sums[..count]
+                .iter_mut()
+                .find(|s| s.normalize().dot(&n) > 10f64.to_radians().cos())
+            {
+                *s += n * w;
+            } else if count < PRIOR_SURFACES {
+                sums[count] = n * w;
+                count += 1;
+            }
+        };
+        let walls = &self.system.contact.walls;
+        // behind a wall: the walls' depths weigh (a corner's summed normal force); else the
+        // walls within the margin, by how near
+        let behind = walls.iter().any(|w| w.signed_distance(tip) < 0.0);
+        for wall in walls {
+            let distance = wall.signed_distance(tip);
+            if distance < self.wall_margin {
+                let w = if behind {
+                    (-distance).max(0.0)
+                } else {
+                    self.wall_margin - distance
+                };
+                if w > 0.0 {
+                    add(-wall.normal, w, sums);
+                }
+            }
+        }
+        if !self.system.contact.shapes.is_empty() {
+            let rel = RelativeMotion {
+                position: tip - orientation * self.system.rod_tip,
+                orientation: *orientation,
+                velocity: Vector3::zeros(),
+                angular_velocity: Vector3::zeros(),
+            };
+            self.system
+                .for_each_shape_contact_force(&rel, 0.0, |point, force| {
+                    let w = force.force.dot(&point.normal);
+                    if w > 0.0 {
+                        add(-point.normal, w, sums);
+                    }
+                });
+        }
+        count
+    }
+}

@@ -50,6 +50,7 @@ fn one_contact(
         sensor_delay_ticks: sensor_ticks,
         sensor_origin: Vector3::new(0.0, 0.0, -0.15),
         reduced_mass: 279.0,
+        geometry: None,
     };
     let mut c = ModelMediated::new(params, &context);
     let n = wall.normal;
@@ -93,6 +94,7 @@ fn one_contact(
             },
             tip_position_actual: p_act,
             tip_velocity_actual: v_act,
+            orientation_actual: None,
             tip_position_desired: p_des,
             tip_velocity_desired: v_des,
             tip_mobility: nalgebra::Matrix3::zeros(), // not read by model-mediated

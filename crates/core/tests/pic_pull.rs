@@ -24,6 +24,7 @@ fn view(force: Vector3<f64>, stiffness: f64, damping: f64) -> ContactView {
         normal: e,
         frictional: false,
         friction: 0.0,
+        corner: false,
     }
 }
 
@@ -37,6 +38,7 @@ fn input(
         measured: FrameWrench::default(),
         tip_position_actual: p_act,
         tip_velocity_actual: v_act,
+        orientation_actual: None,
         tip_position_desired: p_act + lag,
         tip_velocity_desired: v_act + dv,
         tip_mobility: Matrix3::zeros(),

@@ -20,7 +20,7 @@
 //! [`MAX_HELD_TICKS`]). Pairing a held force with the present kinematics drifted k̂ low and ĉ
 //! negative (docs/identification.md, "Stale sensor records").
 
-use nalgebra::{Matrix2, Vector2, Vector3};
+use nalgebra::{Matrix2, UnitQuaternion, Vector2, Vector3};
 
 use super::akf::SageHusaFilter;
 use super::detect::ContactDetector;
@@ -28,6 +28,21 @@ use super::params::{DelayMode, ModelParams};
 use super::surface::{SurfaceFit, MIN_FIT_SAMPLES};
 use super::{CompensatorContext, CompensatorInput};
 use crate::delay_line::DelayLine;
+use crate::world::GeometryPrior;
+
+/// Angle (rad) added to the nominal friction cone within which a measured force agrees with
+/// the geometry's normal ([`ContactEstimator`]'s prior): the noise's and the mounting's.
+pub const PRIOR_CONE_MARGIN: f64 = 0.05;
+
+/// Largest angle (rad, 2°) between the geometry's normal and a contact's own fitted normal
+/// that the prior is kept through (with [`PRIOR_FIT_SIGMAS`] of the fit's standard error):
+/// beyond it the fit contradicts the nominal geometry (the hardware mounted off it) and
+/// replaces it. Below it the fit's own error is the larger: on `rod-in-frame` and
+/// `probe-drogue` the fitted normals were 0.2-4.4° off the true normal, the nominal one
+/// 0.0-0.6°.
+pub const PRIOR_FIT_TOLERANCE: f64 = 2.0 * std::f64::consts::PI / 180.0;
+/// Standard errors of the fitted normal added to [`PRIOR_FIT_TOLERANCE`].
+pub const PRIOR_FIT_SIGMAS: f64 = 3.0;
 
 /// What the identification front end makes of a tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -55,6 +70,10 @@ pub struct ContactView {
     /// Identified friction coefficient μ̂ (0 on a frictionless surface or before a sliding
     /// sample).
     pub friction: f64,
+    /// Whether the contact presses several surfaces at once by the scenario's geometry (a
+    /// corner, an edge; [`crate::world::GeometryPrior::contact_normal`]): `normal` is the
+    /// direction of their summed normal force.
+    pub corner: bool,
 }
 
 /// A surface met before: its identified normal and friction, for the next contact's first
@@ -80,6 +99,8 @@ struct Sample {
     force: Vector3<f64>,
     position: Vector3<f64>,
     velocity: Vector3<f64>,
+    /// The servicer's attitude with `position` (servicer to `t`), when known.
+    orientation: Option<UnitQuaternion<f64>>,
     in_contact: bool,
 }
 
@@ -118,6 +139,8 @@ pub struct ContactEstimator {
     sensor_origin: Vector3<f64>,
     /// Robot tip position and velocity of the last `τ_p/T + 1 + MAX_HELD_TICKS` ticks.
     kinematics: DelayLine<(Vector3<f64>, Vector3<f64>)>,
+    /// The robot's servicer attitude over the same ticks ([`CompensatorInput::orientation_actual`]).
+    attitudes: DelayLine<Option<UnitQuaternion<f64>>>,
     /// The present sensor record (force, moment): the last new one.
     last_record: (Vector3<f64>, Vector3<f64>),
     /// The sensor record before it.
@@ -145,6 +168,13 @@ pub struct ContactEstimator {
     relawed: bool,
     /// Contacts ended so far (whose law the filter has learnt).
     contacts: usize,
+    /// The scenario's nominal geometry ([`CompensatorContext::geometry`]; only `pida`'s,
+    /// [`ContactEstimator::with_geometry`]).
+    geometry: Option<std::sync::Arc<GeometryPrior>>,
+    /// Whether the current contact's normal is the geometry's prior.
+    geometric: bool,
+    /// Whether the geometry's prior presses several surfaces at once (a corner, an edge).
+    corner: bool,
 }
 
 impl ContactEstimator {
@@ -175,6 +205,7 @@ impl ContactEstimator {
                 delay_ticks + MAX_HELD_TICKS,
                 (Vector3::zeros(), Vector3::zeros()),
             ),
+            attitudes: DelayLine::new(delay_ticks + MAX_HELD_TICKS, None),
             last_record: (Vector3::zeros(), Vector3::zeros()),
             previous_measured: (Vector3::zeros(), Vector3::zeros()),
             record_gap: 1,
@@ -188,7 +219,18 @@ impl ContactEstimator {
             reseeded: false,
             relawed: false,
             contacts: 0,
+            geometry: None,
+            geometric: false,
+            corner: false,
         }
+    }
+
+    /// The scenario's nominal geometry as the prior for a new surface's normal before the
+    /// contact's own is fitted ([`CompensatorContext::geometry`]; `pida` sets it, the other
+    /// users of the front end do not).
+    pub fn with_geometry(mut self, geometry: Option<std::sync::Arc<GeometryPrior>>) -> Self {
+        self.geometry = geometry;
+        self
     }
 
     /// The current (or last) contact's surface: its normal fit ([`SurfaceFit`]) and the
@@ -214,6 +256,8 @@ impl ContactEstimator {
         self.fit.reset();
         self.reseeded = false;
         self.relawed = false;
+        self.geometric = false;
+        self.corner = false;
         let e = force.normalize();
         self.surface = self
             .surfaces
@@ -228,19 +272,30 @@ impl ContactEstimator {
             .unwrap_or_default();
     }
 
-    /// A contact sample: the fit, and the surface in use once the fit is determined.
+    /// A contact sample: the fit, and the surface in use: the geometry's normal while it
+    /// agrees with the measurement and the contact's own fit does not contradict it
+    /// ([`ContactEstimator::geometry_prior`]), else the fit once it is determined.
     fn contact_sample(&mut self, sample: &Sample) {
         self.fit
             .add(&sample.force, &sample.position, &sample.velocity);
         if self.fit.samples() >= MIN_FIT_SAMPLES {
             self.fit.fit(2);
-            if self.fit.is_determined() {
-                let was_frictional = self.surface.frictional;
-                self.surface.frictional = self.fit.leans();
-                self.surface.normal = self.fit.normal().0;
-                if self.surface.frictional && !was_frictional && !self.reseeded {
-                    self.reseed();
-                }
+        }
+        if self.geometry_prior(sample) {
+            // the filter's increments ran along the right normal, but from its prior law:
+            // re-seeded once the contact's own law along it is well determined, as a fitted
+            // frictional contact is
+            if self.fit.is_determined() && self.fit.leans() && !self.reseeded {
+                self.reseed();
+            }
+        } else if self.fit.is_determined() {
+            // the geometry's prior was not the contact's own identification
+            let was_frictional = self.surface.frictional && !self.geometric;
+            self.geometric = false;
+            self.surface.frictional = self.fit.leans();
+            self.surface.normal = self.fit.normal().0;
+            if self.surface.frictional && !was_frictional && !self.reseeded {
+                self.reseed();
             }
         }
         if self.surface.frictional
@@ -257,6 +312,62 @@ impl ContactEstimator {
             if weight > 0.0 {
                 self.surface.friction = mu;
                 self.surface.weight = weight;
+            }
+        }
+    }
+
+    /// The force's direction, which friction leans by `atan μ`, is not the contact's normal,
+    /// and the contact's own fit ([`SurfaceFit`]) needs [`MIN_FIT_SAMPLES`] and more of a
+    /// contact of 53-120 on the frictional presets, and errs by degrees on a corner or a turning
+    /// servicer: the scenario's nominal geometry gives the normal instead
+    /// ([`GeometryPrior::contact_normal`] at the sample's tip and the robot's attitude: the
+    /// direction of the nominal normal force, a corner's two surfaces summed), when the force
+    /// lies within the nominal friction cone about it (plus [`PRIOR_CONE_MARGIN`]: the geometry
+    /// agrees with the measurement) and the contact's own fit, determined and leaning (a
+    /// frictional plane identified), does not contradict it on a single surface (more than
+    /// [`PRIOR_FIT_TOLERANCE`] plus [`PRIOR_FIT_SIGMAS`] standard errors apart: the hardware
+    /// is mounted off its nominal pose). The surface is then frictional along that normal
+    /// (friction follows the normal force). Returns whether the prior is in use; when it stops
+    /// agreeing before the fit is determined, the force's direction is the normal again (the
+    /// friction coefficient kept). No geometry (a frictionless scenario): nothing changes.
+    fn geometry_prior(&mut self, sample: &Sample) -> bool {
+        let Some(geometry) = self.geometry.as_deref() else {
+            return false;
+        };
+        let orientation = sample.orientation.unwrap_or(geometry.orientation);
+        let e = sample.force.normalize();
+        let cone = (geometry.friction.atan() + PRIOR_CONE_MARGIN).cos();
+        let agrees = geometry
+            .contact_normal(&sample.position, &orientation)
+            .filter(|(n, _)| n.dot(&e) >= cone);
+        let contradicted = |n: &Vector3<f64>, surfaces: usize| {
+            let (fitted, std) = self.fit.normal();
+            surfaces == 1
+                && self.fit.is_determined()
+                && self.fit.leans()
+                && fitted.dot(n).clamp(-1.0, 1.0).acos()
+                    > PRIOR_FIT_TOLERANCE + PRIOR_FIT_SIGMAS * std
+        };
+        match agrees {
+            Some((n, surfaces)) if !contradicted(&n, surfaces) => {
+                self.surface.normal = n;
+                self.surface.frictional = true;
+                self.geometric = true;
+                self.corner = surfaces > 1;
+                true
+            }
+            _ => {
+                if self.geometric && !self.fit.is_determined() {
+                    // the geometry no longer agrees: back to the force's direction
+                    self.surface = KnownSurface {
+                        friction: self.surface.friction,
+                        weight: self.surface.weight,
+                        ..KnownSurface::default()
+                    };
+                    self.geometric = false;
+                }
+                self.corner = false;
+                false
             }
         }
     }
@@ -341,6 +452,7 @@ impl ContactEstimator {
     /// Forgets everything but the parameters.
     pub fn reset(&mut self) {
         self.kinematics.fill((Vector3::zeros(), Vector3::zeros()));
+        self.attitudes.fill(None);
         self.last_record = (Vector3::zeros(), Vector3::zeros());
         self.previous_measured = (Vector3::zeros(), Vector3::zeros());
         self.record_gap = 1;
@@ -355,6 +467,8 @@ impl ContactEstimator {
         self.reseeded = false;
         self.relawed = false;
         self.contacts = 0;
+        self.geometric = false;
+        self.corner = false;
     }
 
     /// One tick: delay compensation, identification, contact direction. Allocation-free.
@@ -367,6 +481,7 @@ impl ContactEstimator {
         if first {
             // first tick: the kinematics held their present value for all earlier time
             self.kinematics.fill((p_act, v_act));
+            self.attitudes.fill(input.orientation_actual);
             self.last_record = (f_mea, m_mea);
             self.previous_measured = (f_mea, m_mea);
         } else if fresh {
@@ -378,6 +493,7 @@ impl ContactEstimator {
             self.held = (self.held + 1).min(MAX_HELD_TICKS);
         }
         self.kinematics.push((p_act, v_act));
+        self.attitudes.push(input.orientation_actual);
         // the present record was measured τ_p before it arrived, `held` ticks ago
         let lag = self.delay_ticks + self.held;
 
@@ -391,15 +507,24 @@ impl ContactEstimator {
             Some(held) if !fresh => held,
             _ => {
                 // the identification sample: a force and the kinematics that produced it
-                let (force, (position, velocity)) = match self.mode {
+                let (force, (position, velocity), orientation) = match self.mode {
                     // (6) F_act = F_mea + τ_p dF_mea/dt, against the present kinematics
-                    DelayMode::Lead => (lead(f_mea, self.previous_measured.0), (p_act, v_act)),
-                    DelayMode::Align => (f_mea, self.kinematics.delayed(self.delay_ticks)),
+                    DelayMode::Lead => (
+                        lead(f_mea, self.previous_measured.0),
+                        (p_act, v_act),
+                        input.orientation_actual,
+                    ),
+                    DelayMode::Align => (
+                        f_mea,
+                        self.kinematics.delayed(self.delay_ticks),
+                        self.attitudes.delayed(self.delay_ticks),
+                    ),
                 };
                 let sample = Sample {
                     force,
                     position,
                     velocity,
+                    orientation,
                     in_contact: self.detector.update(&force),
                 };
                 let was_in_contact = self.previous_sample.is_some_and(|s| s.in_contact);
@@ -498,6 +623,7 @@ impl ContactEstimator {
                 direction
             },
             frictional,
+            corner: frictional && self.corner,
             friction: if frictional {
                 self.surface.friction
             } else {
@@ -522,6 +648,7 @@ mod tests {
             sensor_delay_ticks: 0,
             sensor_origin: Vector3::zeros(),
             reduced_mass: 280.0,
+            geometry: None,
         };
         let mut estimator = ContactEstimator::new(&ModelParams::default(), &context);
         let n = Vector3::new(1.0, 0.3, -0.2).normalize(); // into the wall
@@ -557,6 +684,7 @@ mod tests {
                     },
                     tip_position_actual: p,
                     tip_velocity_actual: v,
+                    orientation_actual: None,
                     tip_position_desired: p,
                     tip_velocity_desired: v,
                     tip_mobility: Matrix3::zeros(),

@@ -35,7 +35,7 @@ pub use pic::Pic;
 pub use pida::Pida;
 pub use tdpa::{TdpaAdmittance, TdpaImpedance};
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -50,6 +50,10 @@ pub struct CompensatorInput {
     pub tip_position_actual: Vector3<f64>,
     /// Actual contact-point velocity, eq. (4), m/s.
     pub tip_velocity_actual: Vector3<f64>,
+    /// Actual attitude of the servicer relative to the target (servicer to `t`) from the
+    /// robot's forward kinematics, as eq. (3)'s tip (`None`: not known, e.g. a recording without
+    /// it; the geometry prior then assumes the scenario's initial attitude).
+    pub orientation_actual: Option<UnitQuaternion<f64>>,
     /// Desired contact point from the virtual dynamics, eq. (25), m.
     pub tip_position_desired: Vector3<f64>,
     /// Desired contact-point velocity, eq. (26), m/s.
@@ -122,7 +126,7 @@ impl CompensatorOutput {
 }
 
 /// Fixed facts a compensator may use.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct CompensatorContext {
     /// Control period T, s.
     pub period: f64,
@@ -133,6 +137,10 @@ pub struct CompensatorContext {
     /// Reduced mass of the virtual satellites μ = m_s m_t/(m_s + m_t), kg (the virtual model
     /// is software, so its masses are known).
     pub reduced_mass: f64,
+    /// The scenario's nominal contact geometry, the prior for a contact's normal before the
+    /// contact's own is fitted ([`crate::world::GeometryPrior`]; `None`: frictionless scenario
+    /// or none given). Read-only, its query allocation-free.
+    pub geometry: Option<std::sync::Arc<crate::world::GeometryPrior>>,
 }
 
 impl CompensatorContext {

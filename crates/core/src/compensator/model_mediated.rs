@@ -224,7 +224,14 @@ impl ModelMediated {
         let (surfaces, initial_law) = initial_model(p);
         ModelMediated {
             params: p.clone(),
-            fallback: Pida::new(&p.fallback, context),
+            // the model renders from its own prior walls; its fallback without the geometry prior
+            fallback: Pida::new(
+                &p.fallback,
+                &CompensatorContext {
+                    geometry: None,
+                    ..context.clone()
+                },
+            ),
             detector: ContactDetector::new(p.fallback.contact_force, context.period),
             period: context.period,
             delay_ticks: context.sensor_delay_ticks,
