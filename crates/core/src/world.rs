@@ -310,7 +310,13 @@ impl TwoBodySystem {
 
     /// [`TwoBodySystem::true_rates`] and the power of the contact's friction, W (≤ 0).
     fn true_rates_and_friction_power(&self, x: &TwoBodyState) -> ((BodyRate, BodyRate), f64) {
-        let c = self.contact_at(&self.relative_motion(x), 0.0);
+        self.true_rates_at(x, &self.relative_motion(x))
+    }
+
+    /// [`TwoBodySystem::true_rates_and_friction_power`] with the relative motion at `x` given
+    /// (`rel`, as [`TwoBodySystem::relative_motion`] gives it): the same numbers, to the bit.
+    fn true_rates_at(&self, x: &TwoBodyState, rel: &RelativeMotion) -> ((BodyRate, BodyRate), f64) {
+        let c = self.contact_at(rel, 0.0);
         let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, &c.wrench);
         (
             (
@@ -325,11 +331,24 @@ impl TwoBodySystem {
     /// energy friction dissipated over it, J (≥ 0; the friction power integrated with the
     /// step's own RK4 weights).
     pub fn step_rk4(&self, x: &mut TwoBodyState, h: f64) -> f64 {
+        let first = self.true_rates_and_friction_power(x);
+        self.step_rk4_with(x, &first, h)
+    }
+
+    /// [`TwoBodySystem::step_rk4`] with its first stage given (`first`, the rates and friction
+    /// power at `x` as [`TwoBodySystem::true_rates_and_friction_power`] gives them): the same
+    /// step, to the bit; steps of several widths from one state share their first stage.
+    fn step_rk4_with(
+        &self,
+        x: &mut TwoBodyState,
+        first: &((BodyRate, BodyRate), f64),
+        h: f64,
+    ) -> f64 {
         let advance = |x: &TwoBodyState, r: &(BodyRate, BodyRate), dt: f64| TwoBodyState {
             servicer: x.servicer.advanced(&r.0, dt),
             target: x.target.advanced(&r.1, dt),
         };
-        let (k1, p1) = self.true_rates_and_friction_power(x);
+        let (k1, p1) = *first;
         let (k2, p2) = self.true_rates_and_friction_power(&advance(x, &k1, 0.5 * h));
         let (k3, p3) = self.true_rates_and_friction_power(&advance(x, &k2, 0.5 * h));
         let (k4, p4) = self.true_rates_and_friction_power(&advance(x, &k3, h));
@@ -438,8 +457,8 @@ impl TwoBodySystem {
 
     /// [`TwoBodySystem::step_reference`] with the relative motion at `x` given (`start`, as
     /// [`TwoBodySystem::relative_motion`] gives it): the same step, to the bit. Also returns the
-    /// relative motion at the new state when the step computed it (a free-flight step without
-    /// shapes), so that the next step need not compute it again.
+    /// relative motion at the new state when the step computed it (every step but a free-flight
+    /// step with shapes), so that the next step need not compute it again.
     pub fn step_reference_from(
         &self,
         x: &mut TwoBodyState,
@@ -478,15 +497,22 @@ impl TwoBodySystem {
         let h = period / substeps as f64;
         let mut remaining = period;
         let mut friction_work = 0.0;
+        // the relative motion at `x` (a step's end is the next step's start: computed once, for
+        // its active set and the next step's first RK4 stage)
+        let mut rel = *start;
         // the active set at `x` (a step's end is the next step's start: asked once)
-        let mut before = known.unwrap_or_else(|| self.active_set(x));
+        let mut before = known.unwrap_or_else(|| self.active_set_at(&rel));
         while remaining > period * 1e-12 {
             let step = h.min(remaining);
+            // the first RK4 stage at `x`, shared by every step from it (the bisection's too)
+            let first = self.true_rates_at(x, &rel);
             let mut y = *x;
-            let work = self.step_rk4(&mut y, step);
-            let after = self.active_set(&y);
+            let work = self.step_rk4_with(&mut y, &first, step);
+            let end = self.relative_motion(&y);
+            let after = self.active_set_at(&end);
             if after == before {
                 *x = y;
+                rel = end;
                 friction_work += work;
                 remaining -= step;
                 before = after;
@@ -497,7 +523,7 @@ impl TwoBodySystem {
             for _ in 0..16 {
                 let mid = 0.5 * (lo + hi);
                 let mut z = *x;
-                self.step_rk4(&mut z, mid);
+                self.step_rk4_with(&mut z, &first, mid);
                 if self.active_set(&z) == before {
                     lo = mid;
                 } else {
@@ -505,12 +531,13 @@ impl TwoBodySystem {
                 }
             }
             // up to the switch with every RK4 stage before it, then across it in a tiny step
-            friction_work += self.step_rk4(x, lo);
+            friction_work += self.step_rk4_with(x, &first, lo);
             friction_work += self.step_rk4(x, hi - lo);
             remaining -= hi;
-            before = self.active_set(x);
+            rel = self.relative_motion(x);
+            before = self.active_set_at(&rel);
         }
-        (friction_work, None)
+        (friction_work, Some(rel))
     }
 }
 
