@@ -44,6 +44,22 @@ pub struct Contact {
     pub tip: Vector3<f64>,
 }
 
+/// The start of a step of the ideal reference ([`TwoBodySystem::step_reference_at`]): the
+/// relative motion there and what the step reads of it, each computed once, by the step that
+/// ended there or by [`TwoBodySystem::reference_start`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReferenceStart {
+    /// The relative motion of the servicer (`t`).
+    pub rel: RelativeMotion,
+    /// Its rod tip, `t`, m ([`RelativeMotion::point_and_velocity`]).
+    pub tip: Vector3<f64>,
+    /// The rod tip's velocity, `t`, m/s.
+    pub tip_velocity: Vector3<f64>,
+    /// The rod tip's clearance from the walls ([`ContactGeometry::clearance`], m), when the
+    /// step that ended here computed it.
+    clearance: Option<f64>,
+}
+
 /// The state of both bodies (world frame).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TwoBodyState {
@@ -247,9 +263,23 @@ impl TwoBodySystem {
     /// walls, then every contact point of the shapes ([`crate::shapes`]). Allocation-free.
     pub fn contact_at(&self, rel: &RelativeMotion, added_damping: f64) -> Contact {
         let (tip, tip_velocity) = rel.point_and_velocity(&self.rod_tip);
+        self.contact_at_tip(rel, &tip, &tip_velocity, added_damping)
+    }
+
+    /// [`TwoBodySystem::contact_at`] with the rod tip of `rel` and its velocity given (`t`, m
+    /// and m/s, as [`RelativeMotion::point_and_velocity`] gives them): the same contact, to the
+    /// bit. Allocation-free.
+    pub fn contact_at_tip(
+        &self,
+        rel: &RelativeMotion,
+        tip: &Vector3<f64>,
+        tip_velocity: &Vector3<f64>,
+        added_damping: f64,
+    ) -> Contact {
+        let tip = *tip;
         let p = self
             .contact
-            .force_with_added_damping(&tip, &tip_velocity, added_damping);
+            .force_with_added_damping(&tip, tip_velocity, added_damping);
         let mut c = Contact {
             force: p.force,
             friction_force: p.friction_force,
@@ -430,12 +460,6 @@ impl TwoBodySystem {
         true
     }
 
-    /// How far the rod tip's path may stray over a free-flight period from what the clearances
-    /// at its ends show, m: the bend of its path, `|Δv_tip|·T/2`.
-    fn bend(&self, end: &RelativeMotion, tip_velocity: &Vector3<f64>, period: f64) -> f64 {
-        (end.point_velocity(&self.rod_tip) - tip_velocity).norm() * period / 2.0
-    }
-
     /// A lower bound of the smallest gap between the servicer and the target, m (negative in
     /// contact): the rod tip to the walls' planes, and the shapes ([`crate::shapes::ShapePairs::clearance`]).
     pub fn clearance_at(&self, rel: &RelativeMotion) -> f64 {
@@ -474,15 +498,42 @@ impl TwoBodySystem {
         period: f64,
         substeps: u32,
     ) -> (f64, Option<RelativeMotion>) {
-        let tip_velocity = start.point_velocity(&self.rod_tip);
+        let (work, end) = self.step_reference_at(x, &self.reference_start(start), period, substeps);
+        (work, end.map(|end| end.rel))
+    }
+
+    /// What a reference step reads of its start, from the relative motion there.
+    pub fn reference_start(&self, rel: &RelativeMotion) -> ReferenceStart {
+        let (tip, tip_velocity) = rel.point_and_velocity(&self.rod_tip);
+        ReferenceStart {
+            rel: *rel,
+            tip,
+            tip_velocity,
+            clearance: None,
+        }
+    }
+
+    /// [`TwoBodySystem::step_reference_from`] from a [`ReferenceStart`] (the relative motion at
+    /// `x` and what is read of it): the same step, to the bit; returns the [`ReferenceStart`] of
+    /// the new state when the step computed its relative motion, with what the step knows of
+    /// it (after a free-flight step, its clearance), for the next step.
+    pub fn step_reference_at(
+        &self,
+        x: &mut TwoBodyState,
+        start: &ReferenceStart,
+        period: f64,
+        substeps: u32,
+    ) -> (f64, Option<ReferenceStart>) {
+        let tip_velocity = start.tip_velocity;
         // the active set at `x`, once known
         let mut known = None;
         if !self.contact.shapes.is_empty() {
-            if self.free_flight_with_shapes(x, start, &tip_velocity, period) {
+            if self.free_flight_with_shapes(x, &start.rel, &tip_velocity, period) {
                 return (0.0, None);
             }
         } else {
-            let set = self.active_set_at(start);
+            // without shapes, the active set and the clearance are the rod tip's
+            let set = self.contact.active_set(&start.tip, &tip_velocity);
             known = Some(set);
             if set == 0 {
                 let mut y = *x;
@@ -493,12 +544,20 @@ impl TwoBodySystem {
                     &self.target,
                     period,
                 );
-                let end = self.relative_motion(&y);
-                let bend = self.bend(&end, &tip_velocity, period);
-                let clear = |m: &RelativeMotion| self.clearance_at(m);
-                if clear(start) > bend && clear(&end) > bend {
-                    *x = y;
-                    return (0.0, Some(end));
+                let end = self.reference_start(&self.relative_motion(&y));
+                // how far the rod tip's path may stray over the period from what the clearances
+                // at its ends show: the bend of its path, |Δv_tip|·T/2
+                let bend = (end.tip_velocity - tip_velocity).norm() * period / 2.0;
+                let clear_start = start
+                    .clearance
+                    .unwrap_or_else(|| self.contact.clearance(&start.tip));
+                if clear_start > bend {
+                    let clear_end = self.contact.clearance(&end.tip);
+                    if clear_end > bend {
+                        *x = y;
+                        let clearance = Some(clear_end);
+                        return (0.0, Some(ReferenceStart { clearance, ..end }));
+                    }
                 }
             }
         }
@@ -507,7 +566,7 @@ impl TwoBodySystem {
         let mut friction_work = 0.0;
         // the relative motion at `x` (a step's end is the next step's start: computed once, for
         // its active set and the next step's first RK4 stage)
-        let mut rel = *start;
+        let mut rel = start.rel;
         // the active set at `x` (a step's end is the next step's start: asked once)
         let mut before = known.unwrap_or_else(|| self.active_set_at(&rel));
         while remaining > period * 1e-12 {
@@ -545,7 +604,7 @@ impl TwoBodySystem {
             rel = self.relative_motion(x);
             before = self.active_set_at(&rel);
         }
-        (friction_work, Some(rel))
+        (friction_work, Some(self.reference_start(&rel)))
     }
 }
 
@@ -576,6 +635,9 @@ fn through_centre(
     moment: &Vector3<f64>,
     lever: &Vector3<f64>,
 ) -> Vector3<f64> {
+    if torque == Vector3::zeros() {
+        return torque;
+    }
     let across = force.cross(&torque).abs().sum();
     let terms = moment.abs().sum() + lever.abs().sum();
     if across > 0.0 && across <= ROUNDING_UNITS * f64::EPSILON * force.abs().sum() * terms {
