@@ -23,10 +23,11 @@ loop is what the comparison is about). Every tick, as the core does it for this 
 
 Simplified, because this preset never reaches it (each checked or stated):
 
-- the bodies' rotation: the torques of this preset are zero up to rounding (every force is
-  along x and acts on the line of the centres of mass), so the attitudes stay the identity
-  and the drift is ``x += v·T``; the core integrates the rotation (RK4 on the quaternion) once
-  an angular velocity is not zero. The loop checks that its own torques stay below 1e-9 N·m;
+- the bodies' rotation: every force of this preset is along x and acts on the line of the
+  centres of mass, so the core's torques are exactly zero (``world.rs`` ``through_centre``
+  drops a torque across the force that is rounding alone), its attitudes stay the identity and
+  its drift is ``x += v·T``, as here; the core integrates the rotation (RK4 on the quaternion)
+  when an angular velocity is not zero. The loop checks that its own torques stay below 1e-9 N·m;
 - friction and the online surface fit (``surface.rs``: frictionless walls, the fit never
   declares the contact frictional), the servo lag and the plant sub-steps (``servo_frequency
   = 0``: the robot is the pure delay), the sensor delay, noise and quantisation (all 0 here),

@@ -123,15 +123,16 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
     let mut trace = Trace::with_capacity(n + 1, false);
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut friction_work = 0.0;
-    // the relative motion at `x` (kept from the step that computed it)
-    let mut rel = system.relative_motion(&x);
+    // the relative motion at `x` and its rod tip (kept from the step that computed them)
+    let mut start = system.reference_start(&system.relative_motion(&x));
     for k in 0..=n {
-        let contact = system.contact_at(&rel, 0.0);
+        let rel = &start.rel;
+        let contact = system.contact_at_tip(rel, &start.tip, &start.tip_velocity, 0.0);
         let (contact_force, wrench) = (contact.force, contact.wrench);
         let row = ReferenceRecord {
             time: k as f64 * period,
             tip_position: contact.tip,
-            tip_velocity: rel.point_velocity(&system.rod_tip),
+            tip_velocity: start.tip_velocity,
             angular_velocity: rel.angular_velocity,
             contact_force,
             friction_force: contact.friction_force,
@@ -154,9 +155,9 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
         }
         if k < n {
             let (work, end) =
-                system.step_reference_from(&mut x, &rel, period, plan.reference_substeps);
+                system.step_reference_at(&mut x, &start, period, plan.reference_substeps);
             friction_work += work;
-            rel = end.unwrap_or_else(|| system.relative_motion(&x));
+            start = end.unwrap_or_else(|| system.reference_start(&system.relative_motion(&x)));
         }
     }
     trace.friction_work = friction_work;

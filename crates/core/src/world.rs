@@ -44,6 +44,22 @@ pub struct Contact {
     pub tip: Vector3<f64>,
 }
 
+/// The start of a step of the ideal reference ([`TwoBodySystem::step_reference_at`]): the
+/// relative motion there and what the step reads of it, each computed once, by the step that
+/// ended there or by [`TwoBodySystem::reference_start`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReferenceStart {
+    /// The relative motion of the servicer (`t`).
+    pub rel: RelativeMotion,
+    /// Its rod tip, `t`, m ([`RelativeMotion::point_and_velocity`]).
+    pub tip: Vector3<f64>,
+    /// The rod tip's velocity, `t`, m/s.
+    pub tip_velocity: Vector3<f64>,
+    /// The rod tip's clearance from the walls ([`ContactGeometry::clearance`], m), when the
+    /// step that ended here computed it.
+    clearance: Option<f64>,
+}
+
 /// The state of both bodies (world frame).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TwoBodyState {
@@ -128,9 +144,17 @@ impl TwoBodySystem {
         let force = t.orientation * w.force;
         let moment = t.orientation * w.moment;
         let sensor_world = t.position + t.orientation * self.sensor_origin;
-        let target_torque = moment + (sensor_world - t.position).cross(&force);
-        let servicer_torque = -moment - (sensor_world - s.position).cross(&force);
-        ([-force, force], [servicer_torque, target_torque])
+        let lever_t = (sensor_world - t.position).cross(&force);
+        let lever_s = (sensor_world - s.position).cross(&force);
+        let target_torque = moment + lever_t;
+        let servicer_torque = -moment - lever_s;
+        (
+            [-force, force],
+            [
+                through_centre(servicer_torque, &force, &moment, &lever_s),
+                through_centre(target_torque, &force, &moment, &lever_t),
+            ],
+        )
     }
 
     /// Changes the servicer's velocity relative to the target by `dv` (`t` frame, m/s), split
@@ -239,9 +263,23 @@ impl TwoBodySystem {
     /// walls, then every contact point of the shapes ([`crate::shapes`]). Allocation-free.
     pub fn contact_at(&self, rel: &RelativeMotion, added_damping: f64) -> Contact {
         let (tip, tip_velocity) = rel.point_and_velocity(&self.rod_tip);
+        self.contact_at_tip(rel, &tip, &tip_velocity, added_damping)
+    }
+
+    /// [`TwoBodySystem::contact_at`] with the rod tip of `rel` and its velocity given (`t`, m
+    /// and m/s, as [`RelativeMotion::point_and_velocity`] gives them): the same contact, to the
+    /// bit. Allocation-free.
+    pub fn contact_at_tip(
+        &self,
+        rel: &RelativeMotion,
+        tip: &Vector3<f64>,
+        tip_velocity: &Vector3<f64>,
+        added_damping: f64,
+    ) -> Contact {
+        let tip = *tip;
         let p = self
             .contact
-            .force_with_added_damping(&tip, &tip_velocity, added_damping);
+            .force_with_added_damping(&tip, tip_velocity, added_damping);
         let mut c = Contact {
             force: p.force,
             friction_force: p.friction_force,
@@ -310,7 +348,13 @@ impl TwoBodySystem {
 
     /// [`TwoBodySystem::true_rates`] and the power of the contact's friction, W (≤ 0).
     fn true_rates_and_friction_power(&self, x: &TwoBodyState) -> ((BodyRate, BodyRate), f64) {
-        let c = self.contact_at(&self.relative_motion(x), 0.0);
+        self.true_rates_at(x, &self.relative_motion(x))
+    }
+
+    /// [`TwoBodySystem::true_rates_and_friction_power`] with the relative motion at `x` given
+    /// (`rel`, as [`TwoBodySystem::relative_motion`] gives it): the same numbers, to the bit.
+    fn true_rates_at(&self, x: &TwoBodyState, rel: &RelativeMotion) -> ((BodyRate, BodyRate), f64) {
+        let c = self.contact_at(rel, 0.0);
         let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, &c.wrench);
         (
             (
@@ -325,11 +369,24 @@ impl TwoBodySystem {
     /// energy friction dissipated over it, J (≥ 0; the friction power integrated with the
     /// step's own RK4 weights).
     pub fn step_rk4(&self, x: &mut TwoBodyState, h: f64) -> f64 {
+        let first = self.true_rates_and_friction_power(x);
+        self.step_rk4_with(x, &first, h)
+    }
+
+    /// [`TwoBodySystem::step_rk4`] with its first stage given (`first`, the rates and friction
+    /// power at `x` as [`TwoBodySystem::true_rates_and_friction_power`] gives them): the same
+    /// step, to the bit; steps of several widths from one state share their first stage.
+    fn step_rk4_with(
+        &self,
+        x: &mut TwoBodyState,
+        first: &((BodyRate, BodyRate), f64),
+        h: f64,
+    ) -> f64 {
         let advance = |x: &TwoBodyState, r: &(BodyRate, BodyRate), dt: f64| TwoBodyState {
             servicer: x.servicer.advanced(&r.0, dt),
             target: x.target.advanced(&r.1, dt),
         };
-        let (k1, p1) = self.true_rates_and_friction_power(x);
+        let (k1, p1) = *first;
         let (k2, p2) = self.true_rates_and_friction_power(&advance(x, &k1, 0.5 * h));
         let (k3, p3) = self.true_rates_and_friction_power(&advance(x, &k2, 0.5 * h));
         let (k4, p4) = self.true_rates_and_friction_power(&advance(x, &k3, h));
@@ -403,12 +460,6 @@ impl TwoBodySystem {
         true
     }
 
-    /// How far the rod tip's path may stray over a free-flight period from what the clearances
-    /// at its ends show, m: the bend of its path, `|Δv_tip|·T/2`.
-    fn bend(&self, end: &RelativeMotion, tip_velocity: &Vector3<f64>, period: f64) -> f64 {
-        (end.point_velocity(&self.rod_tip) - tip_velocity).norm() * period / 2.0
-    }
-
     /// A lower bound of the smallest gap between the servicer and the target, m (negative in
     /// contact): the rod tip to the walls' planes, and the shapes ([`crate::shapes::ShapePairs::clearance`]).
     pub fn clearance_at(&self, rel: &RelativeMotion) -> f64 {
@@ -438,8 +489,8 @@ impl TwoBodySystem {
 
     /// [`TwoBodySystem::step_reference`] with the relative motion at `x` given (`start`, as
     /// [`TwoBodySystem::relative_motion`] gives it): the same step, to the bit. Also returns the
-    /// relative motion at the new state when the step computed it (a free-flight step without
-    /// shapes), so that the next step need not compute it again.
+    /// relative motion at the new state when the step computed it (every step but a free-flight
+    /// step with shapes), so that the next step need not compute it again.
     pub fn step_reference_from(
         &self,
         x: &mut TwoBodyState,
@@ -447,15 +498,42 @@ impl TwoBodySystem {
         period: f64,
         substeps: u32,
     ) -> (f64, Option<RelativeMotion>) {
-        let tip_velocity = start.point_velocity(&self.rod_tip);
+        let (work, end) = self.step_reference_at(x, &self.reference_start(start), period, substeps);
+        (work, end.map(|end| end.rel))
+    }
+
+    /// What a reference step reads of its start, from the relative motion there.
+    pub fn reference_start(&self, rel: &RelativeMotion) -> ReferenceStart {
+        let (tip, tip_velocity) = rel.point_and_velocity(&self.rod_tip);
+        ReferenceStart {
+            rel: *rel,
+            tip,
+            tip_velocity,
+            clearance: None,
+        }
+    }
+
+    /// [`TwoBodySystem::step_reference_from`] from a [`ReferenceStart`] (the relative motion at
+    /// `x` and what is read of it): the same step, to the bit; returns the [`ReferenceStart`] of
+    /// the new state when the step computed its relative motion, with what the step knows of
+    /// it (after a free-flight step, its clearance), for the next step.
+    pub fn step_reference_at(
+        &self,
+        x: &mut TwoBodyState,
+        start: &ReferenceStart,
+        period: f64,
+        substeps: u32,
+    ) -> (f64, Option<ReferenceStart>) {
+        let tip_velocity = start.tip_velocity;
         // the active set at `x`, once known
         let mut known = None;
         if !self.contact.shapes.is_empty() {
-            if self.free_flight_with_shapes(x, start, &tip_velocity, period) {
+            if self.free_flight_with_shapes(x, &start.rel, &tip_velocity, period) {
                 return (0.0, None);
             }
         } else {
-            let set = self.active_set_at(start);
+            // without shapes, the active set and the clearance are the rod tip's
+            let set = self.contact.active_set(&start.tip, &tip_velocity);
             known = Some(set);
             if set == 0 {
                 let mut y = *x;
@@ -466,27 +544,42 @@ impl TwoBodySystem {
                     &self.target,
                     period,
                 );
-                let end = self.relative_motion(&y);
-                let bend = self.bend(&end, &tip_velocity, period);
-                let clear = |m: &RelativeMotion| self.clearance_at(m);
-                if clear(start) > bend && clear(&end) > bend {
-                    *x = y;
-                    return (0.0, Some(end));
+                let end = self.reference_start(&self.relative_motion(&y));
+                // how far the rod tip's path may stray over the period from what the clearances
+                // at its ends show: the bend of its path, |Δv_tip|·T/2
+                let bend = (end.tip_velocity - tip_velocity).norm() * period / 2.0;
+                let clear_start = start
+                    .clearance
+                    .unwrap_or_else(|| self.contact.clearance(&start.tip));
+                if clear_start > bend {
+                    let clear_end = self.contact.clearance(&end.tip);
+                    if clear_end > bend {
+                        *x = y;
+                        let clearance = Some(clear_end);
+                        return (0.0, Some(ReferenceStart { clearance, ..end }));
+                    }
                 }
             }
         }
         let h = period / substeps as f64;
         let mut remaining = period;
         let mut friction_work = 0.0;
+        // the relative motion at `x` (a step's end is the next step's start: computed once, for
+        // its active set and the next step's first RK4 stage)
+        let mut rel = start.rel;
         // the active set at `x` (a step's end is the next step's start: asked once)
-        let mut before = known.unwrap_or_else(|| self.active_set(x));
+        let mut before = known.unwrap_or_else(|| self.active_set_at(&rel));
         while remaining > period * 1e-12 {
             let step = h.min(remaining);
+            // the first RK4 stage at `x`, shared by every step from it (the bisection's too)
+            let first = self.true_rates_at(x, &rel);
             let mut y = *x;
-            let work = self.step_rk4(&mut y, step);
-            let after = self.active_set(&y);
+            let work = self.step_rk4_with(&mut y, &first, step);
+            let end = self.relative_motion(&y);
+            let after = self.active_set_at(&end);
             if after == before {
                 *x = y;
+                rel = end;
                 friction_work += work;
                 remaining -= step;
                 before = after;
@@ -497,7 +590,7 @@ impl TwoBodySystem {
             for _ in 0..16 {
                 let mid = 0.5 * (lo + hi);
                 let mut z = *x;
-                self.step_rk4(&mut z, mid);
+                self.step_rk4_with(&mut z, &first, mid);
                 if self.active_set(&z) == before {
                     lo = mid;
                 } else {
@@ -505,12 +598,52 @@ impl TwoBodySystem {
                 }
             }
             // up to the switch with every RK4 stage before it, then across it in a tiny step
-            friction_work += self.step_rk4(x, lo);
+            friction_work += self.step_rk4_with(x, &first, lo);
             friction_work += self.step_rk4(x, hi - lo);
             remaining -= hi;
-            before = self.active_set(x);
+            rel = self.relative_motion(x);
+            before = self.active_set_at(&rel);
         }
-        (friction_work, None)
+        (friction_work, Some(self.reference_start(&rel)))
+    }
+}
+
+/// How many units of rounding (`f64::EPSILON`) of the terms of a torque its part across the
+/// force may be and still be rounding alone ([`through_centre`]): the compensators' moments are
+/// sums of a few products (a measured moment, the moments of a correction and of an amendment),
+/// each rounded, and differ from the moment of the force they apply by up to 88 such units on
+/// `paper-table1` (every compensator at 4–20 ms; pida and model-mediated up to 30 at 40 ms;
+/// `examples/axial_torque_audit.rs`). 2⁷: a line of action within 3e-14 of the lever arms
+/// (0.03 pm at 1 m) of the centre. Terms that cancel each other (pic, dac, tdpa-impedance at
+/// 40 ms: up to 2200 units) leave more: those bodies turn at rounding level, as they did.
+const ROUNDING_UNITS: f64 = 128.0;
+
+/// A body's torque about its centre of mass, `moment + lever` (N·m, world: `moment` the wrench's
+/// moment about the sensor origin, `lever` the moment of `force` moved from there to the centre),
+/// without its part across the force when that part is rounding alone: when the force's line of
+/// action passes through the centre to the precision of the sum that made the torque,
+/// `|F × τ|₁ ≤ ROUNDING_UNITS · ε · |F|₁ (|moment|₁ + |lever|₁)`, only the torque along the force
+/// (a couple about its own line) is kept: `τ·F / |F|² F`. A contact along an axis through both
+/// centres of mass (every axial preset: rod, walls and centres on one line) then turns neither
+/// body, as in exact arithmetic, where the terms would cancel exactly but a compensator's moment
+/// about the off-axis sensor and the moment of its force differ in their last bits. A torque
+/// with no part across the force (zero, a couple about the force's line, or no force at all) is
+/// returned as it is, to the bit.
+fn through_centre(
+    torque: Vector3<f64>,
+    force: &Vector3<f64>,
+    moment: &Vector3<f64>,
+    lever: &Vector3<f64>,
+) -> Vector3<f64> {
+    if torque == Vector3::zeros() {
+        return torque;
+    }
+    let across = force.cross(&torque).abs().sum();
+    let terms = moment.abs().sum() + lever.abs().sum();
+    if across > 0.0 && across <= ROUNDING_UNITS * f64::EPSILON * force.abs().sum() * terms {
+        force * (torque.dot(force) / force.norm_squared())
+    } else {
+        torque
     }
 }
 
