@@ -702,3 +702,79 @@ fn a_rendered_contact_shorter_than_the_delay_is_no_phantom() {
         }
     }
 }
+
+/// A facility whose robot reports its velocity `scale` times too fast (its position and the
+/// sensor honest): a real robot's reported velocity is noisy (over EGM and RSI 17-25 mm/s
+/// against the virtual tip), which a simulated one's is not.
+struct FastVelocityReports {
+    inner: Box<dyn hilcontact_core::facility::Facility>,
+    scale: f64,
+}
+
+impl hilcontact_core::facility::Facility for FastVelocityReports {
+    fn advance(&mut self, command: &hilcontact_core::frames::RelativeMotion) {
+        self.inner.advance(command)
+    }
+
+    fn measure(&mut self) -> hilcontact_core::facility::Measurement {
+        let mut m = self.inner.measure();
+        m.actual.velocity *= self.scale;
+        m
+    }
+
+    fn contact_force(&self) -> Vector3<f64> {
+        self.inner.contact_force()
+    }
+
+    fn physical_contact(&self) -> hilcontact_core::facility::PhysicalContact {
+        self.inner.physical_contact()
+    }
+}
+
+#[test]
+fn the_law_s_rebound_is_restored_from_the_virtual_approach_not_the_robot_s_reported_velocity() {
+    use hilcontact_core::facility::{build, FacilityLoop};
+    use hilcontact_core::metrics::divergence_bound;
+    use hilcontact_core::sim::{run_hil_against, run_reference, trace_metrics};
+    // paper-table1 at 40 ms without priors: each wall's first contact is pida's, its rebound
+    // then set to the identified law's for the incoming speed. Read from a reported velocity
+    // 15 % fast, that speed made every later contact rebound about 15 % fast (a 20 mm/s
+    // approach read as 25 mm/s over RSI gave CoV 1.49 from the first contact on).
+    let s = table1_model_mediated(0.04, false);
+    let plan = s.resolve().unwrap();
+    let (reference, _) = run_reference(&plan, false);
+    let bound = divergence_bound(
+        plan.divergence_energy_ratio,
+        reference.energy[0],
+        &reference.energy,
+    );
+    for scale in [1.0, 1.15, 0.9] {
+        let initial = plan.system.relative_motion(&plan.initial);
+        let facility = FacilityLoop::with(Box::new(FastVelocityReports {
+            inner: build(&plan, &initial),
+            scale,
+        }));
+        let hil = run_hil_against(&plan, facility, bound, false);
+        let m = trace_metrics(
+            &plan,
+            &reference,
+            &hil.trace,
+            hil.estimates_contact,
+            hil.stop,
+        );
+        assert!(
+            m.lost_collisions.is_empty()
+                && m.extra_collisions.is_empty()
+                && m.collisions.len() >= 4,
+            "scale {scale}: {m:?}"
+        );
+        for c in &m.collisions {
+            let v = c.cov.unwrap();
+            assert!(
+                (v - 1.0).abs() <= 0.02,
+                "reported velocity × {scale}: collision {}: CoV {v:.4}",
+                c.collision.index
+            );
+        }
+    }
+}
