@@ -99,8 +99,8 @@ def test_model_mediated_with_a_calibration_renders_from_the_first_contact_in_rea
         assert all(abs(c["cov"] - 1.0) <= 0.02 for c in run), run
         assert all(c["cof"] <= 1.2 for c in run), run
 
-    # the contrast: without the file each wall's first contact is pida's, far harder (over RSI
-    # the later ones gain speed: docs/calibration.md, not this test's subject)
+    # the contrast: without the file each wall's first contact is pida's, far harder (the later
+    # ones may gain speed, 3 of 8 runs: docs/calibration.md; not this test's subject)
     bare = real_time(tmp_path, tmp_path / "rt-bare", link)["collisions"]
     print("real time without the file:", [(c["cov"], c["cof"], c["rendering"]) for c in bare])
     assert bare[0]["rendering"] == "pida-no-prior" and bare[0]["cof"] is not None, bare[0]
