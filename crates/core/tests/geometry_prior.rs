@@ -277,30 +277,7 @@ fn pida_first_collision_on_oblique_frictional_walls_follows_the_walls_normal() {
 /// CoV 1.24).
 #[test]
 fn pida_first_collision_on_probe_drogue_follows_the_shapes_normal() {
-    let mut s = noisy_pida("probe-drogue");
-    // the drogue's mesh from the preset's OBJ file, read as the loader would
-    let path = format!(
-        "{}/../../python/hilcontact/scenarios/probe-drogue-cone.obj",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let text = std::fs::read_to_string(&path).expect("the drogue's OBJ");
-    let shape = &mut s.target.shapes[0];
-    for line in text.lines() {
-        let mut words = line.split_whitespace();
-        match words.next() {
-            Some("v") => {
-                let v: Vec<f64> = words.map(|w| w.parse().expect("a number")).collect();
-                shape.vertices.push([v[0], v[1], v[2]]);
-            }
-            Some("f") => {
-                let f: Vec<u32> = words
-                    .map(|w| w.parse::<u32>().expect("an index") - 1)
-                    .collect();
-                shape.triangles.push([f[0], f[1], f[2]]);
-            }
-            _ => {}
-        }
-    }
+    let s = probe_drogue(0.01);
     let (error, cov) = first_collision(&s);
     assert!(error < 0.1, "velocity error {error}");
     assert!((cov - 1.0).abs() < 0.1, "CoV {cov}");

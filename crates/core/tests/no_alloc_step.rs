@@ -2,15 +2,17 @@
 //! work, `model-mediated`'s contact-end fits and model updates): a counting allocator, armed on
 //! this test's thread only, while the steps run on recorded inputs. And `reset` forgets a run.
 //! The facility's side of a tick (`FacilityLoop::tick`: advance, measure) allocates nothing
-//! either, over a whole run with noise, quantisation and servo lag.
+//! either, over a whole run with noise, quantisation and servo lag. `pida` with the scenario's
+//! geometry as its prior normal (shapes, a corner of two bars, walls with friction) neither.
 
 mod common;
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
-use common::table1;
+use common::{preset, table1};
 use hilcontact_core::compensator::{CompensatorConfig, ModelMediatedParams, REGISTRY};
+use hilcontact_core::contact::FrictionConfig;
 use hilcontact_core::facility::FacilityLoop;
 use hilcontact_core::hil::compensator_context;
 use hilcontact_core::hil::HilStep;
@@ -215,5 +217,46 @@ fn contacts_of_shapes_allocate_nothing_in_the_facility_nor_the_reference() {
         ARMED.with(|a| a.set(false));
         assert_eq!(COUNT.with(Cell::get), 0, "{name}: allocated while ticking");
         assert!(contact > 0.0, "{name}: the run touches");
+    }
+}
+
+/// `pida` with the geometry prior: the prior's query over the shapes' contact points
+/// (`rod-in-frame`: a cylinder in a frame of boxes, its corner of two bars) and over walls
+/// (`oblique-6dof` with friction), the robot's attitude delayed with the kinematics, the net
+/// friction.
+#[test]
+fn pida_with_the_geometry_prior_steps_without_allocating() {
+    let mut oblique = preset("oblique-6dof");
+    oblique.contact.friction = FrictionConfig {
+        kinetic_coefficient: 0.2,
+        ..FrictionConfig::default()
+    };
+    for mut s in [preset("rod-in-frame"), oblique] {
+        s.facility.sensor_noise = 0.2;
+        s.facility.sensor_delay = 0.005;
+        s.facility.robot_delay = 0.01;
+        s.compensator = CompensatorConfig::from_kind("pida").expect("pida");
+        let plan = s.resolve().expect("plan");
+        let context = compensator_context(&plan);
+        assert!(context.geometry.is_some(), "{}: no geometry prior", s.name);
+        let inputs = compensator_inputs(&plan);
+        assert!(
+            inputs.iter().any(|i| i.measured.force.norm() > 50.0),
+            "{}: no contact",
+            s.name
+        );
+        let mut compensator = s.compensator.build(&context);
+        COUNT.with(|c| c.set(0));
+        ARMED.with(|a| a.set(true));
+        for input in &inputs {
+            std::hint::black_box(compensator.step(input));
+        }
+        ARMED.with(|a| a.set(false));
+        assert_eq!(
+            COUNT.with(Cell::get),
+            0,
+            "{}: allocated while stepping",
+            s.name
+        );
     }
 }
