@@ -48,6 +48,15 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
+/// The allocations `f` makes on this thread.
+fn allocations(f: impl FnOnce()) -> u64 {
+    COUNT.with(|c| c.set(0));
+    ARMED.with(|a| a.set(true));
+    f();
+    ARMED.with(|a| a.set(false));
+    COUNT.with(Cell::get)
+}
+
 #[test]
 fn no_compensator_step_allocates() {
     // a model-mediated run with priors (so every mode, fit and update happens), with noise
@@ -66,18 +75,12 @@ fn no_compensator_step_allocates() {
             other => other,
         };
         let mut compensator = config.build(&context);
-        COUNT.with(|c| c.set(0));
-        ARMED.with(|a| a.set(true));
-        for input in &inputs {
-            std::hint::black_box(compensator.step(input));
-        }
-        ARMED.with(|a| a.set(false));
-        assert_eq!(
-            COUNT.with(Cell::get),
-            0,
-            "{}: allocated while stepping",
-            info.kind
-        );
+        let allocated = allocations(|| {
+            for input in &inputs {
+                std::hint::black_box(compensator.step(input));
+            }
+        });
+        assert_eq!(allocated, 0, "{}: allocated while stepping", info.kind);
         // reset forgets the run: the same inputs give the same outputs as a fresh compensator
         // (compared as text: NaN, "not observed", equals itself there)
         compensator.reset();
@@ -120,15 +123,14 @@ fn no_facility_tick_allocates() {
     assert!(commands.iter().any(|c| c.position.norm() > 0.0));
     let mut facility = FacilityLoop::new(&plan);
     let mut contact = 0.0_f64;
-    COUNT.with(|c| c.set(0));
-    ARMED.with(|a| a.set(true));
-    for command in &commands {
-        let m = facility.tick(command);
-        contact = contact.max(facility.contact_force().norm());
-        std::hint::black_box(m);
-    }
-    ARMED.with(|a| a.set(false));
-    assert_eq!(COUNT.with(Cell::get), 0, "allocated while ticking");
+    let allocated = allocations(|| {
+        for command in &commands {
+            let m = facility.tick(command);
+            contact = contact.max(facility.contact_force().norm());
+            std::hint::black_box(m);
+        }
+    });
+    assert_eq!(allocated, 0, "allocated while ticking");
     assert!(contact > 0.0, "the run touches a wall");
 }
 
@@ -146,15 +148,13 @@ fn no_compensator_step_allocates_on_a_frictional_oblique_contact() {
     let context = compensator_context(&plan);
     for info in REGISTRY {
         let mut compensator = (info.default)().build(&context);
-        COUNT.with(|c| c.set(0));
-        ARMED.with(|a| a.set(true));
-        for input in &inputs {
-            std::hint::black_box(compensator.step(input));
-        }
-        ARMED.with(|a| a.set(false));
+        let allocated = allocations(|| {
+            for input in &inputs {
+                std::hint::black_box(compensator.step(input));
+            }
+        });
         assert_eq!(
-            COUNT.with(Cell::get),
-            0,
+            allocated, 0,
             "{}: allocated while stepping a frictional contact",
             info.kind
         );
@@ -205,17 +205,16 @@ fn contacts_of_shapes_allocate_nothing_in_the_facility_nor_the_reference() {
         let mut facility = FacilityLoop::new(&plan);
         let mut contact = 0.0_f64;
         let mut x = plan.initial;
-        COUNT.with(|c| c.set(0));
-        ARMED.with(|a| a.set(true));
-        for command in &commands {
-            let m = facility.tick(command);
-            contact = contact.max(facility.contact_force().norm());
-            std::hint::black_box(m);
-            plan.system
-                .step_reference(&mut x, plan.period, plan.reference_substeps);
-        }
-        ARMED.with(|a| a.set(false));
-        assert_eq!(COUNT.with(Cell::get), 0, "{name}: allocated while ticking");
+        let allocated = allocations(|| {
+            for command in &commands {
+                let m = facility.tick(command);
+                contact = contact.max(facility.contact_force().norm());
+                std::hint::black_box(m);
+                plan.system
+                    .step_reference(&mut x, plan.period, plan.reference_substeps);
+            }
+        });
+        assert_eq!(allocated, 0, "{name}: allocated while ticking");
         assert!(contact > 0.0, "{name}: the run touches");
     }
 }
@@ -246,17 +245,11 @@ fn pida_with_the_geometry_prior_steps_without_allocating() {
             s.name
         );
         let mut compensator = s.compensator.build(&context);
-        COUNT.with(|c| c.set(0));
-        ARMED.with(|a| a.set(true));
-        for input in &inputs {
-            std::hint::black_box(compensator.step(input));
-        }
-        ARMED.with(|a| a.set(false));
-        assert_eq!(
-            COUNT.with(Cell::get),
-            0,
-            "{}: allocated while stepping",
-            s.name
-        );
+        let allocated = allocations(|| {
+            for input in &inputs {
+                std::hint::black_box(compensator.step(input));
+            }
+        });
+        assert_eq!(allocated, 0, "{}: allocated while stepping", s.name);
     }
 }

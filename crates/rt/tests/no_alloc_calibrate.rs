@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 
 use common::{loopback_options, preset};
 use hilcontact_core::Scenario;
-use hilcontact_rt::calibrate::{CalibrateOptions, CalibrationHandle};
+use hilcontact_rt::calibrate::{CalibrateOptions, CalibrationHandle, RealtimeCalibration};
 use hilcontact_rt::FacilityHandle;
 
 /// The counter and the watched thread are the process's: one test at a time.
@@ -79,6 +79,25 @@ fn start_armed(
     (facility, handle, begun, first)
 }
 
+/// Disarms the counter, then waits for the loop's end and stops the facility. Returns the
+/// allocations counted, the ticks armed (from `first`) and the calibration's result.
+fn disarm_and_finish(
+    facility: FacilityHandle,
+    handle: CalibrationHandle,
+    first: u64,
+) -> (u64, u64, RealtimeCalibration) {
+    ARMED.store(false, Ordering::SeqCst);
+    let counted = ALLOCATIONS.load(Ordering::SeqCst);
+    let ticks = handle.status().tick - first;
+    assert!(
+        handle.wait(Duration::from_secs(120)),
+        "the loop did not end"
+    );
+    let out = handle.finish().unwrap();
+    drop(facility);
+    (counted, ticks, out)
+}
+
 /// The procedure's options: a 2 × 2 grid and its centre, a 2 s excitation.
 fn short() -> CalibrateOptions {
     CalibrateOptions {
@@ -106,15 +125,7 @@ fn the_real_time_calibration_s_loop_does_not_allocate_over_a_wall() {
         std::thread::sleep(Duration::from_millis(20));
         lines.extend(handle.progress());
     }
-    ARMED.store(false, Ordering::SeqCst);
-    let counted = ALLOCATIONS.load(Ordering::SeqCst);
-    let ticks = handle.status().tick - first;
-    assert!(
-        handle.wait(Duration::from_secs(120)),
-        "the loop did not end"
-    );
-    let out = handle.finish().unwrap();
-    drop(facility);
+    let (counted, ticks, out) = disarm_and_finish(facility, handle, first);
     println!("{ticks} ticks armed: {:?}", out.outcome.progress);
     // the window spanned the whole calibration of the wall, which was measured
     assert_eq!(out.exit_code, 0, "{:?}", out.outcome.error);
@@ -151,15 +162,7 @@ fn the_real_time_calibration_s_loop_does_not_allocate_as_the_procedure_stops_its
         );
         std::thread::sleep(Duration::from_micros(500));
     }
-    ARMED.store(false, Ordering::SeqCst);
-    let counted = ALLOCATIONS.load(Ordering::SeqCst);
-    let ticks = handle.status().tick - first;
-    assert!(
-        handle.wait(Duration::from_secs(120)),
-        "the loop did not end"
-    );
-    let out = handle.finish().unwrap();
-    drop(facility);
+    let (counted, ticks, out) = disarm_and_finish(facility, handle, first);
     println!("{ticks} ticks armed: {:?}", out.outcome.error);
     // the procedure stopped itself (not the loop's safety) with its reason, released
     let error = out.outcome.error.clone().expect("stopped");
