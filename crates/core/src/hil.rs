@@ -143,6 +143,7 @@ impl VirtualDynamics {
             orientation_actual: Some(m.actual.orientation),
             tip_position_desired: desired.point(rod),
             tip_velocity_desired: desired.point_velocity(rod),
+            motion_desired: Some(*desired),
             tip_mobility: if self.mobility {
                 self.system.tip_mobility(&self.state)
             } else {

@@ -20,7 +20,7 @@ use std::collections::BTreeSet;
 use nalgebra::{Isometry3, Matrix3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use crate::body::{BodyState, MassProperties};
-use crate::compensator::{CompensatorConfig, MAX_SURFACES};
+use crate::compensator::{CompensatorConfig, PriorShapes, MAX_SURFACES};
 use crate::config::{
     BodyConfig, ContactModelKind, FacilityKind, Inertia, Scenario, MAX_NAME_LENGTH, MAX_TICKS,
     MIN_INERTIA,
@@ -205,6 +205,12 @@ impl Plan {
         }
 
         if let CompensatorConfig::ModelMediated(p) = &mut r.compensator {
+            if p.prior_shapes != PriorShapes::None && !has_shapes {
+                issues.push(
+                    "compensator.prior_shapes",
+                    "takes the scenario's shapes as prior geometry: give shapes on both bodies ([[servicer.shapes]] and [[target.shapes]]), or leave it \"none\"",
+                );
+            }
             if p.prior_walls.len() > MAX_SURFACES {
                 issues.push(
                     "compensator.prior_walls",
@@ -382,7 +388,8 @@ impl Plan {
 
     /// The scenario's nominal geometry as the compensators' prior for a contact's normal
     /// ([`GeometryPrior`], issue 22), when the scenario has friction (`None` when frictionless:
-    /// the force's direction is then the normal, and frictionless runs keep their numbers).
+    /// the force's direction is then the normal, and frictionless runs keep their numbers), or
+    /// when `model-mediated` renders the shapes as its prior (`compensator.prior_shapes`).
     /// Built from [`Plan::nominal`] only (not the facility's true mounting), the servicer's
     /// initial attitude relative to `t`, a 2 mm wall margin. Allocates once, here.
     pub fn geometry_prior(&self) -> Option<std::sync::Arc<GeometryPrior>> {
@@ -393,7 +400,9 @@ impl Plan {
             .chain(c.shape_friction.iter().flatten())
             .map(|f| f.kinetic_coefficient.max(f.static_coefficient))
             .fold(0.0, f64::max);
-        if friction <= 0.0 || (c.walls.is_empty() && c.shapes.is_empty()) {
+        let shapes_prior = matches!(&self.compensator,
+            CompensatorConfig::ModelMediated(p) if p.prior_shapes != PriorShapes::None);
+        if (friction <= 0.0 && !shapes_prior) || (c.walls.is_empty() && c.shapes.is_empty()) {
             return None;
         }
         let orientation = self.nominal.relative_motion(&self.initial).orientation;

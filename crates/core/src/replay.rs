@@ -192,6 +192,8 @@ impl<'a> Recording<'a> {
             tip_velocity_desired: self
                 .tip_velocity
                 .map_or(actual_velocity, |c| Self::at(&c, k)),
+            // a recording has no attitude column: no virtual pose
+            motion_desired: None,
             // a recording has no virtual state: `replay` puts in the translational mobility
             tip_mobility: Matrix3::zeros(),
             // every row a new record (a recording's held records: `identify` skips them)

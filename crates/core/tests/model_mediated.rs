@@ -97,6 +97,7 @@ fn one_contact(
             orientation_actual: None,
             tip_position_desired: p_des,
             tip_velocity_desired: v_des,
+            motion_desired: None,
             tip_mobility: nalgebra::Matrix3::zeros(), // not read by model-mediated
             fresh: true,
         });

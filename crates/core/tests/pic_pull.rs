@@ -41,6 +41,7 @@ fn input(
         orientation_actual: None,
         tip_position_desired: p_act + lag,
         tip_velocity_desired: v_act + dv,
+        motion_desired: None,
         tip_mobility: Matrix3::zeros(),
         fresh: true,
     }

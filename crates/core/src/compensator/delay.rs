@@ -687,6 +687,7 @@ mod tests {
                     orientation_actual: None,
                     tip_position_desired: p,
                     tip_velocity_desired: v,
+                    motion_desired: None,
                     tip_mobility: Matrix3::zeros(),
                     fresh: true,
                 };

@@ -29,7 +29,8 @@ pub use model_mediated::{
 };
 pub use none::{NoParams, PassThrough};
 pub use params::{
-    ControllerMode, DelayMode, LawForm, ModelMediatedParams, ModelParams, ObserverMode, TdpaParams,
+    ControllerMode, DelayMode, LawForm, ModelMediatedParams, ModelParams, ObserverMode,
+    PriorShapes, TdpaParams,
 };
 pub use pic::Pic;
 pub use pida::Pida;
@@ -58,6 +59,10 @@ pub struct CompensatorInput {
     pub tip_position_desired: Vector3<f64>,
     /// Desired contact-point velocity, eq. (26), m/s.
     pub tip_velocity_desired: Vector3<f64>,
+    /// The virtual servicer's pose and twist relative to the target (`t`): the motion the
+    /// tips above are points of (`None`: not known, e.g. a recording; [`ModelMediated`]'s
+    /// shapes prior is then not rendered).
+    pub motion_desired: Option<crate::frames::RelativeMotion>,
     /// Mobility `K` of the virtual rod tip, 1/kg: an impulse `J` at the tip changes the desired
     /// tip velocity by `K·J` ([`crate::world::TwoBodySystem::tip_mobility`]); zero unless the
     /// compensator [`Compensator::uses_tip_mobility`].

@@ -29,10 +29,10 @@
 //! drops the surface (a phantom). No allocation per tick: the samples' buffer is allocated
 //! once.
 
-use nalgebra::{Matrix2, Matrix3, Matrix4, Vector2, Vector3, Vector4};
+use nalgebra::{Matrix2, Matrix3, Matrix4, UnitQuaternion, Vector2, Vector3, Vector4};
 
 use super::detect::ContactDetector;
-use super::params::{LawForm, ModelMediatedParams};
+use super::params::{LawForm, ModelMediatedParams, PriorShapes};
 use super::pida::Pida;
 use super::surface::{CornerFit, SurfaceFit, SLIDE_SPEED};
 use super::{
@@ -42,7 +42,8 @@ use super::{
 use crate::calibration::CalibratedSurface;
 use crate::contact::{ContactLaw, ContactModel, Friction, HuntCrossley, LinearSpringDamper, Wall};
 use crate::delay_line::DelayLine;
-use crate::frames::FrameWrench;
+use crate::frames::{FrameWrench, RelativeMotion};
+use crate::world::TwoBodySystem;
 
 /// A calibrated surface is contradicted by a contact whose plane lies farther from it than
 /// this many of its standard deviations (plus [`CALIBRATION_FLOOR`]) at the contact.
@@ -86,6 +87,10 @@ pub const NORMAL_FIT_ITERATIONS: usize = 20;
 /// Regularisation velocity of the rendered friction, m/s: the engine's default `v_ε`
 /// (`[contact.friction] stick_velocity`); below it the rendered friction is viscous.
 pub const FRICTION_STICK_VELOCITY: f64 = 1e-3;
+/// Longest a contact in which the model rendered the shapes stays open after the virtual shapes
+/// let go while the robot has not touched yet, s ([`ModelMediated`]'s shapes prior): longer
+/// than any loop delay the compensator is meant for.
+pub const SHAPES_HOLD: f64 = 0.5;
 /// Hunt-Crossley is kept by `auto` when its RMS residual is below this share of the linear
 /// fit's.
 pub const HUNT_CROSSLEY_PREFERENCE: f64 = 0.7;
@@ -222,6 +227,9 @@ pub struct ModelMediated {
     /// RSI it is 17-25 mm/s off, and a 20 mm/s approach read as 25 mm/s made every later
     /// contact rebound 50 % fast.)
     approach: Vector3<f64>,
+    /// The scenario's shapes as prior geometry (`prior_shapes`), rendered by the engine's
+    /// shape query; `None` without.
+    shapes: Option<ShapeModel>,
 }
 
 impl ModelMediated {
@@ -281,6 +289,7 @@ impl ModelMediated {
             fallback_impulse: Vector3::zeros(),
             restore: None,
             approach: Vector3::zeros(),
+            shapes: ShapeModel::new(p, context, initial_law),
         }
     }
 
@@ -418,7 +427,10 @@ impl ModelMediated {
                     self.undo = Some(self.model_impulse);
                 }
             }
-        } else if self.samples.len() >= self.params.min_samples as usize && !self.split_corner() {
+        } else if self.samples.len() >= self.params.min_samples as usize
+            && !self.fit_shapes()
+            && !self.split_corner()
+        {
             // with a calibration, `auto` fits the calibrated law's form (measured at leisure)
             let form = match (self.params.law, self.initial_law) {
                 (LawForm::Auto, Some(ContactModel::Linear(_))) if self.calibrated => {
@@ -459,6 +471,42 @@ impl ModelMediated {
         self.fallback_impulse = Vector3::zeros();
         self.robot_past = 0.0;
         self.mode = Mode::Free;
+        if let Some(sh) = self.shapes.as_mut() {
+            sh.motions.clear();
+            sh.rendered = false;
+            sh.robot_touched = false;
+        }
+    }
+
+    /// Whether a contact in which the model rendered the shapes stays open (the virtual shapes
+    /// apart, no force measured): until the robot, replaying the virtual motion one loop delay
+    /// later, has made that contact too (its shapes at `motion_then`, the robot's motion behind
+    /// this measurement, touched and are apart again), at most [`SHAPES_HOLD`] after the
+    /// virtual shapes let go. Without it a contact shorter than the loop's delay would end
+    /// before the robot's began, and the robot's would be taken for a new one (`pida`'s).
+    fn shapes_hold(&mut self, motion_then: Option<&RelativeMotion>) -> bool {
+        let limit = (SHAPES_HOLD / self.period).round() as usize;
+        match (self.shapes.as_mut(), motion_then) {
+            (Some(sh), Some(m)) if sh.rendered => {
+                let touching = sh.touching(m);
+                sh.robot_touched |= touching;
+                touching || (!sh.robot_touched && self.since_model < limit)
+            }
+            _ => false,
+        }
+    }
+
+    /// A contact the robot's shapes made (the shapes prior): their law and friction fitted
+    /// ([`ShapeModel::fit`]) and queued. Returns whether the contact was the shapes' (then it
+    /// is not fitted as a plane).
+    fn fit_shapes(&mut self) -> bool {
+        let (min, memory) = (self.params.min_samples as usize, self.params.memory as f64);
+        match self.shapes.as_mut() {
+            Some(sh) if sh.motions.len() == self.samples.len() => {
+                sh.fit(&self.samples, min, memory)
+            }
+            _ => false,
+        }
     }
 
     /// A contact that pressed two modelled surfaces at once (`corner`): its samples split
@@ -645,10 +693,17 @@ impl ModelMediated {
 
     /// The estimate reported: the law of the surface being rendered, else the shared law.
     fn estimate(&self) -> Option<ContactEstimate> {
-        let law = self
-            .rendered
-            .and_then(|i| self.surfaces[i])
-            .and_then(|s| self.law_of(&s))
+        let shapes = self
+            .shapes
+            .as_ref()
+            .filter(|sh| sh.rendered && sh.known)
+            .map(|sh| sh.system.contact.law);
+        let law = shapes
+            .or_else(|| {
+                self.rendered
+                    .and_then(|i| self.surfaces[i])
+                    .and_then(|s| self.law_of(&s))
+            })
             .or(self.shared_law)?;
         Some(match law {
             ContactModel::Linear(l) => ContactEstimate {
@@ -1076,6 +1131,294 @@ fn fit_hunt_crossley(
     Some(finish_fit(samples, normal, h, law))
 }
 
+/// The scenario's shapes as the model's prior geometry (`prior_shapes`, issue 22): the nominal
+/// system's shapes (its walls left out: they are the planes' part of the model) rendered at the
+/// virtual servicer pose by the engine's own contact query ([`TwoBodySystem::contact_at`]: the
+/// same shape pairs and point law as the reference), with the law and friction the model has
+/// for them. Everything is allocated once, at construction.
+#[derive(Debug, Clone)]
+struct ShapeModel {
+    /// The nominal system with the rendered law and friction in its contact (walls removed).
+    system: TwoBodySystem,
+    /// Whether a law is known (the prior's, the calibration's or an identified one).
+    known: bool,
+    /// Whether the law and friction are the scenario's, kept as given (`geometry-and-law`).
+    fixed: bool,
+    /// Whether the law is a calibration's, kept as given (only μ̂ is learned).
+    calibrated: bool,
+    /// Samples behind the identified law (0: a prior).
+    weight: f64,
+    /// The identified friction coefficient μ̂ rendered (regularised Coulomb, static = kinetic);
+    /// unused with `fixed`.
+    friction: f64,
+    /// The state a run starts with: known, law, friction.
+    initial: (bool, ContactModel, f64),
+    /// An update (law, μ̂, weight) waiting for the virtual shapes to be apart.
+    pending: Option<(ContactModel, f64, f64)>,
+    /// The robot's attitude (servicer to `t`) and angular velocity (`t`, rad/s, from successive
+    /// attitudes) of the last `τ_p/T + 1` ticks.
+    attitudes: DelayLine<(UnitQuaternion<f64>, Vector3<f64>)>,
+    /// The robot's attitude at the last tick, if reported.
+    last_attitude: Option<UnitQuaternion<f64>>,
+    /// The robot's motion behind each of this contact's samples (capacity `max_samples`).
+    motions: Vec<RelativeMotion>,
+    /// Whether the shapes were rendered in this contact.
+    rendered: bool,
+    /// Whether the robot's shapes touched (nominally) in this contact.
+    robot_touched: bool,
+}
+
+impl ShapeModel {
+    /// The shapes prior of `p` (`None` for `prior_shapes = "none"` or without the scenario's
+    /// geometry in `context`); `calibrated_law` is the calibration's law, if one.
+    fn new(
+        p: &ModelMediatedParams,
+        context: &CompensatorContext,
+        calibrated_law: Option<ContactModel>,
+    ) -> Option<Self> {
+        let geometry = context.geometry.as_ref()?;
+        if p.prior_shapes == PriorShapes::None || geometry.system.contact.shapes.is_empty() {
+            return None;
+        }
+        let mut system = geometry.system.clone();
+        system.contact.walls.clear();
+        system.sensor_origin = context.sensor_origin;
+        let fixed = p.prior_shapes == PriorShapes::GeometryAndLaw;
+        let (known, law) = match (fixed, calibrated_law) {
+            (true, _) => (true, system.contact.law),
+            (false, Some(law)) => (true, law),
+            (false, None) => (false, system.contact.law),
+        };
+        let mut model = ShapeModel {
+            system,
+            known,
+            fixed,
+            calibrated: !fixed && calibrated_law.is_some(),
+            weight: 0.0,
+            friction: p.prior_friction,
+            initial: (known, law, p.prior_friction),
+            pending: None,
+            attitudes: DelayLine::new(
+                context.sensor_delay_ticks,
+                (UnitQuaternion::identity(), Vector3::zeros()),
+            ),
+            last_attitude: None,
+            motions: Vec::with_capacity(p.max_samples as usize),
+            rendered: false,
+            robot_touched: false,
+        };
+        model.set(law, p.prior_friction);
+        Some(model)
+    }
+
+    /// Renders `law` and, unless the scenario's friction is kept, μ̂ `friction`.
+    fn set(&mut self, law: ContactModel, friction: f64) {
+        self.system.contact.law = law;
+        if !self.fixed {
+            self.friction = friction;
+            self.system.contact.shape_friction.clear(); // no allocation: it only shrinks
+            self.system.contact.friction = (friction > 0.0).then_some(Friction {
+                static_coefficient: friction,
+                kinetic_coefficient: friction,
+                stick_velocity: FRICTION_STICK_VELOCITY,
+                stribeck_velocity: FRICTION_STICK_VELOCITY,
+            });
+        }
+    }
+
+    /// Forgets the run (no allocation).
+    fn reset(&mut self) {
+        let (known, law, friction) = self.initial;
+        self.known = known;
+        self.weight = 0.0;
+        self.set(law, friction);
+        self.pending = None;
+        self.attitudes
+            .fill((UnitQuaternion::identity(), Vector3::zeros()));
+        self.last_attitude = None;
+        self.motions.clear();
+        self.rendered = false;
+        self.robot_touched = false;
+    }
+
+    /// Records the robot's attitude of this tick (its angular velocity from the last one).
+    fn push_attitude(&mut self, attitude: Option<UnitQuaternion<f64>>, period: f64) {
+        let Some(q) = attitude else {
+            self.last_attitude = None;
+            return;
+        };
+        let omega = match self.last_attitude {
+            Some(last) => (q * last.inverse()).scaled_axis() / period,
+            None => {
+                self.attitudes.fill((q, Vector3::zeros()));
+                Vector3::zeros()
+            }
+        };
+        self.last_attitude = Some(q);
+        self.attitudes.push((q, omega));
+    }
+
+    /// The robot's servicer motion `lag` ticks ago from its rod tip then (`t`, m, m/s).
+    fn robot_motion(
+        &self,
+        lag: usize,
+        tip: &Vector3<f64>,
+        tip_velocity: &Vector3<f64>,
+    ) -> Option<RelativeMotion> {
+        self.last_attitude?;
+        let (orientation, angular_velocity) = self.attitudes.delayed(lag);
+        let arm = orientation * self.system.rod_tip;
+        Some(RelativeMotion {
+            position: tip - arm,
+            orientation,
+            velocity: tip_velocity - angular_velocity.cross(&arm),
+            angular_velocity,
+        })
+    }
+
+    /// The model's wrench on the frame (N, N·m about the sensor origin) at a servicer motion,
+    /// `None` where the shapes do not push (apart, or no law known).
+    fn wrench(&self, motion: &RelativeMotion) -> Option<FrameWrench> {
+        if !self.known {
+            return None;
+        }
+        let c = self.system.contact_at(motion, 0.0);
+        (c.force != Vector3::zeros()).then_some(c.wrench)
+    }
+
+    /// Whether the shapes touch (any contact point) at a servicer motion.
+    fn touching(&self, motion: &RelativeMotion) -> bool {
+        let mut any = false;
+        self.system.for_each_shape_contact(motion, |_| any = true);
+        any
+    }
+
+    /// Adopts a queued update once the virtual shapes are apart.
+    fn adopt_pending(&mut self, motion: &RelativeMotion) {
+        if let Some((law, friction, weight)) = self.pending {
+            if !self.touching(motion) {
+                self.set(law, friction);
+                self.known = true;
+                self.weight = weight;
+                self.pending = None;
+            }
+        }
+    }
+
+    /// Fits the shapes' law and friction to a contact's samples (`samples[i]` measured with the
+    /// robot at `self.motions[i]`) and queues the update: with the nominal geometry every
+    /// sample's contact points are known, so the force on the servicer is linear in the law,
+    /// `−F = Σᵢ (k·dᵢ + c·ḋᵢ)·nᵢ + μ·Σᵢ φ(f_n,i, v_t,i)` (φ the engine's regularised Coulomb law
+    /// at μ = 1): (k, c) by least squares over the force's components with the friction of the
+    /// last estimate taken off, then μ by least squares over the sliding samples (a point
+    /// sliding faster than [`SLIDE_SPEED`]), three rounds. The calibration's law is kept (only
+    /// μ̂ learned); the scenario's (`geometry-and-law`) is kept as given. Returns whether the
+    /// contact was the shapes' (`min_samples` samples with the robot's shapes touching).
+    fn fit(&mut self, samples: &[Sample], min_samples: usize, memory: f64) -> bool {
+        let touching = self.motions.iter().filter(|m| self.touching(m)).count();
+        if touching < min_samples || touching < samples.len() / 2 {
+            return false;
+        }
+        if self.fixed {
+            return true;
+        }
+        let unit = Friction {
+            static_coefficient: 1.0,
+            kinetic_coefficient: 1.0,
+            stick_velocity: FRICTION_STICK_VELOCITY,
+            stribeck_velocity: FRICTION_STICK_VELOCITY,
+        };
+        let calibrated = self.calibrated.then_some(self.system.contact.law);
+        let mut law = calibrated.unwrap_or(self.system.contact.law);
+        let mut mu = 0.0;
+        for _ in 0..3 {
+            // (k, c) with μ's friction taken off (a calibrated law: kept)
+            if calibrated.is_none() {
+                let (mut a, mut b) = (Matrix2::<f64>::zeros(), Vector2::<f64>::zeros());
+                for (x, m) in samples.iter().zip(&self.motions) {
+                    let (mut basis_k, mut basis_c, mut friction) =
+                        (Vector3::zeros(), Vector3::zeros(), Vector3::zeros());
+                    self.for_each_point(m, |n, d, v| {
+                        let rate = -v.dot(n);
+                        basis_k += n * d;
+                        basis_c += n * rate;
+                        if mu > 0.0 {
+                            let f_n = law.normal_force(d, rate);
+                            friction += unit.force(f_n, &(v - n * v.dot(n))) * mu;
+                        }
+                    });
+                    let target = -x.force - friction;
+                    let rows = [basis_k, basis_c];
+                    for i in 0..2 {
+                        b[i] += rows[i].dot(&target);
+                        for j in 0..2 {
+                            a[(i, j)] += rows[i].dot(&rows[j]);
+                        }
+                    }
+                }
+                let Some(kc) = a.try_inverse().map(|inv| inv * b) else {
+                    return true;
+                };
+                if !(kc[0] > 0.0 && kc[0].is_finite()) {
+                    return true;
+                }
+                law = ContactModel::Linear(LinearSpringDamper {
+                    stiffness: kc[0],
+                    damping: kc[1].max(0.0),
+                });
+            }
+            // μ over the sliding samples
+            let (mut num, mut den) = (0.0, 0.0);
+            for (x, m) in samples.iter().zip(&self.motions) {
+                let (mut normal, mut friction, mut sliding) =
+                    (Vector3::zeros(), Vector3::zeros(), false);
+                self.for_each_point(m, |n, d, v| {
+                    let f_n = law.normal_force(d, -v.dot(n));
+                    let v_t = v - n * v.dot(n);
+                    normal += n * f_n;
+                    friction += unit.force(f_n, &v_t);
+                    sliding |= v_t.norm() > SLIDE_SPEED;
+                });
+                if sliding {
+                    num += (-x.force - normal).dot(&friction);
+                    den += friction.norm_squared();
+                }
+            }
+            mu = if den > 0.0 {
+                (num / den).max(0.0)
+            } else {
+                self.friction
+            };
+        }
+        let n = touching as f64;
+        let (law, friction, weight) = if self.weight > 0.0 && calibrated.is_none() {
+            let w_old = self.weight.min(memory);
+            (
+                blend_laws(&self.system.contact.law, w_old, &law, n),
+                (self.friction * w_old + mu * n) / (w_old + n),
+                w_old + n,
+            )
+        } else {
+            (law, mu, n)
+        };
+        self.pending = Some((law, friction, weight));
+        true
+    }
+
+    /// Calls `f(n, d, v)` for every contact point of the shapes at a servicer motion: its
+    /// normal (into free space), depth (m) and the servicer's material velocity there (m/s).
+    fn for_each_point(
+        &self,
+        motion: &RelativeMotion,
+        mut f: impl FnMut(&Vector3<f64>, f64, &Vector3<f64>),
+    ) {
+        self.system.for_each_shape_contact(motion, |p| {
+            let v = motion.velocity + motion.angular_velocity.cross(&(p.point - motion.position));
+            f(&p.normal, p.depth, &v);
+        });
+    }
+}
+
 impl Compensator for ModelMediated {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
         let (f_mea, m_mea) = (input.measured.force, input.measured.moment);
@@ -1090,13 +1433,27 @@ impl Compensator for ModelMediated {
         let (p_then, v_then) = self.kinematics.delayed(self.delay_ticks);
         let physical = self.detector.update(&f_mea);
         let fallback = self.fallback.step(input); // kept current at every tick
+                                                  // the shapes prior: the robot's servicer motion that produced this measurement, and the
+                                                  // model's wrench at the virtual motion
+        let (delay_ticks, period) = (self.delay_ticks, self.period);
+        let motion_then = self.shapes.as_mut().and_then(|sh| {
+            sh.push_attitude(input.orientation_actual, period);
+            sh.robot_motion(delay_ticks, &p_then, &v_then)
+        });
 
         if self.mode == Mode::Free {
             self.adopt_pending(&p_des);
+            if let (Some(sh), Some(m)) = (self.shapes.as_mut(), input.motion_desired.as_ref()) {
+                sh.adopt_pending(m);
+            }
         }
         let (rod_des, surface_des) = self.model_force(&p_des, &v_des);
         let (rod_then, _) = self.model_force(&p_then, &v_then);
-        let model_des = surface_des.is_some();
+        let shape_des = match (self.shapes.as_ref(), input.motion_desired.as_ref()) {
+            (Some(sh), Some(m)) => sh.wrench(m),
+            _ => None,
+        };
+        let model_des = surface_des.is_some() || shape_des.is_some();
         let model_then = rod_then != Vector3::zeros();
 
         // a contact starts with the first force or model contact, ends when neither is left
@@ -1108,7 +1465,16 @@ impl Compensator for ModelMediated {
                 match self.explaining_surface(&f_mea, &p_then) {
                     Some(_) => Mode::Model,
                     None => {
-                        self.reason = self.fallback_reason(&f_mea);
+                        // the robot's shapes touching, their law not known yet
+                        let shapes_unknown = match (self.shapes.as_ref(), motion_then.as_ref()) {
+                            (Some(sh), Some(m)) => !sh.known && sh.touching(m),
+                            _ => false,
+                        };
+                        self.reason = if shapes_unknown {
+                            Rendering::PidaLawUnknown
+                        } else {
+                            self.fallback_reason(&f_mea)
+                        };
                         Mode::Fallback
                     }
                 }
@@ -1119,13 +1485,17 @@ impl Compensator for ModelMediated {
             && !model_then
             && !self.near_calibrated(&p_then)
             && self.since_model >= self.hold_ticks
+            && !self.shapes_hold(motion_then.as_ref())
         {
             self.end_contact();
         }
         self.since_model = if model_des { 0 } else { self.since_model + 1 };
+        let shapes_rendered = self.shapes.as_ref().is_some_and(|sh| sh.rendered);
         if self.mode == Mode::Model
             && physical
             && !model_then
+            && !shapes_rendered
+            && shape_des.is_none()
             && self.explaining_surface(&f_mea, &p_then).is_none()
         {
             // a force that no surface explains (none there): `pida` takes the contact. A force
@@ -1158,11 +1528,22 @@ impl Compensator for ModelMediated {
                     velocity: v_then,
                 });
                 self.force_sum += f_mea;
+                if let (Some(sh), Some(m)) = (self.shapes.as_mut(), motion_then) {
+                    if sh.motions.len() < sh.motions.capacity() {
+                        sh.motions.push(m);
+                    }
+                }
             }
         }
         if let Some(i) = surface_des {
             self.rendered.get_or_insert(i);
         }
+        if let (Some(sh), true) = (self.shapes.as_mut(), shape_des.is_some()) {
+            sh.rendered = true;
+        }
+        // the shapes rendered in this contact: no residual (the planes' model at the robot's
+        // pose is not the whole model there)
+        let shapes_rendered = self.shapes.as_ref().is_some_and(|sh| sh.rendered);
         if let Some(s) = self.rendered.and_then(|i| self.surfaces[i]) {
             let band = s
                 .calibrated
@@ -1182,7 +1563,7 @@ impl Compensator for ModelMediated {
                 let s = self.sensor_origin;
                 let f_model = -rod_des; // on the frame
                 let f_model_then = -rod_then;
-                let residual = if physical {
+                let residual = if physical && !shapes_rendered {
                     (f_mea - f_model_then) * self.params.residual_gain
                 } else {
                     Vector3::zeros()
@@ -1214,15 +1595,21 @@ impl Compensator for ModelMediated {
                 self.model_impulse += force * self.period;
                 // the measured moment that the measured force at the robot's tip does not make
                 let unexplained = m_mea - (p_then - s).cross(&f_mea);
-                let moment = if physical {
+                let moment = if physical && !shapes_rendered {
                     unexplained * self.params.residual_gain
                 } else {
                     Vector3::zeros()
                 };
-                FrameWrench {
+                let mut wrench = FrameWrench {
                     force,
                     moment: (p_des - s).cross(&force) + moment,
+                };
+                if let Some(w) = shape_des {
+                    // the shapes' wrench as the engine computes it at the virtual pose
+                    wrench.force += w.force;
+                    wrench.moment += w.moment;
                 }
+                wrench
             }
         };
         let observed = if self.mode == Mode::Model {
@@ -1293,6 +1680,9 @@ impl Compensator for ModelMediated {
         self.restore = None;
         self.reason = Rendering::PidaNoPrior;
         self.contradicted = [None; MAX_SURFACES];
+        if let Some(sh) = self.shapes.as_mut() {
+            sh.reset();
+        }
     }
 
     fn rendering(&self) -> Rendering {

@@ -163,6 +163,24 @@ pub enum LawForm {
     Auto,
 }
 
+/// What `model-mediated` takes of the scenario's shapes (`[[servicer.shapes]]`,
+/// `[[target.shapes]]`) as prior geometry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default, JsonSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum PriorShapes {
+    /// Nothing: the shapes' contacts are fitted as planes at the rod tip, or `pida`'s (default).
+    #[default]
+    None,
+    /// Their nominal geometry: the contact between the servicer's and the target's shapes is
+    /// rendered at the virtual pose by the engine's shape query, with the calibration's law
+    /// (`compensator.calibration`) or else the law identified from the first contact (that one
+    /// `pida`'s), and `prior_friction` until a contact identifies μ̂.
+    Geometry,
+    /// Their nominal geometry and the scenario's contact law and friction (`[contact]`, the
+    /// law the hardware is stated to have): rendered from the first contact, kept as given.
+    GeometryAndLaw,
+}
+
 /// Parameters of the `model-mediated` compensator.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
@@ -182,6 +200,11 @@ pub struct ModelMediatedParams {
     /// calibrated surfaces until a contact identifies their own (a calibration has none).
     #[schemars(range(min = 0.0, max = 2.0))]
     pub prior_friction: f64,
+    /// The scenario's shapes as prior geometry: `none` (default), `geometry` (the shapes'
+    /// nominal geometry, the law identified or the calibration's) or `geometry-and-law` (also
+    /// the scenario's contact law and friction); see [`PriorShapes`]. A scenario without shapes
+    /// refuses anything but `none`.
+    pub prior_shapes: PriorShapes,
     /// A calibration of the hardware (`hilcontact calibrate`, the calibration file's tables;
     /// `--calibration FILE`): its walls and law are rendered from the very first contact, trusted
     /// as far as their uncertainties say; a contact that contradicts them corrects them. Without
@@ -229,6 +252,7 @@ impl Default for ModelMediatedParams {
             prior_walls: Vec::new(),
             correct_priors: true,
             prior_friction: 0.0,
+            prior_shapes: PriorShapes::None,
             calibration: crate::calibration::CalibrationFile::default(),
             match_angle: 30.0,
             gap_tolerance: 1e-3,
