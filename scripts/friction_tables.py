@@ -20,7 +20,10 @@ model-mediated runs at 40, 80 and 120 ms, each scene without priors, with its wa
 geometry, and with its walls and law as a calibration and its friction coefficient as
 ``prior_friction``, and adds the worst over the collisions its model rendered (each surface's second
 contact on, or the first with a prior wall and a law known), the metrics' own per-collision
-errors.
+errors. It also runs the presets with shapes (``rod-in-frame``, ``probe-drogue``) without priors
+and with their shapes as prior geometry (``prior_shapes``): the law unknown (``geometry``), and
+the scenario's law and friction known (``geometry-and-law``); there the tangential impulse is taken across the reference's normal
+impulse (no walls).
 
 A page's table is the region between ``<!-- friction-tables: KIND -->`` and
 ``<!-- /friction-tables -->`` of docs/compensators/KIND.md.
@@ -116,22 +119,32 @@ def _calibration(raw: dict[str, Any], delay: float) -> dict[str, Any]:
     }
 
 
+#: The presets with shapes, for model-mediated's shapes prior.
+SHAPE_PRESETS = ("rod-in-frame", "probe-drogue")
+
+
 def measure(raw: dict[str, Any], kind: str, delay: float, prior: str = "") -> dict[str, Any]:
     """One run's row (see the module doc); ``prior`` (model-mediated): ``"walls"``, the scene's
     walls as its prior geometry (``compensator.prior_walls``); ``"all"``, its walls and law as
-    a calibration and its friction coefficient as ``prior_friction``."""
+    a calibration and its friction coefficient as ``prior_friction``; ``"shapes"``, its shapes
+    as prior geometry (``prior_shapes = "geometry"``); ``"shapes-law"``, its shapes, law and
+    friction (``prior_shapes = "geometry-and-law"``)."""
     compensator: dict[str, Any] = {"kind": kind}
     if prior == "walls":
         compensator["prior_walls"] = raw["walls"]
     elif prior == "all":
         compensator["calibration"] = _calibration(raw, delay)
         compensator["prior_friction"] = raw["contact"]["friction"]["kinetic"]
+    elif prior == "shapes":
+        compensator["prior_shapes"] = "geometry"
+    elif prior == "shapes-law":
+        compensator["prior_shapes"] = "geometry-and-law"
     raw = {**raw, "compensator": compensator}
     scenario = hc.load_scenario(raw, {**FACILITY, "facility.robot_delay": delay})
     run = hc.simulate(scenario)
     m = run.metrics
     ts, ref = run.timeseries, run.reference
-    normals = [np.asarray(w["normal"], dtype=float) / np.linalg.norm(w["normal"]) for w in raw["walls"]]
+    normals = [np.asarray(w["normal"], dtype=float) / np.linalg.norm(w["normal"]) for w in raw.get("walls") or []]
     references = {c["index"]: c for c in m.get("reference_collisions") or []}
     t_h, t_r = ts["time"].to_numpy(), ref["time"].to_numpy()
     dt = float(raw["simulation"]["period"])
@@ -145,7 +158,12 @@ def measure(raw: dict[str, Any], kind: str, delay: float, prior: str = "") -> di
         # the wrench the virtual dynamics felt (on the frame) and the reference's on the rod
         j_h = -_vec(ts, "applied_force", rows_h).sum(axis=0) * dt
         j_r = _vec(ref, "contact_force", rows_r).sum(axis=0) * (t_r[1] - t_r[0])
-        n = max(normals, key=lambda n: abs(float(j_r @ n)))
+        if normals:
+            n = max(normals, key=lambda n: abs(float(j_r @ n)))
+        else:
+            # shapes, no walls: across the reference's normal impulse
+            j_n = j_r - _vec(ref, "friction_force", rows_r).sum(axis=0) * (t_r[1] - t_r[0])
+            n = j_n / np.linalg.norm(j_n)
         t_hil, t_ref = j_h - (j_h @ n) * n, j_r - (j_r @ n) * n
         if np.linalg.norm(t_ref) > 1e-3 * np.linalg.norm(j_r):
             tangential.append(float(np.linalg.norm(t_hil - t_ref) / np.linalg.norm(t_ref)))
@@ -211,6 +229,13 @@ def table(kind: str, delays: tuple[float, ...] | None = None) -> list[str]:
     if model:
         variants += [(f"{label}, prior walls", raw, "walls") for label, raw in scenes()]
         variants += [(f"{label}, calibrated, prior μ", raw, "all") for label, raw in scenes()]
+        for name in SHAPE_PRESETS:
+            raw = hc.load_scenario(name).to_dict()
+            variants += [
+                (name, raw, ""),
+                (f"{name}, prior shapes", raw, "shapes"),
+                (f"{name}, prior shapes and law", raw, "shapes-law"),
+            ]
     for label, raw, prior in variants:
         for delay in delays or KIND_DELAYS.get(kind, DELAYS):
             row = measure(raw, kind, delay, prior)

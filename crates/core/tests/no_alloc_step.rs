@@ -3,7 +3,8 @@
 //! this test's thread only, while the steps run on recorded inputs. And `reset` forgets a run.
 //! The facility's side of a tick (`FacilityLoop::tick`: advance, measure) allocates nothing
 //! either, over a whole run with noise, quantisation and servo lag. `pida` with the scenario's
-//! geometry as its prior normal (shapes, a corner of two bars, walls with friction) neither.
+//! geometry as its prior normal (shapes, a corner of two bars, walls with friction) neither,
+//! nor `model-mediated` with the scenario's shapes as its prior geometry (`prior_shapes`).
 
 mod common;
 
@@ -11,7 +12,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
 use common::{preset, table1};
-use hilcontact_core::compensator::{CompensatorConfig, ModelMediatedParams, REGISTRY};
+use hilcontact_core::compensator::{CompensatorConfig, ModelMediatedParams, PriorShapes, REGISTRY};
 use hilcontact_core::contact::FrictionConfig;
 use hilcontact_core::facility::FacilityLoop;
 use hilcontact_core::hil::compensator_context;
@@ -169,26 +170,7 @@ fn contacts_of_shapes_allocate_nothing_in_the_facility_nor_the_reference() {
     for name in ["rod-in-frame", "probe-drogue"] {
         let mut s = common::preset(name);
         if name == "probe-drogue" {
-            let path = format!(
-                "{}/../../python/hilcontact/scenarios/probe-drogue-cone.obj",
-                env!("CARGO_MANIFEST_DIR")
-            );
-            let text = std::fs::read_to_string(&path).expect("the drogue's OBJ");
-            let shape = &mut s.target.shapes[0];
-            for line in text.lines() {
-                let mut words = line.split_whitespace();
-                match words.next() {
-                    Some("v") => {
-                        let v: Vec<f64> = words.map(|w| w.parse().unwrap()).collect();
-                        shape.vertices.push([v[0], v[1], v[2]]);
-                    }
-                    Some("f") => {
-                        let f: Vec<u32> = words.map(|w| w.parse::<u32>().unwrap() - 1).collect();
-                        shape.triangles.push([f[0], f[1], f[2]]);
-                    }
-                    _ => {}
-                }
-            }
+            common::load_drogue_mesh(&mut s);
         }
         s.facility.robot_delay = 0.0;
         let plan = s.resolve().unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -251,5 +233,51 @@ fn pida_with_the_geometry_prior_steps_without_allocating() {
             }
         });
         assert_eq!(allocated, 0, "{}: allocated while stepping", s.name);
+    }
+}
+
+/// `model-mediated` with the scenario's shapes as its prior geometry: the shapes' wrench at the
+/// virtual pose (the engine's query), the robot's attitude delayed, the shapes' fit at each
+/// contact's end and its adoption; `geometry` (the law fitted from `pida`'s first contact) and
+/// `geometry-and-law`, on `rod-in-frame` (a cylinder in four boxes) and `probe-drogue` (a
+/// capsule in a cone mesh).
+#[test]
+fn model_mediated_with_the_shapes_prior_steps_without_allocating() {
+    for name in ["rod-in-frame", "probe-drogue"] {
+        for prior in [PriorShapes::Geometry, PriorShapes::GeometryAndLaw] {
+            let mut s = preset(name);
+            if name == "probe-drogue" {
+                common::load_drogue_mesh(&mut s);
+            }
+            s.facility.sensor_noise = 0.2;
+            s.facility.sensor_delay = 0.005;
+            s.facility.robot_delay = 0.08;
+            s.compensator = CompensatorConfig::ModelMediated(ModelMediatedParams {
+                prior_shapes: prior,
+                ..ModelMediatedParams::default()
+            });
+            let plan = s.resolve().expect("plan");
+            let context = compensator_context(&plan);
+            let inputs = compensator_inputs(&plan);
+            assert!(
+                inputs.iter().any(|i| i.measured.force.norm() > 50.0),
+                "{name}: no contact"
+            );
+            let mut compensator = s.compensator.build(&context);
+            let mut modelled = 0;
+            let allocated = allocations(|| {
+                for input in &inputs {
+                    std::hint::black_box(compensator.step(input));
+                    if compensator.rendering() == hilcontact_core::compensator::Rendering::Model {
+                        modelled += 1;
+                    }
+                }
+            });
+            assert_eq!(allocated, 0, "{name} {prior:?}: allocated while stepping");
+            assert!(
+                modelled > 0,
+                "{name} {prior:?}: nothing rendered by the model"
+            );
+        }
     }
 }

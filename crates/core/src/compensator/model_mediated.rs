@@ -28,6 +28,13 @@
 //! makes a force step. A modelled contact during which the robot measures no force at all
 //! drops the surface (a phantom). No allocation per tick: the samples' buffer is allocated
 //! once.
+//!
+//! With `prior_shapes` the scenario's shapes are part of the model: while the virtual servicer's
+//! shapes touch the target's, their contact wrench at the virtual pose is the engine's own
+//! ([`TwoBodySystem::contact_at`] on the nominal shapes) with the model's law and friction: the
+//! scenario's (`geometry-and-law`), the calibration's, or fitted at each contact's end on the
+//! nominal contact points at the robot's pose (`ShapeModel::fit`); a contact the model
+//! rendered stays open until the robot, one loop delay later, has made it too.
 
 use nalgebra::{Matrix2, Matrix3, Matrix4, UnitQuaternion, Vector2, Vector3, Vector4};
 

@@ -83,3 +83,30 @@ pub fn cofs(out: &SimulationOutput) -> Vec<f64> {
         .filter_map(|c| c.cof)
         .collect()
 }
+
+/// Reads `probe-drogue`'s drogue mesh (`probe-drogue-cone.obj`, beside the preset) into its
+/// target shape, as the Python loader does (a Rust [`preset`] has the file's name only).
+pub fn load_drogue_mesh(s: &mut Scenario) {
+    let path = format!(
+        "{}/../../python/hilcontact/scenarios/probe-drogue-cone.obj",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let text = std::fs::read_to_string(&path).expect("the drogue's OBJ");
+    let shape = &mut s.target.shapes[0];
+    for line in text.lines() {
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => {
+                let v: Vec<f64> = words.map(|w| w.parse().expect("a number")).collect();
+                shape.vertices.push([v[0], v[1], v[2]]);
+            }
+            Some("f") => {
+                let f: Vec<u32> = words
+                    .map(|w| w.parse::<u32>().expect("an index") - 1)
+                    .collect();
+                shape.triangles.push([f[0], f[1], f[2]]);
+            }
+            _ => {}
+        }
+    }
+}
