@@ -468,6 +468,7 @@ DEFAULTS = {
         "prior_walls": [],
         "correct_priors": True,
         "prior_friction": 0.0,
+        "prior_shapes": "none",
         "match_angle": 30.0,
         "gap_tolerance": 1e-3,
         "min_samples": 20,
