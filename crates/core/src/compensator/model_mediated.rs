@@ -491,13 +491,26 @@ impl ModelMediated {
     /// this measurement, touched and are apart again), at most [`SHAPES_HOLD`] after the
     /// virtual shapes let go. Without it a contact shorter than the loop's delay would end
     /// before the robot's began, and the robot's would be taken for a new one (`pida`'s).
-    fn shapes_hold(&mut self, motion_then: Option<&RelativeMotion>) -> bool {
+    /// `robot_touching`: the robot's shapes touch at this tick ([`ModelMediated::robot_touching`]).
+    fn shapes_hold(&self, robot_touching: bool) -> bool {
         let limit = (SHAPES_HOLD / self.period).round() as usize;
+        match self.shapes.as_ref() {
+            Some(sh) if sh.rendered => {
+                robot_touching || (!sh.robot_touched && self.since_model < limit)
+            }
+            _ => false,
+        }
+    }
+
+    /// Whether the robot's shapes touch (nominally) at its motion behind this measurement, in a
+    /// contact where the model rendered the shapes (else false, not queried); remembered for
+    /// the contact ([`ModelMediated::shapes_hold`]).
+    fn robot_touching(&mut self, motion_then: Option<&RelativeMotion>) -> bool {
         match (self.shapes.as_mut(), motion_then) {
             (Some(sh), Some(m)) if sh.rendered => {
                 let touching = sh.touching(m);
                 sh.robot_touched |= touching;
-                touching || (!sh.robot_touched && self.since_model < limit)
+                touching
             }
             _ => false,
         }
@@ -1463,6 +1476,7 @@ impl Compensator for ModelMediated {
         let model_des = surface_des.is_some() || shape_des.is_some();
         let model_then = rod_then != Vector3::zeros();
 
+        let robot_touching = self.robot_touching(motion_then.as_ref());
         // a contact starts with the first force or model contact, ends when neither is left
         if self.mode == Mode::Free && (physical || model_des) {
             self.approach = v_des;
@@ -1492,7 +1506,7 @@ impl Compensator for ModelMediated {
             && !model_then
             && !self.near_calibrated(&p_then)
             && self.since_model >= self.hold_ticks
-            && !self.shapes_hold(motion_then.as_ref())
+            && !self.shapes_hold(robot_touching)
         {
             self.end_contact();
         }
