@@ -287,28 +287,7 @@ fn pida_first_collision_on_probe_drogue_follows_the_shapes_normal() {
 fn probe_drogue(delay: f64) -> Scenario {
     let mut s = noisy_pida("probe-drogue");
     s.facility.robot_delay = delay;
-    let path = format!(
-        "{}/../../python/hilcontact/scenarios/probe-drogue-cone.obj",
-        env!("CARGO_MANIFEST_DIR")
-    );
-    let text = std::fs::read_to_string(&path).expect("the drogue's OBJ");
-    let shape = &mut s.target.shapes[0];
-    for line in text.lines() {
-        let mut words = line.split_whitespace();
-        match words.next() {
-            Some("v") => {
-                let v: Vec<f64> = words.map(|w| w.parse().expect("a number")).collect();
-                shape.vertices.push([v[0], v[1], v[2]]);
-            }
-            Some("f") => {
-                let f: Vec<u32> = words
-                    .map(|w| w.parse::<u32>().expect("an index") - 1)
-                    .collect();
-                shape.triangles.push([f[0], f[1], f[2]]);
-            }
-            _ => {}
-        }
-    }
+    common::load_drogue_mesh(&mut s);
     s
 }
 
