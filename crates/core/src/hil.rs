@@ -215,6 +215,10 @@ pub struct HilRecord {
     pub stiffness_estimate: f64,
     /// Identified damping, N·s/m (NaN when not identified).
     pub damping_estimate: f64,
+    /// How many contact laws act in parallel along the physical contact's normal
+    /// ([`crate::world::Contact::law_factor`]; NaN where the facility does not know it, as on
+    /// a real facility).
+    pub law_factor: f64,
     /// Energy observed by the compensator at the environment port, J (NaN when not observed).
     pub observed_energy: f64,
     /// How the compensator handled this tick's contact ([`Rendering::Unreported`] in free
@@ -336,6 +340,7 @@ impl HilStep {
             energy: self.virt.energy(),
             stiffness_estimate: out.estimate.map_or(f64::NAN, |e| e.stiffness),
             damping_estimate: out.estimate.map_or(f64::NAN, |e| e.damping),
+            law_factor: physical.and_then(|p| p.law_factor).unwrap_or(f64::NAN),
             observed_energy: out.observed_energy,
             rendering: self.virt.rendering(),
         };

@@ -78,6 +78,10 @@ pub struct Trace {
     pub stiffness_estimate: Vec<f64>,
     /// Identified damping, N·s/m (NaN when not identified; empty when nothing is identified).
     pub damping_estimate: Vec<f64>,
+    /// How many contact laws acted in parallel along the physical contact's normal
+    /// ([`crate::world::Contact::law_factor`]; NaN where unknown; empty when nothing is
+    /// identified).
+    pub law_factor: Vec<f64>,
     /// Energy friction dissipated over the whole run, J (the ideal reference's; 0 otherwise).
     pub friction_work: f64,
     /// How the compensator handled each tick's contact (empty for the ideal reference).
@@ -122,6 +126,7 @@ impl Trace {
             energy: Vec::with_capacity(n),
             stiffness_estimate: Vec::with_capacity(e),
             damping_estimate: Vec::with_capacity(e),
+            law_factor: Vec::with_capacity(e),
             friction_work: 0.0,
             rendering: Vec::with_capacity(n),
         }
@@ -141,10 +146,12 @@ impl Trace {
         self.energy.push(s.energy);
     }
 
-    /// Appends one tick's contact estimates (N/m, N·s/m).
-    pub fn push_estimates(&mut self, stiffness: f64, damping: f64) {
+    /// Appends one tick's contact estimates (N/m, N·s/m) and the physical contact's
+    /// [`Trace::law_factor`] (NaN where unknown).
+    pub fn push_estimates(&mut self, stiffness: f64, damping: f64, law_factor: f64) {
         self.stiffness_estimate.push(stiffness);
         self.damping_estimate.push(damping);
+        self.law_factor.push(law_factor);
     }
 
     /// Number of ticks.
@@ -730,6 +737,11 @@ pub const IDENTIFICATION_UNITS: IdentificationUnits = IdentificationUnits {
 
 /// Identification error over samples in contact (`force > threshold`) after the first
 /// collision's end; `None` if there is no such sample or the trace has no estimates.
+/// `stiffness` and `damping` are the law at one contact point; a sample where the contact
+/// pressed several points at once is compared with the law along its normal, `λ·k` and `λ·c`
+/// (`λ` the sample's [`Trace::law_factor`], `Σᵢ (nᵢ·n̂)²`: a probe in the crease of two facets
+/// is twice as stiff as one facet), the law an identification along one normal finds; a sample
+/// without a known factor with the point's law.
 pub fn identification_error(
     trace: &Trace,
     threshold: f64,
@@ -745,8 +757,15 @@ pub fn identification_error(
             && k.is_finite()
             && c.is_finite()
         {
-            sk += (k / stiffness - 1.0).abs();
-            sc += (c - damping).abs();
+            // `λ` (1 where unknown or exactly one point)
+            let factor = trace
+                .law_factor
+                .get(i)
+                .copied()
+                .filter(|f| f.is_finite() && *f > 0.0)
+                .unwrap_or(1.0);
+            sk += (k / (factor * stiffness) - 1.0).abs();
+            sc += (c - factor * damping).abs();
             n += 1;
         }
     }

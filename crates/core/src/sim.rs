@@ -73,7 +73,7 @@ fn push_record(trace: &mut Trace, plan: &Plan, row: &HilRecord, estimates_contac
         energy: row.energy,
     });
     if estimates_contact {
-        trace.push_estimates(row.stiffness_estimate, row.damping_estimate);
+        trace.push_estimates(row.stiffness_estimate, row.damping_estimate, row.law_factor);
     }
     trace.rendering.push(row.rendering);
 }

@@ -10,7 +10,7 @@
 use nalgebra::{Isometry3, Matrix3, Translation3, Vector3};
 
 use crate::body::{BodyRate, BodyState, MassProperties};
-use crate::contact::{ContactGeometry, ContactLaw};
+use crate::contact::{ContactGeometry, ContactLaw, ContactModel};
 pub use crate::frames::{FrameWrench, RelativeMotion};
 
 /// Mass properties, rod and sensor: the fixed description of the two-body system.
@@ -42,6 +42,14 @@ pub struct Contact {
     pub friction_power: f64,
     /// The rod tip, m (`t`).
     pub tip: Vector3<f64>,
+    /// How many contact laws act in parallel along the contact's normal `n̂` (the direction of
+    /// the summed normal force): a linear law `k` at each point makes the contact as stiff as
+    /// `law_factor·k` along `n̂`, the stiffness an identification along one normal finds.
+    /// Exactly 1 for one pushing point, 0 without contact; for the rod tip against several
+    /// walls `Σᵢ (nᵢ·n̂)²` (`nᵢ` a wall's normal: 2 for two walls side by side, `2cos²θ` for a
+    /// groove of half-angle θ); NaN where shapes' points are among several (their depths are
+    /// not each a plane's: [`TwoBodySystem::law_factor_at`] measures it).
+    pub law_factor: f64,
 }
 
 /// The start of a step of the ideal reference ([`TwoBodySystem::step_reference_at`]): the
@@ -286,7 +294,24 @@ impl TwoBodySystem {
             wrench: FrameWrench::from_rod_force(&p.force, &tip, &self.sensor_origin),
             friction_power: p.friction_power,
             tip,
+            law_factor: 0.0,
         };
+        // the pushing points: their count, the walls' `S = Σᵢ nᵢnᵢᵀ` (for `law_factor`), and
+        // whether shapes' points are among them
+        let (mut pushing, mut spread, mut shaped) = (0usize, Matrix3::zeros(), false);
+        if p.force != p.friction_force {
+            for wall in &self.contact.walls {
+                let d = wall.penetration(&tip);
+                if d > 0.0 {
+                    let d_dot = wall.penetration_rate(tip_velocity);
+                    let f_n = self.contact.law.normal_force(d, d_dot);
+                    if f_n > 0.0 && f_n + added_damping * d_dot > 0.0 {
+                        pushing += 1;
+                        spread += wall.normal * wall.normal.transpose();
+                    }
+                }
+            }
+        }
         self.for_each_shape_contact_force(rel, added_damping, |point, f| {
             let w = FrameWrench::from_rod_force(&f.force, &point.point, &self.sensor_origin);
             c.force += f.force;
@@ -294,8 +319,52 @@ impl TwoBodySystem {
             c.friction_power += f.friction_power;
             c.wrench.force += w.force;
             c.wrench.moment += w.moment;
+            if f.force != f.friction_force {
+                pushing += 1;
+                shaped = true;
+            }
         });
+        // `law_factor = n̂ᵀ S n̂`, `n̂` along the summed normal force
+        c.law_factor = match (pushing, shaped) {
+            (0, _) => 0.0,
+            (1, _) => 1.0,
+            (_, true) => f64::NAN,
+            (_, false) => (c.force - c.friction_force)
+                .try_normalize(0.0)
+                .map_or(0.0, |n| n.dot(&(spread * n))),
+        };
         c
+    }
+
+    /// [`Contact::law_factor`] of `contact` (the contact at `rel`, [`TwoBodySystem::contact_at`])
+    /// where several points of shapes push: the stiffness along the summed normal `n̂` by a
+    /// central difference of the normal force `N(s)` (the servicer at rest, translated by
+    /// `s·n̂`), over the law's `k`: `λ = (N(−h) − N(h)) / (2h·k)`, `h` = 1e-8 m (exact for a
+    /// linear law while no point enters or leaves within `h`); NaN for a Hunt-Crossley law, whose
+    /// stiffness depends on the depth. `contact.law_factor` itself elsewhere. Allocation-free
+    /// (two more contact evaluations).
+    pub fn law_factor_at(&self, rel: &RelativeMotion, contact: &Contact) -> f64 {
+        const H: f64 = 1e-8;
+        if !contact.law_factor.is_nan() {
+            return contact.law_factor;
+        }
+        let ContactModel::Linear(law) = self.contact.law else {
+            return f64::NAN;
+        };
+        let Some(n) = (contact.force - contact.friction_force).try_normalize(0.0) else {
+            return 0.0;
+        };
+        let normal_force = |s: f64| {
+            let r = RelativeMotion {
+                position: rel.position + n * s,
+                velocity: Vector3::zeros(),
+                angular_velocity: Vector3::zeros(),
+                ..*rel
+            };
+            let c = self.contact_at(&r, 0.0);
+            (c.force - c.friction_force).dot(&n)
+        };
+        (normal_force(-H) - normal_force(H)) / (2.0 * H * law.stiffness)
     }
 
     /// Calls `f` with every contact point of the shapes for a relative motion of the servicer

@@ -467,6 +467,7 @@ impl Truth {
                 energy: f64::NAN,
                 stiffness_estimate: f64::NAN,
                 damping_estimate: f64::NAN,
+                law_factor: p.law_factor.unwrap_or(f64::NAN),
                 observed_energy: f64::NAN,
                 rendering: Rendering::Unreported,
             },

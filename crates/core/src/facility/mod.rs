@@ -54,6 +54,10 @@ pub struct PhysicalContact {
     /// The contact's moment on the frame about the sensor origin, `t`, N·m, where the engine
     /// knows it (the shapes' points spread it); `None`: the force's at the rod tip.
     pub moment: Option<Vector3<f64>>,
+    /// How many contact laws act in parallel along the contact's normal
+    /// ([`crate::world::Contact::law_factor`]: 1 for one point, 0 without contact), where the
+    /// engine knows it; `None`: unknown.
+    pub law_factor: Option<f64>,
 }
 
 /// What stands in for the hardware: a robot that follows the commanded relative motion, the
@@ -87,6 +91,7 @@ pub trait Facility: Send {
             force: self.contact_force(),
             friction_force: self.friction_force(),
             moment: None,
+            law_factor: None,
         }
     }
 }

@@ -313,6 +313,9 @@ impl Facility for FacilityModel {
 
     fn measure(&mut self) -> Measurement {
         self.contact = physical_contact(&self.system, self.robot.actual(), self.dissipation);
+        self.contact.law_factor = self
+            .system
+            .law_factor_at(self.robot.actual(), &self.contact);
         let (force, moment) = self.sensor.sample(&self.contact.wrench);
         Measurement {
             force,
@@ -334,6 +337,7 @@ impl Facility for FacilityModel {
             force: self.contact.force,
             friction_force: self.contact.friction_force,
             moment: Some(self.contact.wrench.moment),
+            law_factor: Some(self.contact.law_factor),
         }
     }
 }

@@ -234,6 +234,7 @@ impl RealtimeProcedure {
             energy: 0.0,
             stiffness_estimate: f64::NAN,
             damping_estimate: f64::NAN,
+            law_factor: f64::NAN,
             observed_energy: f64::NAN,
             rendering: Rendering::Unreported,
         };
