@@ -2,11 +2,12 @@
 //! `F̂_comp = F_comp + F_α` (29), `M̂_comp = M_comp + M_α` (30), with the energy observer fed
 //! by `F_comp`. See docs/compensators/pida.md.
 
-use super::delay::ContactEstimator;
+use super::delay::{ContactEstimator, ContactView};
 use super::energy::{friction_force, DampingAmendment};
 use super::force::{compensate_force, CompensatedWrench};
 use super::params::ModelParams;
 use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
+use crate::frames::FrameWrench;
 use nalgebra::Vector3;
 
 /// Parameter identification and damping amendment.
@@ -15,6 +16,8 @@ pub struct Pida {
     estimator: ContactEstimator,
     amendment: DampingAmendment,
     sensor_origin: Vector3<f64>,
+    /// The last tick's contact view and amendment wrench ([`Pida::last_tick`]).
+    last: Option<(ContactView, FrameWrench)>,
 }
 
 impl Pida {
@@ -24,7 +27,15 @@ impl Pida {
             estimator: ContactEstimator::new(p, context).with_geometry(context.geometry.clone()),
             amendment: DampingAmendment::new(p, context),
             sensor_origin: context.sensor_origin,
+            last: None,
         }
+    }
+
+    /// The last tick's contact view (the normal, μ̂, k̂, ĉ in use) and the energy
+    /// controller's wrench `(F_α, M_α)` (N, N·m), for diagnostics (`examples/pida_presets.rs`);
+    /// `None` before the first tick.
+    pub fn last_tick(&self) -> Option<(ContactView, FrameWrench)> {
+        self.last
     }
 }
 
@@ -110,6 +121,7 @@ impl Compensator for Pida {
                 &self.sensor_origin,
             );
         }
+        self.last = Some((view, alpha));
         self.amendment
             .output(&comp.force, &comp.moment, &alpha, &view) // (29), (30)
     }
@@ -117,6 +129,7 @@ impl Compensator for Pida {
     fn reset(&mut self) {
         self.estimator.reset();
         self.amendment.reset();
+        self.last = None;
     }
 
     fn estimates_contact(&self) -> bool {
