@@ -1,5 +1,6 @@
 //! `pida` on the frictional presets, per collision (issue 22):
-//! `cargo +stable run --profile fast -p hilcontact-core --example pida_presets [preset|all] [delay_s ...]`.
+//! `cargo +stable run --profile fast -p hilcontact-core --example pida_presets [preset|all] [delay_s ...] [trace=N]`
+//! (`trace=N`: every other tick of collision N, pida's view and wrench).
 //!
 //! `rod-in-frame` and `probe-drogue` with 0.2 N sensor noise, 5 ms sensor delay and `pida` at
 //! 10 and 20 ms robot delay (the issue's target rows). For each collision matched to a
@@ -74,10 +75,18 @@ impl Compensator for Recorder {
 }
 
 fn preset(name: &str) -> Scenario {
-    let dir = format!("{}/../../python/hilcontact/scenarios", env!("CARGO_MANIFEST_DIR"));
+    let dir = format!(
+        "{}/../../python/hilcontact/scenarios",
+        env!("CARGO_MANIFEST_DIR")
+    );
     let text = std::fs::read_to_string(format!("{dir}/{name}.toml")).expect("preset");
     let mut s: Scenario = toml::from_str(&text).expect("parse");
-    for shape in s.target.shapes.iter_mut().chain(s.servicer.shapes.iter_mut()) {
+    for shape in s
+        .target
+        .shapes
+        .iter_mut()
+        .chain(s.servicer.shapes.iter_mut())
+    {
         if shape.file.is_empty() {
             continue;
         }
@@ -123,14 +132,13 @@ fn law(rows: &[(f64, f64, f64)]) -> (f64, f64) {
         a += h * h.transpose();
         y += h * f;
     }
-    a.try_inverse()
-        .map_or((f64::NAN, f64::NAN), |i| {
-            let x = i * y;
-            (x[0], x[1])
-        })
+    a.try_inverse().map_or((f64::NAN, f64::NAN), |i| {
+        let x = i * y;
+        (x[0], x[1])
+    })
 }
 
-fn run(name: &str, delay: f64) {
+fn run(name: &str, delay: f64, trace: Option<usize>) {
     let mut s = preset(name);
     s.facility.sensor_noise = 0.2;
     s.facility.sensor_delay = 0.005;
@@ -163,13 +171,21 @@ fn run(name: &str, delay: f64) {
     let f_r: Vec<Vector3<f64>> = (0..t_r.len())
         .map(|i| {
             let c = |a: &str| out.reference.column(a).expect(a)[i];
-            Vector3::new(c("contact_force_x"), c("contact_force_y"), c("contact_force_z"))
+            Vector3::new(
+                c("contact_force_x"),
+                c("contact_force_y"),
+                c("contact_force_z"),
+            )
         })
         .collect();
     let ff_r: Vec<Vector3<f64>> = (0..t_r.len())
         .map(|i| {
             let c = |a: &str| out.reference.column(a).expect(a)[i];
-            Vector3::new(c("friction_force_x"), c("friction_force_y"), c("friction_force_z"))
+            Vector3::new(
+                c("friction_force_x"),
+                c("friction_force_y"),
+                c("friction_force_z"),
+            )
         })
         .collect();
     println!(
@@ -192,6 +208,9 @@ fn run(name: &str, delay: f64) {
         let ticks: Vec<usize> = (0..rows.len())
             .filter(|&k| rows[k].time >= t0 && rows[k].time <= t1)
             .collect();
+        if trace == Some(i + 1) {
+            print_trace(&ticks, &rows, &log);
+        }
         let (mut surfaces, mut corner, mut in_contact) = (0usize, 0usize, 0usize);
         let (mut angle_w, mut weight, mut angle_max) = (0.0, 0.0, 0.0f64);
         let (mut f_t, mut f_n) = (0.0, 0.0);
@@ -221,7 +240,12 @@ fn run(name: &str, delay: f64) {
                     c_hat = view.damping;
                     let fn_true = normal_force.norm();
                     if fn_true > 1.0 {
-                        let a = view.normal.dot(&n_true).clamp(-1.0, 1.0).acos().to_degrees();
+                        let a = view
+                            .normal
+                            .dot(&n_true)
+                            .clamp(-1.0, 1.0)
+                            .acos()
+                            .to_degrees();
                         angle_w += a * fn_true;
                         weight += fn_true;
                         if fn_true > 20.0 {
@@ -269,7 +293,11 @@ fn run(name: &str, delay: f64) {
             .map(|&k| f_r[k] - ff_r[k])
             .sum::<Vector3<f64>>()
             .normalize();
-        let j_app: Vector3<f64> = -ticks.iter().map(|&k| log[k].output.applied.force).sum::<Vector3<f64>>() * period;
+        let j_app: Vector3<f64> = -ticks
+            .iter()
+            .map(|&k| log[k].output.applied.force)
+            .sum::<Vector3<f64>>()
+            * period;
         let w_fref = q.last().map_or(0.0, |&l| w_r[l] - w_r[q[0]]);
         let energy = c.rebound_time.map_or(f64::NAN, |after| {
             let t_h: Vec<f64> = rows.iter().map(|r| r.time).collect();
@@ -312,20 +340,63 @@ fn run(name: &str, delay: f64) {
     println!();
 }
 
+/// Every other tick of a collision: pida's view and wrench against the facility's contact.
+fn print_trace(ticks: &[usize], rows: &[hilcontact_core::hil::HilRecord], log: &[Tick]) {
+    for &k in ticks.iter().step_by(2) {
+        let (row, tick) = (&rows[k], &log[k]);
+        let Some((view, alpha)) = tick.view else {
+            continue;
+        };
+        let n = view.normal;
+        let a = tick.output.applied.force;
+        let v = tick.input.tip_velocity_desired;
+        let v_t = v - n * v.dot(&n);
+        let a_t = a - n * a.dot(&n);
+        let phys = row.contact_force - row.friction_force;
+        println!(
+            "{:.3} in {} fr {} cor {} μ̂ {:.3} n·n_true {:.4} A·n {:7.1} |A_t| {:5.1} A_t·v̂_t {:6.1} |v_t| {:5.2}mm/s Fα·n {:7.1} Fphys {:6.1} Ffric {:5.1} M {:6.2} {:6.2} {:6.2}",
+            row.time,
+            view.in_contact as u8,
+            view.frictional as u8,
+            view.corner as u8,
+            view.friction,
+            -n.dot(&phys.try_normalize(1e-9).unwrap_or_default()),
+            a.dot(&n),
+            a_t.norm(),
+            a_t.dot(&v_t.try_normalize(1e-9).unwrap_or_default()),
+            1e3 * v_t.norm(),
+            alpha.force.dot(&n),
+            phys.norm(),
+            row.friction_force.norm(),
+            tick.output.applied.moment.x,
+            tick.output.applied.moment.y,
+            tick.output.applied.moment.z,
+        );
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let names: Vec<&str> = match args.first().map(String::as_str) {
         None | Some("all") => vec!["rod-in-frame", "probe-drogue"],
         Some(name) => vec![name],
     };
+    let trace = args
+        .iter()
+        .find_map(|a| a.strip_prefix("trace="))
+        .map(|n| n.parse().expect("trace=collision number"));
     let delays: Vec<f64> = if args.len() > 1 {
-        args[1..].iter().map(|d| d.parse().expect("delay, s")).collect()
+        args[1..]
+            .iter()
+            .filter(|a| !a.starts_with("trace="))
+            .map(|d| d.parse().expect("delay, s"))
+            .collect()
     } else {
         vec![0.01, 0.02]
     };
     for name in names {
         for &delay in &delays {
-            run(name, delay);
+            run(name, delay, trace);
         }
     }
 }
