@@ -201,7 +201,7 @@ fn run(name: &str, delay: f64, trace: Option<usize>) {
     println!("|{}", "---|".repeat(26));
     let period = plan.period;
     for (i, c) in m.collisions.iter().enumerate() {
-        let Some(r) = c.reference.and_then(|r| m.reference_collisions.get(r)) else {
+        let Some(r) = c.reference.and_then(|r| m.reference_collisions.get(r - 1)) else {
             continue;
         };
         let (t0, t1) = (c.collision.start - 0.005, c.collision.end + 0.005);
