@@ -2,12 +2,13 @@
 //! `F̂_comp = F_comp + F_α` (29), `M̂_comp = M_comp + M_α` (30), with the energy observer fed
 //! by `F_comp`. See docs/compensators/pida.md.
 
-use super::delay::{ContactEstimator, ContactView};
+use super::delay::{ContactEstimator, ContactView, PRIOR_CONE_MARGIN};
 use super::energy::{friction_force, DampingAmendment};
 use super::force::{compensate_force, CompensatedWrench};
 use super::params::ModelParams;
 use super::{Compensator, CompensatorContext, CompensatorInput, CompensatorOutput};
 use crate::frames::FrameWrench;
+use crate::world::GeometryPrior;
 use nalgebra::Vector3;
 
 /// Parameter identification and damping amendment.
@@ -18,6 +19,9 @@ pub struct Pida {
     sensor_origin: Vector3<f64>,
     /// The last tick's contact view and amendment wrench ([`Pida::last_tick`]).
     last: Option<(ContactView, FrameWrench)>,
+    /// The scenario's nominal geometry ([`CompensatorContext::geometry`]): a corner's normal at
+    /// the virtual tip ([`corner_normal`]).
+    geometry: Option<std::sync::Arc<GeometryPrior>>,
 }
 
 impl Pida {
@@ -28,6 +32,7 @@ impl Pida {
             amendment: DampingAmendment::new(p, context),
             sensor_origin: context.sensor_origin,
             last: None,
+            geometry: context.geometry.clone(),
         }
     }
 
@@ -112,12 +117,41 @@ fn measured_friction(view: &ContactView) -> f64 {
     (view.force - view.normal * f_n).norm() / f_n
 }
 
+/// The normal of a corner (two surfaces pressed at once, [`ContactView::corner`]) at the
+/// **virtual** tip: the direction of the nominal summed normal force there
+/// ([`GeometryPrior::contact_normal`] at `p_des` and the robot's attitude), where the compensated
+/// force is rendered, in place of the one at the identification sample (the robot's tip `τ_p`
+/// ago), while the virtual tip is in the corner too and that normal lies within the nominal
+/// friction cone (plus [`PRIOR_CONE_MARGIN`]) of `normal`; else `normal`. Entering a corner,
+/// the split between its surfaces changes within the contact: on `rod-in-frame`'s first
+/// collision (the rod's side along the front bar into the side bar) the virtual tip, `τ_r`
+/// ahead, already presses the side bar harder, and the sample's normal put the normal force
+/// 1.6° off on average (up to 6.5°) in the wrong direction, which turned the servicer (angular
+/// velocity 12.8 % off) and made a 15.4 % rebound error at 10 ms (now 2.8 %).
+fn corner_normal(
+    normal: &Vector3<f64>,
+    geometry: &GeometryPrior,
+    input: &CompensatorInput,
+) -> Vector3<f64> {
+    let orientation = input.orientation_actual.unwrap_or(geometry.orientation);
+    let cone = (geometry.friction.atan() + PRIOR_CONE_MARGIN).cos();
+    match geometry.contact_normal(&input.tip_position_desired, &orientation) {
+        Some((n, surfaces)) if surfaces > 1 && n.dot(normal) >= cone => n,
+        _ => *normal,
+    }
+}
+
 impl Compensator for Pida {
     fn step(&mut self, input: &CompensatorInput) -> CompensatorOutput {
         let mut view = self.estimator.step(input); // steps 1-4
         let mut comp = compensate_force(&view, input, &self.sensor_origin); // steps 5-6
         if view.frictional && view.friction <= 0.0 {
             view.friction = measured_friction(&view);
+        }
+        if view.corner {
+            if let Some(g) = self.geometry.as_deref() {
+                view.normal = corner_normal(&view.normal, g, input);
+            }
         }
         let friction = view.frictional && view.friction > 0.0;
         if friction {
