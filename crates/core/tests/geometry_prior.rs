@@ -354,8 +354,9 @@ fn pida_on_probe_drogue_keeps_every_collision_within_bounds() {
 
 /// `rod-in-frame` at 10 and 20 ms (the rod's side on the front bar's edge, then into the
 /// corner of two bars): no reference collision lost, none extra, every rebound within 30 % and
-/// 55 % (measured 15.4 % and 43.1 %; without the geometry prior 44.4 % and 117.6 % with one
-/// lost and two extra).
+/// 55 % (measured 15.4 % and 43.1 % with the prior alone, 2.8 % and 16.0 % with the friction
+/// before μ̂ and the corner's normal at the virtual tip; without the geometry prior 44.4 % and
+/// 117.6 % with one lost and two extra).
 #[test]
 fn pida_on_rod_in_frame_loses_no_collision() {
     for (delay, worst) in [(0.01, 0.30), (0.02, 0.55)] {
