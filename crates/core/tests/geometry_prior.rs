@@ -333,8 +333,9 @@ fn pida_on_probe_drogue_keeps_every_collision_within_bounds() {
 
 /// `rod-in-frame` at 10 and 20 ms (the rod's side on the front bar's edge, then into the
 /// corner of two bars): no reference collision lost, none extra, every rebound within 30 % and
-/// 55 % (measured 15.4 % and 43.1 %; without the geometry prior 44.4 % and 117.6 % with one
-/// lost and two extra).
+/// 55 % (measured 15.4 % and 43.1 % with the prior alone, 2.8 % and 16.0 % with the friction
+/// before μ̂ and the corner's normal at the virtual tip; without the geometry prior 44.4 % and
+/// 117.6 % with one lost and two extra).
 #[test]
 fn pida_on_rod_in_frame_loses_no_collision() {
     for (delay, worst) in [(0.01, 0.30), (0.02, 0.55)] {
@@ -363,4 +364,38 @@ fn pida_on_rod_in_frame_loses_no_collision() {
             "{delay} s: {errors:?}"
         );
     }
+}
+
+/// `rod-in-frame` at 10 and 20 ms: on the single-bar contacts after the corner (collisions 2
+/// on), whose compression has no sliding sample of the robot to identify μ̂ from, the friction
+/// is the measured friction ratio along the virtual tip's sliding (`pida.rs`
+/// `measured_friction`): every rebound within 8 % (measured 3.1-3.4 % and 4.4-5.4 %; with the
+/// robot's own friction scaled into the virtual dynamics as it came, 15.3 % and 43.1 %: it
+/// pushed the virtual tip across the normal, 0.3 → 8 mm/s).
+#[test]
+fn pida_on_rod_in_frame_predicts_friction_before_it_is_identified() {
+    for delay in [0.01, 0.02] {
+        let mut s = noisy_pida("rod-in-frame");
+        s.facility.robot_delay = delay;
+        let (errors, lost) = collisions(&s);
+        assert_eq!(lost, 0, "{delay} s: lost collisions");
+        assert!(errors.len() >= 4, "{delay} s: {errors:?}");
+        assert!(
+            errors[1..].iter().all(|e| *e < 0.08),
+            "{delay} s: {errors:?}"
+        );
+    }
+}
+
+/// `rod-in-frame` at 10 ms: a corner's normal taken at the virtual tip (`pida.rs`
+/// `corner_normal`), where the compensated force is rendered, brings every rebound within 5 %
+/// (measured 1.3-2.8 %; with the normal at the robot's tip `τ_p` ago, collision 1 — the rod's
+/// side along the front bar into the side bar — 15.4 %, the servicer's angular velocity 12.8 %
+/// off).
+#[test]
+fn pida_on_rod_in_frame_renders_the_corner_at_the_virtual_tip() {
+    let (errors, lost) = collisions(&noisy_pida("rod-in-frame"));
+    assert_eq!(lost, 0);
+    assert!(errors.len() >= 4, "{errors:?}");
+    assert!(errors.iter().all(|e| *e < 0.05), "{errors:?}");
 }
