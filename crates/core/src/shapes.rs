@@ -697,12 +697,29 @@ fn cylinder_aabb(c: &Cylinder, pose: &Isometry3<f64>) -> Aabb {
 /// more than `g` if this is.
 fn remembered_gap(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece, slot: usize) -> Option<f64> {
     let a = pt.axes.get(slot)?;
-    let ms = ps.core.as_support_map()?;
-    let mt = pt.core.as_support_map()?;
     // the servicer's farthest point along `a`, the target's nearest
-    let s_hi = ms.support_point(pose_s, &a).coords.dot(&a);
-    let t_lo = mt.support_point(&pt.pose, &-a.into_inner()).coords.dot(&a);
+    let s_hi = core_reach(ps, pose_s, &a)?;
+    let t_lo = -core_reach(pt, &pt.pose, &-a)?;
     Some(t_lo - s_hi)
+}
+
+/// `max x·d` over the core of `piece` at `pose` (`d` unit, `t`), m: its support point's
+/// height along `d`, in closed form for a cylinder (`c·d + a·|u·d| + r·√(1 − (u·d)²)`, `u` its
+/// axis, `a` its half height, `r` its radius) and a box (`c·d + Σ h_i·|e_i·d|`, `e_i` its
+/// axes, `h` its half extents), else from parry's support point; `None` for a core without
+/// one. (The cull [`remembered_gap`] asks it twice per pair and evaluation.)
+fn core_reach(piece: &Piece, pose: &Isometry3<f64>, d: &Vector3<f64>) -> Option<f64> {
+    let centre = pose.translation.vector.dot(d);
+    if let Some(c) = piece.core.as_cylinder() {
+        let k = (pose.rotation * Vector3::y()).dot(d);
+        return Some(centre + c.half_height * k.abs() + c.radius * (1.0 - k * k).max(0.0).sqrt());
+    }
+    if let Some(b) = piece.core.as_cuboid() {
+        let local = pose.rotation.inverse_transform_vector(d);
+        return Some(centre + b.half_extents.dot(&local.abs()));
+    }
+    let map = piece.core.as_support_map()?;
+    Some(map.support_point(pose, d).coords.dot(d))
 }
 
 /// Whether parry answers the pair of cores by GJK (two support maps, neither a ball nor a
