@@ -172,6 +172,10 @@ struct Piece {
     size: f64,
     /// On a target piece, the separating axes last found toward the servicer's pieces.
     axes: AxisCache,
+    /// The core, when it is a cylinder or a box (kept apart: the closed forms read them on
+    /// every query, and a downcast of the shared core costs two dynamic calls).
+    cylinder: Option<Cylinder>,
+    cuboid: Option<Cuboid>,
 }
 
 impl Piece {
@@ -277,7 +281,6 @@ fn piece(core: SharedShape, pose: Isometry3<f64>, radius: f64) -> Piece {
     let local = core.compute_local_aabb();
     let size = (local.maxs - local.mins).norm();
     Piece {
-        core,
         pose,
         aabb,
         normal,
@@ -285,6 +288,9 @@ fn piece(core: SharedShape, pose: Isometry3<f64>, radius: f64) -> Piece {
         n_vertices,
         size,
         axes: AxisCache::new(),
+        cylinder: core.as_cylinder().copied(),
+        cuboid: core.as_cuboid().copied(),
+        core,
     }
 }
 
@@ -343,6 +349,8 @@ impl BodyShape {
                     n_vertices: 0,
                     size: f64::INFINITY,
                     axes: AxisCache::new(),
+                    cylinder: None,
+                    cuboid: None,
                 };
                 (0.0, vec![p])
             }
@@ -504,7 +512,8 @@ impl ShapePairs {
     /// Allocation-free while no penetration exceeds the pair's `r_A + r_B`.
     pub fn for_each_point(&self, pose: &Isometry3<f64>, mut f: impl FnMut(&ContactPoint)) {
         let mut pair = 0u64;
-        let mut seen = Seen::new();
+        // (made at the first point: its slots cost a 3 kB copy, and most evaluations have none)
+        let mut seen: Option<Seen> = None;
         // the index of the servicer shape's first piece among all the servicer's pieces
         let mut first_piece = 0;
         for (a, s) in self.servicer.iter().enumerate() {
@@ -514,7 +523,9 @@ impl ShapePairs {
                 pair += 1;
                 let reach = s.radius + t.radius;
                 let mesh = s.is_mesh() || t.is_mesh();
-                seen.clear();
+                if let Some(seen) = &mut seen {
+                    seen.clear();
+                }
                 for (i, ps) in s.pieces.iter().enumerate() {
                     let (pose_s, aabb_s) = single.unwrap_or_else(|| placed(ps, s.radius, pose));
                     let slot = first_piece + i;
@@ -562,7 +573,7 @@ impl ShapePairs {
                             &mut |c| {
                                 let on_face =
                                     face.is_none_or(|n| c.normal.dot(&n).abs() > 1.0 - 1e-9);
-                                seen.insert(
+                                seen.get_or_insert_with(Seen::new).insert(
                                     &ContactPoint {
                                         servicer_shape: a,
                                         target_shape: b,
@@ -575,7 +586,9 @@ impl ShapePairs {
                         );
                     }
                 }
-                seen.finish(reach, &mut f);
+                if let Some(seen) = &seen {
+                    seen.finish(reach, &mut f);
+                }
             }
             first_piece += s.pieces.len();
         }
@@ -670,7 +683,7 @@ impl ShapePairs {
 /// `radius` included.
 fn placed(ps: &Piece, radius: f64, pose: &Isometry3<f64>) -> (Isometry3<f64>, Aabb) {
     let pose_s = pose * ps.pose;
-    let aabb = match ps.core.as_cylinder() {
+    let aabb = match &ps.cylinder {
         Some(c) => cylinder_aabb(c, &pose_s),
         None => ps.core.compute_aabb(&pose_s),
     };
@@ -710,11 +723,11 @@ fn remembered_gap(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece, slot: usize) 
 /// one. (The cull [`remembered_gap`] asks it twice per pair and evaluation.)
 fn core_reach(piece: &Piece, pose: &Isometry3<f64>, d: &Vector3<f64>) -> Option<f64> {
     let centre = pose.translation.vector.dot(d);
-    if let Some(c) = piece.core.as_cylinder() {
+    if let Some(c) = &piece.cylinder {
         let k = (pose.rotation * Vector3::y()).dot(d);
         return Some(centre + c.half_height * k.abs() + c.radius * (1.0 - k * k).max(0.0).sqrt());
     }
-    if let Some(b) = piece.core.as_cuboid() {
+    if let Some(b) = &piece.cuboid {
         let local = pose.rotation.inverse_transform_vector(d);
         return Some(centre + b.half_extents.dot(&local.abs()));
     }
@@ -1287,9 +1300,9 @@ const CYLINDER_BOX_MIN_TILT: f64 = 1e-3;
 /// 4 to 60 rounds of projections to meet this pair).
 fn cylinder_box_pair(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece) -> Option<Contact> {
     let (cylinder, cylinder_pose, cuboid, box_pose, servicer_cylinder) =
-        match (ps.core.as_cylinder(), pt.core.as_cuboid()) {
+        match (&ps.cylinder, &pt.cuboid) {
             (Some(c), Some(b)) => (c, pose_s, b, &pt.pose, true),
-            _ => match (ps.core.as_cuboid(), pt.core.as_cylinder()) {
+            _ => match (&ps.cuboid, &pt.cylinder) {
                 (Some(b), Some(c)) => (c, &pt.pose, b, pose_s, false),
                 _ => return None,
             },
