@@ -27,7 +27,9 @@
 //!
 //! Cost: bounding boxes, a triangle's plane, the separating axis remembered from the last
 //! evaluation (`AxisCache`, temporal coherence: tested, never trusted, so the results do not
-//! depend on it), the target piece's own axes, and only then parry's query.
+//! depend on it), the target piece's own axes, and only then parry's query; a cylinder's side
+//! against a box (rod-in-frame's every pair) has its closest pair in closed form
+//! (`cylinder_box_pair`), the other pairs GJK's refined by `exact_pair`.
 //!
 //! Allocation-free while the penetration stays below `r_A + r_B` (the cores then never
 //! overlap, and parry's GJK needs no EPA); the queries allocate nothing else.
