@@ -280,7 +280,7 @@ impl TwoBodySystem {
         tip_velocity: &Vector3<f64>,
         added_damping: f64,
     ) -> Contact {
-        self.contact_at_tip_noting(rel, tip, tip_velocity, added_damping, |_, _| {})
+        self.contact_at_tip_noting(rel, tip, tip_velocity, added_damping, true, |_, _| {})
     }
 
     /// The contact at a reference step's start (the reference's record): as the step that ended
@@ -306,9 +306,17 @@ impl TwoBodySystem {
         if let Some(known) = start.known {
             return known;
         }
+        let known = self.contact_and_active_set_of(start, true);
+        start.known = Some(known);
+        known
+    }
+
+    /// [`TwoBodySystem::contact_and_active_set`] computed, the shapes' contact points looked
+    /// for only if `shapes` (not where a free-flight step has just shown there are none).
+    fn contact_and_active_set_of(&self, start: &ReferenceStart, shapes: bool) -> (Contact, u64) {
         let (rel, tip, tip_velocity) = (&start.rel, &start.tip, &start.tip_velocity);
         let mut set = self.contact.active_set(tip, tip_velocity);
-        let c = self.contact_at_tip_noting(rel, tip, tip_velocity, 0.0, |point, v| {
+        let c = self.contact_at_tip_noting(rel, tip, tip_velocity, 0.0, shapes, |point, v| {
             if self
                 .contact
                 .law
@@ -318,18 +326,18 @@ impl TwoBodySystem {
                 set = set.wrapping_add(point.id);
             }
         });
-        start.known = Some((c, set));
         (c, set)
     }
 
     /// [`TwoBodySystem::contact_at_tip`], calling `note` with every contact point of the shapes
-    /// and its sliding velocity (`t`, m/s).
+    /// and its sliding velocity (`t`, m/s); the shapes looked at only if `shapes`.
     fn contact_at_tip_noting(
         &self,
         rel: &RelativeMotion,
         tip: &Vector3<f64>,
         tip_velocity: &Vector3<f64>,
         added_damping: f64,
+        shapes: bool,
         mut note: impl FnMut(&crate::shapes::ContactPoint, &Vector3<f64>),
     ) -> Contact {
         let tip = *tip;
@@ -343,6 +351,9 @@ impl TwoBodySystem {
             friction_power: p.friction_power,
             tip,
         };
+        if !shapes {
+            return c;
+        }
         self.for_each_shape_contact_force(rel, added_damping, |point, f| {
             note(
                 point,
@@ -595,7 +606,11 @@ impl TwoBodySystem {
         let mut known = None;
         if !self.contact.shapes.is_empty() {
             if self.free_flight_with_shapes(x, &start.rel, &tip_velocity, period) {
-                return (0.0, None);
+                // its test kept every piece of the servicer farther from the target's than it
+                // can move in the period: no contact point of the shapes at its end
+                let end = self.reference_start(&self.relative_motion(x));
+                let known = Some(self.contact_and_active_set_of(&end, false));
+                return (0.0, Some(ReferenceStart { known, ..end }));
             }
         } else {
             // without shapes, the active set and the clearance are the rod tip's
