@@ -504,14 +504,14 @@ impl TwoBodySystem {
     /// clear of the walls (as without shapes) and no point of the servicer's shapes can reach
     /// the target within the period: every piece farther from the target's than
     /// `1.1·T·(|v| + |ω|·R)` at the faster end ([`crate::shapes::ShapePairs::clear_of`]).
-    /// Returns whether it stepped.
+    /// Returns the relative motion at its end if it stepped.
     fn free_flight_with_shapes(
         &self,
         x: &mut TwoBodyState,
         start: &RelativeMotion,
         tip_velocity: &Vector3<f64>,
         period: f64,
-    ) -> bool {
+    ) -> Option<RelativeMotion> {
         let mut y = *x;
         y.servicer.drift(&self.servicer, period);
         y.target.drift(&self.target, period);
@@ -523,17 +523,17 @@ impl TwoBodySystem {
                 .contact
                 .active_set(&start.point(&self.rod_tip), tip_velocity);
             if set != 0 || clear(start) <= tip || clear(&end) <= tip {
-                return false;
+                return None;
             }
         }
         let r = self.contact.shapes.servicer_extent();
         let speed = |m: &RelativeMotion| m.velocity.norm() + m.angular_velocity.norm() * r;
         let reach = 1.1 * period * speed(start).max(speed(&end));
         if !self.contact.shapes.clear_of(&servicer_pose(start), reach) {
-            return false;
+            return None;
         }
         *x = y;
-        true
+        Some(end)
     }
 
     /// A lower bound of the smallest gap between the servicer and the target, m (negative in
@@ -605,10 +605,10 @@ impl TwoBodySystem {
         // the active set at `x`, once known
         let mut known = None;
         if !self.contact.shapes.is_empty() {
-            if self.free_flight_with_shapes(x, &start.rel, &tip_velocity, period) {
+            if let Some(end) = self.free_flight_with_shapes(x, &start.rel, &tip_velocity, period) {
                 // its test kept every piece of the servicer farther from the target's than it
                 // can move in the period: no contact point of the shapes at its end
-                let end = self.reference_start(&self.relative_motion(x));
+                let end = self.reference_start(&end);
                 let known = Some(self.contact_and_active_set_of(&end, false));
                 return (0.0, Some(ReferenceStart { known, ..end }));
             }
