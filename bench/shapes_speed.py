@@ -3,7 +3,8 @@
 384-triangle mesh) against today's `paper-table1` run, each as it is; medians of `--repeat`
 runs of `hilcontact.simulate` (time series included), the presets taken in turn in every round
 (so that a change of the machine's load weighs on all three alike), with the load average
-printed. The target: rod-in-frame at most 3x paper-table1.
+printed, and the fastest run of each (on a busy machine the least disturbed one). The target:
+rod-in-frame at most 3x paper-table1 (medians).
 
     python bench/shapes_speed.py [--repeat 7]
 """
@@ -35,10 +36,15 @@ def main() -> None:
             times[name].append(time.perf_counter() - start)
     print(f"load average {load:.1f} before, {os.getloadavg()[0]:.1f} after ({os.cpu_count()} cores)")
     base = statistics.median(times[names[0]])
+    fastest = min(times[names[0]])
     for name, s in scenarios.items():
         t = statistics.median(times[name])
+        m = min(times[name])
         simulated = s.simulation.duration
-        print(f"{name:14s} {simulated:4.1f} s simulated: median {t * 1e3:7.1f} ms  ({t / base:4.2f}x paper-table1)")
+        print(
+            f"{name:14s} {simulated:4.1f} s simulated: median {t * 1e3:7.1f} ms  ({t / base:4.2f}x paper-table1), "
+            f"fastest {m * 1e3:7.1f} ms ({m / fastest:4.2f}x)"
+        )
 
 
 if __name__ == "__main__":

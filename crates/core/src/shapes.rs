@@ -27,7 +27,9 @@
 //!
 //! Cost: bounding boxes, a triangle's plane, the separating axis remembered from the last
 //! evaluation (`AxisCache`, temporal coherence: tested, never trusted, so the results do not
-//! depend on it), the target piece's own axes, and only then parry's query.
+//! depend on it), the target piece's own axes, and only then parry's query; a cylinder's side
+//! against a box (rod-in-frame's every pair) has its closest pair in closed form
+//! (`cylinder_box_pair`), the other pairs GJK's refined by `exact_pair`.
 //!
 //! Allocation-free while the penetration stays below `r_A + r_B` (the cores then never
 //! overlap, and parry's GJK needs no EPA); the queries allocate nothing else.
@@ -172,6 +174,10 @@ struct Piece {
     size: f64,
     /// On a target piece, the separating axes last found toward the servicer's pieces.
     axes: AxisCache,
+    /// The core, when it is a cylinder or a box (kept apart: the closed forms read them on
+    /// every query, and a downcast of the shared core costs two dynamic calls).
+    cylinder: Option<Cylinder>,
+    cuboid: Option<Cuboid>,
 }
 
 impl Piece {
@@ -277,7 +283,6 @@ fn piece(core: SharedShape, pose: Isometry3<f64>, radius: f64) -> Piece {
     let local = core.compute_local_aabb();
     let size = (local.maxs - local.mins).norm();
     Piece {
-        core,
         pose,
         aabb,
         normal,
@@ -285,6 +290,9 @@ fn piece(core: SharedShape, pose: Isometry3<f64>, radius: f64) -> Piece {
         n_vertices,
         size,
         axes: AxisCache::new(),
+        cylinder: core.as_cylinder().copied(),
+        cuboid: core.as_cuboid().copied(),
+        core,
     }
 }
 
@@ -343,6 +351,8 @@ impl BodyShape {
                     n_vertices: 0,
                     size: f64::INFINITY,
                     axes: AxisCache::new(),
+                    cylinder: None,
+                    cuboid: None,
                 };
                 (0.0, vec![p])
             }
@@ -504,7 +514,8 @@ impl ShapePairs {
     /// Allocation-free while no penetration exceeds the pair's `r_A + r_B`.
     pub fn for_each_point(&self, pose: &Isometry3<f64>, mut f: impl FnMut(&ContactPoint)) {
         let mut pair = 0u64;
-        let mut seen = Seen::new();
+        // (made at the first point: its slots cost a 3 kB copy, and most evaluations have none)
+        let mut seen: Option<Seen> = None;
         // the index of the servicer shape's first piece among all the servicer's pieces
         let mut first_piece = 0;
         for (a, s) in self.servicer.iter().enumerate() {
@@ -514,7 +525,9 @@ impl ShapePairs {
                 pair += 1;
                 let reach = s.radius + t.radius;
                 let mesh = s.is_mesh() || t.is_mesh();
-                seen.clear();
+                if let Some(seen) = &mut seen {
+                    seen.clear();
+                }
                 for (i, ps) in s.pieces.iter().enumerate() {
                     let (pose_s, aabb_s) = single.unwrap_or_else(|| placed(ps, s.radius, pose));
                     let slot = first_piece + i;
@@ -562,7 +575,7 @@ impl ShapePairs {
                             &mut |c| {
                                 let on_face =
                                     face.is_none_or(|n| c.normal.dot(&n).abs() > 1.0 - 1e-9);
-                                seen.insert(
+                                seen.get_or_insert_with(Seen::new).insert(
                                     &ContactPoint {
                                         servicer_shape: a,
                                         target_shape: b,
@@ -575,7 +588,9 @@ impl ShapePairs {
                         );
                     }
                 }
-                seen.finish(reach, &mut f);
+                if let Some(seen) = &seen {
+                    seen.finish(reach, &mut f);
+                }
             }
             first_piece += s.pieces.len();
         }
@@ -670,7 +685,24 @@ impl ShapePairs {
 /// `radius` included.
 fn placed(ps: &Piece, radius: f64, pose: &Isometry3<f64>) -> (Isometry3<f64>, Aabb) {
     let pose_s = pose * ps.pose;
-    (pose_s, ps.core.compute_aabb(&pose_s).loosened(radius))
+    let aabb = match &ps.cylinder {
+        Some(c) => cylinder_aabb(c, &pose_s),
+        None => ps.core.compute_aabb(&pose_s),
+    };
+    (pose_s, aabb.loosened(radius))
+}
+
+/// The bounding box of a cylinder's core `c` at `pose` (its axis, parry's `y`, along `u`), in
+/// closed form: half extents `a·|u_i| + r·√(1 − u_i²)` about its centre (`a` its half height,
+/// `r` its radius), loosened by 1e-12 of `a + r` against rounding (parry's own, from six
+/// support points, cost 12 % of a rod-in-frame run). Only ever used to cull: a box no smaller
+/// than the core's changes no result.
+fn cylinder_aabb(c: &Cylinder, pose: &Isometry3<f64>) -> Aabb {
+    let u = pose.rotation * Vector3::y();
+    let pad = 1e-12 * (c.half_height + c.radius);
+    let half = u.map(|x| c.half_height * x.abs() + c.radius * (1.0 - x * x).max(0.0).sqrt() + pad);
+    let centre = Point3::from(pose.translation.vector);
+    Aabb::new(centre - half, centre + half)
 }
 
 /// The gap between the cores of the servicer piece `ps` (at `pose_s`; `slot`, its index among
@@ -680,12 +712,29 @@ fn placed(ps: &Piece, radius: f64, pose: &Isometry3<f64>) -> (Isometry3<f64>, Aa
 /// more than `g` if this is.
 fn remembered_gap(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece, slot: usize) -> Option<f64> {
     let a = pt.axes.get(slot)?;
-    let ms = ps.core.as_support_map()?;
-    let mt = pt.core.as_support_map()?;
     // the servicer's farthest point along `a`, the target's nearest
-    let s_hi = ms.support_point(pose_s, &a).coords.dot(&a);
-    let t_lo = mt.support_point(&pt.pose, &-a.into_inner()).coords.dot(&a);
+    let s_hi = core_reach(ps, pose_s, &a)?;
+    let t_lo = -core_reach(pt, &pt.pose, &-a)?;
     Some(t_lo - s_hi)
+}
+
+/// `max x·d` over the core of `piece` at `pose` (`d` unit, `t`), m: its support point's
+/// height along `d`, in closed form for a cylinder (`c·d + a·|u·d| + r·√(1 − (u·d)²)`, `u` its
+/// axis, `a` its half height, `r` its radius) and a box (`c·d + Σ h_i·|e_i·d|`, `e_i` its
+/// axes, `h` its half extents), else from parry's support point; `None` for a core without
+/// one. (The cull [`remembered_gap`] asks it twice per pair and evaluation.)
+fn core_reach(piece: &Piece, pose: &Isometry3<f64>, d: &Vector3<f64>) -> Option<f64> {
+    let centre = pose.translation.vector.dot(d);
+    if let Some(c) = &piece.cylinder {
+        let k = (pose.rotation * Vector3::y()).dot(d);
+        return Some(centre + c.half_height * k.abs() + c.radius * (1.0 - k * k).max(0.0).sqrt());
+    }
+    if let Some(b) = &piece.cuboid {
+        let local = pose.rotation.inverse_transform_vector(d);
+        return Some(centre + b.half_extents.dot(&local.abs()));
+    }
+    let map = piece.core.as_support_map()?;
+    Some(map.support_point(pose, d).coords.dot(d))
 }
 
 /// Whether parry answers the pair of cores by GJK (two support maps, neither a ball nor a
@@ -777,6 +826,11 @@ fn core_distance(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece) -> f64 {
 /// `slot`: the same computation as parry's `query::distance` for two support maps (same
 /// start, same GJK, same result), its direction kept.
 fn core_distance_noting(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece, slot: usize) -> f64 {
+    // a cylinder's side against a box: the exact distance in closed form
+    if let Some(c) = cylinder_box_pair(ps, pose_s, pt) {
+        pt.axes.set(slot, &c.normal1);
+        return c.dist;
+    }
     // parry's own closed forms for these pairs
     let closed_form = (ps.core.as_cuboid().is_some() && pt.core.as_cuboid().is_some())
         || (ps.core.as_segment().is_some() && pt.core.as_segment().is_some());
@@ -1213,6 +1267,162 @@ fn exact_pair(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece, c: &mut Contact) 
     }
 }
 
+/// Smallest curvature `Σ u_i²` of the axis' squared distance to the box (over the coordinates
+/// where the axis lies outside the box, `u` its direction in the box's frame) at which
+/// [`cylinder_box_pair`] answers: below it the axis runs (nearly) parallel to a face or an
+/// edge of the box, the closest pair is (nearly) not unique, and GJK with [`exact_pair`]
+/// answers as before.
+const CYLINDER_BOX_MIN_SLOPE: f64 = 1e-6;
+
+/// Smallest component `|u_i|` of the cylinder's axis in the box's frame (the sine of its angle
+/// to a face) at which [`cylinder_box_pair`] answers: an axis nearly parallel to a face leaves
+/// pieces of `φ` nearly flat, where the closest pair slides far for a change of the distance
+/// below rounding (today's pair and the closed form's then differ by up to 2.5e-12 m for the
+/// same distance), and GJK with [`exact_pair`] answers as before. (rod-in-frame's rod is
+/// tilted 2° and 3°: `|u_x|`, `|u_y|` ≥ 0.03.)
+const CYLINDER_BOX_MIN_TILT: f64 = 1e-3;
+
+/// The closest pair of a cylinder's core and a box's core (either body's), in closed form,
+/// where the cylinder's side makes it (the rod's side against a bar's face, edge or corner:
+/// every pair of rod-in-frame); `None` elsewhere (the axis' nearest point to the box at one of
+/// its ends: a cap or a rim; the axis nearly parallel to a face or an edge; the cores
+/// touching or overlapping), where GJK and [`exact_pair`] answer.
+///
+/// The cylinder (axis segment `P(t) = c + t·u`, `|t| ≤ a`, radius `r`) is the segment swept by
+/// the disc of radius `r` across `u`. In the box's frame (half extents `h`) the axis' squared
+/// distance to the box, `φ(t) = |P(t) − clamp(P(t), −h, h)|²`, is convex and piecewise
+/// quadratic, with its breaks where `P(t)` crosses a face's plane (`t = (±h_i − c_i)/u_i`):
+/// `½φ'(t) = u·(P(t) − clamp(P(t)))` rises through zero in one piece, where the coordinates
+/// outside the box, each against its face `b_i = ±h_i`, give
+/// `t* = −Σ u_i (c_i − b_i) / Σ u_i²`. With `t*` strictly inside `(−a, a)`, `d = P(t*) −
+/// clamp(P(t*))` is across the axis (`u·d = ½φ'(t*) = 0`), so the point `P(t*) − r·d/|d|` is on
+/// the cylinder's side, and since every point of the cylinder is within `r` of the axis, no
+/// pair is closer than `|d| − r`: the cores' closest pair is `(P(t*) − r·d/|d|, clamp(P(t*)))`,
+/// exact to rounding (GJK stops up to 2e-5 m off on a cylinder; [`exact_pair`] then needs
+/// 4 to 60 rounds of projections to meet this pair).
+fn cylinder_box_pair(ps: &Piece, pose_s: &Isometry3<f64>, pt: &Piece) -> Option<Contact> {
+    let (cylinder, cylinder_pose, cuboid, box_pose, servicer_cylinder) =
+        match (&ps.cylinder, &pt.cuboid) {
+            (Some(c), Some(b)) => (c, pose_s, b, &pt.pose, true),
+            _ => match (&ps.cuboid, &pt.cylinder) {
+                (Some(b), Some(c)) => (c, &pt.pose, b, pose_s, false),
+                _ => return None,
+            },
+        };
+    // the axis in the box's frame
+    let rel = box_pose.inv_mul(cylinder_pose);
+    let c = rel.translation.vector;
+    let u = rel.rotation * Vector3::y();
+    // (nearly) parallel to a face: left to GJK and the projections
+    if u.amin() < CYLINDER_BOX_MIN_TILT {
+        return None;
+    }
+    let (a, r, h) = (cylinder.half_height, cylinder.radius, cuboid.half_extents);
+    let clamp = |p: &Vector3<f64>| p.sup(&-h).inf(&h);
+    // ½φ'(t)
+    let slope_at = |t: f64| {
+        let p = c + u * t;
+        u.dot(&(p - clamp(&p)))
+    };
+    // the ends and the breaks inside, in order
+    let mut ts = [0.0; 8];
+    ts[0] = -a;
+    let mut n = 1;
+    for i in 0..3 {
+        if u[i] != 0.0 {
+            for b in [-h[i], h[i]] {
+                let t = (b - c[i]) / u[i];
+                if t > -a && t < a {
+                    ts[n] = t;
+                    n += 1;
+                }
+            }
+        }
+    }
+    ts[n] = a;
+    n += 1;
+    ts[..n].sort_unstable_by(f64::total_cmp);
+    // the piece where ½φ' rises through zero (none: the nearest point is an end)
+    let k = ts[..n].iter().position(|&t| slope_at(t) >= 0.0)?;
+    if k == 0 {
+        return None;
+    }
+    // on the piece from `ts[j]`: `Σ u_i (c_i − b_i)` and `Σ u_i²` over the coordinates outside
+    let piece_terms = |j: usize| {
+        let mid = c + u * (0.5 * (ts[j] + ts[j + 1]));
+        let (mut num, mut curvature) = (0.0, 0.0);
+        for i in 0..3 {
+            let b = if mid[i] > h[i] {
+                h[i]
+            } else if mid[i] < -h[i] {
+                -h[i]
+            } else {
+                continue;
+            };
+            num += u[i] * (c[i] - b);
+            curvature += u[i] * u[i];
+        }
+        (num, curvature)
+    };
+    let (num, curvature) = piece_terms(k - 1);
+    if curvature < CYLINDER_BOX_MIN_SLOPE {
+        return None;
+    }
+    let t = (-num / curvature).clamp(ts[k - 1], ts[k]);
+    // at a break, the piece on its other side must curve too (a flat one: a line of closest
+    // pairs, where rounding may leave `½φ'` a hair from zero on either side)
+    let flat = |j: usize| piece_terms(j).1 < CYLINDER_BOX_MIN_SLOPE;
+    if (ts[k] - t <= 1e-9 && k + 1 < n && flat(k))
+        || (t - ts[k - 1] <= 1e-9 && k >= 2 && flat(k - 2))
+    {
+        return None;
+    }
+    if t <= -a || t >= a {
+        return None;
+    }
+    let p = c + u * t;
+    let on_box = clamp(&p);
+    let d = p - on_box;
+    let gap = d.norm();
+    if !(gap > r) {
+        return None;
+    }
+    // the box's outward normal there (toward the cylinder), and the cylinder's point
+    let n_box = box_pose.rotation * (d / gap);
+    let on_box = box_pose * Point3::from(on_box);
+    let on_cylinder = box_pose * Point3::from(p - d * (r / gap));
+    let (point1, point2, normal2) = if servicer_cylinder {
+        (on_cylinder, on_box, n_box)
+    } else {
+        (on_box, on_cylinder, -n_box)
+    };
+    let normal2 = Unit::new_unchecked(normal2);
+    Some(Contact::new(point1, point2, -normal2, normal2, gap - r))
+}
+
+/// The contact of two pieces' cores within `reach` (`t`) with their exact closest pair:
+/// [`cylinder_box_pair`] where it answers (its axis remembered as [`core_contact`] does),
+/// else [`core_contact`] refined by [`exact_pair`].
+fn exact_contact(
+    ps: &Piece,
+    pose_s: &Isometry3<f64>,
+    pt: &Piece,
+    slot: usize,
+    reach: f64,
+) -> Option<Contact> {
+    if let Some(c) = cylinder_box_pair(ps, pose_s, pt) {
+        pt.axes.set(slot, &c.normal1);
+        return (c.dist <= reach).then_some(c);
+    }
+    let mut c = core_contact(ps, pose_s, pt, slot, reach)?;
+    exact_pair(ps, pose_s, pt, &mut c);
+    Some(c)
+}
+
+#[cfg(test)]
+#[path = "shapes_cylinder_box_tests.rs"]
+mod cylinder_box_tests;
+
 /// The contact points of a servicer piece at `pose_s` (`t`) and a target piece (`r_s`, `r_t`
 /// their radii, `reach = r_s + r_t`), to `emit`.
 #[allow(clippy::too_many_arguments)]
@@ -1228,10 +1438,9 @@ fn piece_contacts(
     id: u64,
     emit: &mut impl FnMut(&ContactPoint),
 ) {
-    let Some(mut c) = core_contact(ps, pose_s, pt, slot, reach) else {
+    let Some(c) = exact_contact(ps, pose_s, pt, slot, reach) else {
         return;
     };
-    exact_pair(ps, pose_s, pt, &mut c);
     if c.dist >= reach {
         return;
     }

@@ -126,8 +126,9 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
     // the relative motion at `x` and its rod tip (kept from the step that computed them)
     let mut start = system.reference_start(&system.relative_motion(&x));
     for k in 0..=n {
+        // (as the step that ended here computed it, if it did)
+        let contact = system.reference_contact(&mut start);
         let rel = &start.rel;
-        let contact = system.contact_at_tip(rel, &start.tip, &start.tip_velocity, 0.0);
         let (contact_force, wrench) = (contact.force, contact.wrench);
         let row = ReferenceRecord {
             time: k as f64 * period,

@@ -66,6 +66,10 @@ pub struct ReferenceStart {
     /// The rod tip's clearance from the walls ([`ContactGeometry::clearance`], m), when the
     /// step that ended here computed it.
     clearance: Option<f64>,
+    /// The contact here and its active set ([`TwoBodySystem::contact_and_active_set`]), when
+    /// the step that ended here computed them (its last active set, fused with the contact
+    /// that the next step's first RK4 stage and the reference's record read).
+    known: Option<(Contact, u64)>,
 }
 
 /// The state of both bodies (world frame).
@@ -284,6 +288,66 @@ impl TwoBodySystem {
         tip_velocity: &Vector3<f64>,
         added_damping: f64,
     ) -> Contact {
+        self.contact_at_tip_noting(rel, tip, tip_velocity, added_damping, true, |_, _| {})
+    }
+
+    /// The contact at a reference step's start (the reference's record): as the step that ended
+    /// there computed it, or with its active set ([`TwoBodySystem::contact_and_active_set`],
+    /// kept in `start` for the step from there) where there are shapes (without shapes the
+    /// step asks only the rod tip's active set, and the contact alone is computed).
+    pub fn reference_contact(&self, start: &mut ReferenceStart) -> Contact {
+        match start.known {
+            Some((c, _)) => c,
+            None if self.contact.shapes.is_empty() => {
+                self.contact_at_tip(&start.rel, &start.tip, &start.tip_velocity, 0.0)
+            }
+            None => self.contact_and_active_set(start).0,
+        }
+    }
+
+    /// The contact at a reference step's start and its active set
+    /// ([`TwoBodySystem::contact_at_tip`] with no added damping and
+    /// [`TwoBodySystem::active_set_at`]: the same numbers, to the bit), from one pass over the
+    /// shapes' contact points, or as the step that ended there computed them; kept in `start`
+    /// for the step from there.
+    pub fn contact_and_active_set(&self, start: &mut ReferenceStart) -> (Contact, u64) {
+        if let Some(known) = start.known {
+            return known;
+        }
+        let known = self.contact_and_active_set_of(start, true);
+        start.known = Some(known);
+        known
+    }
+
+    /// [`TwoBodySystem::contact_and_active_set`] computed, the shapes' contact points looked
+    /// for only if `shapes` (not where a free-flight step has just shown there are none).
+    fn contact_and_active_set_of(&self, start: &ReferenceStart, shapes: bool) -> (Contact, u64) {
+        let (rel, tip, tip_velocity) = (&start.rel, &start.tip, &start.tip_velocity);
+        let mut set = self.contact.active_set(tip, tip_velocity);
+        let c = self.contact_at_tip_noting(rel, tip, tip_velocity, 0.0, shapes, |point, v| {
+            if self
+                .contact
+                .law
+                .normal_force(point.depth, -v.dot(&point.normal))
+                > 0.0
+            {
+                set = set.wrapping_add(point.id);
+            }
+        });
+        (c, set)
+    }
+
+    /// [`TwoBodySystem::contact_at_tip`], calling `note` with every contact point of the shapes
+    /// and its sliding velocity (`t`, m/s); the shapes looked at only if `shapes`.
+    fn contact_at_tip_noting(
+        &self,
+        rel: &RelativeMotion,
+        tip: &Vector3<f64>,
+        tip_velocity: &Vector3<f64>,
+        added_damping: f64,
+        shapes: bool,
+        mut note: impl FnMut(&crate::shapes::ContactPoint, &Vector3<f64>),
+    ) -> Contact {
         let tip = *tip;
         let p = self
             .contact
@@ -312,18 +376,24 @@ impl TwoBodySystem {
                 }
             }
         }
-        self.for_each_shape_contact_force(rel, added_damping, |point, f| {
-            let w = FrameWrench::from_rod_force(&f.force, &point.point, &self.sensor_origin);
-            c.force += f.force;
-            c.friction_force += f.friction_force;
-            c.friction_power += f.friction_power;
-            c.wrench.force += w.force;
-            c.wrench.moment += w.moment;
-            if f.force != f.friction_force {
-                pushing += 1;
-                shaped = true;
-            }
-        });
+        if shapes {
+            self.for_each_shape_contact_force(rel, added_damping, |point, f| {
+                note(
+                    point,
+                    &(rel.velocity + rel.angular_velocity.cross(&(point.point - rel.position))),
+                );
+                let w = FrameWrench::from_rod_force(&f.force, &point.point, &self.sensor_origin);
+                c.force += f.force;
+                c.friction_force += f.friction_force;
+                c.friction_power += f.friction_power;
+                c.wrench.force += w.force;
+                c.wrench.moment += w.moment;
+                if f.force != f.friction_force {
+                    pushing += 1;
+                    shaped = true;
+                }
+            });
+        }
         // `law_factor = n̂ᵀ S n̂`, `n̂` along the summed normal force
         c.law_factor = match (pushing, shaped) {
             (0, _) => 0.0,
@@ -423,7 +493,12 @@ impl TwoBodySystem {
     /// [`TwoBodySystem::true_rates_and_friction_power`] with the relative motion at `x` given
     /// (`rel`, as [`TwoBodySystem::relative_motion`] gives it): the same numbers, to the bit.
     fn true_rates_at(&self, x: &TwoBodyState, rel: &RelativeMotion) -> ((BodyRate, BodyRate), f64) {
-        let c = self.contact_at(rel, 0.0);
+        self.true_rates_from(x, &self.contact_at(rel, 0.0))
+    }
+
+    /// [`TwoBodySystem::true_rates_at`] with the contact at `x` given (`c`, as
+    /// [`TwoBodySystem::contact_at`] gives it with no added damping).
+    fn true_rates_from(&self, x: &TwoBodyState, c: &Contact) -> ((BodyRate, BodyRate), f64) {
         let ([f_s, f_t], [tau_s, tau_t]) = self.body_wrenches(x, &c.wrench);
         (
             (
@@ -497,14 +572,14 @@ impl TwoBodySystem {
     /// clear of the walls (as without shapes) and no point of the servicer's shapes can reach
     /// the target within the period: every piece farther from the target's than
     /// `1.1·T·(|v| + |ω|·R)` at the faster end ([`crate::shapes::ShapePairs::clear_of`]).
-    /// Returns whether it stepped.
+    /// Returns the relative motion at its end if it stepped.
     fn free_flight_with_shapes(
         &self,
         x: &mut TwoBodyState,
         start: &RelativeMotion,
         tip_velocity: &Vector3<f64>,
         period: f64,
-    ) -> bool {
+    ) -> Option<RelativeMotion> {
         let mut y = *x;
         y.servicer.drift(&self.servicer, period);
         y.target.drift(&self.target, period);
@@ -516,17 +591,17 @@ impl TwoBodySystem {
                 .contact
                 .active_set(&start.point(&self.rod_tip), tip_velocity);
             if set != 0 || clear(start) <= tip || clear(&end) <= tip {
-                return false;
+                return None;
             }
         }
         let r = self.contact.shapes.servicer_extent();
         let speed = |m: &RelativeMotion| m.velocity.norm() + m.angular_velocity.norm() * r;
         let reach = 1.1 * period * speed(start).max(speed(&end));
         if !self.contact.shapes.clear_of(&servicer_pose(start), reach) {
-            return false;
+            return None;
         }
         *x = y;
-        true
+        Some(end)
     }
 
     /// A lower bound of the smallest gap between the servicer and the target, m (negative in
@@ -579,6 +654,7 @@ impl TwoBodySystem {
             tip,
             tip_velocity,
             clearance: None,
+            known: None,
         }
     }
 
@@ -597,8 +673,12 @@ impl TwoBodySystem {
         // the active set at `x`, once known
         let mut known = None;
         if !self.contact.shapes.is_empty() {
-            if self.free_flight_with_shapes(x, &start.rel, &tip_velocity, period) {
-                return (0.0, None);
+            if let Some(end) = self.free_flight_with_shapes(x, &start.rel, &tip_velocity, period) {
+                // its test kept every piece of the servicer farther from the target's than it
+                // can move in the period: no contact point of the shapes at its end
+                let end = self.reference_start(&end);
+                let known = Some(self.contact_and_active_set_of(&end, false));
+                return (0.0, Some(ReferenceStart { known, ..end }));
             }
         } else {
             // without shapes, the active set and the clearance are the rod tip's
@@ -636,24 +716,37 @@ impl TwoBodySystem {
         // the relative motion at `x` (a step's end is the next step's start: computed once, for
         // its active set and the next step's first RK4 stage)
         let mut rel = start.rel;
-        // the active set at `x` (a step's end is the next step's start: asked once)
-        let mut before = known.unwrap_or_else(|| self.active_set_at(&rel));
+        // the active set at `x` (a step's end is the next step's start: asked once), and the
+        // contact there when known (the last active set's pass computed it too)
+        let (mut contact, mut before) = match (known, start.known) {
+            (Some(set), _) => (None, set),
+            (None, Some((c, set))) => (Some(c), set),
+            (None, None) => (None, self.active_set_at(&rel)),
+        };
+        // the end's contact and active set, for the next step
+        let mut end_known = None;
         while remaining > period * 1e-12 {
             let step = h.min(remaining);
             // the first RK4 stage at `x`, shared by every step from it (the bisection's too)
-            let first = self.true_rates_at(x, &rel);
+            let first = match contact.take() {
+                Some(c) => self.true_rates_from(x, &c),
+                None => self.true_rates_at(x, &rel),
+            };
             let mut y = *x;
             let work = self.step_rk4_with(&mut y, &first, step);
-            let end = self.relative_motion(&y);
-            let after = self.active_set_at(&end);
+            let mut end = self.reference_start(&self.relative_motion(&y));
+            let (end_contact, after) = self.contact_and_active_set(&mut end);
             if after == before {
                 *x = y;
-                rel = end;
+                rel = end.rel;
                 friction_work += work;
                 remaining -= step;
                 before = after;
+                contact = Some(end_contact);
+                end_known = Some((end_contact, after));
                 continue;
             }
+            end_known = None;
             // the set changes within the step: bisect for the first moment it does
             let (mut lo, mut hi) = (0.0, step);
             for _ in 0..16 {
@@ -673,7 +766,11 @@ impl TwoBodySystem {
             rel = self.relative_motion(x);
             before = self.active_set_at(&rel);
         }
-        (friction_work, Some(self.reference_start(&rel)))
+        let end = ReferenceStart {
+            known: end_known,
+            ..self.reference_start(&rel)
+        };
+        (friction_work, Some(end))
     }
 }
 
