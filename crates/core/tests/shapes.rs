@@ -385,13 +385,13 @@ fn random_shape(kind: usize, size: f64, q: [f64; 4], position: [f64; 3]) -> Shap
 }
 
 proptest! {
-    // A fixed seed: a frictionless cylinder or cone tilted 30-45° from the contact normal
-    // (where its side line's ends and fixed rim points are blended by weights that change with
-    // the pose) or a cylinder's line clipped to a box's face still gains energy, up to 4.1 % in
-    // draws with μ = 0 (docs/model.md "Shapes", limits), so a random draw with little friction
-    // could fail a run for a known defect. The draws of this seed pass, and so did 1 800 random
-    // draws of this test as it stands (6 runs of PROPTEST_CASES=300); the defect is open
-    // (issue 21). `PROPTEST_CASES` sets the number of draws.
+    // A fixed seed: a frictionless cylinder's line clipped to a box's face (weights that follow
+    // the contact normal and the ends' depths without their gradient) gains up to 5.4 %, and a
+    // cone's corner contact on a box 1.5e-4 at the reference's 1 ms steps (an integration
+    // error), about one random μ = 0 draw in 500 (docs/model.md "Shapes", limits), so a random
+    // draw with little friction could fail a run for a known defect. The draws of this seed
+    // pass, in both tests; the defect is open (issue 21). `PROPTEST_CASES` sets the number of
+    // draws.
     #![proptest_config(ProptestConfig {
         cases: std::env::var("PROPTEST_CASES").ok().and_then(|c| c.parse().ok()).unwrap_or(24),
         rng_seed: proptest::test_runner::RngSeed::Fixed(0x5eed_0021),
@@ -409,41 +409,241 @@ proptest! {
         speed in 0.005f64..0.03, mu in 0.0f64..0.3, ms in 50.0f64..500.0, mt in 200.0f64..5000.0,
         ys in -0.03f64..0.03, zs in -0.03f64..0.03,
     ) {
-        prop_assume!(qs.iter().map(|x| x * x).sum::<f64>() > 0.1);
-        prop_assume!(qt.iter().map(|x| x * x).sum::<f64>() > 0.1);
-        let size = 0.05;
-        let servicer = random_shape(ks, size, qs, [0.3 + offset[0], offset[1], offset[2]]);
-        let target = random_shape(kt, size, qt, [0.0, 0.0, 0.0]);
-        let mut s = shapes_scene(vec![servicer], vec![target], [-speed, 0.1 * speed, 0.0], mt);
-        s.servicer.mass = ms;
-        s.servicer.inertia = Inertia::Principal([0.4 * ms * 0.01, 0.3 * ms * 0.01, 0.5 * ms * 0.01]);
-        s.target.inertia = Inertia::Principal([0.3 * mt * 0.01, 0.5 * mt * 0.01, 0.4 * mt * 0.01]);
-        // the servicer's shape 0.3 m ahead along x, aimed at the target's shape
-        s.servicer.position = [0.0, ys, zs];
-        s.servicer.angular_velocity = [0.0, 0.01, -0.02];
-        s.contact.friction.kinetic_coefficient = mu;
-        s.simulation.duration = 0.3 / speed;
-        s.simulation.period = 1e-3;
-        // starting apart is part of the scene: skip draws that start in contact
-        let plan = match s.resolve() {
-            Ok(p) => p,
-            Err(e) => { prop_assume!(!e.to_string().contains("interpenetrating")); panic!("{e}") }
-        };
-        let x0 = plan.initial;
-        let mut x = x0;
-        let mut touched = false;
-        for _ in 0..plan.ticks {
-            plan.system.step_reference(&mut x, plan.period, plan.reference_substeps);
-            touched |= plan.system.contact(&x).force.norm() > 0.0;
+        random_impact(ks, kt, qs, qt, offset, speed, mu, ms, mt, ys, zs)?;
+    }
+
+    /// The same scenes without friction (the elastic contact alone, whose energy friction
+    /// cannot hide): momentum conserved, and energy never grows.
+    #[test]
+    fn random_frictionless_shape_impacts_conserve_momentum_and_never_gain_energy(
+        ks in 0usize..5, kt in 0usize..5,
+        qs in prop::array::uniform4(-1.0f64..1.0), qt in prop::array::uniform4(-1.0f64..1.0),
+        offset in prop::array::uniform3(-0.05f64..0.05),
+        speed in 0.005f64..0.03, ms in 50.0f64..500.0, mt in 200.0f64..5000.0,
+        ys in -0.03f64..0.03, zs in -0.03f64..0.03,
+    ) {
+        random_impact(ks, kt, qs, qt, offset, speed, 0.0, ms, mt, ys, zs)?;
+    }
+}
+
+/// One random 6-DOF shape scene of the property tests above (shape kinds `ks`, `kt`; attitudes
+/// `qs`, `qt`, unnormalised quaternions; the servicer shape's `offset`, m; approach `speed`,
+/// m/s; friction coefficient `mu`; masses `ms`, `mt`, kg; the servicer's lateral position `ys`,
+/// `zs`, m): momentum conserved to 1e-9, energy grown by at most 1e-6 (relative).
+#[allow(clippy::too_many_arguments)]
+fn random_impact(
+    ks: usize,
+    kt: usize,
+    qs: [f64; 4],
+    qt: [f64; 4],
+    offset: [f64; 3],
+    speed: f64,
+    mu: f64,
+    ms: f64,
+    mt: f64,
+    ys: f64,
+    zs: f64,
+) -> Result<(), TestCaseError> {
+    prop_assume!(qs.iter().map(|x| x * x).sum::<f64>() > 0.1);
+    prop_assume!(qt.iter().map(|x| x * x).sum::<f64>() > 0.1);
+    let size = 0.05;
+    let servicer = random_shape(ks, size, qs, [0.3 + offset[0], offset[1], offset[2]]);
+    let target = random_shape(kt, size, qt, [0.0, 0.0, 0.0]);
+    let mut s = shapes_scene(vec![servicer], vec![target], [-speed, 0.1 * speed, 0.0], mt);
+    s.servicer.mass = ms;
+    s.servicer.inertia = Inertia::Principal([0.4 * ms * 0.01, 0.3 * ms * 0.01, 0.5 * ms * 0.01]);
+    s.target.inertia = Inertia::Principal([0.3 * mt * 0.01, 0.5 * mt * 0.01, 0.4 * mt * 0.01]);
+    // the servicer's shape 0.3 m ahead along x, aimed at the target's shape
+    s.servicer.position = [0.0, ys, zs];
+    s.servicer.angular_velocity = [0.0, 0.01, -0.02];
+    s.contact.friction.kinetic_coefficient = mu;
+    s.simulation.duration = 0.3 / speed;
+    s.simulation.period = 1e-3;
+    // starting apart is part of the scene: skip draws that start in contact
+    let plan = match s.resolve() {
+        Ok(p) => p,
+        Err(e) => {
+            prop_assume!(!e.to_string().contains("interpenetrating"));
+            panic!("{e}")
         }
-        // a draw whose shapes miss each other says nothing (and too many such draws fail the test)
-        prop_assume!(touched);
-        let (p0, p1) = (plan.system.linear_momentum(&x0), plan.system.linear_momentum(&x));
-        let (l0, l1) = (plan.system.angular_momentum(&x0), plan.system.angular_momentum(&x));
-        prop_assert!((p1 - p0).norm() <= 1e-9 * p0.norm().max(1.0), "p {p0:?} → {p1:?}");
-        prop_assert!((l1 - l0).norm() <= 1e-9 * l0.norm().max(1.0), "L {l0:?} → {l1:?}");
-        let (e0, e1) = (plan.system.energy(&x0), plan.system.energy(&x) + plan.system.contact_potential_energy(&x));
-        prop_assert!(e1 <= e0 * (1.0 + 1e-6), "energy grew {e0} → {e1} (touched {touched})");
+    };
+    let x0 = plan.initial;
+    let mut x = x0;
+    let mut touched = false;
+    for _ in 0..plan.ticks {
+        plan.system
+            .step_reference(&mut x, plan.period, plan.reference_substeps);
+        touched |= plan.system.contact(&x).force.norm() > 0.0;
+    }
+    // a draw whose shapes miss each other says nothing (and too many such draws fail the test)
+    prop_assume!(touched);
+    // a contact the run's end cuts short: on until the shapes are apart (its points' depths
+    // are not its potential's: a weighted point's spring is `k·w`, and a point measured beyond
+    // another moves that one's depth), at most as long again
+    for _ in 0..plan.ticks {
+        if plan.system.contact_potential_energy(&x) == 0.0 {
+            break;
+        }
+        plan.system
+            .step_reference(&mut x, plan.period, plan.reference_substeps);
+    }
+    let (p0, p1) = (
+        plan.system.linear_momentum(&x0),
+        plan.system.linear_momentum(&x),
+    );
+    let (l0, l1) = (
+        plan.system.angular_momentum(&x0),
+        plan.system.angular_momentum(&x),
+    );
+    prop_assert!(
+        (p1 - p0).norm() <= 1e-9 * p0.norm().max(1.0),
+        "p {p0:?} → {p1:?}"
+    );
+    prop_assert!(
+        (l1 - l0).norm() <= 1e-9 * l0.norm().max(1.0),
+        "L {l0:?} → {l1:?}"
+    );
+    let (e0, e1) = (
+        plan.system.energy(&x0),
+        plan.system.energy(&x) + plan.system.contact_potential_energy(&x),
+    );
+    prop_assert!(
+        e1 <= e0 * (1.0 + 1e-6),
+        "energy grew {e0} → {e1} (touched {touched})"
+    );
+    Ok(())
+}
+
+/// Frictionless draws of the property test's scenes that gained energy (found by random
+/// scans, issue 21; each line's gain before its fix): energy never grows, momentum conserved.
+#[test]
+#[allow(clippy::type_complexity)]
+fn frictionless_draws_that_gained_energy_keep_it() {
+    // (ks, kt, qs, qt, offset, speed, ms, mt, ys, zs)
+    let draws: [(
+        usize,
+        usize,
+        [f64; 4],
+        [f64; 4],
+        [f64; 3],
+        f64,
+        f64,
+        f64,
+        f64,
+        f64,
+    ); 4] = [
+        // cylinder on cone: +13.2 % (a side line's end and a fixed rim point, weighted)
+        (
+            3,
+            4,
+            [
+                0.6749093299971236,
+                0.24655774874081682,
+                -0.5065786404063097,
+                0.15712785616317593,
+            ],
+            [
+                0.6163947011990889,
+                -0.5589520062281317,
+                -0.96238805122644,
+                0.9906777858253977,
+            ],
+            [
+                -0.03120473517117648,
+                0.00025196461975088985,
+                -0.0036180617392043285,
+            ],
+            0.02667981188547282,
+            58.46216743869674,
+            2176.4180430488987,
+            0.004951270429159549,
+            -0.01643145647247953,
+        ),
+        // cylinder on cone: +0.25 % (the same)
+        (
+            3,
+            4,
+            [
+                0.04015392727716627,
+                -0.15288348573715926,
+                -0.5365107608767401,
+                0.3905444543551686,
+            ],
+            [
+                -0.7420534828912906,
+                0.7864008674951446,
+                -0.9029486948826286,
+                -0.1891257936764279,
+            ],
+            [
+                0.00452925028512742,
+                0.021266367805915648,
+                0.04405990212229974,
+            ],
+            0.02980771578235112,
+            314.1816457435708,
+            4653.132493748731,
+            0.010604870267815501,
+            0.013835394202278258,
+        ),
+        // cone on cone: +9.3e-4 (the same)
+        (
+            4,
+            4,
+            [
+                -0.6102579931164216,
+                0.03191564531759772,
+                -0.43484564837170114,
+                0.09887531117066728,
+            ],
+            [
+                -0.9982294457457905,
+                0.7933112825550195,
+                0.28185306751748795,
+                -0.9649444839832741,
+            ],
+            [
+                0.04400778808921563,
+                -0.022539346127738905,
+                -0.00687889737036914,
+            ],
+            0.028656746829026043,
+            328.9472676690112,
+            2782.498933481955,
+            0.006977219210243142,
+            0.010816302742570172,
+        ),
+        // box on cone: +24.6 % as counted with the contact cut by the run's end
+        (
+            1,
+            4,
+            [
+                0.4932181456032727,
+                0.7100658866835126,
+                -0.5229400282055969,
+                -0.7917988430302898,
+            ],
+            [
+                0.6768153569339064,
+                -0.8092432869433266,
+                0.9762658050666293,
+                0.10658934857597124,
+            ],
+            [
+                0.03251419452344445,
+                0.03825629077569982,
+                0.005920792437680525,
+            ],
+            0.028618080973520248,
+            433.4711635357137,
+            3479.851929421823,
+            -0.0014458982108756652,
+            0.010367538302844766,
+        ),
+    ];
+    for (ks, kt, qs, qt, offset, speed, ms, mt, ys, zs) in draws {
+        random_impact(ks, kt, qs, qt, offset, speed, 0.0, ms, mt, ys, zs)
+            .unwrap_or_else(|e| panic!("{ks} on {kt}: {e}"));
     }
 }
 
