@@ -17,6 +17,7 @@ pub use crate::metrics::Trace;
 use crate::metrics::{self, EnergySummary, Metrics, TraceSample};
 use crate::plan::Plan;
 use crate::stop::{Status, Stop, StopKind};
+use crate::world::TwoBodyState;
 
 /// Named columns of equal length.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -118,14 +119,29 @@ pub struct SimulationOutput {
 /// flight; in contact RK4 with `simulation.reference_substeps` steps per period and the
 /// contact's start and end located). Returns the trace and, if `keep_rows`, every record.
 pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecord>) {
-    let (n, period, system) = (plan.ticks, plan.period, &plan.system);
-    let mut x = plan.initial;
-    let mut trace = Trace::with_capacity(n + 1, false);
-    let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
+    run_reference_from(plan, &plan.initial, 0, plan.ticks, keep_rows, |_| false)
+}
+
+/// [`run_reference`] from the state `x0` at tick `k0` (time `k0 · period`) to tick `n`, or
+/// to the first tick after which `done` (asked of the trace after each tick's sample) says
+/// so: the same integration, step for step (a local reference, [`metrics::local_comparison`]).
+pub fn run_reference_from(
+    plan: &Plan,
+    x0: &TwoBodyState,
+    k0: usize,
+    n: usize,
+    keep_rows: bool,
+    mut done: impl FnMut(&Trace) -> bool,
+) -> (Trace, Vec<ReferenceRecord>) {
+    let (period, system) = (plan.period, &plan.system);
+    let mut x = *x0;
+    let ticks = n.saturating_sub(k0) + 1;
+    let mut trace = Trace::with_capacity(ticks, false);
+    let mut rows = Vec::with_capacity(if keep_rows { ticks } else { 0 });
     let mut friction_work = 0.0;
     // the relative motion at `x` and its rod tip (kept from the step that computed them)
     let mut start = system.reference_start(&system.relative_motion(&x));
-    for k in 0..=n {
+    for k in k0..=n {
         let rel = &start.rel;
         let contact = system.contact_at_tip(rel, &start.tip, &start.tip_velocity, 0.0);
         let (contact_force, wrench) = (contact.force, contact.wrench);
@@ -153,6 +169,9 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
         if keep_rows {
             rows.push(row);
         }
+        if done(&trace) {
+            break;
+        }
         if k < n {
             let (work, end) =
                 system.step_reference_at(&mut x, &start, period, plan.reference_substeps);
@@ -171,6 +190,9 @@ pub struct HilRun {
     pub trace: Trace,
     /// Every record, if asked for (up to divergence).
     pub rows: Vec<HilRecord>,
+    /// The virtual dynamics' state of both bodies at every tick run (what the local
+    /// references restart from, [`metrics::local_comparison`]).
+    pub states: Vec<TwoBodyState>,
     /// Whether the compensator identified the contact.
     pub estimates_contact: bool,
     /// Whether the compensator observed the port energy.
@@ -220,10 +242,12 @@ pub fn run_hil_step_until(
     let estimates = step.dynamics().estimates_contact();
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut trace = Trace::with_capacity(n + 1, estimates);
+    let mut states = Vec::with_capacity(n + 1);
     // the command for the coming tick (the first tick does not read it)
     let mut command = step.command();
     let mut k = 0;
     let stop = loop {
+        states.push(*step.dynamics().state());
         let m = facility.tick(&command);
         let (row, stop) = step.observe(k, &m, Some(facility.physical_contact()));
         let time = row.time;
@@ -246,6 +270,7 @@ pub fn run_hil_step_until(
     HilRun {
         trace,
         rows,
+        states,
         estimates_contact: estimates,
         observes_energy: step.dynamics().observes_energy(),
         stop,
@@ -301,7 +326,7 @@ pub fn reference_key(plan: &Plan) -> String {
 /// metrics, to the bit, without running the reference again.
 pub fn simulate_plan_metrics_with_reference(plan: &Plan, reference: &Trace) -> Metrics {
     let hil = run_hil(plan, divergence_bound_of(plan, reference), false);
-    trace_metrics(plan, reference, &hil.trace, hil.estimates_contact, hil.stop)
+    run_metrics(plan, reference, &hil)
 }
 
 /// The divergence bound of a plan's HIL run from its reference's trace, J
@@ -611,18 +636,84 @@ fn run_with(
         };
         (reference_trace, reference) = run_reference(&span, keep_rows);
     }
-    let metrics = trace_metrics(
-        plan,
-        &reference_trace,
-        &hil.trace,
-        hil.estimates_contact,
-        hil.stop,
-    );
+    let metrics = run_metrics(plan, &reference_trace, &hil);
     Runs {
         reference,
         hil,
         metrics,
     }
+}
+
+/// The metrics of a simulated HIL run against the reference's trace: [`trace_metrics`]
+/// with the local references restarted from the run's virtual states
+/// ([`metrics::local_comparison`]).
+pub fn run_metrics(plan: &Plan, reference: &Trace, hil: &HilRun) -> Metrics {
+    trace_metrics_with_states(
+        plan,
+        reference,
+        &hil.trace,
+        hil.estimates_contact,
+        hil.stop,
+        &hil.states,
+    )
+}
+
+/// The local reference of a HIL collision ([`metrics::local_comparison`]): the ideal
+/// reference run again from the virtual state `states[k0]` (the restart's time and its trace),
+/// `k0` the tick `lag + sensor delay + 3` periods before the collision's start, or the
+/// latest tick before it down to the previous collision's end where the virtual bodies are
+/// apart ([`crate::world::TwoBodySystem::clearance_at`] > 0); run to the tick the next HIL
+/// collision starts (its first collision's rebound is read in the same free flight), or
+/// until its own next contact starts. None if no such tick is found.
+pub fn local_reference(
+    plan: &Plan,
+    states: &[TwoBodyState],
+    span: &metrics::CollisionSpan,
+) -> Option<(f64, Trace)> {
+    let (system, period, threshold) = (&plan.system, plan.period, plan.contact_threshold);
+    let back = ((plan.facility_lag() + plan.sensor_delay()) / period).ceil() as usize + 3;
+    let lo = span.previous_end;
+    let hi = span
+        .start
+        .saturating_sub(back)
+        .max(lo)
+        .min(states.len().checked_sub(1)?);
+    let k0 = (lo..=hi)
+        .rev()
+        .find(|&k| system.clearance_at(&system.relative_motion(&states[k])) > 0.0)?;
+    // stop once the first contact has ended and either a second one starts or the HIL's
+    // next collision does
+    let (mut touched, mut ended) = (false, false);
+    let done = |t: &Trace| {
+        let f = t.force.last().copied().unwrap_or(0.0);
+        touched |= f > threshold;
+        ended |= touched && f <= threshold;
+        ended && (f > threshold || k0 + t.len() > span.next)
+    };
+    let (trace, _) = run_reference_from(plan, &states[k0], k0, plan.ticks, false, done);
+    Some((k0 as f64 * period, trace))
+}
+
+/// [`trace_metrics`] with the virtual dynamics' state at every tick of the trace (`states`,
+/// [`HilRun::states`]): each complete collision also compared with its local reference
+/// ([`local_reference`]); without states (real-time runs, replays) the local errors are none.
+pub fn trace_metrics_with_states(
+    plan: &Plan,
+    reference: &Trace,
+    hil: &Trace,
+    estimates_contact: bool,
+    stop: Stop,
+    states: &[TwoBodyState],
+) -> Metrics {
+    let mut m = trace_metrics(plan, reference, hil, estimates_contact, stop);
+    if states.is_empty() {
+        return m;
+    }
+    metrics::local_comparison(hil, plan.contact_threshold, &mut m.collisions, |span| {
+        local_reference(plan, states, span)
+    });
+    m.summary = metrics::Summary::judged_from(&m.collisions, plan.tolerances.judge_from);
+    m
 }
 
 /// The metrics of a HIL trace against the reference's trace: the one computation used by
@@ -674,7 +765,7 @@ pub fn trace_metrics(
         diverged_at: (status == Status::Diverged).then(|| t.time.last().copied().unwrap_or(0.0)),
         reason,
         stop,
-        summary: metrics::Summary::of(&comparison.collisions),
+        summary: metrics::Summary::judged_from(&comparison.collisions, plan.tolerances.judge_from),
         collisions: comparison.collisions,
         reference_collisions: comparison.reference_collisions,
         lost_collisions: comparison.lost_collisions,
