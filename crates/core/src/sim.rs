@@ -232,9 +232,22 @@ pub fn run_hil_step(plan: &Plan, facility: FacilityLoop, step: HilStep, keep_row
 /// comes first.
 pub fn run_hil_step_until(
     plan: &Plan,
+    facility: FacilityLoop,
+    step: HilStep,
+    keep_rows: bool,
+    stop: &AtomicBool,
+) -> HilRun {
+    run_hil_loop(plan, facility, step, keep_rows, true, stop)
+}
+
+/// [`run_hil_step_until`], keeping the virtual states ([`HilRun::states`]) only if
+/// `keep_states` (a sweep's row does not read the local references they are for).
+fn run_hil_loop(
+    plan: &Plan,
     mut facility: FacilityLoop,
     mut step: HilStep,
     keep_rows: bool,
+    keep_states: bool,
     stop: &AtomicBool,
 ) -> HilRun {
     let user_stop = stop;
@@ -242,12 +255,14 @@ pub fn run_hil_step_until(
     let estimates = step.dynamics().estimates_contact();
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut trace = Trace::with_capacity(n + 1, estimates);
-    let mut states = Vec::with_capacity(n + 1);
+    let mut states = Vec::with_capacity(if keep_states { n + 1 } else { 0 });
     // the command for the coming tick (the first tick does not read it)
     let mut command = step.command();
     let mut k = 0;
     let stop = loop {
-        states.push(*step.dynamics().state());
+        if keep_states {
+            states.push(*step.dynamics().state());
+        }
         let m = facility.tick(&command);
         let (row, stop) = step.observe(k, &m, Some(facility.physical_contact()));
         let time = row.time;
@@ -304,7 +319,7 @@ pub fn simulate_metrics(s: &Scenario) -> Result<Metrics> {
 /// Runs the reference and the HIL loop of a resolved plan and computes the metrics, without
 /// keeping the records (what a sweep keeps of a run).
 pub fn simulate_plan_metrics(plan: &Plan) -> Metrics {
-    run(plan, false).metrics
+    simulate_plan_metrics_with_reference(plan, &run_reference(plan, false).0)
 }
 
 /// What a plan's ideal reference depends on, as text that tells every bit apart: the true
@@ -323,10 +338,14 @@ pub fn reference_key(plan: &Plan) -> String {
 
 /// [`simulate_plan_metrics`] with the plan's reference trace already computed
 /// (`run_reference(p, false).0` of a plan `p` with the same [`reference_key`]): the same
-/// metrics, to the bit, without running the reference again.
+/// metrics, to the bit, without running the reference again. Neither keeps the virtual states,
+/// so neither has the local references' errors ([`run_metrics`]; a sweep's row does not read
+/// them).
 pub fn simulate_plan_metrics_with_reference(plan: &Plan, reference: &Trace) -> Metrics {
-    let hil = run_hil(plan, divergence_bound_of(plan, reference), false);
-    run_metrics(plan, reference, &hil)
+    let step = HilStep::new(plan, divergence_bound_of(plan, reference));
+    let (facility, stop) = (FacilityLoop::new(plan), &AtomicBool::new(false));
+    let hil = run_hil_loop(plan, facility, step, false, false, stop);
+    trace_metrics(plan, reference, &hil.trace, hil.estimates_contact, hil.stop)
 }
 
 /// The divergence bound of a plan's HIL run from its reference's trace, J
@@ -608,10 +627,6 @@ pub fn simulate_plan_with_compensator_until(
     (output, hil.rows)
 }
 
-fn run(plan: &Plan, keep_rows: bool) -> Runs {
-    run_with(plan, keep_rows, None, &AtomicBool::new(false))
-}
-
 /// The reference and the HIL loop, with the plan's compensator or `compensator`; `stop`: the
 /// user's stop ([`run_hil_step_until`]), after which the reference is run again over the HIL
 /// loop's span, so that both tables and the metrics cover the same ticks.
@@ -662,9 +677,10 @@ pub fn run_metrics(plan: &Plan, reference: &Trace, hil: &HilRun) -> Metrics {
 /// reference run again from the virtual state `states[k0]` (the restart's time and its trace),
 /// `k0` the tick `lag + sensor delay + 3` periods before the collision's start, or the
 /// latest tick before it down to the previous collision's end where the virtual bodies are
-/// apart ([`crate::world::TwoBodySystem::clearance_at`] > 0); run to the tick the next HIL
-/// collision starts (its first collision's rebound is read in the same free flight), or
-/// until its own next contact starts. None if no such tick is found.
+/// apart ([`crate::world::TwoBodySystem::clearance_at`] > 0); run until its first contact has
+/// ended and settled (`2 (lag + sensor delay + 5 periods)` after both collisions' ends), or
+/// until the next HIL collision or its own second contact starts, whichever comes first (its
+/// rebound is read in the middle of that common free flight). None if no such tick is found.
 pub fn local_reference(
     plan: &Plan,
     states: &[TwoBodyState],
@@ -683,12 +699,18 @@ pub fn local_reference(
         .find(|&k| system.clearance_at(&system.relative_motion(&states[k])) > 0.0)?;
     // stop once the first contact has ended and either a second one starts or the HIL's
     // next collision does
-    let (mut touched, mut ended) = (false, false);
+    let (mut touched, mut ended) = (false, None);
+    // settled: twice the loop's lag, the sensor delay and 5 periods after both collisions
+    // ended, so that the rebound sample (the middle of the common free flight) lies after the
+    // sensor-delayed tail of the HIL's force, as [`trace_metrics`]' `settle` does
+    let settle = 2 * (back + 2);
     let done = |t: &Trace| {
-        let f = t.force.last().copied().unwrap_or(0.0);
+        let (f, k) = (t.force.last().copied().unwrap_or(0.0), k0 + t.len() - 1);
         touched |= f > threshold;
-        ended |= touched && f <= threshold;
-        ended && (f > threshold || k0 + t.len() > span.next)
+        if touched && f <= threshold && ended.is_none() {
+            ended = Some(k);
+        }
+        ended.is_some_and(|e| f > threshold || k >= span.next || k >= e.max(span.end) + settle)
     };
     let (trace, _) = run_reference_from(plan, &states[k0], k0, plan.ticks, false, done);
     Some((k0 as f64 * period, trace))
@@ -696,7 +718,8 @@ pub fn local_reference(
 
 /// [`trace_metrics`] with the virtual dynamics' state at every tick of the trace (`states`,
 /// [`HilRun::states`]): each complete collision also compared with its local reference
-/// ([`local_reference`]); without states (real-time runs, replays) the local errors are none.
+/// ([`local_reference`]); without states (real-time runs, replays, a sweep's rows) and for a
+/// diverged run the local errors are none.
 pub fn trace_metrics_with_states(
     plan: &Plan,
     reference: &Trace,
@@ -706,7 +729,9 @@ pub fn trace_metrics_with_states(
     states: &[TwoBodyState],
 ) -> Metrics {
     let mut m = trace_metrics(plan, reference, hil, estimates_contact, stop);
-    if states.is_empty() {
+    // a diverged run's collisions grow without bound (restarting each would cost more than
+    // the run): no local references
+    if states.is_empty() || m.status == Status::Diverged {
         return m;
     }
     metrics::local_comparison(hil, plan.contact_threshold, &mut m.collisions, |span| {
