@@ -35,6 +35,10 @@
 //!   error (degrees), the normal impulse error `|J_n − J_n,ref| / |J_n,ref|`, the tangential
 //!   impulse error `|J_t − J_t,ref| / max(|J_t,ref|, 0.01 |J_n,ref|)`
 //!   ([`TANGENTIAL_IMPULSE_FLOOR`]: 0, not NaN, without friction) and the peak moment ratio.
+//! - **Local reference** ([`local_comparison`]): each complete HIL collision is also compared,
+//!   by the same per-pair metrics, with the first collision of the ideal reference restarted
+//!   from the virtual state just before it (`local_*` fields; a contact read from the state it
+//!   began in). Read, never judged: the verdict stays the global comparison's.
 //! - **Verdict**: a run that ran to its end is `unfaithful` when any matched collision breaks
 //!   the tolerances ([`Tolerances`], `[metrics]` in the scenario: `|CoV − 1|`, CoF, velocity
 //!   error, tangential impulse error) or more collisions are lost or extra than allowed; else `ok`.
