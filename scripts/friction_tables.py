@@ -24,6 +24,9 @@ errors. It also runs the presets with shapes (``rod-in-frame``, ``probe-drogue``
 and with their shapes as prior geometry (``prior_shapes``): the law unknown (``geometry``), and
 the scenario's law and friction known (``geometry-and-law``); there the tangential impulse is taken across the reference's normal
 impulse (no walls).
+model-mediated's rows add the same model-rendered collisions (matched or not) against their
+local (restarted) references, the metrics' ``local_*`` errors (docs/model.md "Metrics": each
+contact read from the state it began in; never the verdict).
 
 A page's table is the region between ``<!-- friction-tables: KIND -->`` and
 ``<!-- /friction-tables -->`` of docs/compensators/KIND.md.
@@ -186,11 +189,23 @@ def measure(raw: dict[str, Any], kind: str, delay: float, prior: str = "") -> di
         values = [c[key] for c in modelled if c.get(key) is not None]
         return max(values) if values else float("nan")
 
+    # the same collisions against their local (restarted) references, matched or not
+    # (docs/model.md "Metrics": each contact read on its own; never the verdict)
+    local = [c for c in m.get("collisions") or [] if c.get("rendering") == "model" and c.get("local_velocity_error") is not None]
+
+    def worst_local(key: str) -> float:
+        values = [c[key] for c in local if c.get(key) is not None]
+        return max(values) if values else float("nan")
+
     return {
         "modelled": len(modelled),
         "model_velocity_error": worst("velocity_error"),
         "model_cof": worst("cof"),
         "model_tangential": worst("tangential_impulse_error"),
+        "local_modelled": len(local),
+        "local_velocity_error": worst_local("local_velocity_error"),
+        "local_cof": worst_local("local_cof"),
+        "local_tangential": worst_local("local_tangential_impulse_error"),
         "status": m.get("status"),
         "lost": len(m.get("lost_collisions") or []),
         "extra": len(m.get("extra_collisions") or []),
@@ -218,12 +233,17 @@ HEADER = ("| scene | delay | lost/extra | v err % | CoF | tangential J err % | e
 #: (their count; rebound velocity vector error, CoF and tangential impulse error, the metrics'
 #: own definitions).
 MODEL_HEADER = " model-rendered | its v err % | its CoF | its J_t err % |"
+#: Extra columns of model-mediated: the same collisions (matched or not) against their local
+#: references (docs/model.md "Metrics", ``local_*``: each contact read from the state it began
+#: in; never the verdict): their count, the worst local rebound velocity error, CoF and
+#: tangential impulse error.
+LOCAL_HEADER = " local: model-rendered | local v err % | local CoF | local J_t err % |"
 
 
 def table(kind: str, delays: tuple[float, ...] | None = None) -> list[str]:
     """The Markdown table of one compensator."""
     model = kind == "model-mediated"
-    header = HEADER + MODEL_HEADER if model else HEADER
+    header = HEADER + MODEL_HEADER + LOCAL_HEADER if model else HEADER
     lines = [header, "|" + "---|" * (header.count("|") - 1)]
     variants = [(label, raw, "") for label, raw in scenes()]
     if model:
@@ -248,6 +268,10 @@ def table(kind: str, delays: tuple[float, ...] | None = None) -> list[str]:
                 line += (
                     f" {row['modelled']} | {_pct(row['model_velocity_error'])} | {_num(row['model_cof'])} | "
                     f"{_pct(row['model_tangential'])} |"
+                )
+                line += (
+                    f" {row['local_modelled']} | {_pct(row['local_velocity_error'])} | {_num(row['local_cof'])} | "
+                    f"{_pct(row['local_tangential'])} |"
                 )
             lines.append(line)
     return lines

@@ -123,8 +123,12 @@ def test_collision_table(fake_run):
         "reference_rebound_velocity_x", "reference_rebound_velocity_y", "reference_rebound_velocity_z",
         # how the compensator handled it (model-mediated's report; "-" without one)
         "rendering",
+        # against the collision's local (restarted) reference (none in this run's metrics)
+        "local_start", "local_velocity_error", "local_cof", "local_tangential_impulse_error",
+        "local_normal_impulse_error",
     ]
     assert list(table["rendering"]) == ["-", "-"]
+    assert table["local_velocity_error"].isna().all()
     assert table.loc[1, "cov"] == 1.25 and table.loc[1, "reference_rebound_speed"] == 0.02
     assert table.loc[1, "reference"] == 1 and table.loc[1, "velocity_error"] == 0.25
     assert math.isnan(table.loc[2, "reference"])

@@ -20,7 +20,10 @@ def simulate(scenario_json: str, outputs: str | None = None) -> dict[str, Any]:
     origin), ``rebound_velocity`` and ``rebound_angular_velocity`` (``[x, y, z]``, m/s, rad/s,
     ``t``), and for a compared HIL collision ``direction_error`` (degrees),
     ``normal_impulse_error``, ``tangential_impulse_error`` (fractions) and
-    ``peak_moment_ratio`` (``hilcontact.Run.collision_table`` puts them in a DataFrame).
+    ``peak_moment_ratio``, and against the collision's local (restarted) reference
+    ``local_start`` (s), ``local_velocity_error``, ``local_cof``,
+    ``local_tangential_impulse_error``, ``local_normal_impulse_error`` (``None`` without one;
+    docs/model.md "Metrics") (``hilcontact.Run.collision_table`` puts them in a DataFrame).
 
     ``outputs``: JSON of the outputs to also write the run to, each under its key with a
     real-time run's options for it (``{"mcap": {"path": ..., "overwrite": false}}``); the

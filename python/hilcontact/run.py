@@ -155,7 +155,10 @@ class Run:
         reference_rebound_velocity_x/_y/_z (m/s); rendering (how the compensator handled the
         collision, :func:`~hilcontact.verdict.rendering_label`: ``model``, ``pida: no
         prior``, ``pida: prior contradicted``, ``pida: law unknown``; ``-`` for a compensator
-        without a model). NaN where there is no value."""
+        without a model); then the errors against the collision's local (restarted) reference
+        (docs/model.md, "Metrics"; read, never judged): local_start (s), local_velocity_error,
+        local_cof, local_tangential_impulse_error, local_normal_impulse_error (fractions;
+        NaN for real-time runs and replays). NaN where there is no value."""
         reference = {c.get("index"): c for c in self.metrics.get("reference_collisions") or []}
         numbers = [
             "start", "end", "peak_force", "rebound_speed", "cov", "cof", "velocity_error",
@@ -165,6 +168,10 @@ class Run:
         vectors = ["rebound_velocity", "rebound_angular_velocity"]
         errors = ["direction_error", "normal_impulse_error", "tangential_impulse_error", "peak_moment_ratio"]
         from_reference = ["normal_impulse", "tangential_impulse", "peak_moment"]
+        local = [
+            "local_start", "local_velocity_error", "local_cof", "local_tangential_impulse_error",
+            "local_normal_impulse_error",
+        ]
         axes = ("x", "y", "z")
 
         def spread(name: str, value: Any) -> dict[str, Any]:
@@ -186,6 +193,7 @@ class Run:
             row.update({f"reference_{key}": ref.get(key) for key in from_reference})
             row.update(spread("reference_rebound_velocity", ref.get("rebound_velocity")))
             row["rendering"] = rendering_label(collision.get("rendering"))
+            row.update({key: collision.get(key) for key in local})
             rows.append(row)
         floats = [
             *numbers, "reference", "reference_peak_force", "reference_rebound_speed",
@@ -195,9 +203,9 @@ class Run:
             *[f"reference_{key}" for key in from_reference],
             *[f"reference_rebound_velocity_{axis}" for axis in axes],
         ]
-        columns = ["collision", "complete", *floats, "rendering"]
+        columns = ["collision", "complete", *floats, "rendering", *local]
         table = pd.DataFrame(rows, columns=columns)
-        table[floats] = table[floats].astype(np.float64)
+        table[floats + local] = table[floats + local].astype(np.float64)
         return table.set_index("collision")
 
     @classmethod

@@ -35,6 +35,10 @@
 //!   error (degrees), the normal impulse error `|J_n − J_n,ref| / |J_n,ref|`, the tangential
 //!   impulse error `|J_t − J_t,ref| / max(|J_t,ref|, 0.01 |J_n,ref|)`
 //!   ([`TANGENTIAL_IMPULSE_FLOOR`]: 0, not NaN, without friction) and the peak moment ratio.
+//! - **Local reference** ([`local_comparison`]): each complete HIL collision is also compared,
+//!   by the same per-pair metrics, with the first collision of the ideal reference restarted
+//!   from the virtual state just before it (`local_*` fields; a contact read from the state it
+//!   began in). Read, never judged: the verdict stays the global comparison's.
 //! - **Verdict**: a run that ran to its end is `unfaithful` when any matched collision breaks
 //!   the tolerances ([`Tolerances`], `[metrics]` in the scenario: `|CoV − 1|`, CoF, velocity
 //!   error, tangential impulse error) or more collisions are lost or extra than allowed; else `ok`.
@@ -389,6 +393,22 @@ pub struct ComparedCollision {
     /// Peak moment of the physical contact about the sensor origin / the reference's (none
     /// when the reference's lever arm is below 1 µm).
     pub peak_moment_ratio: Option<f64>,
+    /// Time of the local reference's restart, s: the virtual state there, with the bodies
+    /// apart, is where the ideal reference was run again for this collision alone
+    /// ([`local_comparison`]; none without the virtual states, e.g. real-time runs and
+    /// replays, or when no tick with the bodies apart was found).
+    pub local_start: Option<f64>,
+    /// `|v − v_loc| / |v_loc|`: the rebound velocity error against the local reference's
+    /// first collision ([`local_comparison`]; fraction). Read, never judged.
+    pub local_velocity_error: Option<f64>,
+    /// `F_peak / F_peak,loc` against the local reference's first collision. Read, never judged.
+    pub local_cof: Option<f64>,
+    /// `|J_t − J_t,loc| / max(|J_t,loc|, 0.01 |J_n,loc|)` against the local reference's
+    /// first collision (fraction). Read, never judged.
+    pub local_tangential_impulse_error: Option<f64>,
+    /// `|J_n − J_n,loc| / |J_n,loc|` against the local reference's first collision
+    /// (fraction). Read, never judged.
+    pub local_normal_impulse_error: Option<f64>,
 }
 
 /// When a run is faithful (`[metrics]` in the scenario; docs/model.md "Metrics").
@@ -466,7 +486,6 @@ pub fn compare(
             partner[j] = Some(i);
         }
     }
-    let ratio = |a: f64, b: f64| (b > 0.0 && a.is_finite()).then(|| a / b);
     let collisions: Vec<ComparedCollision> = hs
         .iter()
         .enumerate()
@@ -486,61 +505,15 @@ pub fn compare(
                 normal_impulse_error: None,
                 tangential_impulse_error: None,
                 peak_moment_ratio: None,
+                local_start: None,
+                local_velocity_error: None,
+                local_cof: None,
+                local_tangential_impulse_error: None,
+                local_normal_impulse_error: None,
             };
-            let Some(i) = partner[j] else { return c };
-            let r = &rs[i];
-            if !(h.complete && r.complete) {
-                return c;
+            if let Some(i) = partner[j] {
+                compare_pair(&mut c, hil, &hs, j, reference, &rs, i);
             }
-            // the rebound sample: the middle of the common free flight
-            let lo = hil.time[h.end].max(reference.time[r.end]);
-            let hi = hil.time[h.next].min(reference.time[r.next]);
-            let (hi_i, ri) = if hi > lo {
-                let t = 0.5 * (lo + hi);
-                (hil.index_at(t), reference.index_at(t))
-            } else {
-                ((h.end + h.next) / 2, (r.end + r.next) / 2)
-            };
-            let (v, v_ref) = (hil.velocity[hi_i], reference.velocity[ri]);
-            let (w, w_ref) = (hil.angular_velocity[hi_i], reference.angular_velocity[ri]);
-            let peak =
-                |t: &Trace, s: &Span| t.force[s.start..=s.end].iter().cloned().fold(0.0, f64::max);
-            // from the middle of the free flight before the collision: a compensator may make
-            // the virtual dynamics feel the contact before the robot does (model-mediated)
-            let from = |spans: &[Span], j: usize| match j {
-                0 => 0,
-                _ => (spans[j - 1].end + spans[j].start) / 2,
-            };
-            let impulse = |t: &Trace, from: usize, to: usize| {
-                (
-                    t.integral(&t.wrench_force, from, to),
-                    t.integral(&t.wrench_moment, from, to),
-                )
-            };
-            let (j_h, m_h) = impulse(hil, from(&hs, j), hi_i);
-            let (j_r, m_r) = impulse(reference, from(&rs, i), ri);
-            c.rebound_time = Some(hil.time[hi_i]);
-            c.cov = ratio(v.norm(), v_ref.norm());
-            c.velocity_error = ratio((v - v_ref).norm(), v_ref.norm());
-            c.angular_velocity_error =
-                (w_ref.norm() >= 1e-6).then(|| (w - w_ref).norm() / w_ref.norm());
-            c.cof = ratio(peak(hil, h), peak(reference, r));
-            c.impulse_ratio = ratio(j_h.norm(), j_r.norm());
-            c.angular_impulse_ratio = ratio(m_h.norm(), m_r.norm());
-            c.direction_error = angle_deg(&v, &v_ref);
-            let ((jn_h, jt_h), (jn_r, jt_r)) = (impulses(hil, h), impulses(reference, r));
-            c.normal_impulse_error = ratio((jn_h - jn_r).norm(), jn_r.norm());
-            c.tangential_impulse_error = ratio(
-                (jt_h - jt_r).norm(),
-                jt_r.norm().max(TANGENTIAL_IMPULSE_FLOOR * jn_r.norm()),
-            );
-            let (m_peak, m_peak_ref) = (
-                peak_norm(&hil.contact_moment[h.start..=h.end]),
-                peak_norm(&reference.contact_moment[r.start..=r.end]),
-            );
-            c.peak_moment_ratio = (m_peak_ref > 1e-6 * peak(reference, r))
-                .then(|| m_peak / m_peak_ref)
-                .filter(|x| x.is_finite());
             c
         })
         .collect();
@@ -570,6 +543,134 @@ pub fn compare(
         lost_collisions,
         extra_collisions,
         violations,
+    }
+}
+
+/// The per-pair metrics of HIL collision `j` (spans `hs` of `hil`) against reference
+/// collision `i` (spans `rs` of `reference`), written into `c` (see the module doc; nothing
+/// unless both are complete). The reference may be a local one ([`local_comparison`]): the
+/// two traces are read by time, so they need not start at the same sample.
+fn compare_pair(
+    c: &mut ComparedCollision,
+    hil: &Trace,
+    hs: &[Span],
+    j: usize,
+    reference: &Trace,
+    rs: &[Span],
+    i: usize,
+) {
+    let ratio = |a: f64, b: f64| (b > 0.0 && a.is_finite()).then(|| a / b);
+    let (h, r) = (&hs[j], &rs[i]);
+    if !(h.complete && r.complete) {
+        return;
+    }
+    // the rebound sample: the middle of the common free flight
+    let lo = hil.time[h.end].max(reference.time[r.end]);
+    let hi = hil.time[h.next].min(reference.time[r.next]);
+    let (hi_i, ri) = if hi > lo {
+        let t = 0.5 * (lo + hi);
+        (hil.index_at(t), reference.index_at(t))
+    } else {
+        ((h.end + h.next) / 2, (r.end + r.next) / 2)
+    };
+    let (v, v_ref) = (hil.velocity[hi_i], reference.velocity[ri]);
+    let (w, w_ref) = (hil.angular_velocity[hi_i], reference.angular_velocity[ri]);
+    let peak = |t: &Trace, s: &Span| t.force[s.start..=s.end].iter().cloned().fold(0.0, f64::max);
+    // from the middle of the free flight before the collision: a compensator may make
+    // the virtual dynamics feel the contact before the robot does (model-mediated)
+    let from = |spans: &[Span], j: usize| match j {
+        0 => 0,
+        _ => (spans[j - 1].end + spans[j].start) / 2,
+    };
+    let impulse = |t: &Trace, from: usize, to: usize| {
+        (
+            t.integral(&t.wrench_force, from, to),
+            t.integral(&t.wrench_moment, from, to),
+        )
+    };
+    let (j_h, m_h) = impulse(hil, from(hs, j), hi_i);
+    let (j_r, m_r) = impulse(reference, from(rs, i), ri);
+    c.rebound_time = Some(hil.time[hi_i]);
+    c.cov = ratio(v.norm(), v_ref.norm());
+    c.velocity_error = ratio((v - v_ref).norm(), v_ref.norm());
+    c.angular_velocity_error = (w_ref.norm() >= 1e-6).then(|| (w - w_ref).norm() / w_ref.norm());
+    c.cof = ratio(peak(hil, h), peak(reference, r));
+    c.impulse_ratio = ratio(j_h.norm(), j_r.norm());
+    c.angular_impulse_ratio = ratio(m_h.norm(), m_r.norm());
+    c.direction_error = angle_deg(&v, &v_ref);
+    let ((jn_h, jt_h), (jn_r, jt_r)) = (impulses(hil, h), impulses(reference, r));
+    c.normal_impulse_error = ratio((jn_h - jn_r).norm(), jn_r.norm());
+    c.tangential_impulse_error = ratio(
+        (jt_h - jt_r).norm(),
+        jt_r.norm().max(TANGENTIAL_IMPULSE_FLOOR * jn_r.norm()),
+    );
+    let (m_peak, m_peak_ref) = (
+        peak_norm(&hil.contact_moment[h.start..=h.end]),
+        peak_norm(&reference.contact_moment[r.start..=r.end]),
+    );
+    c.peak_moment_ratio = (m_peak_ref > 1e-6 * peak(reference, r))
+        .then(|| m_peak / m_peak_ref)
+        .filter(|x| x.is_finite());
+}
+
+/// Where a HIL collision lies in its trace, by sample index (= tick): what a local reference
+/// is restarted from ([`local_comparison`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CollisionSpan {
+    /// First sample above the threshold.
+    pub start: usize,
+    /// First sample below it.
+    pub end: usize,
+    /// Start of the next collision, or the last sample.
+    pub next: usize,
+    /// End of the previous collision (0 for the first).
+    pub previous_end: usize,
+}
+
+/// The local (restarted) reference of each complete HIL collision, and the errors against it
+/// (docs/model.md "Metrics"): `restart` runs the ideal reference again from the virtual state
+/// at a tick before the collision where the bodies are apart and hands back its trace (samples
+/// at the HIL trace's times from that tick on) and the restart's time, or none; the
+/// collision is then compared with the local reference's first collision by
+/// the same per-pair metrics as with the global reference's ([`compare`]), into the
+/// `local_*` fields. A local reference whose first sample is in contact, or whose first
+/// collision does not end, gives none. The global metrics and the verdict are untouched:
+/// the local errors read each contact on its own, from the state the run was in.
+pub fn local_comparison(
+    hil: &Trace,
+    threshold: f64,
+    collisions: &mut [ComparedCollision],
+    mut restart: impl FnMut(&CollisionSpan) -> Option<(f64, Trace)>,
+) {
+    let hs = spans(hil, threshold);
+    for (j, h) in hs.iter().enumerate() {
+        let Some(c) = collisions.get_mut(j) else {
+            break;
+        };
+        if !h.complete {
+            continue;
+        }
+        let span = CollisionSpan {
+            start: h.start,
+            end: h.end,
+            next: h.next,
+            previous_end: if j == 0 { 0 } else { hs[j - 1].end },
+        };
+        let Some((start, local)) = restart(&span) else {
+            continue;
+        };
+        let ls = spans(&local, threshold);
+        let apart = local.force.first().is_some_and(|&f| f <= threshold);
+        if !apart || !ls.first().is_some_and(|l| l.complete) {
+            continue;
+        }
+        let mut pair = c.clone();
+        compare_pair(&mut pair, hil, &hs, j, &local, &ls, 0);
+        c.local_start = Some(start);
+        c.local_velocity_error = pair.velocity_error;
+        c.local_cof = pair.cof;
+        c.local_tangential_impulse_error = pair.tangential_impulse_error;
+        c.local_normal_impulse_error = pair.normal_impulse_error;
     }
 }
 
@@ -821,13 +922,34 @@ pub struct Summary {
     pub worst_tangential_impulse_error: f64,
     /// The peak moment ratio farthest from 1 (NaN if none).
     pub worst_peak_moment_ratio: f64,
+    /// The largest local rebound velocity error from `judge_from` on (fraction, NaN if none;
+    /// [`local_comparison`], read, never judged).
+    pub worst_local_velocity_error: f64,
+    /// The local CoF farthest from 1 from `judge_from` on (NaN if none).
+    pub worst_local_cof: f64,
+    /// The largest local tangential impulse error from `judge_from` on (fraction, NaN if none).
+    pub worst_local_tangential_impulse_error: f64,
+    /// The largest local normal impulse error from `judge_from` on (fraction, NaN if none).
+    pub worst_local_normal_impulse_error: f64,
 }
 
 impl Summary {
-    /// The summary of compared collisions.
+    /// The summary of compared collisions (the local errors' worst over all of them).
     pub fn of(collisions: &[ComparedCollision]) -> Self {
+        Self::judged_from(collisions, 1)
+    }
+
+    /// The summary of compared collisions, the local errors' worst over those from the
+    /// `judge_from`-th on (1-based, [`Tolerances::judge_from`]).
+    pub fn judged_from(collisions: &[ComparedCollision], judge_from: usize) -> Self {
         let pick = |f: fn(&ComparedCollision) -> Option<f64>, target: f64| {
             mean_and_worst(collisions.iter().filter_map(f), target)
+        };
+        let local = |f: fn(&ComparedCollision) -> Option<f64>, target: f64| {
+            let judged = collisions
+                .iter()
+                .filter(|c| c.collision.index >= judge_from);
+            mean_and_worst(judged.filter_map(f), target).1
         };
         let (mean_cov, worst_cov) = pick(|c| c.cov, 1.0);
         let (mean_cof, worst_cof) = pick(|c| c.cof, 1.0);
@@ -846,6 +968,10 @@ impl Summary {
             worst_normal_impulse_error: pick(|c| c.normal_impulse_error, 0.0).1,
             worst_tangential_impulse_error: pick(|c| c.tangential_impulse_error, 0.0).1,
             worst_peak_moment_ratio: pick(|c| c.peak_moment_ratio, 1.0).1,
+            worst_local_velocity_error: local(|c| c.local_velocity_error, 0.0),
+            worst_local_cof: local(|c| c.local_cof, 1.0),
+            worst_local_tangential_impulse_error: local(|c| c.local_tangential_impulse_error, 0.0),
+            worst_local_normal_impulse_error: local(|c| c.local_normal_impulse_error, 0.0),
         }
     }
 }
@@ -1292,6 +1418,11 @@ mod tests {
             normal_impulse_error: None,
             tangential_impulse_error: None,
             peak_moment_ratio: None,
+            local_start: None,
+            local_velocity_error: None,
+            local_cof: None,
+            local_tangential_impulse_error: None,
+            local_normal_impulse_error: None,
         };
         let s = Summary::of(&[
             mk(Some(1.02), Some(1.1), Some(0.03)),

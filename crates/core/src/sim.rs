@@ -17,6 +17,7 @@ pub use crate::metrics::Trace;
 use crate::metrics::{self, EnergySummary, Metrics, TraceSample};
 use crate::plan::Plan;
 use crate::stop::{Status, Stop, StopKind};
+use crate::world::TwoBodyState;
 
 /// Named columns of equal length.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -118,14 +119,29 @@ pub struct SimulationOutput {
 /// flight; in contact RK4 with `simulation.reference_substeps` steps per period and the
 /// contact's start and end located). Returns the trace and, if `keep_rows`, every record.
 pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecord>) {
-    let (n, period, system) = (plan.ticks, plan.period, &plan.system);
-    let mut x = plan.initial;
-    let mut trace = Trace::with_capacity(n + 1, false);
-    let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
+    run_reference_from(plan, &plan.initial, 0, plan.ticks, keep_rows, |_| false)
+}
+
+/// [`run_reference`] from the state `x0` at tick `k0` (time `k0 · period`) to tick `n`, or
+/// to the first tick after which `done` (asked of the trace after each tick's sample) says
+/// so: the same integration, step for step (a local reference, [`metrics::local_comparison`]).
+pub fn run_reference_from(
+    plan: &Plan,
+    x0: &TwoBodyState,
+    k0: usize,
+    n: usize,
+    keep_rows: bool,
+    mut done: impl FnMut(&Trace) -> bool,
+) -> (Trace, Vec<ReferenceRecord>) {
+    let (period, system) = (plan.period, &plan.system);
+    let mut x = *x0;
+    let ticks = n.saturating_sub(k0) + 1;
+    let mut trace = Trace::with_capacity(ticks, false);
+    let mut rows = Vec::with_capacity(if keep_rows { ticks } else { 0 });
     let mut friction_work = 0.0;
     // the relative motion at `x` and its rod tip (kept from the step that computed them)
     let mut start = system.reference_start(&system.relative_motion(&x));
-    for k in 0..=n {
+    for k in k0..=n {
         // (as the step that ended here computed it, if it did)
         let contact = system.reference_contact(&mut start);
         let rel = &start.rel;
@@ -154,6 +170,9 @@ pub fn run_reference(plan: &Plan, keep_rows: bool) -> (Trace, Vec<ReferenceRecor
         if keep_rows {
             rows.push(row);
         }
+        if done(&trace) {
+            break;
+        }
         if k < n {
             let (work, end) =
                 system.step_reference_at(&mut x, &start, period, plan.reference_substeps);
@@ -172,6 +191,9 @@ pub struct HilRun {
     pub trace: Trace,
     /// Every record, if asked for (up to divergence).
     pub rows: Vec<HilRecord>,
+    /// The virtual dynamics' state of both bodies at every tick run (what the local
+    /// references restart from, [`metrics::local_comparison`]).
+    pub states: Vec<TwoBodyState>,
     /// Whether the compensator identified the contact.
     pub estimates_contact: bool,
     /// Whether the compensator observed the port energy.
@@ -211,9 +233,22 @@ pub fn run_hil_step(plan: &Plan, facility: FacilityLoop, step: HilStep, keep_row
 /// comes first.
 pub fn run_hil_step_until(
     plan: &Plan,
+    facility: FacilityLoop,
+    step: HilStep,
+    keep_rows: bool,
+    stop: &AtomicBool,
+) -> HilRun {
+    run_hil_loop(plan, facility, step, keep_rows, true, stop)
+}
+
+/// [`run_hil_step_until`], keeping the virtual states ([`HilRun::states`]) only if
+/// `keep_states` (a sweep's row does not read the local references they are for).
+fn run_hil_loop(
+    plan: &Plan,
     mut facility: FacilityLoop,
     mut step: HilStep,
     keep_rows: bool,
+    keep_states: bool,
     stop: &AtomicBool,
 ) -> HilRun {
     let user_stop = stop;
@@ -221,10 +256,14 @@ pub fn run_hil_step_until(
     let estimates = step.dynamics().estimates_contact();
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut trace = Trace::with_capacity(n + 1, estimates);
+    let mut states = Vec::with_capacity(if keep_states { n + 1 } else { 0 });
     // the command for the coming tick (the first tick does not read it)
     let mut command = step.command();
     let mut k = 0;
     let stop = loop {
+        if keep_states {
+            states.push(*step.dynamics().state());
+        }
         let m = facility.tick(&command);
         let (row, stop) = step.observe(k, &m, Some(facility.physical_contact()));
         let time = row.time;
@@ -247,6 +286,7 @@ pub fn run_hil_step_until(
     HilRun {
         trace,
         rows,
+        states,
         estimates_contact: estimates,
         observes_energy: step.dynamics().observes_energy(),
         stop,
@@ -280,7 +320,7 @@ pub fn simulate_metrics(s: &Scenario) -> Result<Metrics> {
 /// Runs the reference and the HIL loop of a resolved plan and computes the metrics, without
 /// keeping the records (what a sweep keeps of a run).
 pub fn simulate_plan_metrics(plan: &Plan) -> Metrics {
-    run(plan, false).metrics
+    simulate_plan_metrics_with_reference(plan, &run_reference(plan, false).0)
 }
 
 /// What a plan's ideal reference depends on, as text that tells every bit apart: the true
@@ -299,9 +339,13 @@ pub fn reference_key(plan: &Plan) -> String {
 
 /// [`simulate_plan_metrics`] with the plan's reference trace already computed
 /// (`run_reference(p, false).0` of a plan `p` with the same [`reference_key`]): the same
-/// metrics, to the bit, without running the reference again.
+/// metrics, to the bit, without running the reference again. Neither keeps the virtual states,
+/// so neither has the local references' errors ([`run_metrics`]; a sweep's row does not read
+/// them).
 pub fn simulate_plan_metrics_with_reference(plan: &Plan, reference: &Trace) -> Metrics {
-    let hil = run_hil(plan, divergence_bound_of(plan, reference), false);
+    let step = HilStep::new(plan, divergence_bound_of(plan, reference));
+    let (facility, stop) = (FacilityLoop::new(plan), &AtomicBool::new(false));
+    let hil = run_hil_loop(plan, facility, step, false, false, stop);
     trace_metrics(plan, reference, &hil.trace, hil.estimates_contact, hil.stop)
 }
 
@@ -584,10 +628,6 @@ pub fn simulate_plan_with_compensator_until(
     (output, hil.rows)
 }
 
-fn run(plan: &Plan, keep_rows: bool) -> Runs {
-    run_with(plan, keep_rows, None, &AtomicBool::new(false))
-}
-
 /// The reference and the HIL loop, with the plan's compensator or `compensator`; `stop`: the
 /// user's stop ([`run_hil_step_until`]), after which the reference is run again over the HIL
 /// loop's span, so that both tables and the metrics cover the same ticks.
@@ -612,18 +652,94 @@ fn run_with(
         };
         (reference_trace, reference) = run_reference(&span, keep_rows);
     }
-    let metrics = trace_metrics(
-        plan,
-        &reference_trace,
-        &hil.trace,
-        hil.estimates_contact,
-        hil.stop,
-    );
+    let metrics = run_metrics(plan, &reference_trace, &hil);
     Runs {
         reference,
         hil,
         metrics,
     }
+}
+
+/// The metrics of a simulated HIL run against the reference's trace: [`trace_metrics`]
+/// with the local references restarted from the run's virtual states
+/// ([`metrics::local_comparison`]).
+pub fn run_metrics(plan: &Plan, reference: &Trace, hil: &HilRun) -> Metrics {
+    trace_metrics_with_states(
+        plan,
+        reference,
+        &hil.trace,
+        hil.estimates_contact,
+        hil.stop,
+        &hil.states,
+    )
+}
+
+/// The local reference of a HIL collision ([`metrics::local_comparison`]): the ideal
+/// reference run again from the virtual state `states[k0]` (the restart's time and its trace),
+/// `k0` the tick `lag + sensor delay + 3` periods before the collision's start, or the
+/// latest tick before it down to the previous collision's end where the virtual bodies are
+/// apart ([`crate::world::TwoBodySystem::clearance_at`] > 0); run until its first contact has
+/// ended and settled (`2 (lag + sensor delay + 5 periods)` after both collisions' ends), or
+/// until the next HIL collision or its own second contact starts, whichever comes first (its
+/// rebound is read in the middle of that common free flight). None if no such tick is found.
+pub fn local_reference(
+    plan: &Plan,
+    states: &[TwoBodyState],
+    span: &metrics::CollisionSpan,
+) -> Option<(f64, Trace)> {
+    let (system, period, threshold) = (&plan.system, plan.period, plan.contact_threshold);
+    let back = ((plan.facility_lag() + plan.sensor_delay()) / period).ceil() as usize + 3;
+    let lo = span.previous_end;
+    let hi = span
+        .start
+        .saturating_sub(back)
+        .max(lo)
+        .min(states.len().checked_sub(1)?);
+    let k0 = (lo..=hi)
+        .rev()
+        .find(|&k| system.clearance_at(&system.relative_motion(&states[k])) > 0.0)?;
+    // stop once the first contact has ended and either a second one starts or the HIL's
+    // next collision does
+    let (mut touched, mut ended) = (false, None);
+    // settled: twice the loop's lag, the sensor delay and 5 periods after both collisions
+    // ended, so that the rebound sample (the middle of the common free flight) lies after the
+    // sensor-delayed tail of the HIL's force, as [`trace_metrics`]' `settle` does
+    let settle = 2 * (back + 2);
+    let done = |t: &Trace| {
+        let (f, k) = (t.force.last().copied().unwrap_or(0.0), k0 + t.len() - 1);
+        touched |= f > threshold;
+        if touched && f <= threshold && ended.is_none() {
+            ended = Some(k);
+        }
+        ended.is_some_and(|e| f > threshold || k >= span.next || k >= e.max(span.end) + settle)
+    };
+    let (trace, _) = run_reference_from(plan, &states[k0], k0, plan.ticks, false, done);
+    Some((k0 as f64 * period, trace))
+}
+
+/// [`trace_metrics`] with the virtual dynamics' state at every tick of the trace (`states`,
+/// [`HilRun::states`]): each complete collision also compared with its local reference
+/// ([`local_reference`]); without states (real-time runs, replays, a sweep's rows) and for a
+/// diverged run the local errors are none.
+pub fn trace_metrics_with_states(
+    plan: &Plan,
+    reference: &Trace,
+    hil: &Trace,
+    estimates_contact: bool,
+    stop: Stop,
+    states: &[TwoBodyState],
+) -> Metrics {
+    let mut m = trace_metrics(plan, reference, hil, estimates_contact, stop);
+    // a diverged run's collisions grow without bound (restarting each would cost more than
+    // the run): no local references
+    if states.is_empty() || m.status == Status::Diverged {
+        return m;
+    }
+    metrics::local_comparison(hil, plan.contact_threshold, &mut m.collisions, |span| {
+        local_reference(plan, states, span)
+    });
+    m.summary = metrics::Summary::judged_from(&m.collisions, plan.tolerances.judge_from);
+    m
 }
 
 /// The metrics of a HIL trace against the reference's trace: the one computation used by
@@ -675,7 +791,7 @@ pub fn trace_metrics(
         diverged_at: (status == Status::Diverged).then(|| t.time.last().copied().unwrap_or(0.0)),
         reason,
         stop,
-        summary: metrics::Summary::of(&comparison.collisions),
+        summary: metrics::Summary::judged_from(&comparison.collisions, plan.tolerances.judge_from),
         collisions: comparison.collisions,
         reference_collisions: comparison.reference_collisions,
         lost_collisions: comparison.lost_collisions,
