@@ -143,7 +143,8 @@ def measure(raw: dict[str, Any], kind: str, delay: float, prior: str = "") -> di
     elif prior == "shapes-law":
         compensator["prior_shapes"] = "geometry-and-law"
     raw = {**raw, "compensator": compensator}
-    scenario = hc.load_scenario(raw, {**FACILITY, "facility.robot_delay": delay})
+    local = {"metrics.local_references": True} if kind == "model-mediated" else {}
+    scenario = hc.load_scenario(raw, {**FACILITY, "facility.robot_delay": delay, **local})
     run = hc.simulate(scenario)
     m = run.metrics
     ts, ref = run.timeseries, run.reference

@@ -476,6 +476,11 @@ pub struct MetricsConfig {
     #[serde(default = "default_judge_from")]
     #[schemars(range(min = 1, max = 1000000))]
     pub judge_from: u32,
+    /// Whether each collision is also compared with its local reference, the ideal reference
+    /// restarted from the virtual state before it (the `local_*` errors, docs/model.md
+    /// "Metrics"; read, never judged). Off by default: the restarts cost a simulated run 5-25 %.
+    #[serde(default)]
+    pub local_references: bool,
 }
 
 fn default_judge_from() -> u32 {
@@ -524,6 +529,7 @@ impl Default for MetricsConfig {
             max_lost_collisions: 0,
             max_extra_collisions: 0,
             judge_from: default_judge_from(),
+            local_references: false,
         }
     }
 }

@@ -230,7 +230,8 @@ pub fn run_hil_step(plan: &Plan, facility: FacilityLoop, step: HilStep, keep_row
 /// no allocation), after the tick's record; once it is set the run ends there as a
 /// [`StopKind::User`] stop at that tick's time (status `interrupted`), with every record so
 /// far. A stop of the step itself (divergence, a value no longer finite) at the same tick
-/// comes first.
+/// comes first. The virtual states ([`HilRun::states`]) are kept where the scenario asks for
+/// the local references (`metrics.local_references`).
 pub fn run_hil_step_until(
     plan: &Plan,
     facility: FacilityLoop,
@@ -238,7 +239,8 @@ pub fn run_hil_step_until(
     keep_rows: bool,
     stop: &AtomicBool,
 ) -> HilRun {
-    run_hil_loop(plan, facility, step, keep_rows, true, stop)
+    let keep_states = plan.scenario.metrics.local_references;
+    run_hil_loop(plan, facility, step, keep_rows, keep_states, stop)
 }
 
 /// [`run_hil_step_until`], keeping the virtual states ([`HilRun::states`]) only if

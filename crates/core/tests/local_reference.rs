@@ -4,7 +4,14 @@
 
 mod common;
 
-use common::preset;
+use common::preset as preset_file;
+
+/// A preset with the local references asked for (`metrics.local_references`, off by default).
+fn preset(name: &str) -> Scenario {
+    let mut s = preset_file(name);
+    s.metrics.local_references = true;
+    s
+}
 use hilcontact_core::compensator::CompensatorConfig;
 use hilcontact_core::compensator::PriorShapes;
 use hilcontact_core::compensator::Rendering;
@@ -244,6 +251,30 @@ fn local_errors_are_small_where_global_errors_compound() {
 /// Without the virtual states (a real-time run's or a replay's trace) there is no local
 /// reference: every local error is none and the summary's worst NaN; the global metrics are
 /// the same as with them.
+#[test]
+fn the_local_references_are_off_by_default() {
+    let mut s = preset_file("rod-in-frame");
+    assert!(!s.metrics.local_references);
+    s.facility.robot_delay = 0.02;
+    s.compensator = CompensatorConfig::from_kind("pida").expect("kind");
+    let off = simulate_plan(&s.resolve().expect("plan")).metrics;
+    s.metrics.local_references = true;
+    let on = simulate_plan(&s.resolve().expect("plan")).metrics;
+    assert!(off
+        .collisions
+        .iter()
+        .all(|c| c.local_velocity_error.is_none()));
+    assert!(on
+        .collisions
+        .iter()
+        .any(|c| c.local_velocity_error.is_some()));
+    assert_eq!(
+        off.summary.worst_velocity_error,
+        on.summary.worst_velocity_error
+    );
+    assert_eq!(off.status, on.status);
+}
+
 #[test]
 fn without_states_the_local_errors_are_missing() {
     let mut s = preset("rod-in-frame");
