@@ -325,12 +325,7 @@ impl TwoBodySystem {
         let (rel, tip, tip_velocity) = (&start.rel, &start.tip, &start.tip_velocity);
         let mut set = self.contact.active_set(tip, tip_velocity);
         let c = self.contact_at_tip_noting(rel, tip, tip_velocity, 0.0, shapes, |point, v| {
-            if self
-                .contact
-                .law
-                .normal_force(point.depth, -v.dot(&point.normal))
-                > 0.0
-            {
+            if self.pushes(point, v) {
                 set = set.wrapping_add(point.id);
             }
         });
@@ -550,18 +545,22 @@ impl TwoBodySystem {
         self.active_set_at(&self.relative_motion(x))
     }
 
+    /// Whether a contact point of the shapes pushes, its material point moving at `v` (`t`,
+    /// m/s): the law's normal force there is positive (what the active set counts).
+    fn pushes(&self, point: &crate::shapes::ContactPoint, v: &Vector3<f64>) -> bool {
+        self.contact
+            .law
+            .normal_force(point.depth, -v.dot(&point.normal))
+            > 0.0
+    }
+
     /// [`TwoBodySystem::active_set`] for a relative motion of the servicer.
     pub fn active_set_at(&self, rel: &RelativeMotion) -> u64 {
         let (tip, tip_velocity) = rel.point_and_velocity(&self.rod_tip);
         let mut set = self.contact.active_set(&tip, &tip_velocity);
         self.for_each_shape_contact(rel, |point| {
             let v = rel.velocity + rel.angular_velocity.cross(&(point.point - rel.position));
-            if self
-                .contact
-                .law
-                .normal_force(point.depth, -v.dot(&point.normal))
-                > 0.0
-            {
+            if self.pushes(point, &v) {
                 set = set.wrapping_add(point.id);
             }
         });
