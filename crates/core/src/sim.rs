@@ -256,6 +256,8 @@ fn run_hil_loop(
     let user_stop = stop;
     let n = plan.ticks;
     let estimates = step.dynamics().estimates_contact();
+    // (the identification metric reads the law factor)
+    facility.measure_law_factor(estimates);
     let mut rows = Vec::with_capacity(if keep_rows { n + 1 } else { 0 });
     let mut trace = Trace::with_capacity(n + 1, estimates);
     let mut states = Vec::with_capacity(if keep_states { n + 1 } else { 0 });

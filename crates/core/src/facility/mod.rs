@@ -85,6 +85,14 @@ pub trait Facility: Send {
         Vector3::zeros()
     }
 
+    /// Asks the engine to measure [`PhysicalContact::law_factor`] where that costs extra
+    /// (several points of shapes: two more contact evaluations a tick); off until asked. The
+    /// simulation asks when the compensator identifies the contact (the identification metric
+    /// reads it).
+    fn measure_law_factor(&mut self, on: bool) {
+        let _ = on;
+    }
+
     /// The physical contact at the last [`Facility::measure`]: the force and its friction part.
     fn physical_contact(&self) -> PhysicalContact {
         PhysicalContact {
@@ -173,6 +181,11 @@ impl FacilityLoop {
     /// friction part.
     pub fn physical_contact(&self) -> PhysicalContact {
         self.facility.physical_contact()
+    }
+
+    /// [`Facility::measure_law_factor`] of the facility.
+    pub fn measure_law_factor(&mut self, on: bool) {
+        self.facility.measure_law_factor(on);
     }
 
     /// Ticks run so far.

@@ -280,6 +280,9 @@ pub struct FacilityModel {
     contact: Contact,
     /// The facility's added contact damping, N·s/m ([`crate::plan::FacilityPlan::dissipation`]).
     dissipation: f64,
+    /// Whether the law factor of several shapes' points is measured
+    /// ([`Facility::measure_law_factor`]); NaN there otherwise.
+    law_factor: bool,
 }
 
 impl FacilityModel {
@@ -302,6 +305,7 @@ impl FacilityModel {
             sensor: SensorModel::new(plan, &contact.wrench),
             contact,
             dissipation: f.dissipation,
+            law_factor: false,
         }
     }
 }
@@ -313,9 +317,11 @@ impl Facility for FacilityModel {
 
     fn measure(&mut self) -> Measurement {
         self.contact = physical_contact(&self.system, self.robot.actual(), self.dissipation);
-        self.contact.law_factor = self
-            .system
-            .law_factor_at(self.robot.actual(), &self.contact);
+        if self.law_factor {
+            self.contact.law_factor = self
+                .system
+                .law_factor_at(self.robot.actual(), &self.contact);
+        }
         let (force, moment) = self.sensor.sample(&self.contact.wrench);
         Measurement {
             force,
@@ -326,6 +332,10 @@ impl Facility for FacilityModel {
 
     fn contact_force(&self) -> Vector3<f64> {
         self.contact.force
+    }
+
+    fn measure_law_factor(&mut self, on: bool) {
+        self.law_factor = on;
     }
 
     fn friction_force(&self) -> Vector3<f64> {
