@@ -27,6 +27,9 @@
 //!   `Fα/Fn`: the most negative F_α·n over F_comp·n in the contact (−1: F_α cancels the normal
 //!   force).
 
+#[path = "../tests/common/mod.rs"]
+mod common;
+
 use std::sync::{Arc, Mutex};
 
 use hilcontact_core::compensator::{
@@ -91,23 +94,7 @@ fn preset(name: &str) -> Scenario {
             continue;
         }
         let file = std::mem::take(&mut shape.file);
-        let obj = std::fs::read_to_string(format!("{dir}/{file}")).expect("mesh");
-        for line in obj.lines() {
-            let mut words = line.split_whitespace();
-            match words.next() {
-                Some("v") => {
-                    let v: Vec<f64> = words.map(|w| w.parse().expect("number")).collect();
-                    shape.vertices.push([v[0], v[1], v[2]]);
-                }
-                Some("f") => {
-                    let f: Vec<u32> = words
-                        .map(|w| w.parse::<u32>().expect("index") - 1)
-                        .collect();
-                    shape.triangles.push([f[0], f[1], f[2]]);
-                }
-                _ => {}
-            }
-        }
+        common::read_obj(&format!("{dir}/{file}"), shape);
     }
     s
 }

@@ -91,8 +91,13 @@ pub fn load_drogue_mesh(s: &mut Scenario) {
         "{}/../../python/hilcontact/scenarios/probe-drogue-cone.obj",
         env!("CARGO_MANIFEST_DIR")
     );
-    let text = std::fs::read_to_string(&path).expect("the drogue's OBJ");
-    let shape = &mut s.target.shapes[0];
+    read_obj(&path, &mut s.target.shapes[0]);
+}
+
+/// Reads the vertices and triangles of the OBJ file at `path` into a mesh shape (as the Python
+/// loader does; the core reads no files).
+pub fn read_obj(path: &str, shape: &mut hilcontact_core::config::ShapeConfig) {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{path}: {e}"));
     for line in text.lines() {
         let mut words = line.split_whitespace();
         match words.next() {
